@@ -1,0 +1,53 @@
+# Two commands: `make demo` and `make test`. Each sets everything up from a fresh clone.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+SYSTEM_STAMP := $(VENV)/.system-installed
+APT_PACKAGES := rt-tests graphviz spin systemd
+
+.PHONY: demo test lint typecheck unit bench setup system-deps clean
+
+setup: $(STAMP) $(SYSTEM_STAMP)
+
+$(VENV)/bin/python:
+	$(PYTHON) -m venv $(VENV)
+
+$(STAMP): pyproject.toml | $(VENV)/bin/python
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[dev]'
+	touch $@
+
+# System tools: cyclictest (benchmarks), dot (graphs), spin (cross-check), systemd-analyze.
+$(SYSTEM_STAMP): | $(VENV)/bin/python
+	@missing=""; \
+	command -v cyclictest >/dev/null || missing="$$missing rt-tests"; \
+	command -v dot >/dev/null || missing="$$missing graphviz"; \
+	command -v spin >/dev/null || missing="$$missing spin"; \
+	command -v systemd-analyze >/dev/null || missing="$$missing systemd"; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ]; then apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
+	  else echo "warning: missing system packages:$$missing (run as root or: sudo apt-get install$$missing)"; fi; \
+	fi
+	touch $@
+
+demo: setup
+	$(PY) -m orccadd.demo
+
+lint: setup
+	$(VENV)/bin/ruff check orccadd tests benchmarks tools
+	$(VENV)/bin/ruff format --check orccadd tests benchmarks tools
+
+typecheck: setup
+	$(VENV)/bin/mypy
+
+unit: setup
+	$(PY) -m pytest -q
+
+test: lint typecheck unit
+
+bench: setup
+	$(PY) benchmarks/loop_latency.py
+
+clean:
+	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache
