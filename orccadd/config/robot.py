@@ -1,0 +1,168 @@
+"""Robot configuration: model, joints and their limits, resource backend, period, safe stop.
+
+Loaded from `configs/robots/*.toml` by `load_robot_config`, strictly (see `schema`), then
+cross-checked against the URDF (joint names, order and the manufacturer's limits).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Literal
+
+from orccadd.config.schema import field, format_range, load_dataclass
+from orccadd.errors import ConfigError
+
+INF = math.inf
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Where the dynamic model comes from.
+
+    `urdf` is a path relative to the config file, or `example-robot-data:<path>` for a URDF
+    shipped by the example-robot-data package. Joints of the URDF that the config does not list
+    must be named in `locked_joints` (they are fixed at `locked_positions`, default 0).
+    """
+
+    urdf: str = field(doc="URDF path")
+    locked_joints: tuple[str, ...] = field(default=())
+    locked_positions: tuple[float, ...] = field(default=())
+
+
+@dataclass(frozen=True)
+class JointConfig:
+    """One actuated joint and the limits the controller enforces (SI units, radians)."""
+
+    name: str = field()
+    position_min_rad: float = field()
+    position_max_rad: float = field()
+    max_velocity_rad_s: float = field(bounds=(0.0, INF), open_lo=True)
+    max_acceleration_rad_s2: float = field(bounds=(0.0, INF), open_lo=True)
+    max_jerk_rad_s3: float = field(bounds=(0.0, INF), open_lo=True)
+    max_torque_nm: float = field(bounds=(0.0, INF), open_lo=True)
+    home_rad: float = field(default=0.0)
+
+
+@dataclass(frozen=True)
+class SafeStopConfig:
+    """What `safe_stop()` does (IEC 60204-1 stop categories).
+
+    0: torque off and brakes at once; 1: controlled deceleration then torque off and brakes;
+    2: controlled deceleration then hold position with torque on.
+    """
+
+    category: Literal[0, 1, 2] = field(default=1)
+    deceleration_rad_s2: float = field(default=5.0, bounds=(0.0, INF), open_lo=True)
+    timeout_s: float = field(default=2.0, bounds=(0.0, 60.0), open_lo=True)
+
+
+@dataclass(frozen=True)
+class LimitsConfig:
+    """How the resource layer reacts to limits.
+
+    Measured positions beyond the range by more than `position_tolerance_rad`, or speeds beyond
+    `velocity_tolerance` times the maximum, raise a type 3 exception.
+    """
+
+    position_tolerance_rad: float = field(default=0.02, bounds=(0.0, 0.5))
+    velocity_tolerance: float = field(default=1.1, bounds=(1.0, 2.0))
+
+
+@dataclass(frozen=True)
+class ResourceConfig:
+    """The Physical Resource backend (`sim`, later `canopen`, `dynamixel`, `ur_rtde`)."""
+
+    backend: str = field()
+    name: str = field(default="arm")
+    settings: dict[str, Any] = field(default=None)  # type: ignore[assignment]
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """A whole robot: model, joints, resource, control period and safety policy."""
+
+    name: str = field()
+    control_period_s: float = field(bounds=(0.0001, 0.1))
+    model: ModelConfig = field()
+    joints: tuple[JointConfig, ...] = field(min_len=1)
+    resource: ResourceConfig = field()
+    safe_stop: SafeStopConfig = field(default=SafeStopConfig())
+    limits: LimitsConfig = field(default=LimitsConfig())
+    source: str = ""  # the file it was loaded from (set by the loader)
+    backend_settings: Any = None  # the backend's typed settings (set by the loader)
+
+    @property
+    def dof(self) -> int:
+        return len(self.joints)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+    def resolve(self, path: str) -> Path:
+        """A path from the config, relative to the config file's folder."""
+        return (Path(self.source).parent / path).resolve()
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    """Read a TOML file, turning syntax errors into `ConfigError` naming the file and line."""
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(str(path), "", "file not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(str(path), "", f"is not valid TOML: {e}") from None
+
+
+def load_robot_config(path: str | Path, *, check_model: bool = True) -> RobotConfig:
+    """Load and check a robot config. Not for a tick: reads files, loads the URDF."""
+    p = Path(path)
+    file = str(path)
+    raw = read_toml(p)
+    raw_fields = {k: v for k, v in raw.items()}
+    cfg = load_dataclass(RobotConfig, {k: v for k, v in raw_fields.items()}, file)
+    if "source" in raw or "backend_settings" in raw:
+        key = "source" if "source" in raw else "backend_settings"
+        raise ConfigError(file, key, "is not a known key")
+    cfg = replace(cfg, source=file)
+    _check_joints(cfg, file)
+    from orccadd.physres import backend_class  # local: backends import numpy/pinocchio
+
+    backend = backend_class(cfg.resource.backend, file)
+    settings = backend.load_settings(cfg.resource.settings or {}, cfg, file)
+    cfg = replace(cfg, backend_settings=settings)
+    if check_model:
+        from orccadd.model import RobotModel
+
+        RobotModel.from_config(cfg)  # raises ConfigError/ModelError on mismatch
+    return cfg
+
+
+def _check_joints(cfg: RobotConfig, file: str) -> None:
+    seen: set[str] = set()
+    for i, j in enumerate(cfg.joints):
+        key = f"joints[{i}]"
+        if j.name in seen:
+            raise ConfigError(file, f"{key}.name", f"(={j.name!r}) is listed twice")
+        seen.add(j.name)
+        if not j.position_min_rad < j.position_max_rad:
+            raise ConfigError(
+                file,
+                f"{key}.position_max_rad",
+                f"(={j.position_max_rad!r}) must be greater than position_min_rad "
+                f"(={j.position_min_rad!r})",
+            )
+        if not j.position_min_rad <= j.home_rad <= j.position_max_rad:
+            rng = format_range(j.position_min_rad, j.position_max_rad, False, False)
+            raise ConfigError(file, f"{key}.home_rad", f"(={j.home_rad!r}) must be in {rng}")
+    if len(cfg.model.locked_positions) not in (0, len(cfg.model.locked_joints)):
+        raise ConfigError(
+            file,
+            "model.locked_positions",
+            f"has {len(cfg.model.locked_positions)} entries, must have one per locked joint "
+            f"({len(cfg.model.locked_joints)}) or none",
+        )

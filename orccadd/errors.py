@@ -1,0 +1,42 @@
+"""One error tree for orccadd. Every error a user can cause derives from `OrccaddError`."""
+
+from __future__ import annotations
+
+
+class OrccaddError(Exception):
+    """Root of every error orccadd raises on purpose."""
+
+
+class ConfigError(OrccaddError):
+    """A configuration file is wrong: the message names the file, key path, value and what is allowed."""
+
+    def __init__(self, file: str, key: str, message: str) -> None:
+        self.file = file
+        self.key = key
+        self.detail = message
+        where = f"{file}: {key}" if key else file
+        super().__init__(f"{where} {message}" if key else f"{file}: {message}")
+
+
+class WiringError(OrccaddError):
+    """A Robot-Task's modules cannot be wired as declared (both ends are named)."""
+
+
+class ModelError(OrccaddError):
+    """The robot model (URDF) cannot be loaded or does not match the config."""
+
+
+class ResourceError(OrccaddError):
+    """A Physical Resource failed (configuration, lifecycle, or communication)."""
+
+
+class LifecycleError(ResourceError):
+    """A lifecycle transition was asked from a state that does not allow it."""
+
+
+class ParameterError(OrccaddError):
+    """A module parameter was set to a value outside its declaration (bounds, shape, tunable)."""
+
+
+class TimeoutError_(OrccaddError):  # noqa: N818 - avoid shadowing the builtin
+    """A blocking step did not finish within its `timeout_s`."""

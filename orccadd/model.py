@@ -1,0 +1,138 @@
+"""The robot's dynamic model (Pinocchio) and its joint limits, as one immutable object.
+
+`RobotModel` holds the Pinocchio `Model` (never mutated after load) and the limit vectors;
+whoever computes with it makes its own `pin.Data` with `new_data()` (model/workspace split).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from orccadd.config.robot import RobotConfig
+from orccadd.config.schema import format_range
+from orccadd.errors import ConfigError, ModelError
+
+FloatArray = npt.NDArray[np.float64]
+ERD_PREFIX = "example-robot-data:"
+
+
+def example_robot_data_dir() -> Path:
+    """The share folder of the example-robot-data package (installed by pip under cmeel.prefix)."""
+    for entry in sys.path:
+        candidate = Path(entry) / "cmeel.prefix" / "share" / "example-robot-data"
+        if candidate.is_dir():
+            return candidate
+    raise ModelError("the example-robot-data package is not installed (pip install example-robot-data)")
+
+
+def resolve_urdf(cfg: RobotConfig) -> Path:
+    urdf = cfg.model.urdf
+    path = example_robot_data_dir() / urdf[len(ERD_PREFIX):] if urdf.startswith(ERD_PREFIX) else cfg.resolve(urdf)
+    if not path.is_file():
+        raise ConfigError(cfg.source, "model.urdf", f"(={urdf!r}) names no file ({path})")
+    return path
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    """Pinocchio model reduced to the configured joints, with limit vectors (SI units)."""
+
+    model: pin.Model
+    joint_names: tuple[str, ...]
+    q_min_rad: FloatArray
+    q_max_rad: FloatArray
+    v_max_rad_s: FloatArray
+    a_max_rad_s2: FloatArray
+    j_max_rad_s3: FloatArray
+    tau_max_nm: FloatArray
+    home_rad: FloatArray
+
+    @property
+    def dof(self) -> int:
+        return len(self.joint_names)
+
+    def new_data(self) -> pin.Data:
+        """A fresh Pinocchio workspace for this model (allocate once, outside ticks)."""
+        return self.model.createData()
+
+    @staticmethod
+    def from_config(cfg: RobotConfig) -> RobotModel:
+        """Load the URDF, lock unlisted joints, check names, order and manufacturer limits."""
+        path = resolve_urdf(cfg)
+        try:
+            full = pin.buildModelFromUrdf(str(path))
+        except Exception as e:  # pinocchio raises plain exceptions on malformed files
+            raise ModelError(f"{path}: cannot load URDF: {e}") from e
+        names = list(full.names)[1:]
+        for i, name in enumerate(cfg.model.locked_joints):
+            if name not in names:
+                raise ConfigError(cfg.source, f"model.locked_joints[{i}]",
+                                  f"(={name!r}) is not a joint of {path.name} (joints: {', '.join(names)})")
+        q_ref = pin.neutral(full)
+        for i, name in enumerate(cfg.model.locked_joints):
+            if cfg.model.locked_positions:
+                jid = full.getJointId(name)
+                q_ref[full.joints[jid].idx_q] = cfg.model.locked_positions[i]
+        lock_ids = [full.getJointId(n) for n in cfg.model.locked_joints]
+        model = pin.buildReducedModel(full, lock_ids, q_ref) if lock_ids else full
+        model_names = list(model.names)[1:]
+        for i, j in enumerate(cfg.joints):
+            if j.name not in model_names:
+                raise ConfigError(cfg.source, f"joints[{i}].name",
+                                  f"(={j.name!r}) is not a joint of {path.name} "
+                                  f"(joints: {', '.join(model_names)})")
+        unlisted = [n for n in model_names if n not in cfg.joint_names]
+        if unlisted:
+            raise ConfigError(cfg.source, "joints",
+                              f"does not list {', '.join(unlisted)} of {path.name}: "
+                              "list them or name them in model.locked_joints")
+        for i, j in enumerate(cfg.joints):
+            if model_names[i] != j.name:
+                raise ConfigError(cfg.source, f"joints[{i}].name",
+                                  f"(={j.name!r}) is out of order: the model's order is "
+                                  f"{', '.join(model_names)}")
+            if model.joints[i + 1].nq != 1:
+                raise ConfigError(cfg.source, f"joints[{i}].name",
+                                  f"(={j.name!r}) is not a one-axis joint")
+        _check_against_urdf(cfg, model)
+        arr = lambda vals: np.array(vals, dtype=np.float64)  # noqa: E731
+        model.gravity = pin.Motion(np.array([0.0, 0.0, -9.81, 0.0, 0.0, 0.0]))
+        return RobotModel(
+            model=model,
+            joint_names=cfg.joint_names,
+            q_min_rad=arr([j.position_min_rad for j in cfg.joints]),
+            q_max_rad=arr([j.position_max_rad for j in cfg.joints]),
+            v_max_rad_s=arr([j.max_velocity_rad_s for j in cfg.joints]),
+            a_max_rad_s2=arr([j.max_acceleration_rad_s2 for j in cfg.joints]),
+            j_max_rad_s3=arr([j.max_jerk_rad_s3 for j in cfg.joints]),
+            tau_max_nm=arr([j.max_torque_nm for j in cfg.joints]),
+            home_rad=arr([j.home_rad for j in cfg.joints]),
+        )
+
+
+def _check_against_urdf(cfg: RobotConfig, model: pin.Model) -> None:
+    """The config may only narrow the manufacturer's limits written in the URDF."""
+    for i, j in enumerate(cfg.joints):
+        key = f"joints[{i}]"
+        lo, hi = float(model.lowerPositionLimit[i]), float(model.upperPositionLimit[i])
+        vmax, tmax = float(model.velocityLimit[i]), float(model.effortLimit[i])
+        if lo < hi:
+            for attr, val in (("position_min_rad", j.position_min_rad), ("position_max_rad", j.position_max_rad)):
+                if not lo - 1e-9 <= val <= hi + 1e-9:
+                    raise ConfigError(cfg.source, f"{key}.{attr}",
+                                      f"(={val!r}) must be in {format_range(lo, hi, False, False)} "
+                                      f"(URDF limit of {j.name})")
+        if vmax > 0 and j.max_velocity_rad_s > vmax + 1e-9:
+            raise ConfigError(cfg.source, f"{key}.max_velocity_rad_s",
+                              f"(={j.max_velocity_rad_s!r}) must be in {format_range(0, vmax, True, False)} "
+                              f"(URDF limit of {j.name})")
+        if tmax > 0 and j.max_torque_nm > tmax + 1e-9:
+            raise ConfigError(cfg.source, f"{key}.max_torque_nm",
+                              f"(={j.max_torque_nm!r}) must be in {format_range(0, tmax, True, False)} "
+                              f"(URDF limit of {j.name})")

@@ -1,0 +1,224 @@
+"""Algorithmic modules: one block of a control law, with declared ports and parameters.
+
+Writing a module (the whole API)::
+
+    from orccadd.modules import Module, ModuleContext, register
+
+    @register("low_pass")
+    class LowPass(Module):
+        '''First-order low-pass filter on a joint vector.'''
+
+        def __init__(self, name: str, ctx: ModuleContext) -> None:
+            super().__init__(name, ctx)
+            n = ctx.dof
+            self.x = self.add_input("x", (n,), "rad/s")
+            self.y = self.add_output("y", (n,), "rad/s")
+            self.cutoff = self.add_parameter("cutoff_hz", 10.0, bounds=(0.1, 500.0),
+                                             unit="Hz", tunable=True)
+
+        def start(self, state: JointState) -> None:   # from the measured state
+            self.y.value[:] = self.x.value
+
+        def update(self, t_s: float) -> None:         # one tick: no allocation, no raise
+            a = min(1.0, 2 * math.pi * float(self.cutoff.value) * self.ctx.period_s)
+            self.y.value += a * (self.x.value - self.y.value)
+
+Ports carry a shape, a unit and a dtype; an output owns a preallocated numpy buffer and wiring
+makes the input's `value` *be* that buffer, so a tick copies and allocates nothing. Parameters
+carry a default, bounds, a unit and whether they are tunable at run time; a tuned value is
+checked when it is asked for and applied in place at a tick boundary.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from orccadd.errors import ParameterError
+from orccadd.model import RobotModel
+from orccadd.physres.base import JointState
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ModuleContext:
+    """What a module may know of its surroundings (fixed for the task's life)."""
+
+    task: str
+    model: RobotModel
+    period_s: float
+
+    @property
+    def dof(self) -> int:
+        return self.model.dof
+
+
+class Port:
+    """An input or output port. `value` is the numpy buffer (shared through wiring)."""
+
+    __slots__ = ("dtype", "is_input", "module", "name", "shape", "unit", "value")
+
+    def __init__(
+        self, module: str, name: str, shape: tuple[int, ...], unit: str, dtype: type, is_input: bool
+    ) -> None:
+        self.module = module
+        self.name = name
+        self.shape = shape
+        self.unit = unit
+        self.dtype = np.dtype(dtype)
+        self.is_input = is_input
+        self.value: npt.NDArray[Any] = np.zeros(shape, dtype=dtype)
+
+    @property
+    def path(self) -> str:
+        return f"{self.module}.{self.name}"
+
+    def describe(self) -> str:
+        kind = "bool" if self.dtype == np.bool_ else f"{self.shape}"
+        return f"{self.path} [{kind}, {self.unit or '-'}]"
+
+
+class Parameter:
+    """A declared parameter. `value` is a numpy array updated in place (never rebound)."""
+
+    __slots__ = ("bounds", "default", "module", "name", "shape", "tunable", "unit", "value")
+
+    def __init__(
+        self,
+        module: str,
+        name: str,
+        default: Any,
+        bounds: tuple[Any, Any],
+        unit: str,
+        tunable: bool,
+        shape: tuple[int, ...],
+    ) -> None:
+        self.module = module
+        self.name = name
+        self.bounds = bounds
+        self.unit = unit
+        self.tunable = tunable
+        self.shape = shape
+        self.value: FloatArray = np.zeros(shape)
+        self.value[...] = self.check(default)
+        self.default = self.value.copy()
+
+    @property
+    def path(self) -> str:
+        return f"{self.module}.{self.name}"
+
+    def check(self, value: Any) -> FloatArray:
+        """The value as an array of this parameter's shape, or ParameterError saying why."""
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ParameterError(f"{self.path} (={value!r}) must be a number or a list of numbers") from None
+        if arr.shape != self.shape:
+            if arr.shape == () and self.shape != ():
+                arr = np.full(self.shape, float(arr))
+            else:
+                want = "a number" if self.shape == () else f"{self.shape[0]} numbers (or one)"
+                raise ParameterError(f"{self.path} (={value!r}) must be {want}")
+        lo, hi = self.bounds
+        bad = ~((arr >= lo) & (arr <= hi))
+        if bad.any():
+            shown = value if np.ndim(value) == 0 else arr.tolist()
+            if bad.ndim == 0:
+                rng = f"[{float(lo):g}, {float(hi):g}]"
+            else:
+                i = int(np.flatnonzero(bad)[0])
+                lo_i, hi_i = np.broadcast_to(lo, bad.shape)[i], np.broadcast_to(hi, bad.shape)[i]
+                rng = f"[{float(lo_i):g}, {float(hi_i):g}] at index {i}"
+            raise ParameterError(f"{self.path} (={shown!r}) must be in {rng} {self.unit}".rstrip())
+        return arr
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "name": self.path,
+            "value": self.value.tolist(),
+            "bounds": [np.asarray(b).tolist() for b in self.bounds],
+            "unit": self.unit,
+            "tunable": self.tunable,
+        }
+
+
+class Module(ABC):
+    """Base of every algorithmic module. Subclasses declare ports/parameters in `__init__`."""
+
+    type_name: ClassVar[str] = ""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        self.name = name
+        self.ctx = ctx
+        self.inputs: dict[str, Port] = {}
+        self.outputs: dict[str, Port] = {}
+        self.parameters: dict[str, Parameter] = {}
+
+    # ---- declarations (constructor only) --------------------------------------------------
+    def add_input(self, name: str, shape: tuple[int, ...], unit: str, dtype: type = np.float64) -> Port:
+        port = Port(self.name, name, shape, unit, dtype, is_input=True)
+        self.inputs[name] = port
+        return port
+
+    def add_output(self, name: str, shape: tuple[int, ...], unit: str, dtype: type = np.float64) -> Port:
+        port = Port(self.name, name, shape, unit, dtype, is_input=False)
+        self.outputs[name] = port
+        return port
+
+    def add_parameter(
+        self,
+        name: str,
+        default: Any,
+        *,
+        bounds: tuple[Any, Any],
+        unit: str = "",
+        tunable: bool = False,
+        shape: tuple[int, ...] = (),
+    ) -> Parameter:
+        param = Parameter(self.name, name, default, bounds, unit, tunable, shape)
+        self.parameters[name] = param
+        return param
+
+    # ---- behaviour ------------------------------------------------------------------------
+    def configure(self, values: dict[str, Any]) -> None:
+        """Set parameters from the task file (before the task runs)."""
+        for key, v in values.items():
+            if key not in self.parameters:
+                allowed = ", ".join(sorted(self.parameters)) or "none"
+                raise ParameterError(
+                    f"module {self.name!r} ({self.type_name}) has no parameter {key!r} "
+                    f"(parameters: {allowed})"
+                )
+            self.parameters[key].value[...] = self.parameters[key].check(v)
+            self.on_parameter_change(key)
+
+    def start(self, state: JointState) -> None:  # noqa: B027 - optional hook
+        """Initialise from the measured state when the task starts (no jump in the command)."""
+
+    @abstractmethod
+    def update(self, t_s: float) -> None:
+        """One tick: read inputs, write outputs in place. No allocation of buffers, no raise."""
+
+    def on_parameter_change(self, name: str) -> None:  # noqa: B027 - optional hook
+        """Called (at a tick boundary) after parameter `name` took a new value."""
+
+
+MODULES: dict[str, type[Module]] = {}
+
+
+def register(type_name: str) -> Any:
+    """Class decorator: make a module type available to task files under `type_name`."""
+
+    def deco(cls: type[Module]) -> type[Module]:
+        if type_name in MODULES and MODULES[type_name] is not cls:
+            raise ValueError(f"module type {type_name!r} registered twice")
+        cls.type_name = type_name
+        MODULES[type_name] = cls
+        return cls
+
+    return deco

@@ -1,0 +1,108 @@
+"""Joint-space control laws: computed torque, PD with gravity compensation, gravity hold."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from orccadd.modules.base import Module, ModuleContext, register
+from orccadd.physres.base import JointState
+
+
+@register("computed_torque")
+class ComputedTorque(Module):
+    """tau = M(q)·(ddq_des + kp·e + kd·de) + h(q, dq), computed in one RNEA call.
+
+    `kp` (1/s²) and `kd` (1/s) set the error dynamics e'' + kd·e' + kp·e = 0 per joint.
+    """
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        n = ctx.dof
+        self.q = self.add_input("q", (n,), "rad")
+        self.dq = self.add_input("dq", (n,), "rad/s")
+        self.q_des = self.add_input("q_des", (n,), "rad")
+        self.dq_des = self.add_input("dq_des", (n,), "rad/s")
+        self.ddq_des = self.add_input("ddq_des", (n,), "rad/s^2")
+        self.tau = self.add_output("tau", (n,), "N.m")
+        self.kp = self.add_parameter("kp", 400.0, bounds=(0.0, 1e5), unit="1/s^2", tunable=True, shape=(n,))
+        self.kd = self.add_parameter("kd", 40.0, bounds=(0.0, 1e3), unit="1/s", tunable=True, shape=(n,))
+        self._model = ctx.model.model
+        self._data = ctx.model.new_data()
+        self._a = np.zeros(n)
+        self._e = np.zeros(n)
+
+    def update(self, t_s: float) -> None:
+        a, e = self._a, self._e
+        np.subtract(self.q_des.value, self.q.value, out=e)
+        np.multiply(self.kp.value, e, out=a)
+        np.subtract(self.dq_des.value, self.dq.value, out=e)
+        e *= self.kd.value
+        a += e
+        a += self.ddq_des.value
+        self.tau.value[:] = pin.rnea(self._model, self._data, self.q.value, self.dq.value, a)
+
+
+@register("joint_pd_gravity")
+class JointPDGravity(Module):
+    """tau = kp·(q_des − q) + kd·(dq_des − dq) + g(q): joint PD with gravity compensation."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        n = ctx.dof
+        self.q = self.add_input("q", (n,), "rad")
+        self.dq = self.add_input("dq", (n,), "rad/s")
+        self.q_des = self.add_input("q_des", (n,), "rad")
+        self.dq_des = self.add_input("dq_des", (n,), "rad/s")
+        self.tau = self.add_output("tau", (n,), "N.m")
+        self.kp = self.add_parameter("kp", 200.0, bounds=(0.0, 1e5), unit="N.m/rad", tunable=True, shape=(n,))
+        self.kd = self.add_parameter("kd", 20.0, bounds=(0.0, 1e4), unit="N.m.s/rad", tunable=True, shape=(n,))
+        self._model = ctx.model.model
+        self._data = ctx.model.new_data()
+        self._e = np.zeros(n)
+
+    def update(self, t_s: float) -> None:
+        tau, e = self.tau.value, self._e
+        tau[:] = pin.computeGeneralizedGravity(self._model, self._data, self.q.value)
+        np.subtract(self.q_des.value, self.q.value, out=e)
+        e *= self.kp.value
+        tau += e
+        np.subtract(self.dq_des.value, self.dq.value, out=e)
+        e *= self.kd.value
+        tau += e
+
+
+@register("gravity_compensation")
+class GravityCompensation(Module):
+    """tau = g(q): the arm floats where it is, held by its own friction (a "hold" law)."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        n = ctx.dof
+        self.q = self.add_input("q", (n,), "rad")
+        self.tau = self.add_output("tau", (n,), "N.m")
+        self._model = ctx.model.model
+        self._data = ctx.model.new_data()
+
+    def update(self, t_s: float) -> None:
+        self.tau.value[:] = pin.computeGeneralizedGravity(self._model, self._data, self.q.value)
+
+
+@register("hold_position")
+class HoldPosition(Module):
+    """Setpoint source: the measured position when the task starts, zero velocity."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        n = ctx.dof
+        self.q_des = self.add_output("q_des", (n,), "rad")
+        self.dq_des = self.add_output("dq_des", (n,), "rad/s")
+        self.ddq_des = self.add_output("ddq_des", (n,), "rad/s^2")
+
+    def start(self, state: JointState) -> None:
+        self.q_des.value[:] = state.q_rad
+        self.dq_des.value[:] = 0.0
+        self.ddq_des.value[:] = 0.0
+
+    def update(self, t_s: float) -> None:
+        pass

@@ -1,0 +1,111 @@
+"""Watchers: modules that turn measured signals into events (a boolean `fired` output).
+
+The task's reactive shell maps a watcher's `fired` to a postcondition, a type 1/2/3 exception
+or a synchronisation signal; the event is emitted on the rising edge.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from orccadd.modules.base import Module, ModuleContext, register
+from orccadd.physres.base import JointState
+
+
+class Watcher(Module):
+    """Base of watchers: a `fired` output and a debounce (`ticks` in a row before firing)."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        self.fired = self.add_output("fired", (), "bool", dtype=np.bool_)
+        self.ticks = self.add_parameter("ticks", 1, bounds=(1, 100000), unit="ticks", tunable=True)
+        self._count = 0
+        self._scratch = np.zeros(ctx.dof)
+
+    def start(self, state: JointState) -> None:
+        self._count = 0
+        self.fired.value[...] = False
+
+    def _debounce(self, condition: bool) -> None:
+        self._count = self._count + 1 if condition else 0
+        self.fired.value[...] = self._count >= self.ticks.value
+
+
+@register("tracking_error_watch")
+class TrackingErrorWatch(Watcher):
+    """Fires when max |q_des − q| exceeds `threshold_rad` (for `ticks` ticks in a row)."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        n = ctx.dof
+        self.q = self.add_input("q", (n,), "rad")
+        self.q_des = self.add_input("q_des", (n,), "rad")
+        self.threshold = self.add_parameter("threshold_rad", 0.05, bounds=(1e-6, 10.0), unit="rad", tunable=True)
+
+    def update(self, t_s: float) -> None:
+        e = self._scratch
+        np.subtract(self.q_des.value, self.q.value, out=e)
+        np.abs(e, out=e)
+        self._debounce(bool(e.max() > self.threshold.value))
+
+
+@register("joint_limit_watch")
+class JointLimitWatch(Watcher):
+    """Fires when a joint comes within `margin_rad` of its position limits or exceeds
+    `velocity_fraction` of its maximum velocity."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        n, m = ctx.dof, ctx.model
+        self.q = self.add_input("q", (n,), "rad")
+        self.dq = self.add_input("dq", (n,), "rad/s")
+        self.margin = self.add_parameter("margin_rad", 0.05, bounds=(0.0, 1.0), unit="rad", tunable=True)
+        self.vfrac = self.add_parameter("velocity_fraction", 0.95, bounds=(0.01, 1.5), unit="1", tunable=True)
+        self._lo, self._hi, self._vmax = m.q_min_rad, m.q_max_rad, m.v_max_rad_s
+
+    def update(self, t_s: float) -> None:
+        q, margin = self.q.value, float(self.margin.value)
+        s = self._scratch
+        np.abs(self.dq.value, out=s)
+        near = bool((q < self._lo + margin).any() or (q > self._hi - margin).any())
+        fast = bool((s > self._vmax * self.vfrac.value).any())
+        self._debounce(near or fast)
+
+
+@register("target_reached")
+class TargetReached(Watcher):
+    """Postcondition: every |q − q_goal| < `tolerance_rad` and every |dq| < `velocity_tolerance_rad_s`."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        n = ctx.dof
+        self.q = self.add_input("q", (n,), "rad")
+        self.dq = self.add_input("dq", (n,), "rad/s")
+        self.q_goal = self.add_input("q_goal", (n,), "rad")
+        self.tol = self.add_parameter("tolerance_rad", 0.005, bounds=(1e-6, 1.0), unit="rad", tunable=True)
+        self.vtol = self.add_parameter("velocity_tolerance_rad_s", 0.01, bounds=(1e-6, 10.0), unit="rad/s", tunable=True)
+
+    def update(self, t_s: float) -> None:
+        e = self._scratch
+        np.subtract(self.q_goal.value, self.q.value, out=e)
+        np.abs(e, out=e)
+        ok = e.max() < self.tol.value
+        np.abs(self.dq.value, out=e)
+        self._debounce(bool(ok and e.max() < self.vtol.value))
+
+
+@register("timeout_watch")
+class TimeoutWatch(Watcher):
+    """Fires `timeout_s` after the task started."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        self.timeout = self.add_parameter("timeout_s", 10.0, bounds=(0.0, 1e6), unit="s", tunable=True)
+        self._t0 = 0.0
+
+    def start(self, state: JointState) -> None:
+        super().start(state)
+        self._t0 = state.t_s
+
+    def update(self, t_s: float) -> None:
+        self._debounce(t_s - self._t0 >= float(self.timeout.value) - 1e-9)

@@ -1,0 +1,70 @@
+"""Physical Resources: backends registered by name, imported only when chosen.
+
+Built-in backends are listed in `BACKENDS`; third-party ones register under the
+`orccadd.physres` entry-point group.
+"""
+
+from __future__ import annotations
+
+import importlib
+from importlib.metadata import entry_points
+
+from orccadd.errors import ConfigError
+from orccadd.physres.base import (
+    T3_MASK,
+    CommandMode,
+    JointState,
+    Lifecycle,
+    PhysicalResource,
+    Status,
+)
+
+BACKENDS: dict[str, tuple[str, str]] = {
+    "sim": ("orccadd.physres.sim", "SimulatedArm"),
+}
+
+
+def backend_names() -> list[str]:
+    names = set(BACKENDS)
+    names.update(ep.name for ep in entry_points(group="orccadd.physres"))
+    return sorted(names)
+
+
+def backend_class(name: str, file: str = "") -> type[PhysicalResource]:
+    """The resource class for backend `name`; a ConfigError naming the choices otherwise."""
+    if name in BACKENDS:
+        module, attr = BACKENDS[name]
+        cls = getattr(importlib.import_module(module), attr)
+    else:
+        eps = [ep for ep in entry_points(group="orccadd.physres") if ep.name == name]
+        if not eps:
+            raise ConfigError(
+                file, "resource.backend", f"(={name!r}) must be one of {', '.join(backend_names())}"
+            )
+        cls = eps[0].load()
+    assert issubclass(cls, PhysicalResource)
+    return cls
+
+
+def create_resource(config: object) -> PhysicalResource:
+    """Build (not configure) the resource a robot config names."""
+    from orccadd.config.robot import RobotConfig
+    from orccadd.model import RobotModel
+
+    assert isinstance(config, RobotConfig)
+    cls = backend_class(config.resource.backend, config.source)
+    return cls(config, RobotModel.from_config(config))
+
+
+__all__ = [
+    "BACKENDS",
+    "T3_MASK",
+    "CommandMode",
+    "JointState",
+    "Lifecycle",
+    "PhysicalResource",
+    "Status",
+    "backend_class",
+    "backend_names",
+    "create_resource",
+]

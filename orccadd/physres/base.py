@@ -1,0 +1,278 @@
+"""The Physical Resource: the robot as a control law sees it.
+
+One ABC for every backend (simulated arm, CiA 402 drives, Dynamixel servos, UR over RTDE). The
+base class does the shared work, like python-can's `BusABC`: the lifecycle, limit enforcement
+on every command, measured-limit checks and the status flags; a backend overrides a few hooks
+(`_on_configure`, `_on_activate`, `_read_into`, `_write_command`, `_begin_safe_stop`, ...).
+
+Tick methods (`read`, `write`, `safe_stop`) allocate no arrays and raise nothing on the
+normal path: they report through `Status` flags. Lifecycle methods are not for a tick.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from enum import IntEnum, IntFlag
+from typing import Any, ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from orccadd.config.robot import RobotConfig
+from orccadd.errors import LifecycleError, ResourceError
+from orccadd.model import RobotModel
+
+FloatArray = npt.NDArray[np.float64]
+
+
+class CommandMode(IntEnum):
+    """What `write()` commands. CiA 402: CSP / CSV / CST; UR: servoJ / speedJ / torque."""
+
+    POSITION = 1
+    VELOCITY = 2
+    TORQUE = 3
+
+
+class Lifecycle(IntEnum):
+    """Resource lifecycle (after ros2_control): unconfigured → inactive → active → finalized."""
+
+    UNCONFIGURED = 0
+    INACTIVE = 1
+    ACTIVE = 2
+    FINALIZED = 3
+
+
+class Status(IntFlag):
+    """Status flags of the last read/write. `T3_MASK` flags are type 3 exceptions."""
+
+    OK = 0
+    CMD_CLAMPED = 1  # a command beyond a limit was clamped (torque saturation is only this)
+    LIMIT_VIOLATION = 2  # measured state or a position/velocity command outside the limits
+    FAULT = 4  # the device reports a fault (drive fault, protective stop, hardware error)
+    COMM_LOST = 8  # a communication watchdog expired
+    STOPPING = 16  # a safe stop is in progress: commands are ignored
+    STOPPED = 32  # at rest after a safe stop (brakes engaged, or holding)
+    TORQUE_OFF = 64  # no torque on the motors
+
+
+T3_MASK = int(Status.LIMIT_VIOLATION | Status.FAULT | Status.COMM_LOST)
+
+# Lifecycle transitions allowed: (from, method) -> to.
+TRANSITIONS: dict[tuple[Lifecycle, str], Lifecycle] = {
+    (Lifecycle.UNCONFIGURED, "configure"): Lifecycle.INACTIVE,
+    (Lifecycle.INACTIVE, "activate"): Lifecycle.ACTIVE,
+    (Lifecycle.ACTIVE, "deactivate"): Lifecycle.INACTIVE,
+    (Lifecycle.UNCONFIGURED, "shutdown"): Lifecycle.FINALIZED,
+    (Lifecycle.INACTIVE, "shutdown"): Lifecycle.FINALIZED,
+    (Lifecycle.ACTIVE, "shutdown"): Lifecycle.FINALIZED,
+}
+
+
+class JointState:
+    """Measured state, preallocated once and updated in place by `read()`."""
+
+    __slots__ = ("dq_rad_s", "fault_code", "q_rad", "status", "t_s", "tau_nm")
+
+    def __init__(self, dof: int) -> None:
+        self.t_s = 0.0
+        self.q_rad: FloatArray = np.zeros(dof)
+        self.dq_rad_s: FloatArray = np.zeros(dof)
+        self.tau_nm: FloatArray = np.zeros(dof)
+        self.status = 0
+        self.fault_code = 0  # backend-specific (EMCY code, UR safety mode, Dynamixel error bits)
+
+
+class PhysicalResource(ABC):
+    """Base of every backend. Subclasses set `supported_modes` and `Settings`."""
+
+    supported_modes: ClassVar[frozenset[CommandMode]] = frozenset(CommandMode)
+    Settings: ClassVar[type[Any]]
+
+    def __init__(self, config: RobotConfig, model: RobotModel) -> None:
+        self.config = config
+        self.model = model
+        self.name = config.resource.name
+        self.dof = model.dof
+        self.lifecycle = Lifecycle.UNCONFIGURED
+        self.mode = CommandMode.TORQUE
+        self.state = JointState(self.dof)
+        self.fault_message = ""
+        self._cmd: FloatArray = np.zeros(self.dof)
+        self._last_pos_cmd: FloatArray = np.zeros(self.dof)
+        self._scratch: FloatArray = np.zeros(self.dof)
+        self._limit_q_lo = model.q_min_rad - config.limits.position_tolerance_rad
+        self._limit_q_hi = model.q_max_rad + config.limits.position_tolerance_rad
+        self._limit_dq = model.v_max_rad_s * config.limits.velocity_tolerance
+        self._stop_flags = 0
+        self.clamp_count = 0
+
+    # ---- settings -------------------------------------------------------------------------
+    @classmethod
+    def load_settings(cls, raw: Mapping[str, Any], cfg: RobotConfig, file: str) -> Any:
+        """Check `[resource.settings]` strictly into `cls.Settings`. Override to cross-check."""
+        from orccadd.config.schema import load_dataclass
+
+        return load_dataclass(cls.Settings, raw, file, "resource.settings")
+
+    # ---- lifecycle (not for a tick) -------------------------------------------------------
+    def _transition(self, method: str) -> None:
+        nxt = TRANSITIONS.get((self.lifecycle, method))
+        if nxt is None:
+            raise LifecycleError(
+                f"resource {self.name!r}: cannot {method} while {self.lifecycle.name.lower()}"
+            )
+        self.lifecycle = nxt
+
+    def configure(self) -> None:
+        """Open the bus/connection and check the device can do what the config asks."""
+        if self.lifecycle is not Lifecycle.UNCONFIGURED:
+            self._transition("configure")
+        self._on_configure()
+        self._transition("configure")
+
+    def activate(self, mode: CommandMode) -> None:
+        """Enable the motors in `mode`, holding the current position."""
+        if mode not in self.supported_modes:
+            allowed = ", ".join(m.name.lower() for m in sorted(self.supported_modes))
+            raise ResourceError(
+                f"resource {self.name!r} ({type(self).__name__}) cannot command "
+                f"{mode.name.lower()} (supported: {allowed})"
+            )
+        if self.lifecycle is not Lifecycle.INACTIVE:
+            self._transition("activate")
+        self.mode = mode
+        self._stop_flags = 0
+        self._on_activate(mode)
+        self.state.status = 0
+        self._last_pos_cmd[:] = self.state.q_rad
+        self._transition("activate")
+
+    def switch_mode(self, mode: CommandMode) -> None:
+        """Change the command mode while active (between tasks, not within a tick)."""
+        if self.lifecycle is not Lifecycle.ACTIVE:
+            raise LifecycleError(f"resource {self.name!r}: switch_mode needs an active resource")
+        if mode not in self.supported_modes:
+            raise ResourceError(f"resource {self.name!r} cannot command {mode.name.lower()}")
+        self._on_switch_mode(mode)
+        self.mode = mode
+        self._last_pos_cmd[:] = self.state.q_rad
+
+    def deactivate(self) -> None:
+        """Disable the motors (brakes on where the device has them)."""
+        self._transition("deactivate")
+        self._on_deactivate()
+
+    def shutdown(self) -> None:
+        """Release the hardware. Safe to call in any state but finalized."""
+        if self.lifecycle is Lifecycle.ACTIVE:
+            self._on_deactivate()
+        self._transition("shutdown")
+        self._on_shutdown()
+
+    def clear_stop(self) -> None:
+        """Leave the stopped state after a safe stop, if no fault remains (not for a tick)."""
+        if self.state.status & (Status.FAULT | Status.COMM_LOST):
+            raise ResourceError(
+                f"resource {self.name!r}: cannot clear the stop while faulted ({self.fault_message})"
+            )
+        self._stop_flags = 0
+        self._on_clear_stop()
+        self._last_pos_cmd[:] = self.state.q_rad
+
+    # ---- tick methods ---------------------------------------------------------------------
+    def read(self, t_s: float) -> JointState:
+        """Measure the state at time `t_s` (tick). Sets LIMIT_VIOLATION if outside limits."""
+        st = self.state
+        st.status = self._read_into(t_s, st) | self._stop_flags
+        st.t_s = t_s
+        q, dq = st.q_rad, st.dq_rad_s
+        if (
+            (q < self._limit_q_lo).any()
+            or (q > self._limit_q_hi).any()
+            or (np.abs(dq, out=self._scratch) > self._limit_dq).any()
+        ):
+            st.status |= Status.LIMIT_VIOLATION
+        return st
+
+    def write(self, t_s: float, command: FloatArray) -> int:
+        """Send one command in the active mode (tick). Returns the `Status` flags.
+
+        Torques are clamped to max_torque_nm (CMD_CLAMPED). Position and velocity commands
+        outside the limits, or position steps faster than max_velocity, are clamped and also
+        flagged LIMIT_VIOLATION (a type 3 exception for the task). During a safe stop the
+        command is ignored.
+        """
+        if self._stop_flags:
+            return self._stop_flags | self.state.status
+        cmd = self._cmd
+        m = self.model
+        flags = 0
+        if self.mode is CommandMode.TORQUE:
+            np.clip(command, -m.tau_max_nm, m.tau_max_nm, out=cmd)
+        elif self.mode is CommandMode.VELOCITY:
+            np.clip(command, -m.v_max_rad_s, m.v_max_rad_s, out=cmd)
+            if (cmd != command).any():
+                flags |= Status.LIMIT_VIOLATION
+        else:
+            np.clip(command, m.q_min_rad, m.q_max_rad, out=cmd)
+            if (cmd != command).any():
+                flags |= Status.LIMIT_VIOLATION
+            step = self._scratch
+            np.subtract(cmd, self._last_pos_cmd, out=step)
+            max_step = self.config.control_period_s * self.config.limits.velocity_tolerance
+            if (np.abs(step) > m.v_max_rad_s * max_step).any():
+                flags |= Status.LIMIT_VIOLATION
+                np.clip(step, -m.v_max_rad_s * max_step, m.v_max_rad_s * max_step, out=step)
+                np.add(self._last_pos_cmd, step, out=cmd)
+            self._last_pos_cmd[:] = cmd
+        if (cmd != command).any():
+            flags |= Status.CMD_CLAMPED
+            self.clamp_count += 1
+        return flags | self._write_command(t_s, self.mode, cmd)
+
+    def safe_stop(self) -> None:
+        """Bring the arm to rest by the configured stop category (tick-safe, idempotent)."""
+        if self._stop_flags:
+            return
+        self._stop_flags = int(Status.STOPPING)
+        self._begin_safe_stop()
+
+    def _mark_stopped(self, torque_off: bool) -> None:
+        """Backends call this when the safe stop has brought the arm to rest."""
+        self._stop_flags = int(Status.STOPPED | (Status.TORQUE_OFF if torque_off else 0))
+
+    @property
+    def stopping_or_stopped(self) -> bool:
+        return bool(self._stop_flags)
+
+    # ---- backend hooks --------------------------------------------------------------------
+    @abstractmethod
+    def _on_configure(self) -> None: ...
+
+    @abstractmethod
+    def _on_activate(self, mode: CommandMode) -> None: ...
+
+    def _on_switch_mode(self, mode: CommandMode) -> None:
+        """Change the device's mode while enabled; default: nothing to do."""
+
+    @abstractmethod
+    def _on_deactivate(self) -> None: ...
+
+    @abstractmethod
+    def _on_shutdown(self) -> None: ...
+
+    def _on_clear_stop(self) -> None:
+        """Re-enable after a safe stop; default: nothing to do."""
+
+    @abstractmethod
+    def _read_into(self, t_s: float, state: JointState) -> int:
+        """Fill `state` in place; return device status flags (FAULT, COMM_LOST ...)."""
+
+    @abstractmethod
+    def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
+        """Send an already limited command; return device status flags."""
+
+    @abstractmethod
+    def _begin_safe_stop(self) -> None:
+        """Start the device's own stop (quick stop, protective stop, controlled brake)."""

@@ -1,0 +1,306 @@
+"""Simulated arm: Pinocchio forward dynamics (ABA) integrated in fixed sub-steps.
+
+The co-simulation target of seed 001: the same Robot-Tasks run on it and on hardware. It
+models what the controller would meet on a real arm:
+
+- rigid-body dynamics from the URDF's inertial parameters, semi-implicit Euler at `substep_s`;
+- viscous and Coulomb friction (Coulomb as a velocity-level projection, so joints really
+  stick), holding brakes as extra Coulomb torque while engaged;
+- torque saturation at max_torque_nm; in position and velocity modes, a joint servo (PD with
+  gravity feed-forward, per-axis gains from the reflected inertia) like a drive's inner loop;
+- measurement noise and latency (whole periods), deterministic for a given seed;
+- safe stop by IEC 60204-1 category (0, 1, 2), and `inject_fault()` for fault tests.
+
+Time is the caller's: `read(t_s)` integrates the dynamics up to `t_s` with the last command
+held (zero-order hold), so the simulation follows a wall clock or a simulated clock alike.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar
+
+import numpy as np
+import pinocchio as pin
+
+from orccadd.config.robot import RobotConfig
+from orccadd.config.schema import field, load_dataclass
+from orccadd.errors import ConfigError
+from orccadd.model import RobotModel
+from orccadd.physres.base import CommandMode, FloatArray, JointState, PhysicalResource, Status
+
+INF = math.inf
+REST_SPEED_RAD_S = 0.005
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """`[resource.settings]` of the `sim` backend. Per-joint tuples may be empty (zeros)."""
+
+    substep_s: float = field(default=0.0002, bounds=(1e-6, 0.01))
+    viscous_friction_nm_s_rad: tuple[float, ...] = field(default=(), bounds=(0.0, INF))
+    coulomb_friction_nm: tuple[float, ...] = field(default=(), bounds=(0.0, INF))
+    brake_torque_nm: tuple[float, ...] = field(default=(), bounds=(0.0, INF))
+    noise_q_rad: float = field(default=0.0, bounds=(0.0, 1.0))
+    noise_dq_rad_s: float = field(default=0.0, bounds=(0.0, 10.0))
+    noise_tau_nm: float = field(default=0.0, bounds=(0.0, 100.0))
+    latency_periods: int = field(default=0, bounds=(0, 100))
+    seed: int = field(default=0, bounds=(0, 2**63 - 1))
+    initial_q_rad: tuple[float, ...] = field(default=())
+    servo_bandwidth_hz: float = field(default=20.0, bounds=(0.1, 500.0))
+
+
+class SimulatedArm(PhysicalResource):
+    """A Physical Resource whose joints move by the robot's rigid-body dynamics."""
+
+    Settings: ClassVar[type[Any]] = SimSettings
+
+    @classmethod
+    def load_settings(cls, raw: Mapping[str, Any], cfg: RobotConfig, file: str) -> SimSettings:
+        s: SimSettings = load_dataclass(SimSettings, raw, file, "resource.settings")
+        n = cfg.dof
+        for name in ("viscous_friction_nm_s_rad", "coulomb_friction_nm", "brake_torque_nm",
+                     "initial_q_rad"):
+            v = getattr(s, name)
+            if len(v) not in (0, n):
+                raise ConfigError(file, f"resource.settings.{name}",
+                                  f"has {len(v)} entries, must have one per joint ({n}) or none")
+        if s.substep_s > cfg.control_period_s:
+            raise ConfigError(file, "resource.settings.substep_s",
+                              f"(={s.substep_s!r}) must be at most control_period_s "
+                              f"(={cfg.control_period_s!r})")
+        for i, q in enumerate(s.initial_q_rad):
+            j = cfg.joints[i]
+            if not j.position_min_rad <= q <= j.position_max_rad:
+                raise ConfigError(file, f"resource.settings.initial_q_rad[{i}]",
+                                  f"(={q!r}) must be in [{j.position_min_rad:g}, "
+                                  f"{j.position_max_rad:g}] ({j.name})")
+        if not s.brake_torque_nm:
+            s = replace(s, brake_torque_nm=tuple(2.0 * j.max_torque_nm for j in cfg.joints))
+        return s
+
+    def __init__(self, config: RobotConfig, model: RobotModel) -> None:
+        super().__init__(config, model)
+        s: SimSettings = config.backend_settings
+        if s is None:
+            s = SimulatedArm.load_settings({}, config, config.source)
+        self.settings = s
+        n = self.dof
+
+        def vec(v: tuple[float, ...]) -> FloatArray:
+            return np.array(v, dtype=np.float64) if v else np.zeros(n)
+
+        self._pin = model.model
+        self._data = model.new_data()
+        self._viscous = vec(s.viscous_friction_nm_s_rad)
+        self._coulomb = vec(s.coulomb_friction_nm)
+        self._brake = vec(s.brake_torque_nm)
+        self._rng = np.random.default_rng(s.seed)
+        self.q: FloatArray = vec(s.initial_q_rad) if s.initial_q_rad else model.home_rad.copy()
+        self.dq: FloatArray = np.zeros(n)
+        self.tau_applied: FloatArray = np.zeros(n)
+        self.t_sim_s: float | None = None
+        self.brakes_engaged = True
+        self.torque_on = False
+        self._held_cmd: FloatArray = np.zeros(n)
+        self._prev_pos_cmd: FloatArray = np.zeros(n)
+        self._vel_ff: FloatArray = np.zeros(n)
+        self._fault = 0
+        self._stopping = False
+        self._stop_t0_s = 0.0
+        self._stop_v0: FloatArray = np.zeros(n)
+        self._hold_q: FloatArray = np.zeros(n)
+        self._holding = False
+        # Servo gains from the reflected inertia at home (diagonal of M).
+        m_diag = np.diag(pin.crba(self._pin, self._data, model.home_rad)).copy()
+        w = 2 * math.pi * s.servo_bandwidth_hz
+        self._kp = m_diag * w * w
+        self._kd = m_diag * 2.0 * 0.9 * w
+        # Measurement delay line (latency in periods) and noise buffers.
+        depth = s.latency_periods + 1
+        self._ring = np.zeros((depth, 3, n))
+        self._ring_i = 0
+        self._ring_filled = False
+        self._noise = np.zeros(n)
+        self._minv_diag = np.ones(n)
+        self._tau_total = np.zeros(n)
+
+    # ---- lifecycle hooks ------------------------------------------------------------------
+    def _on_configure(self) -> None:
+        self.brakes_engaged = True
+        self.torque_on = False
+
+    def _on_activate(self, mode: CommandMode) -> None:
+        self._fault = 0
+        self._stopping = False
+        self._holding = False
+        self._set_hold_command(mode)
+        self.brakes_engaged = False
+        self.torque_on = True
+
+    def _on_switch_mode(self, mode: CommandMode) -> None:
+        self._set_hold_command(mode)
+
+    def _set_hold_command(self, mode: CommandMode) -> None:
+        if mode is CommandMode.TORQUE:
+            self._held_cmd[:] = pin.computeGeneralizedGravity(self._pin, self._data, self.q)
+        elif mode is CommandMode.POSITION:
+            self._held_cmd[:] = self.q
+        else:
+            self._held_cmd[:] = 0.0
+        self._prev_pos_cmd[:] = self.q
+        self._vel_ff[:] = 0.0
+        self.mode = mode
+
+    def _on_deactivate(self) -> None:
+        self.brakes_engaged = True
+        self.torque_on = False
+
+    def _on_shutdown(self) -> None:
+        self.brakes_engaged = True
+        self.torque_on = False
+
+    def _on_clear_stop(self) -> None:
+        self._stopping = False
+        self._holding = False
+        self._set_hold_command(self.mode)
+        self.brakes_engaged = False
+        self.torque_on = True
+
+    # ---- fault injection (tests, demos) ---------------------------------------------------
+    def inject_fault(self, message: str, code: int = 0x1000) -> None:
+        """Make the next read report a device fault (like a drive's EMCY)."""
+        self._fault = int(Status.FAULT)
+        self.fault_message = message
+        self.state.fault_code = code
+
+    def reset_fault(self) -> None:
+        """Acknowledge a device fault (like CiA 402 fault reset). Not for a tick."""
+        self._fault = 0
+        self.fault_message = ""
+        self.state.fault_code = 0
+
+    # ---- tick hooks -----------------------------------------------------------------------
+    def _read_into(self, t_s: float, state: JointState) -> int:
+        if self.t_sim_s is None:
+            self.t_sim_s = t_s
+        self._advance_to(t_s)
+        n_ring = self._ring.shape[0]
+        slot = self._ring[self._ring_i]
+        slot[0] = self.q
+        slot[1] = self.dq
+        slot[2] = self.tau_applied
+        self._ring_i = (self._ring_i + 1) % n_ring
+        if self._ring_i == 0:
+            self._ring_filled = True
+        oldest = self._ring[self._ring_i] if self._ring_filled else self._ring[0]
+        state.q_rad[:] = oldest[0]
+        state.dq_rad_s[:] = oldest[1]
+        state.tau_nm[:] = oldest[2]
+        s = self.settings
+        if s.noise_q_rad:
+            self._rng.standard_normal(out=self._noise)
+            state.q_rad += s.noise_q_rad * self._noise
+        if s.noise_dq_rad_s:
+            self._rng.standard_normal(out=self._noise)
+            state.dq_rad_s += s.noise_dq_rad_s * self._noise
+        if s.noise_tau_nm:
+            self._rng.standard_normal(out=self._noise)
+            state.tau_nm += s.noise_tau_nm * self._noise
+        flags = self._fault
+        if not self.torque_on:
+            flags |= Status.TORQUE_OFF
+        return flags
+
+    def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
+        if mode is CommandMode.POSITION:
+            period = self.config.control_period_s
+            np.subtract(command, self._prev_pos_cmd, out=self._vel_ff)
+            self._vel_ff /= period
+            self._prev_pos_cmd[:] = command
+        self._held_cmd[:] = command
+        return self._fault
+
+    def _begin_safe_stop(self) -> None:
+        cat = self.config.safe_stop.category
+        self._stopping = True
+        self._stop_t0_s = self.t_sim_s or 0.0
+        self._stop_v0[:] = self.dq
+        if cat == 0:
+            self._engage_brakes()
+
+    def _engage_brakes(self) -> None:
+        self.brakes_engaged = True
+        self.torque_on = False
+        self._stopping = False
+        self._mark_stopped(torque_off=True)
+
+    # ---- dynamics -------------------------------------------------------------------------
+    def _advance_to(self, t_s: float) -> None:
+        assert self.t_sim_s is not None
+        h = self.settings.substep_s
+        steps = int((t_s - self.t_sim_s) / h + 1e-9)
+        if steps <= 0:
+            return
+        pin.computeMinverse(self._pin, self._data, self.q)
+        np.copyto(self._minv_diag, np.diag(self._data.Minv))
+        for _ in range(steps):
+            self._substep(h)
+        self.t_sim_s += steps * h
+
+    def _motor_torque(self, out: FloatArray) -> None:
+        """Torque the motors apply this sub-step (saturated), by mode and stop state."""
+        m = self.model
+        if not self.torque_on:
+            out[:] = 0.0
+            return
+        if self._stopping or self._holding:
+            self._stop_torque(out)
+        elif self.mode is CommandMode.TORQUE:
+            out[:] = self._held_cmd
+        else:
+            g = pin.computeGeneralizedGravity(self._pin, self._data, self.q)
+            if self.mode is CommandMode.POSITION:
+                out[:] = g + self._kp * (self._held_cmd - self.q) + self._kd * (self._vel_ff - self.dq)
+            else:
+                out[:] = g + self._kd * 4.0 * (self._held_cmd - self.dq)
+        np.clip(out, -m.tau_max_nm, m.tau_max_nm, out=out)
+
+    def _stop_torque(self, out: FloatArray) -> None:
+        """Controlled stop: track a velocity ramp to zero, then hold or brake."""
+        cfg = self.config.safe_stop
+        g = pin.computeGeneralizedGravity(self._pin, self._data, self.q)
+        if self._holding:
+            out[:] = g + self._kp * (self._hold_q - self.q) - self._kd * self.dq
+            return
+        assert self.t_sim_s is not None
+        elapsed = self.t_sim_s - self._stop_t0_s
+        dv = cfg.deceleration_rad_s2 * elapsed
+        v_ref = np.sign(self._stop_v0) * np.maximum(np.abs(self._stop_v0) - dv, 0.0)
+        out[:] = g + self._kd * 4.0 * (v_ref - self.dq)
+        at_rest = bool((np.abs(self.dq) < REST_SPEED_RAD_S).all()) and not v_ref.any()
+        if at_rest or elapsed > cfg.timeout_s:
+            if cfg.category == 2 and at_rest:
+                self._holding = True
+                self._stopping = False
+                self._hold_q[:] = self.q
+                self._mark_stopped(torque_off=False)
+            else:
+                self._engage_brakes()
+
+    def _substep(self, h: float) -> None:
+        tau = self._tau_total
+        self._motor_torque(self.tau_applied)
+        np.subtract(self.tau_applied, self._viscous * self.dq, out=tau)
+        ddq = pin.aba(self._pin, self._data, self.q, self.dq, tau)
+        dq_free = self.dq + h * ddq
+        # Coulomb friction (and brakes) as a velocity-level projection: sticks when it can.
+        friction = self._coulomb + (self._brake if self.brakes_engaged else 0.0)
+        dv = h * self._minv_diag * friction
+        stuck = np.abs(dq_free) <= dv
+        dq_free -= np.sign(dq_free) * dv
+        dq_free[stuck] = 0.0
+        self.dq[:] = dq_free
+        self.q += h * self.dq
