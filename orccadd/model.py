@@ -102,6 +102,8 @@ class RobotModel:
                                   f"(={j.name!r}) is not a one-axis joint")
         _check_against_urdf(cfg, model)
         arr = lambda vals: np.array(vals, dtype=np.float64)  # noqa: E731
+        if cfg.model.armature_kg_m2:
+            model.armature = np.array(cfg.model.armature_kg_m2, dtype=np.float64)
         model.gravity = pin.Motion(np.array([0.0, 0.0, -9.81, 0.0, 0.0, 0.0]))
         return RobotModel(
             model=model,

@@ -25,11 +25,14 @@ class ModelConfig:
     `urdf` is a path relative to the config file, or `example-robot-data:<path>` for a URDF
     shipped by the example-robot-data package. Joints of the URDF that the config does not list
     must be named in `locked_joints` (they are fixed at `locked_positions`, default 0).
+    `armature_kg_m2` is each joint's reflected rotor inertia (rotor inertia × gear ratio²),
+    which URDFs leave out but which dominates the wrist joints of real arms.
     """
 
     urdf: str = field(doc="URDF path")
     locked_joints: tuple[str, ...] = field(default=())
     locked_positions: tuple[float, ...] = field(default=())
+    armature_kg_m2: tuple[float, ...] = field(default=(), bounds=(0.0, 100.0))
 
 
 @dataclass(frozen=True)
@@ -159,6 +162,12 @@ def _check_joints(cfg: RobotConfig, file: str) -> None:
         if not j.position_min_rad <= j.home_rad <= j.position_max_rad:
             rng = format_range(j.position_min_rad, j.position_max_rad, False, False)
             raise ConfigError(file, f"{key}.home_rad", f"(={j.home_rad!r}) must be in {rng}")
+    if len(cfg.model.armature_kg_m2) not in (0, cfg.dof):
+        raise ConfigError(
+            file,
+            "model.armature_kg_m2",
+            f"has {len(cfg.model.armature_kg_m2)} entries, must have one per joint ({cfg.dof}) or none",
+        )
     if len(cfg.model.locked_positions) not in (0, len(cfg.model.locked_joints)):
         raise ConfigError(
             file,

@@ -11,9 +11,11 @@ from orccadd.physres.base import JointState
 
 @register("computed_torque")
 class ComputedTorque(Module):
-    """tau = M(q)·(ddq_des + kp·e + kd·de) + h(q, dq), computed in one RNEA call.
+    """tau = M(q)·(ddq_des + kp·e + kd·de + ki·∫e) + h(q, dq), computed in one RNEA call.
 
-    `kp` (1/s²) and `kd` (1/s) set the error dynamics e'' + kd·e' + kp·e = 0 per joint.
+    `kp` (1/s²) and `kd` (1/s) set the error dynamics e'' + kd·e' + kp·e = 0 per joint; the
+    optional integral term `ki` (1/s³; the integral is clamped to ±`integral_limit_rad_s`)
+    removes the steady error that unmodelled friction leaves. The integral starts at zero.
     """
 
     def __init__(self, name: str, ctx: ModuleContext) -> None:
@@ -27,15 +29,29 @@ class ComputedTorque(Module):
         self.tau = self.add_output("tau", (n,), "N.m")
         self.kp = self.add_parameter("kp", 400.0, bounds=(0.0, 1e5), unit="1/s^2", tunable=True, shape=(n,))
         self.kd = self.add_parameter("kd", 40.0, bounds=(0.0, 1e3), unit="1/s", tunable=True, shape=(n,))
+        self.ki = self.add_parameter("ki", 0.0, bounds=(0.0, 1e6), unit="1/s^3", tunable=True, shape=(n,))
+        self.i_max = self.add_parameter("integral_limit_rad_s", 0.05, bounds=(0.0, 10.0), unit="rad.s",
+                                        tunable=True)
         self._model = ctx.model.model
         self._data = ctx.model.new_data()
         self._a = np.zeros(n)
         self._e = np.zeros(n)
+        self._ie = np.zeros(n)
+        self._dt = ctx.period_s
+
+    def start(self, state: JointState) -> None:
+        self._ie[:] = 0.0
 
     def update(self, t_s: float) -> None:
-        a, e = self._a, self._e
+        a, e, ie = self._a, self._e, self._ie
         np.subtract(self.q_des.value, self.q.value, out=e)
         np.multiply(self.kp.value, e, out=a)
+        e *= self._dt
+        ie += e
+        lim = float(self.i_max.value)
+        np.clip(ie, -lim, lim, out=ie)
+        np.multiply(self.ki.value, ie, out=e)
+        a += e
         np.subtract(self.dq_des.value, self.dq.value, out=e)
         e *= self.kd.value
         a += e

@@ -1,0 +1,114 @@
+"""Typed, named events of Robot-Tasks, and the queue they travel in from the control thread.
+
+Names are what the procedure language refers to: `MoveHome.done`, `MoveHome.T2.TrackingLost`,
+`MoveHome.T3.LimitViolation`, `MoveHome.sync.HalfWay`, `MoveHome.T1.SlowDown`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+
+
+class EventKind(IntEnum):
+    """ORCCAD's event classes (seed 000 §2.2)."""
+
+    POST = 0  # postcondition: the task ended successfully
+    T1 = 1  # type 1 exception: handled inside the task (e.g. lower a speed parameter)
+    T2 = 2  # type 2 exception: the task cannot complete, the procedure chooses what next
+    T3 = 3  # type 3 exception: fatal, safe stop at once, then the safe procedure
+    SYNC = 4  # synchronisation signal
+
+
+KIND_PREFIX = {
+    EventKind.POST: "",
+    EventKind.T1: "T1.",
+    EventKind.T2: "T2.",
+    EventKind.T3: "T3.",
+    EventKind.SYNC: "sync.",
+}
+
+# Type 3 exceptions every task has, raised by the resource layer and the executor.
+BUILTIN_T3 = ("LimitViolation", "ResourceFault", "CommLost", "Overrun")
+PRECONDITION_TIMEOUT = "PreconditionTimeout"
+
+
+def event_name(task: str, kind: EventKind, name: str) -> str:
+    if kind is EventKind.POST:
+        return f"{task}.done"
+    return f"{task}.{KIND_PREFIX[kind]}{name}"
+
+
+@dataclass(frozen=True)
+class EventInfo:
+    id: int
+    name: str
+    task: str
+    kind: EventKind
+
+
+class EventRegistry:
+    """Event names ↔ small integers (bit positions for the automaton's bitmasks)."""
+
+    def __init__(self) -> None:
+        self._by_name: dict[str, EventInfo] = {}
+        self._by_id: list[EventInfo] = []
+
+    def register(self, task: str, kind: EventKind, name: str) -> int:
+        full = event_name(task, kind, name)
+        info = self._by_name.get(full)
+        if info is None:
+            info = EventInfo(len(self._by_id), full, task, kind)
+            self._by_name[full] = info
+            self._by_id.append(info)
+        return info.id
+
+    def id(self, name: str) -> int:
+        return self._by_name[name].id
+
+    def info(self, event_id: int) -> EventInfo:
+        return self._by_id[event_id]
+
+    def names(self) -> list[str]:
+        return [e.name for e in self._by_id]
+
+    def __len__(self) -> int:
+        return len(self._by_id)
+
+
+class EventQueue:
+    """Fixed-capacity ring of (time, event id), written by the control thread in a tick.
+
+    `push` never allocates; when full, the oldest entries are overwritten and counted in
+    `dropped` (the consumer is too slow). `drain` is for the consumer, not for a tick.
+    """
+
+    def __init__(self, capacity: int = 1024) -> None:
+        self._t = np.zeros(capacity)
+        self._id = np.zeros(capacity, dtype=np.int64)
+        self._cap = capacity
+        self._head = 0  # next write
+        self._tail = 0  # next read
+        self.dropped = 0
+
+    def push(self, t_s: float, event_id: int) -> None:
+        i = self._head % self._cap
+        self._t[i] = t_s
+        self._id[i] = event_id
+        self._head += 1
+        if self._head - self._tail > self._cap:
+            self._tail += 1
+            self.dropped += 1
+
+    def drain(self) -> list[tuple[float, int]]:
+        out = []
+        while self._tail < self._head:
+            i = self._tail % self._cap
+            out.append((float(self._t[i]), int(self._id[i])))
+            self._tail += 1
+        return out
+
+    def __len__(self) -> int:
+        return self._head - self._tail

@@ -1,0 +1,250 @@
+"""A built Robot-Task: a flat schedule of module updates inside its reactive shell.
+
+One `tick(t_s)` is the hot path: read the resource, check preconditions or run the schedule,
+evaluate the shell's events, write the command. It allocates no buffers and raises nothing;
+a type 3 exception calls `resource.safe_stop()` right there, before anyone else hears of it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from orccadd.errors import ParameterError
+from orccadd.modules.base import Module, Parameter
+from orccadd.physres.base import T3_MASK, CommandMode, PhysicalResource, Status
+from orccadd.task.events import EventKind, EventQueue
+
+
+class Phase(IntEnum):
+    """Where a task is. DONE and ABORTED keep running the law until the task is switched."""
+
+    IDLE = 0
+    PRE = 1  # waiting for preconditions (the resource holds its last command)
+    RUN = 2
+    DONE = 3  # postcondition emitted
+    ABORTED = 4  # type 2 exception emitted
+    FAULT = 5  # type 3 exception: safe stop under way, no command is sent
+    PRE_FAILED = 6  # preconditions not met in time (type 2): the law never started
+
+
+RUNNING = (Phase.RUN, Phase.DONE, Phase.ABORTED)
+
+
+@dataclass(frozen=True)
+class TaskSignature:
+    """The abstract view of a task (seed figure 1): what the procedure language sees."""
+
+    name: str
+    resource: str
+    joints: tuple[str, ...]
+    command: CommandMode
+    has_post: bool
+    t1: tuple[str, ...]
+    t2: tuple[str, ...]
+    t3: tuple[str, ...]
+    sync: tuple[str, ...]
+
+
+class Precondition:
+    """A test on a measured signal that must hold before the law starts, within `timeout_s`."""
+
+    __slots__ = ("hi", "lo", "max_abs", "name", "scratch", "signal", "timeout_s")
+
+    def __init__(self, name: str, signal: npt.NDArray[np.float64], timeout_s: float,
+                 max_abs: float, lo: float, hi: float) -> None:
+        self.name = name
+        self.signal = signal
+        self.timeout_s = timeout_s
+        self.max_abs = max_abs
+        self.lo = lo
+        self.hi = hi
+        self.scratch = np.zeros_like(signal)
+
+    def holds(self) -> bool:
+        s = self.signal
+        np.abs(s, out=self.scratch)
+        if self.scratch.max() >= self.max_abs:
+            return False
+        return bool(s.min() >= self.lo and s.max() <= self.hi)
+
+
+class ShellEvent:
+    """One event of the shell: a watcher's `fired` flag, its kind, id and T1 reaction."""
+
+    __slots__ = ("event_id", "flag", "kind", "name", "prev", "reaction")
+
+    def __init__(self, name: str, kind: EventKind, event_id: int, flag: npt.NDArray[np.bool_],
+                 reaction: Sequence[tuple[Module, Parameter, npt.NDArray[np.float64]]]) -> None:
+        self.name = name
+        self.kind = kind
+        self.event_id = event_id
+        self.flag = flag
+        self.prev = False
+        self.reaction = tuple(reaction)
+
+
+class RobotTask:
+    """A Robot-Task ready to run on its resource. Build it with `orccadd.task.build_task`."""
+
+    def __init__(
+        self,
+        signature: TaskSignature,
+        resource: PhysicalResource,
+        modules: Sequence[Module],
+        command: npt.NDArray[np.float64],
+        preconditions: Sequence[Precondition],
+        events: Sequence[ShellEvent],
+        builtin_ids: dict[str, int],
+        queue: EventQueue,
+        decimation: int,
+        period_s: float,
+    ) -> None:
+        self.signature = signature
+        self.name = signature.name
+        self.resource = resource
+        self.modules = tuple(modules)
+        self.schedule: tuple[Callable[[float], None], ...] = tuple(m.update for m in modules)
+        self.command = command
+        self.preconditions = tuple(preconditions)
+        self.events = tuple(events)
+        self.builtin_ids = builtin_ids
+        self.queue = queue
+        self.decimation = decimation
+        self.period_s = period_s
+        self.phase = Phase.IDLE
+        self.ticks = 0
+        self.t_started_s = 0.0
+        self.last_write_flags = 0
+        self.fault_reason = ""
+        self._pre_started = False
+        self._pending: list[tuple[Module, Parameter, npt.NDArray[np.float64]]] = []
+        self._tunable = {
+            f"{m.name}.{p.name}": (m, p) for m in modules for p in m.parameters.values()
+        }
+
+    # ---- control (not for a tick unless said) ---------------------------------------------
+    def activate(self) -> None:
+        """Arm the task: the next tick checks preconditions (or starts the law at once)."""
+        self.phase = Phase.PRE
+        self.ticks = 0
+        self.fault_reason = ""
+        for ev in self.events:
+            ev.prev = False
+        self._pre_started = False
+
+    def deactivate(self) -> None:
+        self.phase = Phase.IDLE
+
+    def tune(self, path: str, value: Any) -> None:
+        """Check `MODULE.PARAM = value` now; apply it in place at the next tick boundary."""
+        if path not in self._tunable:
+            raise ParameterError(
+                f"task {self.name} has no parameter {path!r} (parameters: {', '.join(sorted(self._tunable))})"
+            )
+        module, param = self._tunable[path]
+        if not param.tunable:
+            raise ParameterError(f"{self.name}.{path} is not tunable at run time")
+        arr = param.check(value)
+        self._pending = [*self._pending, (module, param, arr)]
+
+    def parameters(self) -> list[dict[str, Any]]:
+        return [p.describe() for _, p in self._tunable.values()]
+
+    def raise_t3(self, t_s: float, name: str) -> None:
+        """A type 3 exception from outside the task (e.g. the executor's overrun count). Tick-safe."""
+        if self.phase is Phase.FAULT:
+            return
+        self.resource.safe_stop()
+        self.phase = Phase.FAULT
+        self.fault_reason = name
+        self.queue.push(t_s, self.builtin_ids[name])
+
+    # ---- the hot path ---------------------------------------------------------------------
+    def tick(self, t_s: float) -> None:
+        """One period: read → preconditions or law → shell events → write."""
+        res = self.resource
+        st = res.read(t_s)
+        if st.status & T3_MASK:
+            self._resource_t3(t_s, st.status)
+            return
+        phase = self.phase
+        if phase is Phase.PRE:
+            if not self._pre_started:
+                self._pre_started = True
+                self.t_started_s = t_s
+            if not self._preconditions_hold(t_s):
+                return
+            for m in self.modules:
+                m.start(st)
+            self.phase = phase = Phase.RUN
+            self.t_started_s = t_s
+        if phase not in RUNNING:
+            return
+        self.ticks += 1
+        if self.decimation > 1 and (self.ticks - 1) % self.decimation:
+            return
+        if self._pending:
+            self._apply(self._pending)
+            self._pending = []
+        for update in self.schedule:
+            update(t_s)
+        for ev in self.events:
+            fired = bool(ev.flag)
+            if fired and not ev.prev:
+                self._emit(t_s, ev)
+            ev.prev = fired
+        if self.phase is Phase.FAULT:
+            return
+        flags = res.write(t_s, self.command)
+        self.last_write_flags = flags
+        if flags & T3_MASK:
+            self._resource_t3(t_s, flags)
+
+    def _preconditions_hold(self, t_s: float) -> bool:
+        ok = True
+        for p in self.preconditions:
+            if not p.holds():
+                ok = False
+                if t_s - self.t_started_s >= p.timeout_s:
+                    self.phase = Phase.PRE_FAILED
+                    self.fault_reason = f"precondition {p.name} not met within {p.timeout_s:g} s"
+                    self.queue.push(t_s, self.builtin_ids["PreconditionTimeout"])
+                    return False
+        return ok
+
+    def _emit(self, t_s: float, ev: ShellEvent) -> None:
+        self.queue.push(t_s, ev.event_id)
+        kind = ev.kind
+        if kind is EventKind.T1:
+            self._apply(ev.reaction)
+        elif kind is EventKind.POST:
+            if self.phase is Phase.RUN:
+                self.phase = Phase.DONE
+        elif kind is EventKind.T2:
+            if self.phase is Phase.RUN:
+                self.phase = Phase.ABORTED
+        elif kind is EventKind.T3:
+            self.resource.safe_stop()
+            self.phase = Phase.FAULT
+            self.fault_reason = ev.name
+
+    def _resource_t3(self, t_s: float, flags: int) -> None:
+        if flags & Status.FAULT:
+            name = "ResourceFault"
+        elif flags & Status.COMM_LOST:
+            name = "CommLost"
+        else:
+            name = "LimitViolation"
+        self.raise_t3(t_s, name)
+
+    @staticmethod
+    def _apply(changes: Sequence[tuple[Module, Parameter, npt.NDArray[np.float64]]]) -> None:
+        for module, param, arr in changes:
+            param.value[...] = arr
+            module.on_parameter_change(param.name)
