@@ -10,6 +10,7 @@ import numpy as np
 
 from orccadd.modules.base import Module, ModuleContext, register
 from orccadd.physres.base import JointState
+from orccadd.vec import any_true, max_of
 
 
 class Watcher(Module):
@@ -20,15 +21,20 @@ class Watcher(Module):
         self.fired = self.add_output("fired", (), "bool", dtype=np.bool_)
         self.ticks = self.add_parameter("ticks", 1, bounds=(1, 100000), unit="ticks", tunable=True)
         self._count = 0
+        self._ticks_needed = 1
         self._scratch = np.zeros(ctx.dof)
+        self._mask = np.zeros(ctx.dof, dtype=np.bool_)
 
     def start(self, state: JointState) -> None:
         self._count = 0
         self.fired.value[...] = False
 
+    def on_parameter_change(self, name: str) -> None:
+        self._ticks_needed = int(self.ticks.value)
+
     def _debounce(self, condition: bool) -> None:
         self._count = self._count + 1 if condition else 0
-        self.fired.value[...] = self._count >= self.ticks.value
+        self.fired.value[...] = self._count >= self._ticks_needed
 
 
 @register("tracking_error_watch")
@@ -46,7 +52,7 @@ class TrackingErrorWatch(Watcher):
         e = self._scratch
         np.subtract(self.q_des.value, self.q.value, out=e)
         np.abs(e, out=e)
-        self._debounce(bool(e.max() > self.threshold.value))
+        self._debounce(max_of(e) > float(self.threshold.value))
 
 
 @register("joint_limit_watch")
@@ -62,14 +68,27 @@ class JointLimitWatch(Watcher):
         self.margin = self.add_parameter("margin_rad", 0.05, bounds=(0.0, 1.0), unit="rad", tunable=True)
         self.vfrac = self.add_parameter("velocity_fraction", 0.95, bounds=(0.01, 1.5), unit="1", tunable=True)
         self._lo, self._hi, self._vmax = m.q_min_rad, m.q_max_rad, m.v_max_rad_s
+        self._lo_in = np.zeros(n)
+        self._hi_in = np.zeros(n)
+        self._v_in = np.zeros(n)
+        self.on_parameter_change("margin_rad")
+
+    def on_parameter_change(self, name: str) -> None:
+        super().on_parameter_change(name)
+        margin = float(self.margin.value)
+        np.add(self._lo, margin, out=self._lo_in)
+        np.subtract(self._hi, margin, out=self._hi_in)
+        np.multiply(self._vmax, float(self.vfrac.value), out=self._v_in)
 
     def update(self, t_s: float) -> None:
-        q, margin = self.q.value, float(self.margin.value)
-        s = self._scratch
+        q, s, mask = self.q.value, self._scratch, self._mask
+        np.less(q, self._lo_in, out=mask)
+        hit = any_true(mask)
+        np.greater(q, self._hi_in, out=mask)
+        hit = hit or any_true(mask)
         np.abs(self.dq.value, out=s)
-        near = bool((q < self._lo + margin).any() or (q > self._hi - margin).any())
-        fast = bool((s > self._vmax * self.vfrac.value).any())
-        self._debounce(near or fast)
+        np.greater(s, self._v_in, out=mask)
+        self._debounce(hit or any_true(mask))
 
 
 @register("target_reached")
@@ -89,9 +108,9 @@ class TargetReached(Watcher):
         e = self._scratch
         np.subtract(self.q_goal.value, self.q.value, out=e)
         np.abs(e, out=e)
-        ok = e.max() < self.tol.value
+        ok = max_of(e) < float(self.tol.value)
         np.abs(self.dq.value, out=e)
-        self._debounce(bool(ok and e.max() < self.vtol.value))
+        self._debounce(ok and max_of(e) < float(self.vtol.value))
 
 
 @register("timeout_watch")

@@ -22,6 +22,7 @@ import numpy.typing as npt
 from orccadd.config.robot import RobotConfig
 from orccadd.errors import LifecycleError, ResourceError
 from orccadd.model import RobotModel
+from orccadd.vec import any_true, clamp
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -101,11 +102,16 @@ class PhysicalResource(ABC):
         self._cmd: FloatArray = np.zeros(self.dof)
         self._last_pos_cmd: FloatArray = np.zeros(self.dof)
         self._scratch: FloatArray = np.zeros(self.dof)
+        self._mask = np.zeros(self.dof, dtype=np.bool_)
         self._limit_q_lo = model.q_min_rad - config.limits.position_tolerance_rad
         self._limit_q_hi = model.q_max_rad + config.limits.position_tolerance_rad
         self._limit_dq = model.v_max_rad_s * config.limits.velocity_tolerance
         self._stop_flags = 0
         self.clamp_count = 0
+        self._neg_tau_max = -model.tau_max_nm
+        self._neg_v_max = -model.v_max_rad_s
+        self._step_max = model.v_max_rad_s * config.control_period_s * config.limits.velocity_tolerance
+        self._neg_step_max = -self._step_max
 
     # ---- settings -------------------------------------------------------------------------
     @classmethod
@@ -186,12 +192,14 @@ class PhysicalResource(ABC):
         st = self.state
         st.status = self._read_into(t_s, st) | self._stop_flags
         st.t_s = t_s
-        q, dq = st.q_rad, st.dq_rad_s
-        if (
-            (q < self._limit_q_lo).any()
-            or (q > self._limit_q_hi).any()
-            or (np.abs(dq, out=self._scratch) > self._limit_dq).any()
-        ):
+        mask = self._mask
+        np.less(st.q_rad, self._limit_q_lo, out=mask)
+        bad = any_true(mask)
+        np.greater(st.q_rad, self._limit_q_hi, out=mask)
+        bad = bad or any_true(mask)
+        np.abs(st.dq_rad_s, out=self._scratch)
+        np.greater(self._scratch, self._limit_dq, out=mask)
+        if bad or any_true(mask):
             st.status |= Status.LIMIT_VIOLATION
         return st
 
@@ -205,30 +213,26 @@ class PhysicalResource(ABC):
         """
         if self._stop_flags:
             return self._stop_flags | self.state.status
-        cmd = self._cmd
+        cmd, mask = self._cmd, self._mask
         m = self.model
         flags = 0
         if self.mode is CommandMode.TORQUE:
-            np.clip(command, -m.tau_max_nm, m.tau_max_nm, out=cmd)
+            clamp(command, self._neg_tau_max, m.tau_max_nm, cmd)
         elif self.mode is CommandMode.VELOCITY:
-            np.clip(command, -m.v_max_rad_s, m.v_max_rad_s, out=cmd)
-            if (cmd != command).any():
-                flags |= Status.LIMIT_VIOLATION
+            clamp(command, self._neg_v_max, m.v_max_rad_s, cmd)
         else:
-            np.clip(command, m.q_min_rad, m.q_max_rad, out=cmd)
-            if (cmd != command).any():
-                flags |= Status.LIMIT_VIOLATION
+            clamp(command, m.q_min_rad, m.q_max_rad, cmd)
             step = self._scratch
             np.subtract(cmd, self._last_pos_cmd, out=step)
-            max_step = self.config.control_period_s * self.config.limits.velocity_tolerance
-            if (np.abs(step) > m.v_max_rad_s * max_step).any():
-                flags |= Status.LIMIT_VIOLATION
-                np.clip(step, -m.v_max_rad_s * max_step, m.v_max_rad_s * max_step, out=step)
-                np.add(self._last_pos_cmd, step, out=cmd)
+            clamp(step, self._neg_step_max, self._step_max, step)
+            np.add(self._last_pos_cmd, step, out=cmd)
             self._last_pos_cmd[:] = cmd
-        if (cmd != command).any():
+        np.not_equal(cmd, command, out=mask)
+        if any_true(mask):
             flags |= Status.CMD_CLAMPED
             self.clamp_count += 1
+            if self.mode is not CommandMode.TORQUE:
+                flags |= Status.LIMIT_VIOLATION
         return flags | self._write_command(t_s, self.mode, cmd)
 
     def safe_stop(self) -> None:

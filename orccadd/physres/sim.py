@@ -30,6 +30,7 @@ from orccadd.config.schema import field, load_dataclass
 from orccadd.errors import ConfigError
 from orccadd.model import RobotModel
 from orccadd.physres.base import CommandMode, FloatArray, JointState, PhysicalResource, Status
+from orccadd.vec import clamp
 
 INF = math.inf
 REST_SPEED_RAD_S = 0.005
@@ -126,6 +127,10 @@ class SimulatedArm(PhysicalResource):
         self._noise = np.zeros(n)
         self._minv_diag = np.ones(n)
         self._tau_total = np.zeros(n)
+        self._tmp = np.zeros(n)
+        self._dv_friction = np.zeros(n)
+        self._stuck = np.zeros(n, dtype=np.bool_)
+        self._neg_tau_max = -model.tau_max_nm
 
     # ---- lifecycle hooks ------------------------------------------------------------------
     def _on_configure(self) -> None:
@@ -247,6 +252,7 @@ class SimulatedArm(PhysicalResource):
         pin.computeMinverse(self._pin, self._data, self.q)
         np.copyto(self._minv_diag, np.diag(self._data.Minv))
         for _ in range(steps):
+            self._update_friction(h)
             self._substep(h)
         self.t_sim_s += steps * h
 
@@ -266,7 +272,7 @@ class SimulatedArm(PhysicalResource):
                 out[:] = g + self._kp * (self._held_cmd - self.q) + self._kd * (self._vel_ff - self.dq)
             else:
                 out[:] = g + self._kd * 4.0 * (self._held_cmd - self.dq)
-        np.clip(out, -m.tau_max_nm, m.tau_max_nm, out=out)
+        clamp(out, self._neg_tau_max, m.tau_max_nm, out)
 
     def _stop_torque(self, out: FloatArray) -> None:
         """Controlled stop: track a velocity ramp to zero, then hold or brake."""
@@ -290,17 +296,31 @@ class SimulatedArm(PhysicalResource):
             else:
                 self._engage_brakes()
 
+    def _update_friction(self, h: float) -> None:
+        """Velocity change Coulomb friction (and engaged brakes) can remove in one sub-step."""
+        dv = self._dv_friction
+        if self.brakes_engaged:
+            np.add(self._coulomb, self._brake, out=dv)
+        else:
+            dv[:] = self._coulomb
+        dv *= self._minv_diag
+        dv *= h
+
     def _substep(self, h: float) -> None:
-        tau = self._tau_total
+        tau, tmp, dq = self._tau_total, self._tmp, self.dq
         self._motor_torque(self.tau_applied)
-        np.subtract(self.tau_applied, self._viscous * self.dq, out=tau)
-        ddq = pin.aba(self._pin, self._data, self.q, self.dq, tau)
-        dq_free = self.dq + h * ddq
-        # Coulomb friction (and brakes) as a velocity-level projection: sticks when it can.
-        friction = self._coulomb + (self._brake if self.brakes_engaged else 0.0)
-        dv = h * self._minv_diag * friction
-        stuck = np.abs(dq_free) <= dv
-        dq_free -= np.sign(dq_free) * dv
-        dq_free[stuck] = 0.0
-        self.dq[:] = dq_free
-        self.q += h * self.dq
+        np.multiply(self._viscous, dq, out=tau)
+        np.subtract(self.tau_applied, tau, out=tau)
+        ddq = pin.aba(self._pin, self._data, self.q, dq, tau)
+        np.multiply(ddq, h, out=tmp)
+        dq += tmp
+        # Coulomb friction (and brakes) as a velocity-level projection: joints really stick.
+        dv, stuck = self._dv_friction, self._stuck
+        np.abs(dq, out=tmp)
+        np.less_equal(tmp, dv, out=stuck)
+        np.sign(dq, out=tmp)
+        tmp *= dv
+        dq -= tmp
+        np.putmask(dq, stuck, 0.0)
+        np.multiply(dq, h, out=tmp)
+        self.q += tmp

@@ -19,6 +19,7 @@ from orccadd.errors import ParameterError
 from orccadd.modules.base import Module, Parameter
 from orccadd.physres.base import T3_MASK, CommandMode, PhysicalResource, Status
 from orccadd.task.events import EventKind, EventQueue
+from orccadd.vec import max_of, min_of
 
 
 class Phase(IntEnum):
@@ -69,9 +70,9 @@ class Precondition:
     def holds(self) -> bool:
         s = self.signal
         np.abs(s, out=self.scratch)
-        if self.scratch.max() >= self.max_abs:
+        if max_of(self.scratch) >= self.max_abs:
             return False
-        return bool(s.min() >= self.lo and s.max() <= self.hi)
+        return min_of(s) >= self.lo and max_of(s) <= self.hi
 
 
 class ShellEvent:
