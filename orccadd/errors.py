@@ -35,7 +35,16 @@ class LifecycleError(ResourceError):
 
 
 class ParameterError(OrccaddError):
-    """A module parameter was set to a value outside its declaration (bounds, shape, tunable)."""
+    """A module parameter was set to a value outside its declaration (bounds, shape, tunable).
+
+    `name` is the parameter's own name and `detail` the message without it, so a file loader
+    can cite `modules.ct.kp (=-1.0) must be in [0, 100000] 1/s^2`.
+    """
+
+    def __init__(self, message: str, *, name: str = "", detail: str = "") -> None:
+        super().__init__(message)
+        self.name = name
+        self.detail = detail or message
 
 
 class TimeoutError_(OrccaddError):  # noqa: N818 - avoid shadowing the builtin

@@ -117,25 +117,26 @@ class Parameter:
         try:
             arr = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError):
-            raise ParameterError(f"{self.path} (={value!r}) must be a number or a list of numbers") from None
+            raise self._error(f"(={value!r}) must be a number or a list of numbers") from None
         if arr.shape != self.shape:
             if arr.shape == () and self.shape != ():
                 arr = np.full(self.shape, float(arr))
             else:
                 want = "a number" if self.shape == () else f"{self.shape[0]} numbers (or one)"
-                raise ParameterError(f"{self.path} (={value!r}) must be {want}")
+                raise self._error(f"(={value!r}) must be {want}")
         lo, hi = self.bounds
         bad = ~((arr >= lo) & (arr <= hi))
         if bad.any():
             shown = value if np.ndim(value) == 0 else arr.tolist()
-            if bad.ndim == 0:
-                rng = f"[{float(lo):g}, {float(hi):g}]"
-            else:
-                i = int(np.flatnonzero(bad)[0])
-                lo_i, hi_i = np.broadcast_to(lo, bad.shape)[i], np.broadcast_to(hi, bad.shape)[i]
-                rng = f"[{float(lo_i):g}, {float(hi_i):g}] at index {i}"
-            raise ParameterError(f"{self.path} (={shown!r}) must be in {rng} {self.unit}".rstrip())
+            i = int(np.flatnonzero(bad)[0]) if bad.ndim else 0
+            lo_i = float(np.broadcast_to(lo, bad.shape)[i] if bad.ndim else lo)
+            hi_i = float(np.broadcast_to(hi, bad.shape)[i] if bad.ndim else hi)
+            where = f" at index {i}" if np.ndim(value) else ""
+            raise self._error(f"(={shown!r}) must be in [{lo_i:g}, {hi_i:g}]{where} {self.unit}".rstrip())
         return arr
+
+    def _error(self, detail: str) -> ParameterError:
+        return ParameterError(f"{self.path} {detail}", name=self.name, detail=detail)
 
     def describe(self) -> dict[str, Any]:
         return {
@@ -190,10 +191,8 @@ class Module(ABC):
         for key, v in values.items():
             if key not in self.parameters:
                 allowed = ", ".join(sorted(self.parameters)) or "none"
-                raise ParameterError(
-                    f"module {self.name!r} ({self.type_name}) has no parameter {key!r} "
-                    f"(parameters: {allowed})"
-                )
+                detail = f"is not a parameter of {self.type_name} (parameters: {allowed})"
+                raise ParameterError(f"{self.name}.{key} {detail}", name=key, detail=detail)
             self.parameters[key].value[...] = self.parameters[key].check(v)
             self.on_parameter_change(key)
 

@@ -97,7 +97,7 @@ def build_task(
         try:
             m.configure(ms.parameters)
         except ParameterError as e:
-            raise ConfigError(src, key, str(e)) from None
+            raise ConfigError(src, f"{key}.{e.name}", e.detail) from None
         modules[ms.name] = m
         nodes[ms.name] = _Node(ms.name, m.inputs, m.outputs, m)
     writers = _check_wires(spec, nodes)
@@ -258,7 +258,7 @@ def _shell(spec: TaskSpec, nodes: dict[str, _Node], registry: EventRegistry,
                     try:
                         reaction.append((mod, param, param.check(value)))
                     except ParameterError as err:
-                        raise ConfigError(src, f"{key}.set.{pkey}", str(err)) from None
+                        raise ConfigError(src, f"{key}.set.{pkey}", err.detail) from None
             out.append(ShellEvent(e.name, kind, registry.register(h.name, kind, e.name),
                                   port.value, reaction))
     return out
