@@ -1,0 +1,77 @@
+"""Each watcher raises its event at the right tick (modules driven directly, no resource)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from orccadd.config import load_robot_config
+from orccadd.model import RobotModel
+from orccadd.modules import ModuleContext
+from orccadd.modules.watchers import JointLimitWatch, TargetReached, TimeoutWatch, TrackingErrorWatch
+from orccadd.physres import JointState
+from tests.conftest import UR5E
+
+PERIOD_S = 0.002
+MODEL = RobotModel.from_config(load_robot_config(UR5E))
+CTX = ModuleContext("T", MODEL, PERIOD_S)
+
+
+def first_fired(watcher, feed, n: int = 200) -> int | None:  # type: ignore[no-untyped-def]
+    state = JointState(MODEL.dof)
+    watcher.start(state)
+    for k in range(n):
+        feed(k)
+        watcher.update(k * PERIOD_S)
+        if bool(watcher.fired.value):
+            return k
+    return None
+
+
+def test_tracking_error_fires_after_debounce() -> None:
+    w = TrackingErrorWatch("w", CTX)
+    w.configure({"threshold_rad": 0.05, "ticks": 3})
+
+    def feed(k: int) -> None:
+        w.q.value[:] = 0.0
+        w.q_des.value[:] = 0.0
+        w.q_des.value[4] = 0.01 * k  # crosses 0.05 at k = 6 (0.06 > 0.05)
+
+    assert first_fired(w, feed) == 8  # k = 6, 7, 8 in a row
+
+
+def test_joint_limit_fires_on_position_margin_and_on_speed() -> None:
+    w = JointLimitWatch("w", CTX)
+    w.configure({"margin_rad": 0.1, "velocity_fraction": 0.5})
+
+    def feed_pos(k: int) -> None:
+        w.q.value[:] = MODEL.home_rad
+        w.q.value[2] = MODEL.q_max_rad[2] - 1.0 + 0.05 * k  # within 0.1 of the limit when k > 18
+        w.dq.value[:] = 0.0
+
+    assert first_fired(w, feed_pos) == 19
+
+    def feed_speed(k: int) -> None:
+        w.q.value[:] = MODEL.home_rad
+        w.dq.value[:] = 0.0
+        w.dq.value[0] = -0.1 * k  # 0.5 × 3.1415 = 1.57 exceeded at k = 16
+
+    assert first_fired(w, feed_speed) == 16
+
+
+def test_target_reached_needs_position_and_rest() -> None:
+    w = TargetReached("w", CTX)
+    w.configure({"tolerance_rad": 0.01, "velocity_tolerance_rad_s": 0.02, "ticks": 1})
+    goal = MODEL.home_rad
+
+    def feed(k: int) -> None:
+        w.q_goal.value[:] = goal
+        w.q.value[:] = goal + 0.1 * np.exp(-0.2 * k)  # within 0.01 from k = 12
+        w.dq.value[:] = 0.05 if k < 20 else 0.0  # at rest from k = 20
+
+    assert first_fired(w, feed) == 20
+
+
+def test_timeout_fires_after_timeout_s() -> None:
+    w = TimeoutWatch("w", CTX)
+    w.configure({"timeout_s": 0.05})
+    assert first_fired(w, lambda k: None) == 25  # 25 × 2 ms

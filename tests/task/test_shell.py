@@ -1,0 +1,108 @@
+"""The reactive shell: preconditions, T1 local reaction, T2, T3 → safe stop, tuning."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from orccadd.errors import ParameterError
+from orccadd.physres import Status
+from orccadd.runtime import SimClock
+from orccadd.session import Session
+from orccadd.task import Phase
+from tests.conftest import MOVE_TASK, UR5E
+
+FAR = [0.8, -1.2, 1.2, -1.6, -1.2, 0.4]
+
+
+def open_task(path=MOVE_TASK):  # type: ignore[no-untyped-def]
+    s = Session.open(UR5E)
+    task = s.task(path)
+    return s, task, s.loop(SimClock())
+
+
+def test_t1_lowers_speed_locally_and_task_completes(task_variant) -> None:  # type: ignore[no-untyped-def]
+    s, task, loop = open_task(task_variant(("threshold_rad = 0.02", "threshold_rad = 0.002")))
+    traj = next(m for m in task.modules if m.name == "traj")
+    traj.configure({"target_rad": FAR})
+    assert loop.run_task(task, timeout_s=10.0) is Phase.DONE
+    names = s.event_names()
+    assert names[0] == "MoveJoints.T1.TrackingDrift" and names[-1] == "MoveJoints.done"
+    assert float(traj.speed_scale.value) == pytest.approx(0.4)
+
+
+def test_t2_aborts_and_keeps_commanding(task_variant) -> None:  # type: ignore[no-untyped-def]
+    s, task, loop = open_task(task_variant(("threshold_rad = 0.2", "threshold_rad = 0.003")))
+    next(m for m in task.modules if m.name == "traj").configure({"target_rad": FAR})
+    assert loop.run_task(task, timeout_s=10.0) is Phase.ABORTED
+    assert "MoveJoints.T2.TrackingLost" in s.event_names()
+    assert not s.resource.stopping_or_stopped  # the procedure decides what next; law still runs
+    before = task.command.copy()
+    loop.run_for(0.05)
+    assert not np.array_equal(before, task.command)
+
+
+def test_precondition_timeout_is_a_type_2(task_variant) -> None:  # type: ignore[no-untyped-def]
+    s, task, loop = open_task(task_variant(("max_abs_below = 0.5", "within = [5.0, 6.0]")))
+    t0 = s.resource.state.t_s
+    assert loop.run_task(task, timeout_s=5.0) is Phase.PRE_FAILED
+    (t_event, eid), = s.queue.drain()
+    assert s.registry.info(eid).name == "MoveJoints.T2.PreconditionTimeout"
+    assert t_event - t0 == pytest.approx(1.0 + 0.002, abs=0.0021)  # timeout_s = 1.0
+    assert "ArmSlow" in task.fault_reason
+
+
+def check_stopped_safely(s: Session, loop, category_torque_off: bool) -> None:  # type: ignore[no-untyped-def]
+    res = s.resource
+    speeds = []
+    for _ in range(1500):  # 3 s
+        loop.executor.run(max_ticks=1)
+        speeds.append(res.state.dq_rad_s.copy())
+    speeds_arr = np.array(speeds)
+    assert np.abs(speeds_arr[-50:]).max() < 0.01
+    decel = np.abs(np.diff(speeds_arr, axis=0)).max() / s.config.control_period_s
+    assert decel < 3 * s.config.safe_stop.deceleration_rad_s2 + 5.0, decel
+    q = res.state.q_rad
+    assert ((q >= res.model.q_min_rad) & (q <= res.model.q_max_rad)).all()
+    assert res.state.status & Status.STOPPED
+    assert bool(res.state.status & Status.TORQUE_OFF) is category_torque_off
+
+
+def test_t3_from_a_watcher_safe_stops_the_arm(task_variant) -> None:  # type: ignore[no-untyped-def]
+    s, task, loop = open_task(task_variant(("margin_rad = 0.02", "margin_rad = 0.02\nvelocity_fraction = 0.3")))
+    next(m for m in task.modules if m.name == "traj").configure({"target_rad": FAR})
+    assert loop.run_task(task, timeout_s=10.0) is Phase.FAULT
+    assert s.event_names() == ["MoveJoints.T3.NearJointLimit"]
+    assert s.resource.stopping_or_stopped
+    assert np.abs(s.resource.state.dq_rad_s).max() > 0.5  # it was moving fast
+    check_stopped_safely(s, loop, category_torque_off=True)  # category 1: brakes, torque off
+
+
+def test_resource_fault_is_a_type_3() -> None:
+    s, task, loop = open_task()
+    next(m for m in task.modules if m.name == "traj").configure({"target_rad": FAR})
+    task.activate()
+    loop.active = task
+    loop.run_for(0.3)
+    s.resource.inject_fault("over-current on axis 2")  # type: ignore[attr-defined]
+    loop.run_for(0.01)
+    assert task.phase is Phase.FAULT
+    assert "MoveJoints.T3.ResourceFault" in s.event_names()
+    check_stopped_safely(s, loop, category_torque_off=True)
+
+
+def test_tune_is_checked_then_applied_at_tick_boundary() -> None:
+    s, task, loop = open_task()
+    ct = next(m for m in task.modules if m.name == "ct")
+    with pytest.raises(ParameterError, match=r"ct.kp \(=-3\) must be in \[0, 100000\]"):
+        task.tune("ct.kp", -3)
+    with pytest.raises(ParameterError, match="has no parameter 'ct.gain'"):
+        task.tune("ct.gain", 1.0)
+    with pytest.raises(ParameterError, match="must be 6 numbers"):
+        task.tune("ct.kp", [1.0, 2.0])
+    task.tune("ct.kp", 500.0)
+    assert float(ct.kp.value[0]) == 900.0  # not yet: applied at the next tick
+    task.activate()
+    loop.active = task
+    loop.run_for(0.01)
+    assert (ct.kp.value == 500.0).all()
