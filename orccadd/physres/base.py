@@ -255,7 +255,9 @@ class PhysicalResource(ABC):
     def _on_configure(self) -> None: ...
 
     @abstractmethod
-    def _on_activate(self, mode: CommandMode) -> None: ...
+    def _on_activate(self, mode: CommandMode) -> None:
+        """Enable the device; leave the current measured position in `self.state.q_rad`
+        (the position-mode rate limit starts from it)."""
 
     def _on_switch_mode(self, mode: CommandMode) -> None:
         """Change the device's mode while enabled; default: nothing to do."""

@@ -138,6 +138,7 @@ class SimulatedArm(PhysicalResource):
         self.torque_on = False
 
     def _on_activate(self, mode: CommandMode) -> None:
+        self.state.q_rad[:] = self.q
         self._fault = 0
         self._stopping = False
         self._holding = False

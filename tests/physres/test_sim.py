@@ -1,0 +1,156 @@
+"""The simulated arm: lifecycle, limit enforcement, stop categories, determinism, latency."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from orccadd.config import load_robot_config
+from orccadd.errors import LifecycleError, ResourceError
+from orccadd.physres import CommandMode, Lifecycle, Status, create_resource
+from orccadd.physres.sim import SimulatedArm
+from tests.conftest import PANDA, UR5E
+
+DT = 0.002
+
+
+def make(path=UR5E, mode: CommandMode | None = CommandMode.TORQUE) -> SimulatedArm:  # type: ignore[no-untyped-def]
+    res = create_resource(load_robot_config(path))
+    assert isinstance(res, SimulatedArm)
+    res.configure()
+    if mode is not None:
+        res.activate(mode)
+    return res
+
+
+def hold_gravity(res: SimulatedArm, ticks: int, t0: float = 0.0, extra: float = 0.0) -> None:
+    data = res.model.new_data()
+    for k in range(ticks):
+        st = res.read(t0 + k * DT)
+        res.write(t0 + k * DT, pin.computeGeneralizedGravity(res.model.model, data, st.q_rad) + extra)
+
+
+def test_lifecycle_order_is_enforced() -> None:
+    res = create_resource(load_robot_config(UR5E))
+    with pytest.raises(LifecycleError, match="cannot activate while unconfigured"):
+        res.activate(CommandMode.TORQUE)
+    res.configure()
+    with pytest.raises(LifecycleError, match="cannot configure while inactive"):
+        res.configure()
+    res.activate(CommandMode.POSITION)
+    assert res.lifecycle is Lifecycle.ACTIVE
+    res.deactivate()
+    res.shutdown()
+    assert res.lifecycle is Lifecycle.FINALIZED
+
+
+def test_gravity_compensation_holds_the_arm() -> None:
+    res = make()
+    q0 = res.state.q_rad.copy() if res.state.t_s else res.q.copy()
+    hold_gravity(res, 500)
+    assert np.abs(res.state.q_rad - q0).max() < 1e-3
+
+
+def test_without_torque_the_arm_falls_and_brakes_hold_it() -> None:
+    res = make()
+    for k in range(200):
+        res.read(k * DT)
+        res.write(k * DT, np.zeros(res.dof))
+    assert np.abs(res.state.q_rad - res.q).max() < 1e-9
+    assert np.abs(res.state.dq_rad_s).max() > 0.1  # falling under gravity (friction is not enough)
+    res.deactivate()  # brakes
+    for k in range(200, 600):
+        res.read(k * DT)
+    assert np.abs(res.state.dq_rad_s).max() == 0.0
+
+
+def test_torque_is_saturated_without_type_3() -> None:
+    res = make()
+    flags = res.write(0.0, np.full(res.dof, 1000.0))
+    assert flags & Status.CMD_CLAMPED and not flags & Status.LIMIT_VIOLATION
+    np.testing.assert_allclose(res._cmd, res.model.tau_max_nm)
+
+
+def test_position_command_beyond_limits_is_clamped_and_a_violation() -> None:
+    res = make(mode=CommandMode.POSITION)
+    res.read(0.0)
+    cmd = res.state.q_rad.copy()
+    cmd[2] = 10.0
+    flags = res.write(0.0, cmd)
+    assert flags & Status.CMD_CLAMPED and flags & Status.LIMIT_VIOLATION
+    step = res.model.v_max_rad_s[2] * res.config.control_period_s * res.config.limits.velocity_tolerance
+    assert res._cmd[2] == pytest.approx(res.state.q_rad[2] + step)
+
+
+def test_measured_position_beyond_limit_is_flagged() -> None:
+    res = make()
+    res.q[2] = res.model.q_max_rad[2] + 0.1
+    assert res.read(0.0).status & Status.LIMIT_VIOLATION
+
+
+def test_unsupported_mode_is_refused_clearly() -> None:
+    res = make(mode=None)
+    type(res).supported_modes = frozenset({CommandMode.TORQUE})
+    try:
+        with pytest.raises(ResourceError, match="cannot command position"):
+            res.activate(CommandMode.POSITION)
+    finally:
+        del type(res).supported_modes
+
+
+@pytest.mark.parametrize(("category", "torque_off", "brakes"), [(0, True, True), (1, True, True), (2, False, False)])
+def test_safe_stop_categories(robot_variant, category, torque_off, brakes) -> None:  # type: ignore[no-untyped-def]
+    res = make(robot_variant(("category = 1", f"category = {category}")))
+    hold_gravity(res, 150, extra=4.0)  # push: the arm moves
+    assert np.abs(res.state.dq_rad_s).max() > 0.3
+    res.safe_stop()
+    assert res.write(0.3, np.full(res.dof, 50.0)) & Status.STOPPING or category == 0  # ignored
+    hold_gravity(res, 1500, t0=0.302)
+    st = res.state
+    assert np.abs(st.dq_rad_s).max() < 0.01
+    assert st.status & Status.STOPPED
+    assert bool(st.status & Status.TORQUE_OFF) is torque_off
+    assert res.brakes_engaged is brakes
+
+
+def test_clear_stop_refused_while_faulted_then_allowed() -> None:
+    res = make()
+    res.inject_fault("following error")
+    res.read(0.0)
+    res.safe_stop()
+    with pytest.raises(ResourceError, match="following error"):
+        res.clear_stop()
+    res.reset_fault()
+    res.read(DT)
+    res.clear_stop()
+    assert not res.stopping_or_stopped
+
+
+def test_noise_is_deterministic_for_a_seed(robot_variant) -> None:  # type: ignore[no-untyped-def]
+    noisy = ("seed = 1", "seed = 7\nnoise_q_rad = 0.001\nnoise_dq_rad_s = 0.01")
+    runs = []
+    for _ in range(2):
+        res = make(robot_variant(noisy))
+        hold_gravity(res, 100)
+        runs.append(res.state.q_rad.copy())
+    np.testing.assert_array_equal(runs[0], runs[1])
+    other = make(robot_variant(("seed = 1", "seed = 8\nnoise_q_rad = 0.001")))
+    hold_gravity(other, 100)
+    assert not np.array_equal(runs[0], other.state.q_rad)
+
+
+def test_latency_delays_measurements_by_whole_periods(robot_variant) -> None:  # type: ignore[no-untyped-def]
+    res = make(robot_variant(("seed = 1", "seed = 1\nlatency_periods = 3")))
+    seen, truth = [], []
+    for k in range(40):
+        st = res.read(k * DT)
+        seen.append(st.q_rad[1])
+        truth.append(res.q[1])
+        res.write(k * DT, np.zeros(res.dof))  # falls: q changes every period
+    assert seen[10:] == pytest.approx(truth[7:-3])
+
+
+def test_panda_fingers_are_locked_out_of_the_model() -> None:
+    res = make(PANDA)
+    assert res.dof == 7 and res.model.model.nq == 7
