@@ -41,8 +41,10 @@ def main(argv: list[str] | None = None) -> int:
     rt = enter_realtime(args.priority)
     for w in rt.warnings:
         print(f"warning: {w}", file=sys.stderr)
-    print(f"orccadd demo: {cfg.name} ({cfg.dof} joints, {cfg.resource.backend}), "
-          f"period {cfg.control_period_s * 1e3:g} ms, {rt.describe()}")
+    print(
+        f"orccadd demo: {cfg.name} ({cfg.dof} joints, {cfg.resource.backend}), "
+        f"period {cfg.control_period_s * 1e3:g} ms, {rt.describe()}"
+    )
     failures = 0
     try:
         for i, (name, target) in enumerate(TARGETS_RAD.items(), start=1):
@@ -53,9 +55,11 @@ def main(argv: list[str] | None = None) -> int:
             elapsed = time.monotonic() - t0
             err = float(np.abs(session.resource.state.q_rad - goal).max())
             events = ", ".join(n.split(".", 1)[1] for n in session.event_names())
-            print(f"motion {i}/{len(TARGETS_RAD)} {name:6s} target {np.round(goal, 2).tolist()}: "
-                  f"{phase.name.lower()} in {elapsed:5.2f} s, final error {err:.4f} rad "
-                  f"[events: {events or 'none'}]")
+            print(
+                f"motion {i}/{len(TARGETS_RAD)} {name:6s} target {np.round(goal, 2).tolist()}: "
+                f"{phase.name.lower()} in {elapsed:5.2f} s, final error {err:.4f} rad "
+                f"[events: {events or 'none'}]"
+            )
             failures += phase.name != "DONE"
         loop.run_for(0.2)  # hold at the last target
     finally:

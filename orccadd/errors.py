@@ -45,7 +45,3 @@ class ParameterError(OrccaddError):
         super().__init__(message)
         self.name = name
         self.detail = detail or message
-
-
-class TimeoutError_(OrccaddError):  # noqa: N818 - avoid shadowing the builtin
-    """A blocking step did not finish within its `timeout_s`."""

@@ -33,7 +33,11 @@ def example_robot_data_dir() -> Path:
 
 def resolve_urdf(cfg: RobotConfig) -> Path:
     urdf = cfg.model.urdf
-    path = example_robot_data_dir() / urdf[len(ERD_PREFIX):] if urdf.startswith(ERD_PREFIX) else cfg.resolve(urdf)
+    path = (
+        example_robot_data_dir() / urdf[len(ERD_PREFIX) :]
+        if urdf.startswith(ERD_PREFIX)
+        else cfg.resolve(urdf)
+    )
     if not path.is_file():
         raise ConfigError(cfg.source, "model.urdf", f"(={urdf!r}) names no file ({path})")
     return path
@@ -72,8 +76,11 @@ class RobotModel:
         names = list(full.names)[1:]
         for i, name in enumerate(cfg.model.locked_joints):
             if name not in names:
-                raise ConfigError(cfg.source, f"model.locked_joints[{i}]",
-                                  f"(={name!r}) is not a joint of {path.name} (joints: {', '.join(names)})")
+                raise ConfigError(
+                    cfg.source,
+                    f"model.locked_joints[{i}]",
+                    f"(={name!r}) is not a joint of {path.name} (joints: {', '.join(names)})",
+                )
         q_ref = pin.neutral(full)
         for i, name in enumerate(cfg.model.locked_joints):
             if cfg.model.locked_positions:
@@ -84,24 +91,29 @@ class RobotModel:
         model_names = list(model.names)[1:]
         for i, j in enumerate(cfg.joints):
             if j.name not in model_names:
-                raise ConfigError(cfg.source, f"joints[{i}].name",
-                                  f"(={j.name!r}) is not a joint of {path.name} "
-                                  f"(joints: {', '.join(model_names)})")
+                raise ConfigError(
+                    cfg.source,
+                    f"joints[{i}].name",
+                    f"(={j.name!r}) is not a joint of {path.name} (joints: {', '.join(model_names)})",
+                )
         unlisted = [n for n in model_names if n not in cfg.joint_names]
         if unlisted:
-            raise ConfigError(cfg.source, "joints",
-                              f"does not list {', '.join(unlisted)} of {path.name}: "
-                              "list them or name them in model.locked_joints")
+            raise ConfigError(
+                cfg.source,
+                "joints",
+                f"does not list {', '.join(unlisted)} of {path.name}: "
+                "list them or name them in model.locked_joints",
+            )
         for i, j in enumerate(cfg.joints):
             if model_names[i] != j.name:
-                raise ConfigError(cfg.source, f"joints[{i}].name",
-                                  f"(={j.name!r}) is out of order: the model's order is "
-                                  f"{', '.join(model_names)}")
+                raise ConfigError(
+                    cfg.source,
+                    f"joints[{i}].name",
+                    f"(={j.name!r}) is out of order: the model's order is {', '.join(model_names)}",
+                )
             if model.joints[i + 1].nq != 1:
-                raise ConfigError(cfg.source, f"joints[{i}].name",
-                                  f"(={j.name!r}) is not a one-axis joint")
+                raise ConfigError(cfg.source, f"joints[{i}].name", f"(={j.name!r}) is not a one-axis joint")
         _check_against_urdf(cfg, model)
-        arr = lambda vals: np.array(vals, dtype=np.float64)  # noqa: E731
         if cfg.model.armature_kg_m2:
             model.armature = np.array(cfg.model.armature_kg_m2, dtype=np.float64)
         model.gravity = pin.Motion(np.array([0.0, 0.0, -9.81, 0.0, 0.0, 0.0]))
@@ -118,6 +130,10 @@ class RobotModel:
         )
 
 
+def arr(values: list[float]) -> FloatArray:
+    return np.array(values, dtype=np.float64)
+
+
 def _check_against_urdf(cfg: RobotConfig, model: pin.Model) -> None:
     """The config may only narrow the manufacturer's limits written in the URDF."""
     for i, j in enumerate(cfg.joints):
@@ -125,16 +141,28 @@ def _check_against_urdf(cfg: RobotConfig, model: pin.Model) -> None:
         lo, hi = float(model.lowerPositionLimit[i]), float(model.upperPositionLimit[i])
         vmax, tmax = float(model.velocityLimit[i]), float(model.effortLimit[i])
         if lo < hi:
-            for attr, val in (("position_min_rad", j.position_min_rad), ("position_max_rad", j.position_max_rad)):
+            for attr, val in (
+                ("position_min_rad", j.position_min_rad),
+                ("position_max_rad", j.position_max_rad),
+            ):
                 if not lo - 1e-9 <= val <= hi + 1e-9:
-                    raise ConfigError(cfg.source, f"{key}.{attr}",
-                                      f"(={val!r}) must be in {format_range(lo, hi, False, False)} "
-                                      f"(URDF limit of {j.name})")
+                    raise ConfigError(
+                        cfg.source,
+                        f"{key}.{attr}",
+                        f"(={val!r}) must be in {format_range(lo, hi, False, False)} "
+                        f"(URDF limit of {j.name})",
+                    )
         if vmax > 0 and j.max_velocity_rad_s > vmax + 1e-9:
-            raise ConfigError(cfg.source, f"{key}.max_velocity_rad_s",
-                              f"(={j.max_velocity_rad_s!r}) must be in {format_range(0, vmax, True, False)} "
-                              f"(URDF limit of {j.name})")
+            raise ConfigError(
+                cfg.source,
+                f"{key}.max_velocity_rad_s",
+                f"(={j.max_velocity_rad_s!r}) must be in {format_range(0, vmax, True, False)} "
+                f"(URDF limit of {j.name})",
+            )
         if tmax > 0 and j.max_torque_nm > tmax + 1e-9:
-            raise ConfigError(cfg.source, f"{key}.max_torque_nm",
-                              f"(={j.max_torque_nm!r}) must be in {format_range(0, tmax, True, False)} "
-                              f"(URDF limit of {j.name})")
+            raise ConfigError(
+                cfg.source,
+                f"{key}.max_torque_nm",
+                f"(={j.max_torque_nm!r}) must be in {format_range(0, tmax, True, False)} "
+                f"(URDF limit of {j.name})",
+            )

@@ -26,8 +26,12 @@ def min_of(a: npt.NDArray[np.float64]) -> float:
     return float(a[a.argmin()])
 
 
-def clamp(x: npt.NDArray[np.float64], lo: npt.NDArray[np.float64] | float,
-          hi: npt.NDArray[np.float64] | float, out: npt.NDArray[np.float64]) -> None:
+def clamp(
+    x: npt.NDArray[np.float64],
+    lo: npt.NDArray[np.float64] | float,
+    hi: npt.NDArray[np.float64] | float,
+    out: npt.NDArray[np.float64],
+) -> None:
     """`np.clip(x, lo, hi, out=out)` without np.clip's 4 µs wrapper."""
     np.minimum(x, hi, out=out)
     np.maximum(out, lo, out=out)

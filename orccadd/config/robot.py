@@ -156,8 +156,7 @@ def _check_joints(cfg: RobotConfig, file: str) -> None:
             raise ConfigError(
                 file,
                 f"{key}.position_max_rad",
-                f"(={j.position_max_rad!r}) must be greater than position_min_rad "
-                f"(={j.position_min_rad!r})",
+                f"(={j.position_max_rad!r}) must be greater than position_min_rad (={j.position_min_rad!r})",
             )
         if not j.position_min_rad <= j.home_rad <= j.position_max_rad:
             rng = format_range(j.position_min_rad, j.position_max_rad, False, False)

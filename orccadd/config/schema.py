@@ -62,9 +62,7 @@ def check_bounds(file: str, key: str, value: float, meta: Mapping[str, Any]) -> 
     ok_lo = value > lo if open_lo else value >= lo
     ok_hi = value < hi if open_hi else value <= hi
     if not (ok_lo and ok_hi) or math.isnan(value):
-        raise ConfigError(
-            file, key, f"(={value!r}) must be in {format_range(lo, hi, open_lo, open_hi)}"
-        )
+        raise ConfigError(file, key, f"(={value!r}) must be in {format_range(lo, hi, open_lo, open_hi)}")
 
 
 def _type_name(tp: Any) -> str:
@@ -103,28 +101,24 @@ def convert(tp: Any, value: Any, file: str, key: str, meta: Mapping[str, Any]) -
     if origin is typing.Literal:
         allowed = get_args(tp)
         if value not in allowed:
-            raise ConfigError(
-                file, key, f"(={value!r}) must be one of {', '.join(repr(a) for a in allowed)}"
-            )
+            raise ConfigError(file, key, f"(={value!r}) must be one of {', '.join(repr(a) for a in allowed)}")
         return value
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, Mapping):
             raise ConfigError(file, key, f"(={value!r}) must be a table")
         return load_dataclass(typing.cast(type[Any], tp), value, file, key)
     if origin is tuple:
-        args = get_args(tp)
+        elem_types = get_args(tp)
         if not isinstance(value, list):
             raise ConfigError(file, key, f"(={value!r}) must be {_type_name(tp)}")
         min_len = meta.get("min_len")
         if min_len is not None and len(value) < min_len:
             raise ConfigError(file, key, f"has {len(value)} entries, at least {min_len} needed")
-        elem = args[0]
+        elem = elem_types[0]
         inner_meta = {k: v for k, v in meta.items() if k != "min_len"}
-        return tuple(
-            convert(elem, v, file, f"{key}[{i}]", inner_meta) for i, v in enumerate(value)
-        )
+        return tuple(convert(elem, v, file, f"{key}[{i}]", inner_meta) for i, v in enumerate(value))
     if origin is dict:
-        kt, vt = get_args(tp)
+        _, vt = get_args(tp)
         if not isinstance(value, Mapping):
             raise ConfigError(file, key, f"(={value!r}) must be a table")
         return {str(k): convert(vt, v, file, f"{key}.{k}", meta) for k, v in value.items()}
@@ -147,9 +141,7 @@ def convert(tp: Any, value: Any, file: str, key: str, meta: Mapping[str, Any]) -
             raise ConfigError(file, key, f"(={value!r}) must be a string")
         choices = meta.get("choices")
         if choices is not None and value not in choices:
-            raise ConfigError(
-                file, key, f"(={value!r}) must be one of {', '.join(repr(c) for c in choices)}"
-            )
+            raise ConfigError(file, key, f"(={value!r}) must be one of {', '.join(repr(c) for c in choices)}")
         return value
     if tp is Any:
         return value
@@ -160,6 +152,7 @@ def load_dataclass(cls: type[T], data: Mapping[str, Any], file: str, prefix: str
     """Build `cls` from a TOML table, refusing unknown and missing keys."""
     hints = get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+
     def path(name: str) -> str:
         return f"{prefix}.{name}" if prefix else name
 

@@ -1,27 +1,9 @@
 """Algorithmic modules: one block of a control law, with declared ports and parameters.
 
-Writing a module (the whole API)::
-
-    from orccadd.modules import Module, ModuleContext, register
-
-    @register("low_pass")
-    class LowPass(Module):
-        '''First-order low-pass filter on a joint vector.'''
-
-        def __init__(self, name: str, ctx: ModuleContext) -> None:
-            super().__init__(name, ctx)
-            n = ctx.dof
-            self.x = self.add_input("x", (n,), "rad/s")
-            self.y = self.add_output("y", (n,), "rad/s")
-            self.cutoff = self.add_parameter("cutoff_hz", 10.0, bounds=(0.1, 500.0),
-                                             unit="Hz", tunable=True)
-
-        def start(self, state: JointState) -> None:   # from the measured state
-            self.y.value[:] = self.x.value
-
-        def update(self, t_s: float) -> None:         # one tick: no allocation, no raise
-            a = min(1.0, 2 * math.pi * float(self.cutoff.value) * self.ctx.period_s)
-            self.y.value += a * (self.x.value - self.y.value)
+Writing a module: subclass `Module`, declare ports and parameters in `__init__`, fill outputs
+in place in `update`, and `@register("type_name")` it (or publish it under the `orccadd.modules`
+entry-point group). The worked example is `orccadd/modules/filters.py` (`low_pass`), explained
+in docs/writing-a-module.md.
 
 Ports carry a shape, a unit and a dtype; an output owns a preallocated numpy buffer and wiring
 makes the input's `value` *be* that buffer, so a tick copies and allocates nothing. Parameters
@@ -196,14 +178,14 @@ class Module(ABC):
             self.parameters[key].value[...] = self.parameters[key].check(v)
             self.on_parameter_change(key)
 
-    def start(self, state: JointState) -> None:  # noqa: B027 - optional hook
+    def start(self, state: JointState) -> None:
         """Initialise from the measured state when the task starts (no jump in the command)."""
 
     @abstractmethod
     def update(self, t_s: float) -> None:
         """One tick: read inputs, write outputs in place. No allocation of buffers, no raise."""
 
-    def on_parameter_change(self, name: str) -> None:  # noqa: B027 - optional hook
+    def on_parameter_change(self, name: str) -> None:
         """Called (at a tick boundary) after parameter `name` took a new value."""
 
 

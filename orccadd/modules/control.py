@@ -30,8 +30,9 @@ class ComputedTorque(Module):
         self.kp = self.add_parameter("kp", 400.0, bounds=(0.0, 1e5), unit="1/s^2", tunable=True, shape=(n,))
         self.kd = self.add_parameter("kd", 40.0, bounds=(0.0, 1e3), unit="1/s", tunable=True, shape=(n,))
         self.ki = self.add_parameter("ki", 0.0, bounds=(0.0, 1e6), unit="1/s^3", tunable=True, shape=(n,))
-        self.i_max = self.add_parameter("integral_limit_rad_s", 0.05, bounds=(0.0, 10.0), unit="rad.s",
-                                        tunable=True)
+        self.i_max = self.add_parameter(
+            "integral_limit_rad_s", 0.05, bounds=(0.0, 10.0), unit="rad.s", tunable=True
+        )
         self._model = ctx.model.model
         self._data = ctx.model.new_data()
         self._a = np.zeros(n)
@@ -72,7 +73,9 @@ class JointPDGravity(Module):
         self.dq_des = self.add_input("dq_des", (n,), "rad/s")
         self.tau = self.add_output("tau", (n,), "N.m")
         self.kp = self.add_parameter("kp", 200.0, bounds=(0.0, 1e5), unit="N.m/rad", tunable=True, shape=(n,))
-        self.kd = self.add_parameter("kd", 20.0, bounds=(0.0, 1e4), unit="N.m.s/rad", tunable=True, shape=(n,))
+        self.kd = self.add_parameter(
+            "kd", 20.0, bounds=(0.0, 1e4), unit="N.m.s/rad", tunable=True, shape=(n,)
+        )
         self._model = ctx.model.model
         self._data = ctx.model.new_data()
         self._e = np.zeros(n)

@@ -30,12 +30,14 @@ class RuckigTrajectory(Module):
         self.q_goal = self.add_output("q_goal", (n,), "rad")
         self.finished = self.add_output("finished", (), "bool", dtype=np.bool_)
         self.target = self.add_parameter(
-            "target_rad", m.home_rad, bounds=(m.q_min_rad, m.q_max_rad), unit="rad",
-            tunable=True, shape=(n,),
+            "target_rad",
+            m.home_rad,
+            bounds=(m.q_min_rad, m.q_max_rad),
+            unit="rad",
+            tunable=True,
+            shape=(n,),
         )
-        self.speed_scale = self.add_parameter(
-            "speed_scale", 1.0, bounds=(0.01, 1.0), unit="1", tunable=True
-        )
+        self.speed_scale = self.add_parameter("speed_scale", 1.0, bounds=(0.01, 1.0), unit="1", tunable=True)
         self._otg = Ruckig(n, ctx.period_s)
         self._inp = InputParameter(n)
         self._out = OutputParameter(n)

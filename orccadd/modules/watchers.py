@@ -46,7 +46,9 @@ class TrackingErrorWatch(Watcher):
         n = ctx.dof
         self.q = self.add_input("q", (n,), "rad")
         self.q_des = self.add_input("q_des", (n,), "rad")
-        self.threshold = self.add_parameter("threshold_rad", 0.05, bounds=(1e-6, 10.0), unit="rad", tunable=True)
+        self.threshold = self.add_parameter(
+            "threshold_rad", 0.05, bounds=(1e-6, 10.0), unit="rad", tunable=True
+        )
 
     def update(self, t_s: float) -> None:
         e = self._scratch
@@ -102,7 +104,9 @@ class TargetReached(Watcher):
         self.dq = self.add_input("dq", (n,), "rad/s")
         self.q_goal = self.add_input("q_goal", (n,), "rad")
         self.tol = self.add_parameter("tolerance_rad", 0.005, bounds=(1e-6, 1.0), unit="rad", tunable=True)
-        self.vtol = self.add_parameter("velocity_tolerance_rad_s", 0.01, bounds=(1e-6, 10.0), unit="rad/s", tunable=True)
+        self.vtol = self.add_parameter(
+            "velocity_tolerance_rad_s", 0.01, bounds=(1e-6, 10.0), unit="rad/s", tunable=True
+        )
 
     def update(self, t_s: float) -> None:
         e = self._scratch

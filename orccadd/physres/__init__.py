@@ -42,7 +42,8 @@ def backend_class(name: str, file: str = "") -> type[PhysicalResource]:
                 file, "resource.backend", f"(={name!r}) must be one of {', '.join(backend_names())}"
             )
         cls = eps[0].load()
-    assert issubclass(cls, PhysicalResource)
+    if not (isinstance(cls, type) and issubclass(cls, PhysicalResource)):
+        raise ConfigError(file, "resource.backend", f"(={name!r}) does not name a PhysicalResource")
     return cls
 
 

@@ -62,22 +62,33 @@ class SimulatedArm(PhysicalResource):
     def load_settings(cls, raw: Mapping[str, Any], cfg: RobotConfig, file: str) -> SimSettings:
         s: SimSettings = load_dataclass(SimSettings, raw, file, "resource.settings")
         n = cfg.dof
-        for name in ("viscous_friction_nm_s_rad", "coulomb_friction_nm", "brake_torque_nm",
-                     "initial_q_rad"):
+        for name in (
+            "viscous_friction_nm_s_rad",
+            "coulomb_friction_nm",
+            "brake_torque_nm",
+            "initial_q_rad",
+        ):
             v = getattr(s, name)
             if len(v) not in (0, n):
-                raise ConfigError(file, f"resource.settings.{name}",
-                                  f"has {len(v)} entries, must have one per joint ({n}) or none")
+                raise ConfigError(
+                    file,
+                    f"resource.settings.{name}",
+                    f"has {len(v)} entries, must have one per joint ({n}) or none",
+                )
         if s.substep_s > cfg.control_period_s:
-            raise ConfigError(file, "resource.settings.substep_s",
-                              f"(={s.substep_s!r}) must be at most control_period_s "
-                              f"(={cfg.control_period_s!r})")
+            raise ConfigError(
+                file,
+                "resource.settings.substep_s",
+                f"(={s.substep_s!r}) must be at most control_period_s (={cfg.control_period_s!r})",
+            )
         for i, q in enumerate(s.initial_q_rad):
             j = cfg.joints[i]
             if not j.position_min_rad <= q <= j.position_max_rad:
-                raise ConfigError(file, f"resource.settings.initial_q_rad[{i}]",
-                                  f"(={q!r}) must be in [{j.position_min_rad:g}, "
-                                  f"{j.position_max_rad:g}] ({j.name})")
+                raise ConfigError(
+                    file,
+                    f"resource.settings.initial_q_rad[{i}]",
+                    f"(={q!r}) must be in [{j.position_min_rad:g}, {j.position_max_rad:g}] ({j.name})",
+                )
         if not s.brake_torque_nm:
             s = replace(s, brake_torque_nm=tuple(2.0 * j.max_torque_nm for j in cfg.joints))
         return s

@@ -44,8 +44,12 @@ class WallClock(Clock):
         libc_name = ctypes.util.find_library("c") or "libc.so.6"
         self._libc = ctypes.CDLL(libc_name, use_errno=True)
         self._nanosleep = self._libc.clock_nanosleep
-        self._nanosleep.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.POINTER(_Timespec),
-                                    ctypes.c_void_p]
+        self._nanosleep.argtypes = [
+            ctypes.c_int,
+            ctypes.c_int,
+            ctypes.POINTER(_Timespec),
+            ctypes.c_void_p,
+        ]
         self._nanosleep.restype = ctypes.c_int
         self._ts = _Timespec()
         self._ts_ref = ctypes.byref(self._ts)

@@ -23,8 +23,9 @@ class ControlLoop:
         self.active: RobotTask | None = None
         self.overrun_limit = overrun_limit
         period = resource.config.control_period_s
-        self.executor = PeriodicExecutor(clock, period, self.step, on_overrun=self._on_overrun,
-                                         stats=TimingStats(period))
+        self.executor = PeriodicExecutor(
+            clock, period, self.step, on_overrun=self._on_overrun, stats=TimingStats(period)
+        )
 
     @property
     def stats(self) -> TimingStats:

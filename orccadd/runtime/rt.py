@@ -6,6 +6,7 @@ limits) the loop still runs, with a clear warning saying what is missing and how
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import gc
@@ -27,8 +28,10 @@ class RealtimeReport:
 
     def describe(self) -> str:
         fifo = f"SCHED_FIFO {self.sched_fifo_priority}" if self.sched_fifo_priority else "SCHED_OTHER"
-        return f"{fifo}, memory {'locked' if self.memory_locked else 'not locked'}, " \
-               f"gc {'frozen' if self.gc_frozen else 'running'}"
+        return (
+            f"{fifo}, memory {'locked' if self.memory_locked else 'not locked'}, "
+            f"gc {'frozen' if self.gc_frozen else 'running'}"
+        )
 
 
 def enter_realtime(priority: int = 80, lock_memory: bool = True, freeze_gc: bool = True) -> RealtimeReport:
@@ -64,10 +67,8 @@ def enter_realtime(priority: int = 80, lock_memory: bool = True, freeze_gc: bool
 def leave_realtime(report: RealtimeReport) -> None:
     """Undo `enter_realtime` for the calling thread (back to SCHED_OTHER, gc on)."""
     if report.sched_fifo_priority:
-        try:
+        with contextlib.suppress(OSError):
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-        except OSError:
-            pass
     if report.gc_frozen:
         gc.enable()
         gc.unfreeze()

@@ -25,8 +25,10 @@ class Summary:
         return Summary(float(q[0]), float(q[1]), float(q[2]), float(us.max()))
 
     def line(self) -> str:
-        return (f"median {self.median_us:8.1f}  p99 {self.p99_us:8.1f}  "
-                f"p99.9 {self.p999_us:8.1f}  max {self.max_us:8.1f} µs")
+        return (
+            f"median {self.median_us:8.1f}  p99 {self.p99_us:8.1f}  "
+            f"p99.9 {self.p999_us:8.1f}  max {self.max_us:8.1f} µs"
+        )
 
 
 class TimingStats:
@@ -75,10 +77,12 @@ class TimingStats:
         return self._window(self._lat).copy()
 
     def report(self, name: str = "loop") -> str:
-        return "\n".join([
-            f"{name}: {self.ticks} ticks at {self.period_s * 1e3:g} ms, "
-            f"{self.overruns} overruns (max {self.max_consecutive_overruns} in a row), "
-            f"{self.missed_ticks} missed periods",
-            f"  wake-up latency  {self.latency.line()}",
-            f"  compute time     {self.compute.line()}",
-        ])
+        return "\n".join(
+            [
+                f"{name}: {self.ticks} ticks at {self.period_s * 1e3:g} ms, "
+                f"{self.overruns} overruns (max {self.max_consecutive_overruns} in a row), "
+                f"{self.missed_ticks} missed periods",
+                f"  wake-up latency  {self.latency.line()}",
+                f"  compute time     {self.compute.line()}",
+            ]
+        )

@@ -1,7 +1,14 @@
 """Robot-Tasks: declared in files, built into a flat schedule inside a reactive shell."""
 
 from orccadd.task.builder import build_task
-from orccadd.task.events import BUILTIN_T3, EventInfo, EventKind, EventQueue, EventRegistry, event_name
+from orccadd.task.events import (
+    BUILTIN_T3,
+    EventInfo,
+    EventKind,
+    EventQueue,
+    EventRegistry,
+    event_name,
+)
 from orccadd.task.spec import TaskSpec, load_task_file, parse_task
 from orccadd.task.task import Phase, RobotTask, TaskSignature
 

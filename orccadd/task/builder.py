@@ -15,7 +15,13 @@ from orccadd.errors import ConfigError, ParameterError, WiringError
 from orccadd.modules import MODULES, Module, ModuleContext, Port, module_class
 from orccadd.modules.base import Parameter
 from orccadd.physres.base import CommandMode, PhysicalResource
-from orccadd.task.events import BUILTIN_T3, PRECONDITION_TIMEOUT, EventKind, EventQueue, EventRegistry
+from orccadd.task.events import (
+    BUILTIN_T3,
+    PRECONDITION_TIMEOUT,
+    EventKind,
+    EventQueue,
+    EventRegistry,
+)
 from orccadd.task.spec import EventSpec, TaskSpec
 from orccadd.task.task import Precondition, RobotTask, ShellEvent, TaskSignature
 
@@ -25,8 +31,11 @@ COMMAND_PORTS = {
     CommandMode.VELOCITY: ("dq_cmd", "rad/s"),
     CommandMode.POSITION: ("q_cmd", "rad"),
 }
-MODE_BY_NAME = {"torque": CommandMode.TORQUE, "velocity": CommandMode.VELOCITY,
-                "position": CommandMode.POSITION}
+MODE_BY_NAME = {
+    "torque": CommandMode.TORQUE,
+    "velocity": CommandMode.VELOCITY,
+    "position": CommandMode.POSITION,
+}
 
 
 @dataclass
@@ -40,8 +49,11 @@ class _Node:
 def _resource_node(resource: PhysicalResource, mode: CommandMode) -> _Node:
     n, name = resource.dof, resource.name
     outs = {}
-    for port, unit, arr in (("q", "rad", resource.state.q_rad), ("dq", "rad/s", resource.state.dq_rad_s),
-                            ("tau", "N.m", resource.state.tau_nm)):
+    for port, unit, arr in (
+        ("q", "rad", resource.state.q_rad),
+        ("dq", "rad/s", resource.state.dq_rad_s),
+        ("tau", "N.m", resource.state.tau_nm),
+    ):
         p = Port(name, port, (n,), unit, np.float64, is_input=False)
         p.value = arr  # the measured state itself: no copy in a tick
         outs[port] = p
@@ -62,26 +74,42 @@ def build_task(
     registry = registry if registry is not None else EventRegistry()
     queue = queue if queue is not None else EventQueue()
     if h.resource != resource.name:
-        raise ConfigError(src, "task.resource", f"(={h.resource!r}) must be {resource.name!r} (the robot's resource)")
+        raise ConfigError(
+            src,
+            "task.resource",
+            f"(={h.resource!r}) must be {resource.name!r} (the robot's resource)",
+        )
     mode = MODE_BY_NAME[h.command]
     if mode not in resource.supported_modes:
         allowed = ", ".join(m.name.lower() for m in sorted(resource.supported_modes))
-        raise ConfigError(src, "task.command", f"(={h.command!r}) is not supported by resource "
-                                               f"{resource.name!r} (supported: {allowed})")
+        raise ConfigError(
+            src,
+            "task.command",
+            f"(={h.command!r}) is not supported by resource {resource.name!r} (supported: {allowed})",
+        )
     joints = resource.model.joint_names
     for i, j in enumerate(h.joints):
         if j not in joints:
-            raise ConfigError(src, f"task.joints[{i}]", f"(={j!r}) is not a joint of {resource.name!r} "
-                                                        f"(joints: {', '.join(joints)})")
+            raise ConfigError(
+                src,
+                f"task.joints[{i}]",
+                f"(={j!r}) is not a joint of {resource.name!r} (joints: {', '.join(joints)})",
+            )
     if h.joints and set(h.joints) != set(joints):
-        raise ConfigError(src, "task.joints", "must name every joint of the resource: tasks on a "
-                                              "subset of joints are not supported yet")
+        raise ConfigError(
+            src,
+            "task.joints",
+            "must name every joint of the resource: tasks on a subset of joints are not supported yet",
+        )
     robot_period = resource.config.control_period_s
     period = h.period_s or robot_period
     decimation = round(period / robot_period)
     if decimation < 1 or abs(decimation * robot_period - period) > 1e-9:
-        raise ConfigError(src, "task.period_s", f"(={h.period_s!r}) must be a whole multiple of the "
-                                                f"robot's control_period_s (={robot_period!r})")
+        raise ConfigError(
+            src,
+            "task.period_s",
+            f"(={h.period_s!r}) must be a whole multiple of the robot's control_period_s (={robot_period!r})",
+        )
     ctx = ModuleContext(task=h.name, model=resource.model, period_s=period)
     nodes: dict[str, _Node] = {resource.name: _resource_node(resource, mode)}
     modules: dict[str, Module] = {}
@@ -91,8 +119,11 @@ def build_task(
             raise ConfigError(src, key, f"(={ms.name!r}) is the resource's name; choose another")
         cls = module_class(ms.type)
         if cls is None:
-            raise ConfigError(src, f"{key}.type", f"(={ms.type!r}) is not a module type "
-                                                  f"(known: {', '.join(sorted(MODULES))})")
+            raise ConfigError(
+                src,
+                f"{key}.type",
+                f"(={ms.type!r}) is not a module type (known: {', '.join(sorted(MODULES))})",
+            )
         m = cls(ms.name, ctx)
         try:
             m.configure(ms.parameters)
@@ -109,7 +140,7 @@ def build_task(
     pres = []
     for i, p in enumerate(spec.preconditions):
         port = _find_port(spec, nodes, p.signal, f"preconditions[{i}].signal", output=True)
-        lo, hi = (p.within if p.within else (-np.inf, np.inf))
+        lo, hi = p.within if p.within else (-np.inf, np.inf)
         pres.append(Precondition(p.name, port.value, p.timeout_s, p.max_abs_below, lo, hi))
     builtin = {name: registry.register(h.name, EventKind.T3, name) for name in BUILTIN_T3}
     t2 = [e.name for e in spec.events.T2]
@@ -117,14 +148,28 @@ def build_task(
         builtin[PRECONDITION_TIMEOUT] = registry.register(h.name, EventKind.T2, PRECONDITION_TIMEOUT)
         t2.append(PRECONDITION_TIMEOUT)
     sig = TaskSignature(
-        name=h.name, resource=resource.name, joints=tuple(joints), command=mode,
+        name=h.name,
+        resource=resource.name,
+        joints=tuple(joints),
+        command=mode,
         has_post=bool(spec.events.post),
-        t1=tuple(e.name for e in spec.events.T1), t2=tuple(t2),
+        t1=tuple(e.name for e in spec.events.T1),
+        t2=tuple(t2),
         t3=tuple(e.name for e in spec.events.T3) + BUILTIN_T3,
         sync=tuple(e.name for e in spec.events.sync),
     )
-    return RobotTask(sig, resource, [modules[n] for n in order], cmd_port.value, pres, events,
-                     builtin, queue, decimation, period)
+    return RobotTask(
+        sig,
+        resource,
+        [modules[n] for n in order],
+        cmd_port.value,
+        pres,
+        events,
+        builtin,
+        queue,
+        decimation,
+        period,
+    )
 
 
 def _find_port(spec: TaskSpec, nodes: dict[str, _Node], ref: str, key: str, *, output: bool) -> Port:
@@ -134,15 +179,18 @@ def _find_port(spec: TaskSpec, nodes: dict[str, _Node], ref: str, key: str, *, o
     node_name, port_name = parts
     node = nodes.get(node_name)
     if node is None:
-        raise WiringError(f"{spec.source}: {key} (={ref!r}): no module {node_name!r} "
-                          f"(modules: {', '.join(nodes)})")
+        raise WiringError(
+            f"{spec.source}: {key} (={ref!r}): no module {node_name!r} (modules: {', '.join(nodes)})"
+        )
     ports = node.outputs if output else node.inputs
     if port_name not in ports:
         other = node.inputs if output else node.outputs
         kind = "output" if output else "input"
         hint = f"; {ref} is an {'input' if output else 'output'}" if port_name in other else ""
-        raise WiringError(f"{spec.source}: {key} (={ref!r}): {node_name} has no {kind} {port_name!r} "
-                          f"({kind}s: {', '.join(ports) or 'none'}){hint}")
+        raise WiringError(
+            f"{spec.source}: {key} (={ref!r}): {node_name} has no {kind} {port_name!r} "
+            f"({kind}s: {', '.join(ports) or 'none'}){hint}"
+        )
     return ports[port_name]
 
 
@@ -162,28 +210,40 @@ def _check_wires(spec: TaskSpec, nodes: dict[str, _Node]) -> dict[Port, Port]:
         if a.dtype != b.dtype or a.shape != b.shape:
             raise WiringError(f"{pre} shape mismatch: {a.describe()} cannot feed {b.describe()}")
         if a.unit != b.unit:
-            raise WiringError(f"{pre} unit mismatch: {a.path} is in {a.unit or 'no unit'}, "
-                              f"{b.path} expects {b.unit or 'no unit'}")
+            raise WiringError(
+                f"{pre} unit mismatch: {a.path} is in {a.unit or 'no unit'}, "
+                f"{b.path} expects {b.unit or 'no unit'}"
+            )
         if b in writers:
             j = where[b]
-            raise WiringError(f"{pre} {b.path} already has a writer: {writers[b].path} "
-                              f"(wires[{j}]); an input takes exactly one")
+            raise WiringError(
+                f"{pre} {b.path} already has a writer: {writers[b].path} "
+                f"(wires[{j}]); an input takes exactly one"
+            )
         writers[b] = a
         where[b] = i
     for node in nodes.values():
         for port in node.inputs.values():
             if port not in writers:
-                cands = [o.path for n in nodes.values() for o in n.outputs.values()
-                         if o.unit == port.unit and o.shape == port.shape and n is not node]
+                cands = [
+                    o.path
+                    for n in nodes.values()
+                    for o in n.outputs.values()
+                    if o.unit == port.unit and o.shape == port.shape and n is not node
+                ]
                 hint = f" (outputs that fit: {', '.join(cands)})" if cands else ""
-                what = "the command input of the resource" if node.module is None else \
-                    f"input of {node.module.type_name} {node.name!r}"
+                what = (
+                    "the command input of the resource"
+                    if node.module is None
+                    else f"input of {node.module.type_name} {node.name!r}"
+                )
                 raise WiringError(f"{src}: {port.path} ({what}) is not connected{hint}")
     return writers
 
 
-def _schedule(spec: TaskSpec, modules: dict[str, Module], writers: dict[Port, Port],
-              resource_name: str) -> list[str]:
+def _schedule(
+    spec: TaskSpec, modules: dict[str, Module], writers: dict[Port, Port], resource_name: str
+) -> list[str]:
     """Topological order of modules; the resource splits into source (read) and sink (write)."""
     deps: dict[str, set[str]] = {n: set() for n in modules}
     via: dict[tuple[str, str], str] = {}
@@ -201,10 +261,12 @@ def _schedule(spec: TaskSpec, modules: dict[str, Module], writers: dict[Port, Po
             return
         if n in visiting:
             # visiting[i] depends on visiting[i+1]: reverse to print in signal-flow order
-            cycle = (visiting[visiting.index(n):] + [n])[::-1]
+            cycle = [*visiting[visiting.index(n) :], n][::-1]
             wires = ", ".join(via[(cycle[k], cycle[k + 1])] for k in range(len(cycle) - 1))
-            raise WiringError(f"{spec.source}: algebraic loop {' -> '.join(cycle)} ({wires}): "
-                              "break it with a module that delays by one tick")
+            raise WiringError(
+                f"{spec.source}: algebraic loop {' -> '.join(cycle)} ({wires}): "
+                "break it with a module that delays by one tick"
+            )
         visiting.append(n)
         for d in sorted(deps[n]):
             visit(d)
@@ -217,25 +279,38 @@ def _schedule(spec: TaskSpec, modules: dict[str, Module], writers: dict[Port, Po
     return order
 
 
-def _shell(spec: TaskSpec, nodes: dict[str, _Node], registry: EventRegistry,
-           modules: dict[str, Module]) -> list[ShellEvent]:
+def _shell(
+    spec: TaskSpec, nodes: dict[str, _Node], registry: EventRegistry, modules: dict[str, Module]
+) -> list[ShellEvent]:
     src, h = spec.source, spec.task
     out: list[ShellEvent] = []
 
     def flag_of(e_when: str, key: str) -> Port:
         port = _find_port(spec, nodes, e_when, key, output=True)
         if port.dtype != np.bool_ or port.shape != ():
-            raise WiringError(f"{src}: {key} (={e_when!r}): {port.describe()} is not an event "
-                              "(a watcher's boolean 'fired' output is)")
+            raise WiringError(
+                f"{src}: {key} (={e_when!r}): {port.describe()} is not an event "
+                "(a watcher's boolean 'fired' output is)"
+            )
         return port
 
     if spec.events.post:
         port = flag_of(spec.events.post, "events.post")
-        out.append(ShellEvent("done", EventKind.POST, registry.register(h.name, EventKind.POST, "done"),
-                              port.value, ()))
+        out.append(
+            ShellEvent(
+                "done",
+                EventKind.POST,
+                registry.register(h.name, EventKind.POST, "done"),
+                port.value,
+                (),
+            )
+        )
     groups: tuple[tuple[str, EventKind, tuple[EventSpec, ...]], ...] = (
-        ("T1", EventKind.T1, spec.events.T1), ("T2", EventKind.T2, spec.events.T2),
-        ("T3", EventKind.T3, spec.events.T3), ("sync", EventKind.SYNC, spec.events.sync))
+        ("T1", EventKind.T1, spec.events.T1),
+        ("T2", EventKind.T2, spec.events.T2),
+        ("T3", EventKind.T3, spec.events.T3),
+        ("sync", EventKind.SYNC, spec.events.sync),
+    )
     for label, kind, specs in groups:
         for i, e in enumerate(specs):
             key = f"events.{label}[{i}]"
@@ -245,8 +320,12 @@ def _shell(spec: TaskSpec, nodes: dict[str, _Node], registry: EventRegistry,
             reaction: list[tuple[Module, Parameter, np.ndarray]] = []
             if kind is EventKind.T1:
                 if not e.set:
-                    raise ConfigError(src, f"{key}.set", "is missing: a type 1 exception needs a local "
-                                                         "reaction, e.g. set = { \"traj.speed_scale\" = 0.5 }")
+                    raise ConfigError(
+                        src,
+                        f"{key}.set",
+                        "is missing: a type 1 exception needs a local "
+                        'reaction, e.g. set = { "traj.speed_scale" = 0.5 }',
+                    )
                 for pkey, value in e.set.items():
                     mod_name, _, pname = pkey.partition(".")
                     mod = modules.get(mod_name)
@@ -259,6 +338,7 @@ def _shell(spec: TaskSpec, nodes: dict[str, _Node], registry: EventRegistry,
                         reaction.append((mod, param, param.check(value)))
                     except ParameterError as err:
                         raise ConfigError(src, f"{key}.set.{pkey}", err.detail) from None
-            out.append(ShellEvent(e.name, kind, registry.register(h.name, kind, e.name),
-                                  port.value, reaction))
+            out.append(
+                ShellEvent(e.name, kind, registry.register(h.name, kind, e.name), port.value, reaction)
+            )
     return out

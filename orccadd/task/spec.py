@@ -112,7 +112,9 @@ def parse_task(raw: dict[str, Any], source: str) -> TaskSpec:
         raise ConfigError(source, "task", "is missing (a table with name, resource, command)")
     header = load_dataclass(TaskHeader, raw["task"], source, "task")
     if not header.name.isidentifier():
-        raise ConfigError(source, "task.name", f"(={header.name!r}) must be an identifier (letters, digits, _)")
+        raise ConfigError(
+            source, "task.name", f"(={header.name!r}) must be an identifier (letters, digits, _)"
+        )
     modules_raw = raw.get("modules", {})
     if not isinstance(modules_raw, dict) or not modules_raw:
         raise ConfigError(source, "modules", "must be a table of at least one module")
@@ -128,9 +130,12 @@ def parse_task(raw: dict[str, Any], source: str) -> TaskSpec:
         params = {k: v for k, v in body.items() if k != "type"}
         for misplaced in ("wires", "preconditions", "events"):
             if misplaced in params:
-                raise ConfigError(source, f"{key}.{misplaced}",
-                                  f"belongs at the top level: put '{misplaced} = ...' before the "
-                                  "first [table] of the file (TOML puts it in the table above)")
+                raise ConfigError(
+                    source,
+                    f"{key}.{misplaced}",
+                    f"belongs at the top level: put '{misplaced} = ...' before the "
+                    "first [table] of the file (TOML puts it in the table above)",
+                )
         modules.append(ModuleSpec(mname, body["type"], params))
     wires = raw.get("wires", [])
     if not isinstance(wires, list) or not all(isinstance(w, str) for w in wires):
@@ -150,8 +155,11 @@ def parse_task(raw: dict[str, Any], source: str) -> TaskSpec:
     for kind in ("T2", "T3", "sync"):
         for i, e in enumerate(getattr(events, kind)):
             if e.set is not None:
-                raise ConfigError(source, f"events.{kind}[{i}].set",
-                                  "is only for type 1 exceptions (a local reaction)")
+                raise ConfigError(
+                    source,
+                    f"events.{kind}[{i}].set",
+                    "is only for type 1 exceptions (a local reaction)",
+                )
     for kind in ("T1", "T2", "T3", "sync"):
         names = [e.name for e in getattr(events, kind)]
         for i, n in enumerate(names):

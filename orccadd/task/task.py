@@ -57,8 +57,15 @@ class Precondition:
 
     __slots__ = ("hi", "lo", "max_abs", "name", "scratch", "signal", "timeout_s")
 
-    def __init__(self, name: str, signal: npt.NDArray[np.float64], timeout_s: float,
-                 max_abs: float, lo: float, hi: float) -> None:
+    def __init__(
+        self,
+        name: str,
+        signal: npt.NDArray[np.float64],
+        timeout_s: float,
+        max_abs: float,
+        lo: float,
+        hi: float,
+    ) -> None:
         self.name = name
         self.signal = signal
         self.timeout_s = timeout_s
@@ -80,8 +87,14 @@ class ShellEvent:
 
     __slots__ = ("event_id", "flag", "kind", "name", "prev", "reaction")
 
-    def __init__(self, name: str, kind: EventKind, event_id: int, flag: npt.NDArray[np.bool_],
-                 reaction: Sequence[tuple[Module, Parameter, npt.NDArray[np.float64]]]) -> None:
+    def __init__(
+        self,
+        name: str,
+        kind: EventKind,
+        event_id: int,
+        flag: npt.NDArray[np.bool_],
+        reaction: Sequence[tuple[Module, Parameter, npt.NDArray[np.float64]]],
+    ) -> None:
         self.name = name
         self.kind = kind
         self.event_id = event_id
@@ -125,9 +138,7 @@ class RobotTask:
         self.fault_reason = ""
         self._pre_started = False
         self._pending: list[tuple[Module, Parameter, npt.NDArray[np.float64]]] = []
-        self._tunable = {
-            f"{m.name}.{p.name}": (m, p) for m in modules for p in m.parameters.values()
-        }
+        self._tunable = {f"{m.name}.{p.name}": (m, p) for m in modules for p in m.parameters.values()}
 
     # ---- control (not for a tick unless said) ---------------------------------------------
     def activate(self) -> None:

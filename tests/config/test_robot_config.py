@@ -19,42 +19,72 @@ def test_shipped_configs_load() -> None:
 
 BAD = [
     # (edit, substring the message must contain)
-    (("max_velocity_rad_s = 3.1415\n", "max_velocity_rad_s = 12.0\n"),
-     "joints[0].max_velocity_rad_s (=12.0) must be in (0, 3.14159] (URDF limit of shoulder_pan_joint)"),
-    (("max_torque_nm = 28.0\n", "max_torque_nm = 40.0\n"),
-     "joints[3].max_torque_nm (=40.0) must be in (0, 28] (URDF limit of wrist_1_joint)"),
-    (("max_jerk_rad_s3 = 60.0\n", "max_jerk_rad_s3 = -1.0\n"),
-     "joints[0].max_jerk_rad_s3 (=-1.0) must be in (0, inf]"),
-    (("name = \"ur5e\"", "name = \"ur5e\"\ncolour = \"blue\""),
-     "colour is not a known key (allowed here:"),
-    (("control_period_s = 0.002", "control_period_s = 0.5"),
-     "control_period_s (=0.5) must be in [0.0001, 0.1]"),
-    (("control_period_s = 0.002", "control_period_s = \"fast\""),
-     "control_period_s (='fast') must be a number"),
-    (("backend = \"sim\"", "backend = \"ethercat\""),
-     "resource.backend (='ethercat') must be one of"),
-    (("name = \"elbow_joint\"", "name = \"elbow\""),
-     "joints[2].name (='elbow') is not a joint of ur5e.urdf"),
-    (("name = \"elbow_joint\"", "name = \"wrist_1_joint\""),
-     "joints[3].name (='wrist_1_joint') is listed twice"),
-    (("category = 1", "category = 3"),
-     "safe_stop.category (=3) must be one of 0, 1, 2"),
-    (("seed = 1", "seed = 1\nsubstep = 0.001"),
-     "resource.settings.substep is not a known key"),
-    (("substep_s = 0.0005", "substep_s = 0.01"),
-     "resource.settings.substep_s (=0.01) must be at most control_period_s (=0.002)"),
-    (("coulomb_friction_nm = [4.0, 4.0, 3.0, 1.0, 1.0, 1.0]", "coulomb_friction_nm = [4.0, 4.0]"),
-     "resource.settings.coulomb_friction_nm has 2 entries, must have one per joint (6) or none"),
-    (("home_rad = 1.5708", "home_rad = 4.0"),
-     "joints[2].home_rad (=4.0) must be in [-3.1415, 3.1415]"),
-    (("position_max_rad = 3.1415", "position_max_rad = 3.2"),
-     "joints[2].position_max_rad (=3.2) must be in [-3.14159, 3.14159] (URDF limit of elbow_joint)"),
-    (("urdf = \"", "urdf = \"missing/"),
-     "model.urdf (="),
-    (("armature_kg_m2 = [0.4, 0.4, 0.4, 0.1, 0.1, 0.1]", "armature_kg_m2 = [0.4]"),
-     "model.armature_kg_m2 has 1 entries, must have one per joint (6) or none"),
-    (("initial_q_rad = [0.3, -1.2, 1.0, -1.2, -1.4, 0.2]", "initial_q_rad = [0.3, -1.2, 5.0, -1.2, -1.4, 0.2]"),
-     "resource.settings.initial_q_rad[2] (=5.0) must be in [-3.1415, 3.1415] (elbow_joint)"),
+    (
+        ("max_velocity_rad_s = 3.1415\n", "max_velocity_rad_s = 12.0\n"),
+        "joints[0].max_velocity_rad_s (=12.0) must be in (0, 3.14159] (URDF limit of shoulder_pan_joint)",
+    ),
+    (
+        ("max_torque_nm = 28.0\n", "max_torque_nm = 40.0\n"),
+        "joints[3].max_torque_nm (=40.0) must be in (0, 28] (URDF limit of wrist_1_joint)",
+    ),
+    (
+        ("max_jerk_rad_s3 = 60.0\n", "max_jerk_rad_s3 = -1.0\n"),
+        "joints[0].max_jerk_rad_s3 (=-1.0) must be in (0, inf]",
+    ),
+    (
+        ('name = "ur5e"', 'name = "ur5e"\ncolour = "blue"'),
+        "colour is not a known key (allowed here:",
+    ),
+    (
+        ("control_period_s = 0.002", "control_period_s = 0.5"),
+        "control_period_s (=0.5) must be in [0.0001, 0.1]",
+    ),
+    (
+        ("control_period_s = 0.002", 'control_period_s = "fast"'),
+        "control_period_s (='fast') must be a number",
+    ),
+    (('backend = "sim"', 'backend = "ethercat"'), "resource.backend (='ethercat') must be one of"),
+    (
+        ('name = "elbow_joint"', 'name = "elbow"'),
+        "joints[2].name (='elbow') is not a joint of ur5e.urdf",
+    ),
+    (
+        ('name = "elbow_joint"', 'name = "wrist_1_joint"'),
+        "joints[3].name (='wrist_1_joint') is listed twice",
+    ),
+    (("category = 1", "category = 3"), "safe_stop.category (=3) must be one of 0, 1, 2"),
+    (("seed = 1", "seed = 1\nsubstep = 0.001"), "resource.settings.substep is not a known key"),
+    (
+        ("substep_s = 0.0005", "substep_s = 0.01"),
+        "resource.settings.substep_s (=0.01) must be at most control_period_s (=0.002)",
+    ),
+    (
+        (
+            "coulomb_friction_nm = [4.0, 4.0, 3.0, 1.0, 1.0, 1.0]",
+            "coulomb_friction_nm = [4.0, 4.0]",
+        ),
+        "resource.settings.coulomb_friction_nm has 2 entries, must have one per joint (6) or none",
+    ),
+    (
+        ("home_rad = 1.5708", "home_rad = 4.0"),
+        "joints[2].home_rad (=4.0) must be in [-3.1415, 3.1415]",
+    ),
+    (
+        ("position_max_rad = 3.1415", "position_max_rad = 3.2"),
+        "joints[2].position_max_rad (=3.2) must be in [-3.14159, 3.14159] (URDF limit of elbow_joint)",
+    ),
+    (('urdf = "', 'urdf = "missing/'), "model.urdf (="),
+    (
+        ("armature_kg_m2 = [0.4, 0.4, 0.4, 0.1, 0.1, 0.1]", "armature_kg_m2 = [0.4]"),
+        "model.armature_kg_m2 has 1 entries, must have one per joint (6) or none",
+    ),
+    (
+        (
+            "initial_q_rad = [0.3, -1.2, 1.0, -1.2, -1.4, 0.2]",
+            "initial_q_rad = [0.3, -1.2, 5.0, -1.2, -1.4, 0.2]",
+        ),
+        "resource.settings.initial_q_rad[2] (=5.0) must be in [-3.1415, 3.1415] (elbow_joint)",
+    ),
 ]
 
 
@@ -82,7 +112,10 @@ def test_missing_key_says_what_is_needed(robot_variant) -> None:  # type: ignore
 
 
 def test_unlisted_urdf_joint_must_be_locked(robot_variant) -> None:  # type: ignore[no-untyped-def]
-    path = robot_variant(('locked_joints = ["panda_finger_joint1", "panda_finger_joint2"]', "locked_joints = []"),
-                         ("locked_positions = [0.02, 0.02]", ""), base=PANDA)
+    path = robot_variant(
+        ('locked_joints = ["panda_finger_joint1", "panda_finger_joint2"]', "locked_joints = []"),
+        ("locked_positions = [0.02, 0.02]", ""),
+        base=PANDA,
+    )
     with pytest.raises(ConfigError, match="does not list panda_finger_joint1, panda_finger_joint2"):
         load_robot_config(path)

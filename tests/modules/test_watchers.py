@@ -7,7 +7,12 @@ import numpy as np
 from orccadd.config import load_robot_config
 from orccadd.model import RobotModel
 from orccadd.modules import ModuleContext
-from orccadd.modules.watchers import JointLimitWatch, TargetReached, TimeoutWatch, TrackingErrorWatch
+from orccadd.modules.watchers import (
+    JointLimitWatch,
+    TargetReached,
+    TimeoutWatch,
+    TrackingErrorWatch,
+)
 from orccadd.physres import JointState
 from tests.conftest import UR5E
 

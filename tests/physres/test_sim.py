@@ -99,7 +99,9 @@ def test_unsupported_mode_is_refused_clearly() -> None:
         del type(res).supported_modes
 
 
-@pytest.mark.parametrize(("category", "torque_off", "brakes"), [(0, True, True), (1, True, True), (2, False, False)])
+@pytest.mark.parametrize(
+    ("category", "torque_off", "brakes"), [(0, True, True), (1, True, True), (2, False, False)]
+)
 def test_safe_stop_categories(robot_variant, category, torque_off, brakes) -> None:  # type: ignore[no-untyped-def]
     res = make(robot_variant(("category = 1", f"category = {category}")))
     hold_gravity(res, 150, extra=4.0)  # push: the arm moves

@@ -13,7 +13,9 @@ def test_ticks_do_not_grow_memory() -> None:
     s = Session.open(UR5E)
     task = s.task(MOVE_TASK)
     loop = s.loop(SimClock(), overrun_limit=10**6)
-    next(m for m in task.modules if m.name == "traj").configure({"target_rad": [0.8, -1.2, 1.2, -1.6, -1.2, 0.4]})
+    next(m for m in task.modules if m.name == "traj").configure(
+        {"target_rad": [0.8, -1.2, 1.2, -1.6, -1.2, 0.4]}
+    )
     task.activate()
     loop.active = task
     loop.run_for(0.1)  # warm up (first-call caches)

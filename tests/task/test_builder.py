@@ -46,41 +46,85 @@ def test_wiring_shares_buffers(session: Session) -> None:
 
 
 BAD_WIRING = [
-    (('"traj.dq_des -> ct.dq_des",', '"traj.q_des -> ct.dq_des",'),
-     WiringError, "unit mismatch: traj.q_des is in rad, ct.dq_des expects rad/s"),
-    (('"traj.ddq_des -> ct.ddq_des",', ''),
-     WiringError, "ct.ddq_des (input of computed_torque 'ct') is not connected (outputs that fit: traj.ddq_des)"),
-    (('"arm.q -> ct.q",', '"arm.q -> ct.q",\n  "traj.q_des -> ct.q",'),
-     WiringError, "ct.q already has a writer: arm.q (wires[2]); an input takes exactly one"),
-    (('ki = 4000.0', 'ki = 4000.0\ngain = 3'),
-     ConfigError, "modules.ct.gain is not a parameter of computed_torque (parameters:"),
-    (('"traj.q_des -> ct.q_des",', '"traj.q_des -> ct.q_des",\n  "reached.fired -> ct.kp",'),
-     WiringError, "ct has no input 'kp' (inputs: q, dq, q_des, dq_des, ddq_des)"),
-    (('"arm.q -> traj.q",', '"arm.q -> traj.q",\n  "traj.finished -> lost.q",'),
-     WiringError, "shape mismatch: traj.finished [bool, bool] cannot feed lost.q [(6,), rad]"),
-    (('"ct.tau -> arm.tau_cmd",', ''),
-     WiringError, "arm.tau_cmd (the command input of the resource) is not connected (outputs that fit: ct.tau)"),
-    (('"arm.q -> reached.q",', '"arm.q -> reached.q",\n  "ct.q -> traj.q",'),
-     WiringError, "ct has no output 'q' (outputs: tau); ct.q is an input"),
-    (('"arm.q -> traj.q",', '"arm.q -> traj.q",\n  "traj.q_des ->ct.q_des extra",'),
-     ConfigError, "must read 'MODULE.OUTPUT -> MODULE.INPUT'"),
-    (('type = "computed_torque"', 'type = "computed_torq"'),
-     ConfigError, "modules.ct.type (='computed_torq') is not a module type (known:"),
-    (('kp = 900.0', 'kp = -1.0'),
-     ConfigError, "modules.ct.kp (=-1.0) must be in [0, 100000] 1/s^2"),
-    (('post = "reached.fired"', 'post = "traj.q_goal"'),
-     WiringError, "traj.q_goal [(6,), rad] is not an event"),
-    (('command = "torque"', 'command = "position"'),
-     WiringError, "arm.tau_cmd"),
-    (('set = { "traj.speed_scale" = 0.4 }', 'set = { "traj.speed_scale" = 4.0 }'),
-     ConfigError, "events.T1[0].set.traj.speed_scale (=4.0) must be in [0.01, 1]"),
-    (('resource = "arm"', 'resource = "vehicle"'),
-     ConfigError, "task.resource (='vehicle') must be 'arm'"),
+    (
+        ('"traj.dq_des -> ct.dq_des",', '"traj.q_des -> ct.dq_des",'),
+        WiringError,
+        "unit mismatch: traj.q_des is in rad, ct.dq_des expects rad/s",
+    ),
+    (
+        ('"traj.ddq_des -> ct.ddq_des",', ""),
+        WiringError,
+        "ct.ddq_des (input of computed_torque 'ct') is not connected (outputs that fit: traj.ddq_des)",
+    ),
+    (
+        ('"arm.q -> ct.q",', '"arm.q -> ct.q",\n  "traj.q_des -> ct.q",'),
+        WiringError,
+        "ct.q already has a writer: arm.q (wires[2]); an input takes exactly one",
+    ),
+    (
+        ("ki = 4000.0", "ki = 4000.0\ngain = 3"),
+        ConfigError,
+        "modules.ct.gain is not a parameter of computed_torque (parameters:",
+    ),
+    (
+        ('"traj.q_des -> ct.q_des",', '"traj.q_des -> ct.q_des",\n  "reached.fired -> ct.kp",'),
+        WiringError,
+        "ct has no input 'kp' (inputs: q, dq, q_des, dq_des, ddq_des)",
+    ),
+    (
+        ('"arm.q -> traj.q",', '"arm.q -> traj.q",\n  "traj.finished -> lost.q",'),
+        WiringError,
+        "shape mismatch: traj.finished [bool, bool] cannot feed lost.q [(6,), rad]",
+    ),
+    (
+        ('"ct.tau -> arm.tau_cmd",', ""),
+        WiringError,
+        "arm.tau_cmd (the command input of the resource) is not connected (outputs that fit: ct.tau)",
+    ),
+    (
+        ('"arm.q -> reached.q",', '"arm.q -> reached.q",\n  "ct.q -> traj.q",'),
+        WiringError,
+        "ct has no output 'q' (outputs: tau); ct.q is an input",
+    ),
+    (
+        ('"arm.q -> traj.q",', '"arm.q -> traj.q",\n  "traj.q_des ->ct.q_des extra",'),
+        ConfigError,
+        "must read 'MODULE.OUTPUT -> MODULE.INPUT'",
+    ),
+    (
+        ('type = "computed_torque"', 'type = "computed_torq"'),
+        ConfigError,
+        "modules.ct.type (='computed_torq') is not a module type (known:",
+    ),
+    (
+        ("kp = 900.0", "kp = -1.0"),
+        ConfigError,
+        "modules.ct.kp (=-1.0) must be in [0, 100000] 1/s^2",
+    ),
+    (
+        ('post = "reached.fired"', 'post = "traj.q_goal"'),
+        WiringError,
+        "traj.q_goal [(6,), rad] is not an event",
+    ),
+    (('command = "torque"', 'command = "position"'), WiringError, "arm.tau_cmd"),
+    (
+        ('set = { "traj.speed_scale" = 0.4 }', 'set = { "traj.speed_scale" = 4.0 }'),
+        ConfigError,
+        "events.T1[0].set.traj.speed_scale (=4.0) must be in [0.01, 1]",
+    ),
+    (
+        ('resource = "arm"', 'resource = "vehicle"'),
+        ConfigError,
+        "task.resource (='vehicle') must be 'arm'",
+    ),
 ]
 
 
-@pytest.mark.parametrize(("edit", "error", "message"), BAD_WIRING,
-                         ids=[f"{i}-{m[:30]}" for i, (_, _, m) in enumerate(BAD_WIRING)])
+@pytest.mark.parametrize(
+    ("edit", "error", "message"),
+    BAD_WIRING,
+    ids=[f"{i}-{m[:30]}" for i, (_, _, m) in enumerate(BAD_WIRING)],
+)
 def test_bad_wiring_refused(session, task_variant, edit, error, message) -> None:  # type: ignore[no-untyped-def]
     path = task_variant(edit)
     with pytest.raises(error) as exc:
@@ -91,7 +135,7 @@ def test_bad_wiring_refused(session, task_variant, edit, error, message) -> None
 
 def test_algebraic_loop_is_named(session, tmp_path) -> None:  # type: ignore[no-untyped-def]
     p = tmp_path / "loop.toml"
-    p.write_text('''
+    p.write_text("""
 wires = ["arm.q -> a.q", "arm.dq -> a.dq", "b.q_des -> a.q_des", "a.dq_des -> a.dq_des",
          "a.ddq_des -> a.ddq_des", "a.tau -> arm.tau_cmd"]
 [task]
@@ -102,11 +146,11 @@ command = "torque"
 type = "computed_torque"
 [modules.b]
 type = "hold_position"
-''')
+""")
     # self-loop a -> a through dq_des is refused as an algebraic loop naming the wire
     with pytest.raises(WiringError, match=r"no output 'dq_des'"):
         build(session, p)
-    p.write_text('''
+    p.write_text("""
 wires = ["arm.q -> w1.q", "w2.q_des -> w1.q_des", "arm.q -> w2.q", "arm.dq -> w2.dq",
          "w1.fired -> w2.finished_in", "arm.tau -> arm.tau_cmd"]
 [task]
@@ -117,7 +161,7 @@ command = "torque"
 type = "tracking_error_watch"
 [modules.w2]
 type = "ruckig_trajectory"
-''')
+""")
     with pytest.raises(WiringError, match="no input 'finished_in'"):
         build(session, p)
 
@@ -136,7 +180,7 @@ def test_cycle_between_modules_is_printed_in_flow_order(session, tmp_path) -> No
             np.multiply(self.u.value, 0.5, out=self.y.value)
 
     p = tmp_path / "cycle.toml"
-    p.write_text('''
+    p.write_text("""
 wires = ["g1.y -> g2.u", "g2.y -> g3.u", "g3.y -> g1.u", "g3.y -> arm.tau_cmd"]
 [task]
 name = "Cycle"
@@ -148,7 +192,7 @@ type = "test_delay_free_gain"
 type = "test_delay_free_gain"
 [modules.g3]
 type = "test_delay_free_gain"
-''')
+""")
     with pytest.raises(WiringError) as exc:
         build(session, p)
     msg = str(exc.value)
@@ -158,7 +202,9 @@ type = "test_delay_free_gain"
 
 def test_misplaced_wires_key_gets_a_hint(session, tmp_path) -> None:  # type: ignore[no-untyped-def]
     p = tmp_path / "misplaced.toml"
-    p.write_text('[task]\nname = "T"\nresource = "arm"\ncommand = "torque"\n'
-                 '[modules.h]\ntype = "gravity_compensation"\nwires = ["arm.q -> h.q"]\n')
+    p.write_text(
+        '[task]\nname = "T"\nresource = "arm"\ncommand = "torque"\n'
+        '[modules.h]\ntype = "gravity_compensation"\nwires = ["arm.q -> h.q"]\n'
+    )
     with pytest.raises(ConfigError, match="modules.h.wires belongs at the top level"):
         build(session, p)

@@ -12,10 +12,16 @@ from orccadd.task import Phase
 from tests.conftest import MOVE_TASK, PANDA, UR5E
 
 TARGETS = {
-    "ur5e": [[0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0], [0.8, -1.2, 1.2, -1.6, -1.2, 0.4],
-             [-0.5, -2.0, 2.2, -1.8, -1.57, -0.3]],
-    "panda": [[0.0, -0.7854, 0.0, -2.3562, 0.0, 1.5708, 0.7854], [0.5, 0.2, -0.3, -1.8, 0.4, 2.0, -0.5],
-              [-0.6, -0.3, 0.4, -2.6, -0.5, 1.2, 1.2]],
+    "ur5e": [
+        [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0],
+        [0.8, -1.2, 1.2, -1.6, -1.2, 0.4],
+        [-0.5, -2.0, 2.2, -1.8, -1.57, -0.3],
+    ],
+    "panda": [
+        [0.0, -0.7854, 0.0, -2.3562, 0.0, 1.5708, 0.7854],
+        [0.5, 0.2, -0.3, -1.8, 0.4, 2.0, -0.5],
+        [-0.6, -0.3, 0.4, -2.6, -0.5, 1.2, 1.2],
+    ],
 }
 
 
@@ -73,7 +79,7 @@ def test_new_target_mid_motion_without_torque_jump() -> None:
     tau = np.array(rec.tau)
     dtau = np.abs(np.diff(tau, axis=0)).max(axis=1)
     around = dtau[k_switch - 3 : k_switch + 3].max()
-    during_motion = np.percentile(dtau[5:k_switch - 3], 99.5)
+    during_motion = np.percentile(dtau[5 : k_switch - 3], 99.5)
     # The switch costs no more than the ordinary tick-to-tick change of a jerk-limited motion.
     assert around <= 2.0 * during_motion, (around, during_motion)
     s.close()

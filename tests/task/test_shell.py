@@ -46,7 +46,7 @@ def test_precondition_timeout_is_a_type_2(task_variant) -> None:  # type: ignore
     s, task, loop = open_task(task_variant(("max_abs_below = 0.5", "within = [5.0, 6.0]")))
     t0 = s.resource.state.t_s
     assert loop.run_task(task, timeout_s=5.0) is Phase.PRE_FAILED
-    (t_event, eid), = s.queue.drain()
+    ((t_event, eid),) = s.queue.drain()
     assert s.registry.info(eid).name == "MoveJoints.T2.PreconditionTimeout"
     assert t_event - t0 == pytest.approx(1.0 + 0.002, abs=0.0021)  # timeout_s = 1.0
     assert "ArmSlow" in task.fault_reason
@@ -69,7 +69,9 @@ def check_stopped_safely(s: Session, loop, category_torque_off: bool) -> None:  
 
 
 def test_t3_from_a_watcher_safe_stops_the_arm(task_variant) -> None:  # type: ignore[no-untyped-def]
-    s, task, loop = open_task(task_variant(("margin_rad = 0.02", "margin_rad = 0.02\nvelocity_fraction = 0.3")))
+    s, task, loop = open_task(
+        task_variant(("margin_rad = 0.02", "margin_rad = 0.02\nvelocity_fraction = 0.3"))
+    )
     next(m for m in task.modules if m.name == "traj").configure({"target_rad": FAR})
     assert loop.run_task(task, timeout_s=10.0) is Phase.FAULT
     assert s.event_names() == ["MoveJoints.T3.NearJointLimit"]
@@ -92,7 +94,7 @@ def test_resource_fault_is_a_type_3() -> None:
 
 
 def test_tune_is_checked_then_applied_at_tick_boundary() -> None:
-    s, task, loop = open_task()
+    _, task, loop = open_task()
     ct = next(m for m in task.modules if m.name == "ct")
     with pytest.raises(ParameterError, match=r"ct.kp \(=-3\) must be in \[0, 100000\]"):
         task.tune("ct.kp", -3)
