@@ -26,7 +26,10 @@ class Session:
     @staticmethod
     def open(robot_config: str | Path, mode: CommandMode = CommandMode.TORQUE) -> Session:
         """Load the config, build, configure and activate the resource. Not for a tick."""
-        cfg = load_robot_config(robot_config)
+        return Session.from_config(load_robot_config(robot_config), mode)
+
+    @staticmethod
+    def from_config(cfg: RobotConfig, mode: CommandMode = CommandMode.TORQUE) -> Session:
         res = create_resource(cfg)
         res.configure()
         res.activate(mode)

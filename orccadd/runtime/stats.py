@@ -41,6 +41,7 @@ class TimingStats:
         self.period_s = period_s
         self._lat = np.zeros(capacity, dtype=np.int64)
         self._cmp = np.zeros(capacity, dtype=np.int64)
+        self._over = np.zeros(capacity, dtype=np.bool_)
         self._cap = capacity
         self.ticks = 0
         self.overruns = 0
@@ -52,6 +53,7 @@ class TimingStats:
         i = self.ticks % self._cap
         self._lat[i] = latency_ns
         self._cmp[i] = compute_ns
+        self._over[i] = overrun
         self.ticks += 1
         self.missed_ticks += missed
         if overrun:
@@ -72,6 +74,18 @@ class TimingStats:
     @property
     def compute(self) -> Summary:
         return Summary.of(self._window(self._cmp))
+
+    def overrun_runs(self) -> dict[int, int]:
+        """How many runs of consecutive overruns of each length (in the recorded window)."""
+        runs: dict[int, int] = {}
+        n = 0
+        for flag in self._window(self._over).tolist() + [False]:
+            if flag:
+                n += 1
+            elif n:
+                runs[n] = runs.get(n, 0) + 1
+                n = 0
+        return runs
 
     def latencies_ns(self) -> np.ndarray:
         return self._window(self._lat).copy()

@@ -1,0 +1,152 @@
+"""Control-loop timing on the wall clock, against cyclictest in the same run.
+
+Runs the sim-ur5e Ruckig + computed-torque task (configs/tasks/move_joints.toml) at
+--period-ms (1 kHz by default) for --duration-s with SCHED_FIFO, cycling between targets; then
+`cyclictest` (Debian rt-tests) at the same period and priority for the same duration. Prints
+wake-up latency (median/p99/p99.9/max), compute time per tick (whole tick, and the part that
+is the plant simulation inside `read()`), overruns and runs of consecutive overruns, and the
+ratio of our wake-up p99 to cyclictest's. Run as root: `make bench`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from orccadd.config import load_robot_config
+from orccadd.runtime import Summary, WallClock, enter_realtime, leave_realtime
+from orccadd.session import Session
+from orccadd.task import Phase
+
+ROOT = Path(__file__).resolve().parent.parent
+TARGETS = [
+    [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0],
+    [0.8, -1.2, 1.2, -1.6, -1.2, 0.4],
+    [-0.5, -2.0, 2.2, -1.8, -1.57, -0.3],
+]
+
+
+def run_ours(period_s: float, duration_s: float, priority: int, spin_us: float) -> dict[str, object]:
+    cfg = load_robot_config(ROOT / "configs/robots/sim-ur5e.toml")
+    cfg = dataclasses.replace(cfg, control_period_s=period_s)
+    s = Session.from_config(cfg)
+    task = s.task(ROOT / "configs/tasks/move_joints.toml")
+    traj = next(m for m in task.modules if m.name == "traj")
+    loop = s.loop(WallClock(spin_margin_s=spin_us * 1e-6), overrun_limit=10**9)
+    n_ticks = int(duration_s / period_s)
+    plant_ns = np.zeros(n_ticks + 10, dtype=np.int64)
+    res = s.resource
+    inner_read = res.read
+    perf = time.perf_counter_ns
+    k = [0]
+
+    def timed_read(t_s: float):  # type: ignore[no-untyped-def]
+        t0 = perf()
+        st = inner_read(t_s)
+        plant_ns[k[0] % plant_ns.size] = perf() - t0
+        k[0] += 1
+        return st
+
+    res.read = timed_read  # type: ignore[method-assign]
+    target_i = [0]
+
+    def step(t_s: float) -> None:
+        task.tick(t_s)
+        if task.phase is Phase.DONE:  # next target, re-armed inside the tick (cheap, no alloc)
+            target_i[0] = (target_i[0] + 1) % len(TARGETS)
+            task.tune("traj.target_rad", TARGETS[target_i[0]])
+            task.activate()
+
+    loop.executor.step = step
+    traj.configure({"target_rad": TARGETS[0]})
+    loop.active = task
+    task.activate()
+    rt = enter_realtime(priority)
+    try:
+        loop.executor.run(max_ticks=n_ticks)
+    finally:
+        leave_realtime(rt)
+        s.close()
+    st = loop.stats
+    return {
+        "rt": rt,
+        "latency": st.latency,
+        "compute": st.compute,
+        "plant": Summary.of(plant_ns[: min(k[0], plant_ns.size)]),
+        "ticks": st.ticks,
+        "overruns": st.overruns,
+        "missed": st.missed_ticks,
+        "max_run": st.max_consecutive_overruns,
+        "runs": st.overrun_runs(),
+        "faults": task.phase is Phase.FAULT,
+    }
+
+
+def run_cyclictest(period_s: float, duration_s: float, priority: int) -> Summary | None:
+    exe = shutil.which("cyclictest")
+    if exe is None:
+        print("cyclictest not found (apt-get install rt-tests): no baseline", file=sys.stderr)
+        return None
+    loops = int(duration_s / period_s)
+    cmd = [exe, "-m", "-q", f"-p{priority}", f"-i{int(period_s * 1e6)}", f"-l{loops}", "-h20000"]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=duration_s * 3 + 30).stdout
+    hist = {}
+    for line in out.splitlines():
+        m = re.match(r"^(\d+)\s+(\d+)\s*$", line)
+        if m and int(m.group(2)):
+            hist[int(m.group(1))] = int(m.group(2))
+    max_m = re.search(r"# Max Latencies:\s+(\d+)", out)
+    if not hist:
+        print(f"cyclictest printed no histogram:\n{out[-500:]}", file=sys.stderr)
+        return None
+    values = np.array(sorted(hist))
+    counts = np.array([hist[v] for v in values])
+    cum = np.cumsum(counts) / counts.sum()
+
+    def pct(p: float) -> float:
+        return float(values[np.searchsorted(cum, p)])
+
+    mx = float(max_m.group(1)) if max_m else float(values[-1])
+    return Summary(pct(0.5), pct(0.99), pct(0.999), mx)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--duration-s", type=float, default=60.0)
+    ap.add_argument("--period-ms", type=float, default=1.0)
+    ap.add_argument("--priority", type=int, default=80)
+    ap.add_argument("--spin-us", type=float, default=150.0, help="wake this early and spin (0: pure sleep)")
+    args = ap.parse_args()
+    period_s = args.period_ms * 1e-3
+    ours = run_ours(period_s, args.duration_s, args.priority, args.spin_us)
+    base = run_cyclictest(period_s, args.duration_s, args.priority)
+    lat: Summary = ours["latency"]  # type: ignore[assignment]
+    print(
+        f"loop_latency: sim-ur5e Ruckig + computed torque, {args.period_ms:g} ms period, "
+        f"{args.duration_s:g} s, {ours['rt'].describe()}, spin margin {args.spin_us:g} µs"
+    )  # type: ignore[attr-defined]
+    print(f"  wake-up latency   {lat.line()}")
+    print(f"  compute per tick  {ours['compute'].line()}")  # type: ignore[attr-defined]
+    print(f"   of which plant   {ours['plant'].line()}   (simulation inside read())")  # type: ignore[attr-defined]
+    print(
+        f"  ticks {ours['ticks']}, overruns {ours['overruns']}, missed periods {ours['missed']}, "
+        f"longest run of overruns {ours['max_run']}, runs by length {ours['runs']}"
+    )
+    if base is not None:
+        print(f"  cyclictest        {base.line()}")
+        ratio = lat.p99_us / base.p99_us if base.p99_us else float("inf")
+        print(f"  ratio p99 ours/cyclictest = {ratio:.2f}  (target ≤ 1.0)")
+    print("  targets: compute p99 ≤ 100 µs, never 3 overruns in a row")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
