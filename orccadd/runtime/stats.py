@@ -79,7 +79,7 @@ class TimingStats:
         """How many runs of consecutive overruns of each length (in the recorded window)."""
         runs: dict[int, int] = {}
         n = 0
-        for flag in self._window(self._over).tolist() + [False]:
+        for flag in [*self._window(self._over).tolist(), False]:
             if flag:
                 n += 1
             elif n:
