@@ -137,32 +137,21 @@ def arr(values: list[float]) -> FloatArray:
 def _check_against_urdf(cfg: RobotConfig, model: pin.Model) -> None:
     """The config may only narrow the manufacturer's limits written in the URDF."""
     for i, j in enumerate(cfg.joints):
-        key = f"joints[{i}]"
         lo, hi = float(model.lowerPositionLimit[i]), float(model.upperPositionLimit[i])
         vmax, tmax = float(model.velocityLimit[i]), float(model.effortLimit[i])
+        checks = []
         if lo < hi:
-            for attr, val in (
-                ("position_min_rad", j.position_min_rad),
-                ("position_max_rad", j.position_max_rad),
-            ):
-                if not lo - 1e-9 <= val <= hi + 1e-9:
-                    raise ConfigError(
-                        cfg.source,
-                        f"{key}.{attr}",
-                        f"(={val!r}) must be in {format_range(lo, hi, False, False)} "
-                        f"(URDF limit of {j.name})",
-                    )
-        if vmax > 0 and j.max_velocity_rad_s > vmax + 1e-9:
-            raise ConfigError(
-                cfg.source,
-                f"{key}.max_velocity_rad_s",
-                f"(={j.max_velocity_rad_s!r}) must be in {format_range(0, vmax, True, False)} "
-                f"(URDF limit of {j.name})",
-            )
-        if tmax > 0 and j.max_torque_nm > tmax + 1e-9:
-            raise ConfigError(
-                cfg.source,
-                f"{key}.max_torque_nm",
-                f"(={j.max_torque_nm!r}) must be in {format_range(0, tmax, True, False)} "
-                f"(URDF limit of {j.name})",
-            )
+            checks += [("position_min_rad", lo, hi, False), ("position_max_rad", lo, hi, False)]
+        if vmax > 0:
+            checks.append(("max_velocity_rad_s", 0.0, vmax, True))
+        if tmax > 0:
+            checks.append(("max_torque_nm", 0.0, tmax, True))
+        for attr, low, high, open_lo in checks:
+            val = getattr(j, attr)
+            if not low - 1e-9 <= val <= high + 1e-9:
+                raise ConfigError(
+                    cfg.source,
+                    f"joints[{i}].{attr}",
+                    f"(={val!r}) must be in {format_range(low, high, open_lo, False)} "
+                    f"(URDF limit of {j.name})",
+                )

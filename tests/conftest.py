@@ -23,25 +23,22 @@ def variant_text(base: Path, *edits: tuple[str, str]) -> str:
     return text
 
 
-@pytest.fixture
-def robot_variant(tmp_path: Path) -> Callable[..., Path]:
-    """Write a variant of a shipped robot config; returns its path."""
-
-    def make(*edits: tuple[str, str], base: Path = UR5E, name: str = "robot.toml") -> Path:
+def _variant_writer(tmp_path: Path, default_base: Path, default_name: str) -> Callable[..., Path]:
+    def make(*edits: tuple[str, str], base: Path = default_base, name: str = default_name) -> Path:
         p = tmp_path / name
         p.write_text(variant_text(base, *edits))
         return p
 
     return make
+
+
+@pytest.fixture
+def robot_variant(tmp_path: Path) -> Callable[..., Path]:
+    """Write a variant of a shipped robot config (`make(*(old, new), base=...)`); its path."""
+    return _variant_writer(tmp_path, UR5E, "robot.toml")
 
 
 @pytest.fixture
 def task_variant(tmp_path: Path) -> Callable[..., Path]:
     """Write a variant of the shipped move task; returns its path."""
-
-    def make(*edits: tuple[str, str], base: Path = MOVE_TASK, name: str = "task.toml") -> Path:
-        p = tmp_path / name
-        p.write_text(variant_text(base, *edits))
-        return p
-
-    return make
+    return _variant_writer(tmp_path, MOVE_TASK, "task.toml")

@@ -9,8 +9,24 @@ from orccadd.modules.base import Module, ModuleContext, register
 from orccadd.physres.base import JointState
 
 
+class JointController(Module):
+    """Base of joint-space laws: measured q, dq and desired q_des, dq_des in; torque out."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        n = ctx.dof
+        self.q = self.add_input("q", (n,), "rad")
+        self.dq = self.add_input("dq", (n,), "rad/s")
+        self.q_des = self.add_input("q_des", (n,), "rad")
+        self.dq_des = self.add_input("dq_des", (n,), "rad/s")
+        self.tau = self.add_output("tau", (n,), "N.m")
+        self._model = ctx.model.model
+        self._data = ctx.model.new_data()
+        self._e = np.zeros(n)
+
+
 @register("computed_torque")
-class ComputedTorque(Module):
+class ComputedTorque(JointController):
     """tau = M(q)·(ddq_des + kp·e + kd·de + ki·∫e) + h(q, dq), computed in one RNEA call.
 
     `kp` (1/s²) and `kd` (1/s) set the error dynamics e'' + kd·e' + kp·e = 0 per joint; the
@@ -21,22 +37,14 @@ class ComputedTorque(Module):
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
         n = ctx.dof
-        self.q = self.add_input("q", (n,), "rad")
-        self.dq = self.add_input("dq", (n,), "rad/s")
-        self.q_des = self.add_input("q_des", (n,), "rad")
-        self.dq_des = self.add_input("dq_des", (n,), "rad/s")
         self.ddq_des = self.add_input("ddq_des", (n,), "rad/s^2")
-        self.tau = self.add_output("tau", (n,), "N.m")
         self.kp = self.add_parameter("kp", 400.0, bounds=(0.0, 1e5), unit="1/s^2", tunable=True, shape=(n,))
         self.kd = self.add_parameter("kd", 40.0, bounds=(0.0, 1e3), unit="1/s", tunable=True, shape=(n,))
         self.ki = self.add_parameter("ki", 0.0, bounds=(0.0, 1e6), unit="1/s^3", tunable=True, shape=(n,))
         self.i_max = self.add_parameter(
             "integral_limit_rad_s", 0.05, bounds=(0.0, 10.0), unit="rad.s", tunable=True
         )
-        self._model = ctx.model.model
-        self._data = ctx.model.new_data()
         self._a = np.zeros(n)
-        self._e = np.zeros(n)
         self._ie = np.zeros(n)
         self._dt = ctx.period_s
 
@@ -61,24 +69,16 @@ class ComputedTorque(Module):
 
 
 @register("joint_pd_gravity")
-class JointPDGravity(Module):
+class JointPDGravity(JointController):
     """tau = kp·(q_des − q) + kd·(dq_des − dq) + g(q): joint PD with gravity compensation."""
 
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
         n = ctx.dof
-        self.q = self.add_input("q", (n,), "rad")
-        self.dq = self.add_input("dq", (n,), "rad/s")
-        self.q_des = self.add_input("q_des", (n,), "rad")
-        self.dq_des = self.add_input("dq_des", (n,), "rad/s")
-        self.tau = self.add_output("tau", (n,), "N.m")
         self.kp = self.add_parameter("kp", 200.0, bounds=(0.0, 1e5), unit="N.m/rad", tunable=True, shape=(n,))
         self.kd = self.add_parameter(
             "kd", 20.0, bounds=(0.0, 1e4), unit="N.m.s/rad", tunable=True, shape=(n,)
         )
-        self._model = ctx.model.model
-        self._data = ctx.model.new_data()
-        self._e = np.zeros(n)
 
     def update(self, t_s: float) -> None:
         tau, e = self.tau.value, self._e
