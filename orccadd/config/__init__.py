@@ -9,6 +9,7 @@ from orccadd.config.robot import (
     SafeStopConfig,
     load_robot_config,
     read_toml,
+    with_backend,
 )
 from orccadd.config.schema import field, load_dataclass
 
@@ -23,4 +24,5 @@ __all__ = [
     "load_dataclass",
     "load_robot_config",
     "read_toml",
+    "with_backend",
 ]

@@ -145,6 +145,18 @@ def load_robot_config(path: str | Path, *, check_model: bool = True) -> RobotCon
     return cfg
 
 
+def with_backend(cfg: RobotConfig, backend: str, **settings: Any) -> RobotConfig:
+    """The same robot on another resource backend (e.g. `sim_process`), settings re-checked."""
+    from orccadd.physres import backend_class
+
+    raw = {**(cfg.resource.settings or {}), **settings}
+    resource = replace(cfg.resource, backend=backend, settings=raw)
+    cfg = replace(cfg, resource=resource)
+    return replace(
+        cfg, backend_settings=backend_class(backend, cfg.source).load_settings(raw, cfg, cfg.source)
+    )
+
+
 def _check_joints(cfg: RobotConfig, file: str) -> None:
     seen: set[str] = set()
     for i, j in enumerate(cfg.joints):

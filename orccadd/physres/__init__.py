@@ -21,6 +21,7 @@ from orccadd.physres.base import (
 
 BACKENDS: dict[str, tuple[str, str]] = {
     "sim": ("orccadd.physres.sim", "SimulatedArm"),
+    "sim_process": ("orccadd.physres.sim_process", "SimProcessArm"),
 }
 
 

@@ -60,7 +60,7 @@ class SimulatedArm(PhysicalResource):
 
     @classmethod
     def load_settings(cls, raw: Mapping[str, Any], cfg: RobotConfig, file: str) -> SimSettings:
-        s: SimSettings = load_dataclass(SimSettings, raw, file, "resource.settings")
+        s: SimSettings = load_dataclass(cls.Settings, raw, file, "resource.settings")
         n = cfg.dof
         for name in (
             "viscous_friction_nm_s_rad",

@@ -1,0 +1,132 @@
+"""The simulated plant as its own process: a `SimulatedArm` stepping on the wall clock,
+talking to the controller through a `PlantChannel`, like a robot's own controller would.
+
+It protects itself like a real arm: no fresh command for `watchdog_periods` periods while
+active (the controller stalled or died) → safe stop; the controller process gone → safe stop,
+then exit once at rest.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from orccadd.config.robot import RobotConfig
+from orccadd.model import RobotModel
+from orccadd.physres.base import CommandMode, Lifecycle
+from orccadd.physres.shm_channel import Ctl, PlantChannel, Request
+from orccadd.physres.sim import SimulatedArm
+from orccadd.runtime.clock import WallClock
+from orccadd.runtime.executor import PeriodicExecutor
+from orccadd.runtime.rt import enter_realtime
+
+
+class PlantServer:
+    """One plant step per control period: requests → integrate → publish → command."""
+
+    def __init__(self, cfg: RobotConfig, channel: PlantChannel, watchdog_periods: int) -> None:
+        self.arm = SimulatedArm(cfg, RobotModel.from_config(cfg))
+        self.arm.configure()
+        self.ch = channel
+        self.watchdog_periods = watchdog_periods
+        self.cmd = np.zeros(self.arm.dof)
+        self.last_seq = -1
+        self.stale = 0
+        self.parent = os.getppid()
+        self.done = False
+        self.watchdog_trips = 0
+
+    def _handle_request(self) -> None:
+        ctl, arm = self.ch.ctl, self.arm
+        seq = int(ctl[Ctl.REQ_SEQ])
+        if seq == int(ctl[Ctl.ACK_SEQ]):
+            return
+        code, arg = int(ctl[Ctl.REQ_CODE]), int(ctl[Ctl.REQ_ARG])
+        result = 0
+        try:
+            if code == Request.ACTIVATE:
+                ctl[Ctl.STOP] = 0
+                arm.activate(CommandMode(arg))
+                self.last_seq, self.stale = int(ctl[Ctl.CMD_SEQ]), 0
+            elif code == Request.SWITCH_MODE:
+                arm.switch_mode(CommandMode(arg))
+            elif code == Request.DEACTIVATE:
+                arm.deactivate()
+            elif code == Request.CLEAR_STOP:
+                ctl[Ctl.STOP] = 0
+                arm.clear_stop()
+                self.last_seq, self.stale = int(ctl[Ctl.CMD_SEQ]), 0
+            elif code == Request.INJECT_FAULT:
+                arm.inject_fault("injected fault", code=arg)
+            elif code == Request.RESET_FAULT:
+                arm.reset_fault()
+            elif code == Request.SHUTDOWN:
+                arm.shutdown()
+                self.done = True
+        except Exception:  # reported to the controller as a failed request
+            result = 1
+        ctl[Ctl.ACK_RESULT] = result
+        ctl[Ctl.ACK_SEQ] = seq
+
+    def step(self, t_s: float) -> None:
+        ctl, arm = self.ch.ctl, self.arm
+        self._handle_request()
+        st = arm.read(t_s)
+        self.ch.publish_state(t_s, st.q_rad, st.dq_rad_s, st.tau_nm, st.status)
+        ctl[Ctl.FAULT_CODE] = st.fault_code
+        ctl[Ctl.HEARTBEAT] += 1
+        if arm.lifecycle is not Lifecycle.ACTIVE:
+            return
+        if ctl[Ctl.STOP]:
+            arm.safe_stop()
+        seq, mode = self.ch.take_command(self.cmd)
+        if seq != self.last_seq:
+            self.last_seq, self.stale = seq, 0
+            if mode == arm.mode:
+                arm.write(t_s, self.cmd)
+        else:
+            self.stale += 1
+            if self.stale == self.watchdog_periods and not arm.stopping_or_stopped:
+                self.watchdog_trips += 1
+                arm.safe_stop()  # the controller is silent: stop like a real arm would
+        if os.getppid() != self.parent:
+            arm.safe_stop()  # the controller process is gone
+            if st.status & 0x20:  # STOPPED
+                self.done = True
+
+
+def plant_main(cfg: RobotConfig, shm_name: str, watchdog_periods: int, priority: int) -> None:
+    """Run the plant until shut down (or its controller is gone and the arm is at rest)."""
+    channel = PlantChannel(cfg.dof, shm_name)
+    server = PlantServer(cfg, channel, watchdog_periods)
+    enter_realtime(priority, lock_memory=False)
+    ex = PeriodicExecutor(WallClock(), cfg.control_period_s, server.step)
+    try:
+        ex.run(until=lambda: server.done)
+    finally:
+        channel.close()
+
+
+def main() -> int:
+    """`python -m orccadd.physres.plant_server --shm NAME ...`, the RobotConfig pickled on stdin
+    by the `sim_process` resource that starts it (its own parent: trusted input)."""
+    import argparse
+    import pickle
+    import sys
+
+    ap = argparse.ArgumentParser(description=main.__doc__)
+    ap.add_argument("--shm", required=True)
+    ap.add_argument("--watchdog-periods", type=int, required=True)
+    ap.add_argument("--priority", type=int, default=0)
+    args = ap.parse_args()
+    cfg = pickle.load(sys.stdin.buffer)
+    if not isinstance(cfg, RobotConfig):
+        print("plant_server: stdin is not a RobotConfig", file=sys.stderr)
+        return 2
+    plant_main(cfg, args.shm, args.watchdog_periods, args.priority)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,216 @@
+"""`sim_process` backend: the simulated arm runs in its own process (see `plant_server`).
+
+The control process then pays only for a shared-memory copy in `read()`/`write()`, as with a
+real arm behind a fieldbus. Watchdogs on both sides: the plant stops the arm when commands stop
+coming; the controller reports COMM_LOST (type 3) when the plant's heartbeat stops.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import pickle
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from orccadd.config.robot import RobotConfig
+from orccadd.config.schema import field
+from orccadd.errors import ResourceError
+from orccadd.model import RobotModel
+from orccadd.physres.base import CommandMode, FloatArray, JointState, Lifecycle, PhysicalResource, Status
+from orccadd.physres.shm_channel import Ctl, PlantChannel, Request
+from orccadd.physres.sim import SimSettings, SimulatedArm
+
+SELF_STOPPED = int(Status.STOPPING | Status.STOPPED)
+KEEPALIVE = 0  # a command "mode" the plant counts as fresh but does not apply
+
+
+@dataclass(frozen=True)
+class SimProcessSettings(SimSettings):
+    """`sim` settings plus the process link's watchdogs."""
+
+    watchdog_periods: int = field(default=20, bounds=(2, 100000))
+    heartbeat_timeout_periods: int = field(default=20, bounds=(2, 100000))
+    startup_timeout_s: float = field(default=30.0, bounds=(0.1, 600.0))
+    plant_priority: int = field(default=70, bounds=(0, 99))
+
+
+class SimProcessArm(PhysicalResource):
+    """A Physical Resource whose plant is a separate process on the same machine."""
+
+    Settings: ClassVar[type[Any]] = SimProcessSettings
+
+    @classmethod
+    def load_settings(cls, raw: Any, cfg: RobotConfig, file: str) -> SimProcessSettings:
+        """The `sim` checks, with this backend's settings class."""
+        return SimulatedArm.load_settings.__func__(cls, raw, cfg, file)  # type: ignore[attr-defined, no-any-return]
+
+    def __init__(self, config: RobotConfig, model: RobotModel) -> None:
+        super().__init__(config, model)
+        s = config.backend_settings
+        if s is None:
+            s = SimProcessArm.load_settings({}, config, config.source)
+        self.settings: SimProcessSettings = s
+        self.channel: PlantChannel | None = None
+        self.process: Any = None
+        self._buf = np.zeros(1 + 3 * self.dof)
+        self._last_heartbeat = -1
+        self._silent_reads = 0
+        self._wrote = False
+        self._last_cmd: FloatArray = np.zeros(self.dof)
+
+    # ---- lifecycle ------------------------------------------------------------------------
+    def _on_configure(self) -> None:
+        s = self.settings
+        self.channel = PlantChannel(self.dof, create=True)
+        try:
+            self._start_plant(s)
+        except BaseException:
+            self._release()
+            raise
+
+    def _start_plant(self, s: SimProcessSettings) -> None:
+        assert self.channel is not None
+        cmd = [
+            sys.executable,
+            "-m",
+            "orccadd.physres.plant_server",
+            "--shm",
+            self.channel.name,
+            "--watchdog-periods",
+            str(s.watchdog_periods),
+            "--priority",
+            str(s.plant_priority),
+        ]
+        self.process = subprocess.Popen(cmd, stdin=subprocess.PIPE)
+        assert self.process.stdin is not None
+        self.process.stdin.write(pickle.dumps(self.config))
+        self.process.stdin.close()
+        deadline = time.monotonic() + s.startup_timeout_s
+        while self.channel.ctl[Ctl.HEARTBEAT] == 0:
+            if not self.plant_alive():
+                code = self.process.returncode
+                raise ResourceError(f"resource {self.name!r}: the plant process exited (code {code})")
+            if time.monotonic() > deadline:
+                self.process.kill()
+                raise ResourceError(
+                    f"resource {self.name!r}: the plant process did not start "
+                    f"within {s.startup_timeout_s:g} s"
+                )
+            time.sleep(0.01)
+
+    def _request(self, code: Request, arg: int = 0, timeout_s: float = 2.0) -> None:
+        ch = self._ch()
+        ctl = ch.ctl
+        ctl[Ctl.REQ_CODE] = code
+        ctl[Ctl.REQ_ARG] = arg
+        seq = int(ctl[Ctl.REQ_SEQ]) + 1
+        ctl[Ctl.REQ_SEQ] = seq
+        deadline = time.monotonic() + timeout_s
+        while int(ctl[Ctl.ACK_SEQ]) != seq:
+            if time.monotonic() > deadline or not self.plant_alive():
+                raise ResourceError(
+                    f"resource {self.name!r}: the plant did not acknowledge "
+                    f"{code.name.lower()} within {timeout_s:g} s"
+                )
+            time.sleep(0.0005)
+        if ctl[Ctl.ACK_RESULT]:
+            raise ResourceError(f"resource {self.name!r}: the plant refused {code.name.lower()}")
+
+    def _ch(self) -> PlantChannel:
+        if self.channel is None:
+            raise ResourceError(f"resource {self.name!r} is not configured")
+        return self.channel
+
+    def _on_activate(self, mode: CommandMode) -> None:
+        self._request(Request.ACTIVATE, int(mode))
+        self._ch().read_state(self._buf)
+        n = self.dof
+        self.state.q_rad[:] = self._buf[1 : 1 + n]
+        self._wrote = True
+
+    def _on_switch_mode(self, mode: CommandMode) -> None:
+        self._request(Request.SWITCH_MODE, int(mode))
+
+    def _on_deactivate(self) -> None:
+        if self.plant_alive():  # a dead plant has nothing left to disable
+            self._request(Request.DEACTIVATE)
+
+    def _on_clear_stop(self) -> None:
+        self._request(Request.CLEAR_STOP)
+
+    def inject_fault(self, message: str, code: int = 0x1000) -> None:
+        """Make the plant report a device fault (tests). Not for a tick."""
+        self.fault_message = message
+        self._request(Request.INJECT_FAULT, code)
+
+    def reset_fault(self) -> None:
+        self.fault_message = ""
+        self._request(Request.RESET_FAULT)
+
+    def plant_alive(self) -> bool:
+        return self.process is not None and self.process.poll() is None
+
+    def _on_shutdown(self) -> None:
+        if self.plant_alive():
+            with contextlib.suppress(ResourceError):
+                self._request(Request.SHUTDOWN, timeout_s=2.0)
+            try:
+                self.process.wait(timeout=2.0)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(timeout=2.0)
+        self._release()
+
+    def _release(self) -> None:
+        if self.channel is not None:
+            self.channel.close(unlink=True)
+            self.channel = None
+
+    # ---- tick -----------------------------------------------------------------------------
+    def _read_into(self, t_s: float, state: JointState) -> int:
+        ch = self.channel
+        if ch is None:
+            return int(Status.COMM_LOST)
+        status = ch.read_state(self._buf)
+        n, buf = self.dof, self._buf
+        state.q_rad[:] = buf[1 : 1 + n]
+        state.dq_rad_s[:] = buf[1 + n : 1 + 2 * n]
+        state.tau_nm[:] = buf[1 + 2 * n :]
+        state.fault_code = int(ch.ctl[Ctl.FAULT_CODE])
+        hb = int(ch.ctl[Ctl.HEARTBEAT])
+        if hb == self._last_heartbeat:
+            self._silent_reads += 1
+        else:
+            self._last_heartbeat, self._silent_reads = hb, 0
+        flags = status & ~SELF_STOPPED & ~int(Status.LIMIT_VIOLATION)
+        if self._silent_reads >= self.settings.heartbeat_timeout_periods:
+            flags |= Status.COMM_LOST
+            self.fault_message = "the plant process stopped answering"
+        if status & SELF_STOPPED:
+            if not self._stop_flags:  # the arm stopped by itself (its watchdog): fatal here
+                flags |= Status.FAULT
+                self.fault_message = "the arm stopped on its own (command watchdog)"
+            elif status & Status.STOPPED:
+                self._mark_stopped(bool(status & Status.TORQUE_OFF))
+        elif self.lifecycle is Lifecycle.ACTIVE and not self._wrote and not self._stop_flags:
+            ch.send_command(KEEPALIVE, self._last_cmd)  # no new command: the plant holds its last
+        self._wrote = False
+        return flags
+
+    def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
+        ch = self.channel
+        if ch is None:
+            return int(Status.COMM_LOST)
+        ch.send_command(int(mode), command)
+        self._last_cmd[:] = command
+        self._wrote = True
+        return 0
+
+    def _begin_safe_stop(self) -> None:
+        if self.channel is not None:
+            self.channel.ctl[Ctl.STOP] = 1

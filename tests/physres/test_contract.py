@@ -1,0 +1,72 @@
+"""The Physical Resource contract, re-run by every backend (on the wall clock)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from orccadd.config import load_robot_config, with_backend
+from orccadd.physres import CommandMode, Lifecycle, PhysicalResource, Status, create_resource
+from tests.conftest import UR5E
+
+BACKENDS = ["sim", "sim_process"]
+
+
+@pytest.fixture(params=BACKENDS)
+def resource(request: pytest.FixtureRequest) -> Iterator[PhysicalResource]:
+    res = create_resource(with_backend(load_robot_config(UR5E), request.param))
+    res.configure()
+    yield res
+    if res.lifecycle is not Lifecycle.FINALIZED:
+        res.shutdown()
+
+
+def drive(res: PhysicalResource, seconds: float, extra_nm: float = 0.0) -> None:
+    """Gravity compensation (+ a push) every period on the wall clock."""
+    data = res.model.new_data()
+    period = res.config.control_period_s
+    t_end = time.monotonic() + seconds
+    while time.monotonic() < t_end:
+        st = res.read(time.monotonic())
+        res.write(time.monotonic(), pin.computeGeneralizedGravity(res.model.model, data, st.q_rad) + extra_nm)
+        time.sleep(period)
+
+
+def test_activate_reports_the_measured_position(resource: PhysicalResource) -> None:
+    resource.activate(CommandMode.TORQUE)
+    q0 = resource.state.q_rad.copy()
+    assert np.abs(q0).max() > 0.1  # the configured initial pose, not zeros
+    drive(resource, 0.2)
+    assert np.abs(resource.state.q_rad - q0).max() < 0.01
+    assert not resource.state.status & (Status.FAULT | Status.COMM_LOST | Status.LIMIT_VIOLATION)
+
+
+def test_torque_beyond_limit_is_clamped(resource: PhysicalResource) -> None:
+    resource.activate(CommandMode.TORQUE)
+    resource.read(time.monotonic())
+    flags = resource.write(time.monotonic(), np.full(resource.dof, 1e4))
+    assert flags & Status.CMD_CLAMPED and not flags & Status.LIMIT_VIOLATION
+    resource.safe_stop()
+
+
+def test_safe_stop_brings_the_arm_to_rest(resource: PhysicalResource) -> None:
+    resource.activate(CommandMode.TORQUE)
+    drive(resource, 0.3, extra_nm=3.0)
+    assert np.abs(resource.state.dq_rad_s).max() > 0.2
+    resource.safe_stop()
+    drive(resource, 2.0)
+    st = resource.state
+    assert st.status & Status.STOPPED, Status(st.status)
+    assert np.abs(st.dq_rad_s).max() < 0.01
+
+
+def test_device_fault_is_reported(resource: PhysicalResource) -> None:
+    resource.activate(CommandMode.TORQUE)
+    drive(resource, 0.05)
+    resource.inject_fault("over-current")  # type: ignore[attr-defined]
+    drive(resource, 0.05)
+    assert resource.state.status & Status.FAULT

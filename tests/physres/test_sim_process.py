@@ -1,0 +1,99 @@
+"""The plant in its own process: the watchdogs on both sides of the link."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from orccadd.config import load_robot_config, with_backend
+from orccadd.physres import Status
+from orccadd.physres.sim_process import SimProcessArm
+from orccadd.runtime import WallClock
+from orccadd.session import Session
+from orccadd.task import Phase
+from tests.conftest import MOVE_TASK, ROOT, UR5E
+
+
+@pytest.fixture
+def session() -> Iterator[Session]:
+    s = Session.from_config(with_backend(load_robot_config(UR5E), "sim_process"))
+    yield s
+    s.close()
+    assert not s.resource.plant_alive()  # type: ignore[attr-defined]
+
+
+def test_motion_through_the_process_link(session: Session) -> None:
+    task = session.task(MOVE_TASK)
+    loop = session.loop(WallClock(), overrun_limit=10**6)
+    assert loop.run_task(task, timeout_s=6.0) is Phase.DONE
+    assert session.event_names() == ["MoveJoints.done"]
+
+
+def test_plant_killed_is_comm_lost_type_3(session: Session) -> None:
+    task = session.task(MOVE_TASK)
+    loop = session.loop(WallClock(), overrun_limit=10**6)
+    loop.active = task
+    task.activate()
+    loop.run_for(0.1)
+    res = session.resource
+    assert isinstance(res, SimProcessArm)
+    res.process.kill()
+    res.process.wait()
+    loop.run_for(0.1)  # 50 periods: beyond the 20-period heartbeat timeout
+    assert task.phase is Phase.FAULT
+    names = session.event_names()  # a frozen state may first look like tracking drift (T1)
+    assert [n for n in names if ".T3." in n] == ["MoveJoints.T3.CommLost"], names
+    assert "stopped answering" in res.fault_message
+
+
+def test_silent_controller_makes_the_plant_stop_itself(session: Session) -> None:
+    task = session.task(MOVE_TASK)
+    loop = session.loop(WallClock(), overrun_limit=10**6)
+    loop.active = task
+    task.activate()
+    loop.run_for(0.1)
+    time.sleep(0.2)  # the controller stalls for 100 periods; the plant's watchdog is 20
+    loop.run_for(0.02)
+    assert task.phase is Phase.FAULT
+    names = session.event_names()
+    assert [n for n in names if ".T3." in n] == ["MoveJoints.T3.ResourceFault"], names
+    assert "command watchdog" in session.resource.fault_message
+    time.sleep(1.5)
+    session.resource.read(time.monotonic())
+    assert session.resource.state.status & Status.STOPPED
+
+
+def test_controller_process_killed_plant_stops_and_exits(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    script = tmp_path / "controller.py"
+    script.write_text(f"""
+import os, sys
+sys.path.insert(0, {str(ROOT)!r})
+from orccadd.config import load_robot_config, with_backend
+from orccadd.runtime import WallClock
+from orccadd.session import Session
+s = Session.from_config(with_backend(load_robot_config({str(UR5E)!r}), "sim_process"))
+task = s.task({str(MOVE_TASK)!r})
+loop = s.loop(WallClock(), overrun_limit=10**6)
+loop.active = task
+task.activate()
+loop.run_for(0.3)
+print(s.resource.process.pid, flush=True)
+os._exit(9)  # the controller dies mid-motion
+""")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    plant_pid = int(out.stdout.strip().splitlines()[-1])
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:
+        try:
+            os.kill(plant_pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.05)
+    else:
+        os.kill(plant_pid, 9)
+        pytest.fail("the plant kept running after its controller died")
