@@ -1,9 +1,9 @@
 """The simulated plant as its own process: a `SimulatedArm` stepping on the wall clock,
 talking to the controller through a `PlantChannel`, like a robot's own controller would.
 
-It protects itself like a real arm: no fresh command for `watchdog_periods` periods while
-active (the controller stalled or died) → safe stop; the controller process gone → safe stop,
-then exit once at rest.
+It protects itself like a real arm: once commands stream (the first command after activation
+arms the watchdog), no fresh command for `watchdog_periods` periods (the controller stalled or
+died) → safe stop; the controller process gone → safe stop, then exit once at rest.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ class PlantServer:
         self.cmd = np.zeros(self.arm.dof)
         self.last_seq = -1
         self.stale = 0
+        self.streaming = False  # the watchdog arms with the first command after activation
         self.parent = os.getppid()
         self.done = False
         self.watchdog_trips = 0
@@ -48,7 +49,7 @@ class PlantServer:
             if code == Request.ACTIVATE:
                 ctl[Ctl.STOP] = 0
                 arm.activate(CommandMode(arg))
-                self.last_seq, self.stale = int(ctl[Ctl.CMD_SEQ]), 0
+                self.last_seq, self.stale, self.streaming = int(ctl[Ctl.CMD_SEQ]), 0, False
             elif code == Request.SWITCH_MODE:
                 arm.switch_mode(CommandMode(arg))
             elif code == Request.DEACTIVATE:
@@ -56,7 +57,7 @@ class PlantServer:
             elif code == Request.CLEAR_STOP:
                 ctl[Ctl.STOP] = 0
                 arm.clear_stop()
-                self.last_seq, self.stale = int(ctl[Ctl.CMD_SEQ]), 0
+                self.last_seq, self.stale, self.streaming = int(ctl[Ctl.CMD_SEQ]), 0, False
             elif code == Request.INJECT_FAULT:
                 arm.inject_fault("injected fault", code=arg)
             elif code == Request.RESET_FAULT:
@@ -81,11 +82,13 @@ class PlantServer:
         if ctl[Ctl.STOP]:
             arm.safe_stop()
         seq, mode = self.ch.take_command(self.cmd)
+        if seq < 0:  # the controller is mid-write: keep the last command this step
+            return
         if seq != self.last_seq:
-            self.last_seq, self.stale = seq, 0
+            self.last_seq, self.stale, self.streaming = seq, 0, True
             if mode == arm.mode:
                 arm.write(t_s, self.cmd)
-        else:
+        elif self.streaming:
             self.stale += 1
             if self.stale == self.watchdog_periods and not arm.stopping_or_stopped:
                 self.watchdog_trips += 1

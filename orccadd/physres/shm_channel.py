@@ -84,15 +84,20 @@ class PlantChannel:
         ctl[Ctl.STATUS] = status
         ctl[Ctl.STATE_SEQ] += 1
 
-    def read_state(self, out: np.ndarray) -> int:
-        """Copy a consistent state into `out` (len 1 + 3·dof); returns the plant's status."""
+    def read_state(self, out: np.ndarray, tries: int = 3) -> int:
+        """Copy a consistent state into `out` (len 1 + 3·dof); returns the plant's status, or
+        -1 if no consistent snapshot came in `tries` (never spins: the writer may be a
+        lower-priority process preempted on this very CPU)."""
         ctl = self.ctl
-        while True:
+        for _ in range(tries):
             s1 = int(ctl[Ctl.STATE_SEQ])
+            if s1 & 1:
+                continue
             out[:] = self.state
             status = int(ctl[Ctl.STATUS])
-            if not s1 & 1 and s1 == int(ctl[Ctl.STATE_SEQ]):
+            if s1 == int(ctl[Ctl.STATE_SEQ]):
                 return status
+        return -1
 
     # ---- command: the controller writes, the plant reads ----------------------------------
     def send_command(self, mode: int, cmd: np.ndarray) -> None:
@@ -102,15 +107,19 @@ class PlantChannel:
         self.cmd[:] = cmd
         ctl[Ctl.CMD_SEQ] += 1
 
-    def take_command(self, out: np.ndarray) -> tuple[int, int]:
-        """Copy the latest command into `out`; returns (sequence number, mode)."""
+    def take_command(self, out: np.ndarray, tries: int = 3) -> tuple[int, int]:
+        """Copy the latest command into `out`; returns (sequence number, mode), or (-1, 0) if
+        no consistent snapshot came in `tries`."""
         ctl = self.ctl
-        while True:
+        for _ in range(tries):
             s1 = int(ctl[Ctl.CMD_SEQ])
+            if s1 & 1:
+                continue
             out[:] = self.cmd
             mode = int(ctl[Ctl.CMD_MODE])
-            if not s1 & 1 and s1 == int(ctl[Ctl.CMD_SEQ]):
+            if s1 == int(ctl[Ctl.CMD_SEQ]):
                 return s1, mode
+        return -1, 0
 
     def close(self, unlink: bool = False) -> None:
         del self.ctl, self.state, self.cmd

@@ -177,6 +177,8 @@ class SimProcessArm(PhysicalResource):
         if ch is None:
             return int(Status.COMM_LOST)
         status = ch.read_state(self._buf)
+        if status < 0:  # the plant is mid-write: keep the previous measurement this tick
+            return int(ch.ctl[Ctl.STATUS]) & int(Status.FAULT)
         n, buf = self.dof, self._buf
         state.q_rad[:] = buf[1 : 1 + n]
         state.dq_rad_s[:] = buf[1 + n : 1 + 2 * n]
