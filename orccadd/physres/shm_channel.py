@@ -88,16 +88,22 @@ class PlantChannel:
         """Copy a consistent state into `out` (len 1 + 3·dof); returns the plant's status, or
         -1 if no consistent snapshot came in `tries` (never spins: the writer may be a
         lower-priority process preempted on this very CPU)."""
+        return self._snapshot(Ctl.STATE_SEQ, self.state, out, Ctl.STATUS, tries)[1]
+
+    def _snapshot(
+        self, seq_i: int, src: np.ndarray, out: np.ndarray, word_i: int, tries: int
+    ) -> tuple[int, int]:
+        """Seqlock read of `src` and control word `word_i`: (sequence, word), or (-1, -1)."""
         ctl = self.ctl
         for _ in range(tries):
-            s1 = int(ctl[Ctl.STATE_SEQ])
+            s1 = int(ctl[seq_i])
             if s1 & 1:
                 continue
-            out[:] = self.state
-            status = int(ctl[Ctl.STATUS])
-            if s1 == int(ctl[Ctl.STATE_SEQ]):
-                return status
-        return -1
+            out[:] = src
+            word = int(ctl[word_i])
+            if s1 == int(ctl[seq_i]):
+                return s1, word
+        return -1, -1
 
     # ---- command: the controller writes, the plant reads ----------------------------------
     def send_command(self, mode: int, cmd: np.ndarray) -> None:
@@ -108,18 +114,9 @@ class PlantChannel:
         ctl[Ctl.CMD_SEQ] += 1
 
     def take_command(self, out: np.ndarray, tries: int = 3) -> tuple[int, int]:
-        """Copy the latest command into `out`; returns (sequence number, mode), or (-1, 0) if
+        """Copy the latest command into `out`; returns (sequence number, mode), or (-1, -1) if
         no consistent snapshot came in `tries`."""
-        ctl = self.ctl
-        for _ in range(tries):
-            s1 = int(ctl[Ctl.CMD_SEQ])
-            if s1 & 1:
-                continue
-            out[:] = self.cmd
-            mode = int(ctl[Ctl.CMD_MODE])
-            if s1 == int(ctl[Ctl.CMD_SEQ]):
-                return s1, mode
-        return -1, 0
+        return self._snapshot(Ctl.CMD_SEQ, self.cmd, out, Ctl.CMD_MODE, tries)
 
     def close(self, unlink: bool = False) -> None:
         del self.ctl, self.state, self.cmd

@@ -133,7 +133,7 @@ def test_bad_wiring_refused(session, task_variant, edit, error, message) -> None
     assert str(path) in str(exc.value)
 
 
-def test_algebraic_loop_is_named(session, tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_ports_named_in_wires_must_exist(session, tmp_path) -> None:  # type: ignore[no-untyped-def]
     p = tmp_path / "loop.toml"
     p.write_text("""
 wires = ["arm.q -> a.q", "arm.dq -> a.dq", "b.q_des -> a.q_des", "a.dq_des -> a.dq_des",
@@ -147,7 +147,6 @@ type = "computed_torque"
 [modules.b]
 type = "hold_position"
 """)
-    # self-loop a -> a through dq_des is refused as an algebraic loop naming the wire
     with pytest.raises(WiringError, match=r"no output 'dq_des'"):
         build(session, p)
     p.write_text("""
