@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import re
 import shutil
 import subprocess
@@ -36,10 +37,12 @@ TARGETS = [
 
 
 def run_ours(
-    period_s: float, duration_s: float, priority: int, spin_us: float, backend: str
+    period_s: float, duration_s: float, priority: int, spin_us: float, backend: str, cpu: int
 ) -> dict[str, object]:
     cfg = load_robot_config(ROOT / "configs/robots/sim-ur5e.toml")
-    cfg = with_backend(dataclasses.replace(cfg, control_period_s=period_s), backend)
+    cfg = dataclasses.replace(cfg, control_period_s=period_s)
+    plant_cpu = {"plant_cpu": 0 if cpu == 1 else -1} if backend == "sim_process" else {}
+    cfg = with_backend(cfg, backend, **plant_cpu)
     s = Session.from_config(cfg)
     task = s.task(ROOT / "configs/tasks/move_joints.toml")
     traj = next(m for m in task.modules if m.name == "traj")
@@ -72,7 +75,7 @@ def run_ours(
     traj.configure({"target_rad": TARGETS[0]})
     loop.active = task
     task.activate()
-    rt = enter_realtime(priority)
+    rt = enter_realtime(priority, cpus={cpu} if cpu >= 0 else None)
     try:
         loop.executor.run(max_ticks=n_ticks)
     finally:
@@ -129,6 +132,12 @@ def main() -> int:
     ap.add_argument("--priority", type=int, default=80)
     ap.add_argument("--spin-us", type=float, default=150.0, help="wake this early and spin (0: pure sleep)")
     ap.add_argument(
+        "--cpu",
+        type=int,
+        default=1 if (os.cpu_count() or 1) > 1 else -1,
+        help="pin the control loop to this CPU (the plant process to CPU 0); -1: no pinning",
+    )
+    ap.add_argument(
         "--backend",
         default="sim_process",
         choices=["sim_process", "sim"],
@@ -137,7 +146,7 @@ def main() -> int:
     )
     args = ap.parse_args()
     period_s = args.period_ms * 1e-3
-    ours = run_ours(period_s, args.duration_s, args.priority, args.spin_us, args.backend)
+    ours = run_ours(period_s, args.duration_s, args.priority, args.spin_us, args.backend, args.cpu)
     base = run_cyclictest(period_s, args.duration_s, args.priority)
     lat: Summary = ours["latency"]  # type: ignore[assignment]
     print(

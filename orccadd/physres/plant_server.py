@@ -99,11 +99,11 @@ class PlantServer:
                 self.done = True
 
 
-def plant_main(cfg: RobotConfig, shm_name: str, watchdog_periods: int, priority: int) -> None:
+def plant_main(cfg: RobotConfig, shm_name: str, watchdog_periods: int, priority: int, cpu: int = -1) -> None:
     """Run the plant until shut down (or its controller is gone and the arm is at rest)."""
     channel = PlantChannel(cfg.dof, shm_name)
     server = PlantServer(cfg, channel, watchdog_periods)
-    enter_realtime(priority, lock_memory=False)
+    enter_realtime(priority, lock_memory=False, cpus={cpu} if cpu >= 0 else None)
     ex = PeriodicExecutor(WallClock(), cfg.control_period_s, server.step)
     try:
         ex.run(until=lambda: server.done)
@@ -122,12 +122,13 @@ def main() -> int:
     ap.add_argument("--shm", required=True)
     ap.add_argument("--watchdog-periods", type=int, required=True)
     ap.add_argument("--priority", type=int, default=0)
+    ap.add_argument("--cpu", type=int, default=-1)
     args = ap.parse_args()
     cfg = pickle.load(sys.stdin.buffer)
     if not isinstance(cfg, RobotConfig):
         print("plant_server: stdin is not a RobotConfig", file=sys.stderr)
         return 2
-    plant_main(cfg, args.shm, args.watchdog_periods, args.priority)
+    plant_main(cfg, args.shm, args.watchdog_periods, args.priority, args.cpu)
     return 0
 
 

@@ -37,6 +37,7 @@ class SimProcessSettings(SimSettings):
     heartbeat_timeout_periods: int = field(default=20, bounds=(2, 100000))
     startup_timeout_s: float = field(default=30.0, bounds=(0.1, 600.0))
     plant_priority: int = field(default=70, bounds=(0, 99))
+    plant_cpu: int = field(default=-1, bounds=(-1, 1023))  # -1: let the scheduler choose
 
 
 class SimProcessArm(PhysicalResource):

@@ -22,21 +22,32 @@ class RealtimeReport:
     """What `enter_realtime` achieved."""
 
     sched_fifo_priority: int | None = None
+    cpus: frozenset[int] | None = None
     memory_locked: bool = False
     gc_frozen: bool = False
     warnings: list[str] = field(default_factory=list)
 
     def describe(self) -> str:
         fifo = f"SCHED_FIFO {self.sched_fifo_priority}" if self.sched_fifo_priority else "SCHED_OTHER"
+        if self.cpus is not None:
+            fifo += f" on CPU {','.join(str(c) for c in sorted(self.cpus))}"
         return (
             f"{fifo}, memory {'locked' if self.memory_locked else 'not locked'}, "
             f"gc {'frozen' if self.gc_frozen else 'running'}"
         )
 
 
-def enter_realtime(priority: int = 80, lock_memory: bool = True, freeze_gc: bool = True) -> RealtimeReport:
-    """Make the calling thread real-time where permitted. Not for a tick."""
+def enter_realtime(
+    priority: int = 80, lock_memory: bool = True, freeze_gc: bool = True, cpus: set[int] | None = None
+) -> RealtimeReport:
+    """Make the calling thread real-time where permitted (optionally pinned to `cpus`). Not for a tick."""
     rep = RealtimeReport()
+    if cpus:
+        try:
+            os.sched_setaffinity(0, cpus)
+            rep.cpus = frozenset(cpus)
+        except (OSError, ValueError) as e:
+            rep.warnings.append(f"CPU affinity {sorted(cpus)} refused ({e}): the thread may migrate")
     if priority > 0:
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
