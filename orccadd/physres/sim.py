@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import pinocchio as pin
@@ -53,6 +53,45 @@ class SimSettings:
     servo_bandwidth_hz: float = field(default=20.0, bounds=(0.1, 500.0))
 
 
+S = TypeVar("S", bound=SimSettings)
+
+
+def load_sim_settings(settings_cls: type[S], raw: Mapping[str, Any], cfg: RobotConfig, file: str) -> S:
+    """Check `[resource.settings]` of a simulated-arm backend (`sim`, `sim_process`)."""
+    s = load_dataclass(settings_cls, raw, file, "resource.settings")
+    n = cfg.dof
+    for name in (
+        "viscous_friction_nm_s_rad",
+        "coulomb_friction_nm",
+        "brake_torque_nm",
+        "initial_q_rad",
+    ):
+        v = getattr(s, name)
+        if len(v) not in (0, n):
+            raise ConfigError(
+                file,
+                f"resource.settings.{name}",
+                f"has {len(v)} entries, must have one per joint ({n}) or none",
+            )
+    if s.substep_s > cfg.control_period_s:
+        raise ConfigError(
+            file,
+            "resource.settings.substep_s",
+            f"(={s.substep_s!r}) must be at most control_period_s (={cfg.control_period_s!r})",
+        )
+    for i, q in enumerate(s.initial_q_rad):
+        j = cfg.joints[i]
+        if not j.position_min_rad <= q <= j.position_max_rad:
+            raise ConfigError(
+                file,
+                f"resource.settings.initial_q_rad[{i}]",
+                f"(={q!r}) must be in [{j.position_min_rad:g}, {j.position_max_rad:g}] ({j.name})",
+            )
+    if not s.brake_torque_nm:
+        s = replace(s, brake_torque_nm=tuple(2.0 * j.max_torque_nm for j in cfg.joints))
+    return s
+
+
 class SimulatedArm(PhysicalResource):
     """A Physical Resource whose joints move by the robot's rigid-body dynamics."""
 
@@ -60,38 +99,7 @@ class SimulatedArm(PhysicalResource):
 
     @classmethod
     def load_settings(cls, raw: Mapping[str, Any], cfg: RobotConfig, file: str) -> SimSettings:
-        s: SimSettings = load_dataclass(cls.Settings, raw, file, "resource.settings")
-        n = cfg.dof
-        for name in (
-            "viscous_friction_nm_s_rad",
-            "coulomb_friction_nm",
-            "brake_torque_nm",
-            "initial_q_rad",
-        ):
-            v = getattr(s, name)
-            if len(v) not in (0, n):
-                raise ConfigError(
-                    file,
-                    f"resource.settings.{name}",
-                    f"has {len(v)} entries, must have one per joint ({n}) or none",
-                )
-        if s.substep_s > cfg.control_period_s:
-            raise ConfigError(
-                file,
-                "resource.settings.substep_s",
-                f"(={s.substep_s!r}) must be at most control_period_s (={cfg.control_period_s!r})",
-            )
-        for i, q in enumerate(s.initial_q_rad):
-            j = cfg.joints[i]
-            if not j.position_min_rad <= q <= j.position_max_rad:
-                raise ConfigError(
-                    file,
-                    f"resource.settings.initial_q_rad[{i}]",
-                    f"(={q!r}) must be in [{j.position_min_rad:g}, {j.position_max_rad:g}] ({j.name})",
-                )
-        if not s.brake_torque_nm:
-            s = replace(s, brake_torque_nm=tuple(2.0 * j.max_torque_nm for j in cfg.joints))
-        return s
+        return load_sim_settings(SimSettings, raw, cfg, file)
 
     def __init__(self, config: RobotConfig, model: RobotModel) -> None:
         super().__init__(config, model)
@@ -130,6 +138,9 @@ class SimulatedArm(PhysicalResource):
         w = 2 * math.pi * s.servo_bandwidth_hz
         self._kp = m_diag * w * w
         self._kd = m_diag * 2.0 * 0.9 * w
+        self._kd_velocity = 4.0 * self._kd
+        self._servo_tmp = np.zeros(n)
+        self._zero = np.zeros(n)
         # Measurement delay line (latency in periods) and noise buffers.
         depth = s.latency_periods + 1
         self._ring = np.zeros((depth, 3, n))
@@ -278,26 +289,36 @@ class SimulatedArm(PhysicalResource):
             self._stop_torque(out)
         elif self.mode is CommandMode.TORQUE:
             out[:] = self._held_cmd
+        elif self.mode is CommandMode.POSITION:
+            self._servo(self._held_cmd, self._vel_ff, out)
         else:
-            g = pin.computeGeneralizedGravity(self._pin, self._data, self.q)
-            if self.mode is CommandMode.POSITION:
-                out[:] = g + self._kp * (self._held_cmd - self.q) + self._kd * (self._vel_ff - self.dq)
-            else:
-                out[:] = g + self._kd * 4.0 * (self._held_cmd - self.dq)
+            self._servo(None, self._held_cmd, out)
         clamp(out, self._neg_tau_max, m.tau_max_nm, out)
+
+    def _servo(self, q_ref: FloatArray | None, v_ref: FloatArray, out: FloatArray) -> None:
+        """The drive's joint servo, in place: g(q) + kp·(q_ref − q) + kd'·(v_ref − dq), where
+        kd' = kd with a position reference and 4·kd for velocity alone (q_ref None)."""
+        tmp = self._servo_tmp
+        out[:] = pin.computeGeneralizedGravity(self._pin, self._data, self.q)
+        np.subtract(v_ref, self.dq, out=tmp)
+        tmp *= self._kd if q_ref is not None else self._kd_velocity
+        out += tmp
+        if q_ref is not None:
+            np.subtract(q_ref, self.q, out=tmp)
+            tmp *= self._kp
+            out += tmp
 
     def _stop_torque(self, out: FloatArray) -> None:
         """Controlled stop: track a velocity ramp to zero, then hold or brake."""
         cfg = self.config.safe_stop
-        g = pin.computeGeneralizedGravity(self._pin, self._data, self.q)
         if self._holding:
-            out[:] = g + self._kp * (self._hold_q - self.q) - self._kd * self.dq
+            self._servo(self._hold_q, self._zero, out)
             return
         assert self.t_sim_s is not None
         elapsed = self.t_sim_s - self._stop_t0_s
         dv = cfg.deceleration_rad_s2 * elapsed
         v_ref = np.sign(self._stop_v0) * np.maximum(np.abs(self._stop_v0) - dv, 0.0)
-        out[:] = g + self._kd * 4.0 * (v_ref - self.dq)
+        self._servo(None, v_ref, out)
         at_rest = bool((np.abs(self.dq) < REST_SPEED_RAD_S).all()) and not v_ref.any()
         if at_rest or elapsed > cfg.timeout_s:
             if cfg.category == 2 and at_rest:

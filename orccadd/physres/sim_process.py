@@ -23,7 +23,7 @@ from orccadd.errors import ResourceError
 from orccadd.model import RobotModel
 from orccadd.physres.base import CommandMode, FloatArray, JointState, Lifecycle, PhysicalResource, Status
 from orccadd.physres.shm_channel import Ctl, PlantChannel, Request
-from orccadd.physres.sim import SimSettings, SimulatedArm
+from orccadd.physres.sim import SimSettings, load_sim_settings
 
 SELF_STOPPED = int(Status.STOPPING | Status.STOPPED)
 KEEPALIVE = 0  # a command "mode" the plant counts as fresh but does not apply
@@ -48,7 +48,7 @@ class SimProcessArm(PhysicalResource):
     @classmethod
     def load_settings(cls, raw: Any, cfg: RobotConfig, file: str) -> SimProcessSettings:
         """The `sim` checks, with this backend's settings class."""
-        return SimulatedArm.load_settings.__func__(cls, raw, cfg, file)  # type: ignore[attr-defined, no-any-return]
+        return load_sim_settings(SimProcessSettings, raw, cfg, file)
 
     def __init__(self, config: RobotConfig, model: RobotModel) -> None:
         super().__init__(config, model)

@@ -133,34 +133,44 @@ def test_bad_wiring_refused(session, task_variant, edit, error, message) -> None
     assert str(path) in str(exc.value)
 
 
+def write_task(path, wires: list[str], modules: dict[str, str]):  # type: ignore[no-untyped-def]
+    """A minimal torque task file with these wires and modules (name -> type)."""
+    body = "".join(f'[modules.{n}]\ntype = "{t}"\n' for n, t in modules.items())
+    path.write_text(
+        f'wires = {wires!r}\n[task]\nname = "T"\nresource = "arm"\ncommand = "torque"\n{body}'.replace(
+            "'", '"'
+        )
+    )
+    return path
+
+
 def test_ports_named_in_wires_must_exist(session, tmp_path) -> None:  # type: ignore[no-untyped-def]
-    p = tmp_path / "loop.toml"
-    p.write_text("""
-wires = ["arm.q -> a.q", "arm.dq -> a.dq", "b.q_des -> a.q_des", "a.dq_des -> a.dq_des",
-         "a.ddq_des -> a.ddq_des", "a.tau -> arm.tau_cmd"]
-[task]
-name = "Loop"
-resource = "arm"
-command = "torque"
-[modules.a]
-type = "computed_torque"
-[modules.b]
-type = "hold_position"
-""")
+    p = write_task(
+        tmp_path / "t.toml",
+        [
+            "arm.q -> a.q",
+            "arm.dq -> a.dq",
+            "b.q_des -> a.q_des",
+            "a.dq_des -> a.dq_des",
+            "a.ddq_des -> a.ddq_des",
+            "a.tau -> arm.tau_cmd",
+        ],
+        {"a": "computed_torque", "b": "hold_position"},
+    )
     with pytest.raises(WiringError, match=r"no output 'dq_des'"):
         build(session, p)
-    p.write_text("""
-wires = ["arm.q -> w1.q", "w2.q_des -> w1.q_des", "arm.q -> w2.q", "arm.dq -> w2.dq",
-         "w1.fired -> w2.finished_in", "arm.tau -> arm.tau_cmd"]
-[task]
-name = "Loop"
-resource = "arm"
-command = "torque"
-[modules.w1]
-type = "tracking_error_watch"
-[modules.w2]
-type = "ruckig_trajectory"
-""")
+    write_task(
+        p,
+        [
+            "arm.q -> w1.q",
+            "w2.q_des -> w1.q_des",
+            "arm.q -> w2.q",
+            "arm.dq -> w2.dq",
+            "w1.fired -> w2.finished_in",
+            "arm.tau -> arm.tau_cmd",
+        ],
+        {"w1": "tracking_error_watch", "w2": "ruckig_trajectory"},
+    )
     with pytest.raises(WiringError, match="no input 'finished_in'"):
         build(session, p)
 
@@ -178,20 +188,11 @@ def test_cycle_between_modules_is_printed_in_flow_order(session, tmp_path) -> No
         def update(self, t_s: float) -> None:
             np.multiply(self.u.value, 0.5, out=self.y.value)
 
-    p = tmp_path / "cycle.toml"
-    p.write_text("""
-wires = ["g1.y -> g2.u", "g2.y -> g3.u", "g3.y -> g1.u", "g3.y -> arm.tau_cmd"]
-[task]
-name = "Cycle"
-resource = "arm"
-command = "torque"
-[modules.g1]
-type = "test_delay_free_gain"
-[modules.g2]
-type = "test_delay_free_gain"
-[modules.g3]
-type = "test_delay_free_gain"
-""")
+    p = write_task(
+        tmp_path / "cycle.toml",
+        ["g1.y -> g2.u", "g2.y -> g3.u", "g3.y -> g1.u", "g3.y -> arm.tau_cmd"],
+        {"g1": "test_delay_free_gain", "g2": "test_delay_free_gain", "g3": "test_delay_free_gain"},
+    )
     with pytest.raises(WiringError) as exc:
         build(session, p)
     msg = str(exc.value)
