@@ -139,7 +139,16 @@ def build_task(
     events = _shell(spec, nodes, registry, modules)
     pres = []
     for i, p in enumerate(spec.preconditions):
-        port = _find_port(spec, nodes, p.signal, f"preconditions[{i}].signal", output=True)
+        key = f"preconditions[{i}].signal"
+        port = _find_port(spec, nodes, p.signal, key, output=True)
+        if port.module != resource.name:  # checked before the modules run: measured signals only
+            measured = ", ".join(f"{resource.name}.{n}" for n in nodes[resource.name].outputs)
+            raise ConfigError(
+                src,
+                key,
+                f"(={p.signal!r}) must be a measured signal ({measured}): "
+                "preconditions are checked before the modules run",
+            )
         lo, hi = p.within if p.within else (-np.inf, np.inf)
         pres.append(Precondition(p.name, port.value, p.timeout_s, p.max_abs_below, lo, hi))
     builtin = {name: registry.register(h.name, EventKind.T3, name) for name in BUILTIN_T3}

@@ -113,6 +113,11 @@ BAD_WIRING = [
         "events.T1[0].set.traj.speed_scale (=4.0) must be in [0.01, 1]",
     ),
     (
+        ('signal = "arm.dq"', 'signal = "traj.q_des"'),
+        ConfigError,
+        "preconditions[0].signal (='traj.q_des') must be a measured signal (arm.q, arm.dq, arm.tau)",
+    ),
+    (
         ('resource = "arm"', 'resource = "vehicle"'),
         ConfigError,
         "task.resource (='vehicle') must be 'arm'",
