@@ -45,3 +45,23 @@ class ParameterError(OrccaddError):
         super().__init__(message)
         self.name = name
         self.detail = detail or message
+
+
+class MissionError(OrccaddError):
+    """A mission file is wrong: `file:line:col: message`, then the line and a caret under the place."""
+
+    def __init__(self, file: str, line: int, col: int, message: str, text: str = "") -> None:
+        self.file = file
+        self.line = line
+        self.col = col
+        self.detail = message
+        lines = text.splitlines()
+        shown = ""
+        if 1 <= line <= len(lines):
+            src = lines[line - 1].expandtabs(1)
+            shown = f"\n    {src}\n    {' ' * max(col - 1, 0)}^"
+        super().__init__(f"{file}:{line}:{col}: {message}{shown}")
+
+
+class VerificationError(OrccaddError):
+    """A mission compiled but failed a check; the message holds every failed check's counterexample."""

@@ -1,0 +1,266 @@
+"""The mission language's syntax tree: frozen dataclasses, every node carrying where it was written."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Loc:
+    file: str
+    line: int
+    col: int
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}:{self.col}"
+
+
+# Signal expressions -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SigRef:
+    name: str  # as written: `Stabilized`, `KeepStableUS.T2.Stabilized`, `MoveHome.done`
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Fn:
+    """A property atom about a task: `active(T)`, `start(T)`, `stop(T)`."""
+
+    fn: str
+    arg: str
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Not:
+    item: SigExpr
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class And:
+    items: tuple[SigExpr, ...]
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Or:
+    items: tuple[SigExpr, ...]
+    loc: Loc
+
+
+SigExpr = SigRef | Fn | Not | And | Or
+
+
+# Statements ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Call:
+    """A bare name: run a Robot-Task, or expand a procedure."""
+
+    name: str
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Run:
+    name: str
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Nothing:
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Pause:
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Halt:
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Safe:
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Emit:
+    name: str
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Await:
+    cond: SigExpr
+    immediate: bool
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class When:
+    """`when S do P end` (wait for S, this instant included, then P) or `when S do P until C`."""
+
+    cond: SigExpr
+    body: Stmt
+    until: SigExpr | None
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class DoUntil:
+    """`do P until C`: strong preemption; `weak do P until C`: P reacts in the last instant too."""
+
+    body: Stmt
+    cond: SigExpr
+    weak: bool
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Loop:
+    body: Stmt
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Seq:
+    items: tuple[Stmt, ...]
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Par:
+    branches: tuple[Stmt, ...]
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Present:
+    cond: SigExpr
+    then: Stmt
+    orelse: Stmt | None
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Trap:
+    name: str
+    body: Stmt
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Exit:
+    name: str
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Every:
+    cond: SigExpr
+    body: Stmt
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Handler:
+    """`on C do H`: C is a signal expression, or None for `fatal` (every type 3 exception)."""
+
+    cond: SigExpr | None
+    body: Stmt
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class Handle:
+    body: Stmt
+    handlers: tuple[Handler, ...]
+    loc: Loc
+
+
+Stmt = (
+    Call
+    | Run
+    | Nothing
+    | Pause
+    | Halt
+    | Safe
+    | Emit
+    | Await
+    | When
+    | DoUntil
+    | Loop
+    | Seq
+    | Par
+    | Present
+    | Trap
+    | Exit
+    | Every
+    | Handle
+)
+
+
+# Declarations -------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class EventDecl:
+    kind: str  # post, pre, T2, T3, sync
+    name: str  # empty for post/pre
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class TaskDecl:
+    name: str
+    resource: str
+    joints: tuple[str, ...]  # empty: the whole resource
+    source: str  # task file the signature is checked against, or ""
+    events: tuple[EventDecl, ...]
+    loc: Loc
+    resource_loc: Loc
+
+
+@dataclass(frozen=True)
+class ProcDecl:
+    name: str
+    role: str  # "main", "safe" or ""
+    body: Stmt
+    handlers: tuple[Handler, ...]
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class PropDecl:
+    name: str
+    kind: str  # never, eventually, alternate
+    a: SigExpr
+    b: SigExpr | None
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class NameDecl:
+    name: str
+    loc: Loc
+
+
+@dataclass(frozen=True)
+class MissionAst:
+    file: str
+    text: str
+    name: str
+    resources: tuple[NameDecl, ...]
+    inputs: tuple[NameDecl, ...]
+    signals: tuple[NameDecl, ...]
+    tasks: tuple[TaskDecl, ...]
+    procedures: tuple[ProcDecl, ...]
+    properties: tuple[PropDecl, ...]

@@ -1,0 +1,99 @@
+"""The compiled Robot-Procedure: an immutable explicit automaton, and the runtime that steps it.
+
+At run time a reaction is one masked dictionary lookup: `table[state][inputs & relevant[state]]`
+gives `(next state, action bits)`. Action bits are ordered so that decoding them in bit order gives
+stops before starts (the switching order of seed §5.1: the old law stops, the new one starts).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from orccadd.automaton.program import Program
+
+MAIN, SAFE, END = 0, 1, 2  # phases of a state
+PHASE_NAMES = ("main", "safe", "end")
+
+
+@dataclass(frozen=True)
+class Automaton:
+    """States are 0..n-1, the initial state is 0. Never mutated after `compile_program`."""
+
+    program: Program
+    relevant: tuple[int, ...]  # per state: the input bits its reactions depend on
+    table: tuple[Mapping[int, tuple[int, int]], ...]  # per state: masked inputs -> (next, actions)
+    active: tuple[tuple[int, ...], ...]  # per state: the Robot-Tasks active (indices, sorted)
+    phase: tuple[int, ...]
+    where: tuple[str, ...]  # per state: what the program waits for, with source lines
+    action_names: tuple[str, ...]
+    # action bit layout
+    stop_base: int
+    start_base: int
+    emit_base: int
+    success_bit: int
+    safe_bit: int
+    failed_bit: int
+    safe_done_bit: int
+
+    @property
+    def n_states(self) -> int:
+        return len(self.table)
+
+    @property
+    def n_transitions(self) -> int:
+        return sum(len(t) for t in self.table)
+
+    def react(self, state: int, inputs: int) -> tuple[int, int]:
+        """(next state, action bits) for the inputs present in this instant (environment-model inputs)."""
+        return self.table[state][inputs & self.relevant[state]]
+
+    def describe_actions(self, actions: int) -> list[str]:
+        return [self.action_names[i] for i in range(len(self.action_names)) if actions >> i & 1]
+
+    def starts(self, actions: int) -> int:
+        n = len(self.program.tasks)
+        return (actions >> self.start_base) & ((1 << n) - 1)
+
+    def stops(self, actions: int) -> int:
+        n = len(self.program.tasks)
+        return (actions >> self.stop_base) & ((1 << n) - 1)
+
+    def normalize(self, state: int, inputs: int) -> int:
+        """Reduce raw inputs to the environment model the table was built for: operator inputs kept,
+        events only from active tasks, at most one per task (T3 > T2 > post > pre > sync)."""
+        from orccadd.automaton.program import PRIORITY
+
+        p = self.program
+        out = inputs & p.operator_mask
+        for t in set(self.active[state]):
+            present = inputs & p.event_masks[t] & self.relevant[state]
+            if not present:
+                continue
+            best = min(
+                (ev for ev in p.tasks[t].events if ev[2] & present),
+                key=lambda ev: PRIORITY[ev[0]],
+            )
+            out |= best[2]
+        return out & self.relevant[state]
+
+
+class Runner:
+    """Steps an automaton, one reaction per instant. Cheap enough for the highest-priority thread."""
+
+    __slots__ = ("automaton", "relevant", "state", "table")
+
+    def __init__(self, automaton: Automaton) -> None:
+        self.automaton = automaton
+        self.table = automaton.table
+        self.relevant = automaton.relevant
+        self.state = 0
+
+    def react(self, inputs: int) -> int:
+        """Inputs present in this instant → action bits. Never raises for inputs outside the model."""
+        s = self.state
+        hit = self.table[s].get(inputs & self.relevant[s])
+        if hit is None:
+            hit = self.table[s][self.automaton.normalize(s, inputs)]
+        self.state = hit[0]
+        return hit[1]

@@ -1,0 +1,288 @@
+"""Kernel terms → one explicit automaton, by exploring every reachable state under every input
+combination the environment can produce (synchronous semantics, one reaction per instant).
+
+Environment model, shared with the verifier: operator inputs may come in any combination; a
+Robot-Task raises events only while active, at most one per instant (the runtime keeps the most
+severe of one tick's events: T3 > T2 > post > pre > sync).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections import deque
+from dataclasses import dataclass
+
+from orccadd.automaton import kernel as K
+from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
+from orccadd.automaton.program import Program
+from orccadd.errors import MissionError
+
+DEFAULT_MAX_STATES = 200_000
+MAX_INPUT_COMBINATIONS = 1 << 16
+
+
+@dataclass(frozen=True, slots=True)
+class Top:
+    """A state of the mission: which part runs (main, safe procedure, ended) and its residual term."""
+
+    phase: int
+    term: K.Term
+
+
+class ReactionError(MissionError):
+    """The program has no single reaction in some reachable instant (non-causal, instantaneous loop)."""
+
+    def __init__(self, p: Program, line: int, col: int, message: str, path: list[int]) -> None:
+        trace = "; ".join(f"instant {i + 1}: {p.describe_inputs(m)}" for i, m in enumerate(path))
+        super().__init__(
+            p.file, line, col, f"{message}\n  reached by: {trace or 'the first instant'}", p.text
+        )
+        self.path = path
+
+
+def bits_of(mask: int) -> list[int]:
+    out = []
+    while mask:
+        low = mask & -mask
+        out.append(low)
+        mask ^= low
+    return out
+
+
+class ActionLayout:
+    def __init__(self, p: Program) -> None:
+        n, e = len(p.tasks), len(p.internals)
+        self.stop_base, self.start_base, self.emit_base = 0, n, 2 * n
+        self.success_bit = 1 << (2 * n + e)
+        self.safe_bit = self.success_bit << 1
+        self.failed_bit = self.success_bit << 2
+        self.safe_done_bit = self.success_bit << 3
+        self.names = (
+            *(f"stop {t.name}" for t in p.tasks),
+            *(f"start {t.name}" for t in p.tasks),
+            *(f"emit {s}" for s in p.internals),
+            "success",
+            "safe",
+            "failed",
+            "safe done",
+        )
+
+
+def input_combinations(p: Program, active: tuple[int, ...], relevant: int) -> list[int]:
+    """Every input set the environment can present in a state (see the module docstring)."""
+    choices: list[list[int]] = [[0, *bits_of(p.event_masks[t] & relevant)] for t in sorted(set(active))]
+    ops = bits_of(relevant & p.operator_mask)
+    choices.extend([0, b] for b in ops)
+    count = 1
+    for c in choices:
+        count *= len(c)
+    if count > MAX_INPUT_COMBINATIONS:
+        raise OverflowError(count)
+    return [sum(combo) for combo in itertools.product(*choices)]
+
+
+class Reactor:
+    """One instant of a whole mission (main, then the safe procedure), causality resolved."""
+
+    def __init__(self, p: Program, layout: ActionLayout) -> None:
+        self.p = p
+        self.layout = layout
+
+    def react(self, top: Top, inputs: int) -> tuple[Top, int]:
+        """(next state, action bits). Raises K.InstantaneousLoopError or _CausalityError."""
+        p = self.p
+        if top.phase == END:
+            return top, 0
+        _, internal = K.mentions(top.term, p.end_masks)
+        if top.phase == MAIN:
+            internal |= K.mentions(p.safe, p.end_masks)[1]
+        solutions: dict[tuple[int, int], tuple[Top, int]] = {}
+        candidates = bits_of(internal)
+        for n in range(len(candidates) + 1):
+            for subset in itertools.combinations(candidates, n):
+                assumed = sum(subset)
+                r = K.Instant(inputs, assumed, p.end_masks)
+                nxt, actions = self._run(top, r)
+                if (r.emitted & r.reads) == (assumed & r.reads):
+                    solutions[(assumed & r.reads, r.emitted)] = (nxt, actions)
+        if len(solutions) != 1:
+            raise _CausalityError(internal, len(solutions))
+        return next(iter(solutions.values()))
+
+    def _run(self, top: Top, r: K.Instant) -> tuple[Top, int]:
+        lay = self.layout
+        flags = 0
+        if top.phase == MAIN:
+            code, res = K.step(top.term, r)
+            if code == K.PAUSED:
+                nxt = Top(MAIN, K.settle(res))
+            elif code == K.DONE:
+                nxt, flags = Top(END, K.NOTHING), lay.success_bit
+            else:  # SAFE_CODE: the only exit that can leave the main procedure
+                flags = lay.safe_bit
+                nxt, more = self._safe(self.p.safe, r)
+                flags |= more
+        else:
+            nxt, flags = self._safe(top.term, r)
+        actions = flags | (r.emitted << lay.emit_base)
+        started = list(r.started)
+        for t in r.cancelled:
+            started.remove(t)
+        for t in started:
+            actions |= 1 << (lay.start_base + t)
+        for t in r.stopped:
+            actions |= 1 << (lay.stop_base + t)
+        return nxt, actions
+
+    def _safe(self, term: K.Term, r: K.Instant) -> tuple[Top, int]:
+        code, res = K.step(term, r)
+        if code == K.PAUSED:
+            return Top(SAFE, K.settle(res)), 0
+        if code == K.FAILED_CODE:
+            return Top(END, K.NOTHING), self.layout.failed_bit
+        return Top(END, K.NOTHING), self.layout.safe_done_bit
+
+
+class _CausalityError(Exception):
+    def __init__(self, internal: int, solutions: int) -> None:
+        super().__init__(internal, solutions)
+        self.internal = internal
+        self.solutions = solutions
+
+
+def compile_program(p: Program, max_states: int = DEFAULT_MAX_STATES) -> Automaton:
+    """Explore every reachable state (breadth first, so counterexamples are shortest)."""
+    layout = ActionLayout(p)
+    reactor = Reactor(p, layout)
+    index: dict[Top, int] = {}
+    states: list[Top] = []
+    parent: list[tuple[int, int]] = []  # (previous state, inputs) for counterexample paths
+    relevant: list[int] = []
+    table: list[dict[int, tuple[int, int]]] = []
+    active: list[tuple[int, ...]] = []
+
+    def add(top: Top, via: tuple[int, int]) -> int:
+        i = index.get(top)
+        if i is None:
+            if len(states) >= max_states:
+                raise MissionError(
+                    p.file, 1, 1,
+                    f"the mission's automaton exceeds {max_states} states (state explosion: look for many "
+                    "parallel branches waiting independently); split the mission or raise the limit",
+                    p.text,
+                )  # fmt: skip
+            i = len(states)
+            index[top] = i
+            states.append(top)
+            parent.append(via)
+        return i
+
+    add(Top(MAIN, p.main), (-1, 0))
+    queue = deque([0])
+    while queue:
+        s = queue.popleft()
+        top = states[s]
+        act = tuple(sorted(K.active_tasks(top.term, [])))
+        possible = p.operator_mask
+        for t in act:
+            possible |= p.event_masks[t]
+        rel = K.mentions(top.term, p.end_masks)[0] & possible if top.phase != END else 0
+        try:
+            combos = input_combinations(p, act, rel)
+        except OverflowError as e:
+            msg = (f"a state reacts to {e.args[0]} input combinations (limit {MAX_INPUT_COMBINATIONS}): "
+                   "too many Robot-Tasks active at once")  # fmt: skip
+            raise MissionError(p.file, 1, 1, msg, p.text) from None
+        row: dict[int, tuple[int, int]] = {}
+        for inputs in combos:
+            try:
+                nxt, actions = reactor.react(top, inputs)
+            except K.InstantaneousLoopError as e:
+                path = [*path_to(parent, s), inputs]
+                msg = "this loop restarts within one instant: its body ended in the instant it started"
+                raise ReactionError(p, e.loc.line, e.loc.col, msg, path) from None
+            except _CausalityError as e:
+                raise _causality_error(p, e, [*path_to(parent, s), inputs]) from None
+            n_before = len(states)
+            j = add(nxt, (s, inputs))
+            if j == n_before:
+                queue.append(j)
+            row[inputs] = (j, actions)
+        relevant.append(rel)
+        table.append(row)
+        active.append(act)
+    where = tuple(describe_state(p, t) for t in states)
+    return Automaton(
+        program=p,
+        relevant=tuple(relevant),
+        table=tuple(table),
+        active=tuple(active),
+        phase=tuple(t.phase for t in states),
+        where=where,
+        action_names=layout.names,
+        stop_base=layout.stop_base,
+        start_base=layout.start_base,
+        emit_base=layout.emit_base,
+        success_bit=layout.success_bit,
+        safe_bit=layout.safe_bit,
+        failed_bit=layout.failed_bit,
+        safe_done_bit=layout.safe_done_bit,
+    )
+
+
+def path_to(parent: list[tuple[int, int]], s: int) -> list[int]:
+    """Input sequence from the initial state to state s."""
+    out: list[int] = []
+    while s > 0:
+        s, inputs = parent[s]
+        out.append(inputs)
+    out.reverse()
+    return out
+
+
+def _causality_error(p: Program, e: _CausalityError, path: list[int]) -> MissionError:
+    names = [p.internals[i] for i in range(len(p.internals)) if e.internal >> i & 1]
+    loc = _first_use(p, names)
+    if e.solutions == 0:
+        msg = (f"not causal: no consistent status for {', '.join(names)} in this instant (an emission "
+               "depends on its own absence: `present S else emit S`)")  # fmt: skip
+    else:
+        msg = (f"not causal: {', '.join(names)} could be present or absent in this instant (an emission "
+               "justifies itself: `present S then emit S`)")  # fmt: skip
+    return ReactionError(p, loc[0], loc[1], msg, path)
+
+
+def _first_use(p: Program, names: list[str]) -> tuple[int, int]:
+    import re
+
+    for i, line in enumerate(p.text.splitlines(), start=1):
+        for n in names:
+            m = re.search(rf"\bemit\s+{re.escape(n)}\b", line)
+            if m:
+                return i, m.start() + 1
+    return 1, 1
+
+
+def describe_state(p: Program, top: Top) -> str:
+    if top.phase == END:
+        return "ended"
+    waits: list[str] = []
+    _waits(p, top.term, waits)
+    head = "safe procedure: " if top.phase == SAFE else ""
+    return head + ("; ".join(waits) if waits else "running")
+
+
+def _waits(p: Program, t: K.Term | None, out: list[str]) -> None:
+    if isinstance(t, K.Running | K.Started):
+        out.append(f"{p.tasks[t.task].name} running (line {t.loc.line})")
+    elif isinstance(t, K.Await):
+        out.append(f"await at line {t.loc.line}")
+    elif isinstance(t, K.Halt):
+        out.append(f"halt at line {t.loc.line}")
+    elif isinstance(t, K.Seq):
+        _waits(p, t.first, out)
+    elif isinstance(t, K.Par):
+        for b in t.branches:
+            _waits(p, b, out)
+    elif isinstance(t, K.Abort | K.Trap | K.Handle):
+        _waits(p, t.body, out)

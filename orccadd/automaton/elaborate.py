@@ -1,0 +1,522 @@
+"""Semantic checks and expansion: syntax tree → `Program` (kernel terms, resolved signals).
+
+Checks: one mission name, one main and one safe procedure; no name declared twice or spelt like a
+keyword; tasks on declared resources, signatures agreeing with their task files; every signal
+known (short names only when unambiguous); only internal signals emitted; procedures not
+recursive; `exit` inside its trap; no `safe` inside the safe procedure; no loop body that can end
+in the instant it starts.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+from pathlib import Path
+
+from orccadd.automaton import ast as A
+from orccadd.automaton import kernel as K
+from orccadd.automaton.program import (
+    BUILTIN_T2,
+    BUILTIN_T3,
+    EVENT_KINDS,
+    Program,
+    TaskInfo,
+    event_full_name,
+)
+from orccadd.errors import MissionError, OrccaddError
+
+KEYWORDS = frozenset(
+    [
+        "mission",
+        "resource",
+        "input",
+        "signal",
+        "task",
+        "on",
+        "joints",
+        "from",
+        "end",
+        "post",
+        "pre",
+        "t2",
+        "t3",
+        "sync",
+        "main",
+        "safe",
+        "procedure",
+        "fatal",
+        "do",
+        "property",
+        "never",
+        "eventually",
+        "alternate",
+        "run",
+        "nothing",
+        "pause",
+        "halt",
+        "emit",
+        "await",
+        "immediate",
+        "when",
+        "until",
+        "weak",
+        "loop",
+        "seq",
+        "par",
+        "present",
+        "then",
+        "else",
+        "trap",
+        "in",
+        "exit",
+        "every",
+        "handle",
+        "or",
+        "and",
+        "not",
+    ]
+)
+PROPERTY_FNS = ("active", "start", "stop")
+_TRAP_TOP = 500_000
+
+
+def elaborate(m: A.MissionAst) -> Program:
+    return _Elaborator(m).run()
+
+
+class _Elaborator:
+    def __init__(self, m: A.MissionAst) -> None:
+        self.m = m
+        self.inputs: list[str] = []
+        self.input_task: list[int] = []
+        self.input_kind: list[str] = []
+        self.full: dict[str, tuple[str, int]] = {}  # full name -> ("in"|"int", bit)
+        self.short: dict[str, list[str]] = {}  # short name -> full names
+        self.internals: list[str] = []
+        self.tasks: dict[str, TaskInfo] = {}
+        self.procs: dict[str, A.ProcDecl] = {}
+        self.declared: dict[str, A.Loc] = {}
+
+    def err(self, loc: A.Loc, msg: str) -> MissionError:
+        return MissionError(loc.file, loc.line, loc.col, msg, self.m.text)
+
+    # declarations ---------------------------------------------------------------------------------
+
+    def declare(self, name: str, loc: A.Loc, what: str) -> None:
+        if name.lower() in KEYWORDS:
+            raise self.err(loc, f"`{name}` is a keyword and cannot name a {what}")
+        if name in self.declared:
+            first = self.declared[name]
+            raise self.err(loc, f"`{name}` is already declared at line {first.line}")
+        self.declared[name] = loc
+
+    def add_input(self, full: str, task: int, kind: str, short: str) -> None:
+        self.full[full] = ("in", 1 << len(self.inputs))
+        self.inputs.append(full)
+        self.input_task.append(task)
+        self.input_kind.append(kind)
+        self.short.setdefault(short, []).append(full)
+
+    def run(self) -> Program:
+        m = self.m
+        top = A.Loc(m.file, 1, 1)
+        if not m.name:
+            raise self.err(top, "the file needs a `mission NAME` line")
+        resources = {}
+        for r in m.resources:
+            self.declare(r.name, r.loc, "resource")
+            resources[r.name] = r.loc
+        for i in m.inputs:
+            self.declare(i.name, i.loc, "signal")
+            self.add_input(i.name, -1, "operator", i.name)
+        for s in m.signals:
+            self.declare(s.name, s.loc, "signal")
+            self.full[s.name] = ("int", 1 << len(self.internals))
+            self.internals.append(s.name)
+            self.short.setdefault(s.name, []).append(s.name)
+        operator_mask = (1 << len(self.inputs)) - 1
+        for t in m.tasks:
+            self.declare(t.name, t.loc, "task")
+            if t.resource not in resources:
+                hint = (
+                    f"; declared resources: {', '.join(resources)}"
+                    if resources
+                    else "; add `resource " + t.resource + "`"
+                )
+                raise self.err(
+                    t.resource_loc,
+                    f"task {t.name} runs on `{t.resource}`, which is not a declared resource{hint}",
+                )
+            self.tasks[t.name] = self.task(t, len(self.tasks))
+        for proc in m.procedures:
+            self.declare(proc.name, proc.loc, "procedure")
+            self.procs[proc.name] = proc
+        mains = [p for p in m.procedures if p.role == "main"]
+        safes = [p for p in m.procedures if p.role == "safe"]
+        if len(mains) != 1:
+            where = mains[1].loc if len(mains) > 1 else top
+            raise self.err(where, f"a mission needs exactly one `main procedure` (found {len(mains)})")
+        if len(safes) != 1:
+            where = safes[1].loc if len(safes) > 1 else top
+            raise self.err(
+                where,
+                "a mission needs exactly one `safe procedure`, what runs after a type 3 exception "
+                f"(found {len(safes)})",
+            )
+        tasks = tuple(self.tasks.values())
+        main = self.proc_term(mains[0], [], in_safe=False)
+        safe_body = self.proc_term(safes[0], [], in_safe=True)
+        fatal = K.IN, self.t3_of(safe_body)
+        safe = K.Handle(safe_body, (fatal,), (K.Exit(K.FAILED_CODE),))
+        for prop in m.properties:
+            self.check_prop(prop)
+        return Program(
+            name=m.name,
+            file=m.file,
+            text=m.text,
+            inputs=tuple(self.inputs),
+            input_task=tuple(self.input_task),
+            input_kind=tuple(self.input_kind),
+            internals=tuple(self.internals),
+            tasks=tasks,
+            operator_mask=operator_mask,
+            end_masks=tuple(t.mask("post", "T2", "T3") for t in tasks),
+            event_masks=tuple(t.mask(*EVENT_KINDS) for t in tasks),
+            t3_masks=tuple(t.mask("T3") for t in tasks),
+            main=main,
+            safe=safe,
+            properties=m.properties,
+            ast=m,
+        )
+
+    def task(self, t: A.TaskDecl, index: int) -> TaskInfo:
+        declared: list[tuple[str, str, A.Loc]] = [(e.kind, e.name, e.loc) for e in t.events]
+        joints = t.joints
+        if t.source:
+            joints = self.check_against_file(t, declared)
+        seen: dict[tuple[str, str], A.Loc] = {}
+        for kind, name, loc in declared:
+            if (kind, name) in seen:
+                raise self.err(loc, f"task {t.name} declares {kind} {name or ''} twice".replace("  ", " "))
+            seen[(kind, name)] = loc
+        for name in BUILTIN_T3:
+            seen.setdefault(("T3", name), t.loc)
+        if ("pre", "") in seen:  # a task with preconditions may time out waiting for them
+            for name in BUILTIN_T2:
+                seen.setdefault(("T2", name), t.loc)
+        events: list[tuple[str, str, int]] = []
+        for kind in EVENT_KINDS:
+            for k, name in seen:
+                if k != kind:
+                    continue
+                full = event_full_name(t.name, kind, name)
+                self.add_input(full, index, kind, name or ("done" if kind == "post" else "pre"))
+                if kind not in ("post", "pre"):
+                    self.short.setdefault(f"{t.name}.{name}", []).append(full)
+                events.append((kind, full, self.full[full][1]))
+        return TaskInfo(index, t.name, t.resource, joints, t.source, t.loc, tuple(events))
+
+    def check_against_file(self, t: A.TaskDecl, declared: list[tuple[str, str, A.Loc]]) -> tuple[str, ...]:
+        """The task file is the truth: the mission's declaration must agree with its signature."""
+        from orccadd.task.spec import load_task_file
+
+        path = Path(t.source)
+        if not path.is_absolute():
+            path = Path(t.loc.file).parent / path
+        try:
+            spec = load_task_file(path)
+        except OrccaddError as e:
+            raise self.err(t.loc, f"task {t.name}: cannot read its task file: {e}") from None
+        has: dict[str, set[str]] = {
+            "post": {""} if spec.events.post else set(),
+            "pre": {""} if spec.preconditions else set(),
+            "T2": {e.name for e in spec.events.T2},
+            "T3": {e.name for e in spec.events.T3},
+            "sync": {e.name for e in spec.events.sync},
+        }
+        for kind, name, loc in declared:
+            if name not in has[kind]:
+                what = (
+                    f"a {kind} event {name}"
+                    if name
+                    else f"a {kind}condition"
+                    if kind in ("pre", "post")
+                    else kind
+                )
+                offered = ", ".join(f"{k} {n}".strip() for k in EVENT_KINDS for n in sorted(has[k])) or "none"
+                raise self.err(
+                    loc, f"signature mismatch: {path} gives {t.name} no {what} (it has: {offered})"
+                )
+        if spec.task.resource != t.resource:
+            raise self.err(
+                t.resource_loc,
+                f"signature mismatch: {path} runs on resource `{spec.task.resource}`, not `{t.resource}`",
+            )
+        for kind, names in has.items():
+            for n in sorted(names):
+                if (kind, n) not in {(k, nm) for k, nm, _ in declared}:
+                    declared.append((kind, n, t.loc))
+        if t.joints and spec.task.joints and set(t.joints) != set(spec.task.joints):
+            raise self.err(
+                t.loc,
+                f"signature mismatch: {path} claims joints {list(spec.task.joints)}, not {list(t.joints)}",
+            )
+        return t.joints or spec.task.joints
+
+    # signals --------------------------------------------------------------------------------------
+
+    def resolve(self, name: str, loc: A.Loc) -> tuple[str, int]:
+        if name in self.full:
+            return self.full[name]
+        cands = self.short.get(name, [])
+        if len(cands) == 1:
+            return self.full[cands[0]]
+        if len(cands) > 1:
+            raise self.err(loc, f"`{name}` is ambiguous: write one of {', '.join(cands)}")
+        head = name.split(".")[0]
+        if head in self.procs:
+            raise self.err(loc, f"`{name}` is a procedure, not a signal")
+        if name in self.tasks:
+            raise self.err(loc, f"`{name}` is a task, not a signal: did you mean {name}.done?")
+        if head in self.tasks:
+            own = [f for f in self.inputs if f.startswith(head + ".")]
+            raise self.err(
+                loc, f"task {head} has no event `{name[len(head) + 1 :]}`; its events: {', '.join(own)}"
+            )
+        near = difflib.get_close_matches(name, [*self.full, *self.short], n=3)
+        hint = f"; did you mean {' or '.join(near)}?" if near else ""
+        raise self.err(loc, f"unknown signal `{name}`{hint}")
+
+    def cond(self, e: A.SigExpr) -> K.Cond:
+        if isinstance(e, A.SigRef):
+            where, bit = self.resolve(e.name, e.loc)
+            return (K.IN, bit) if where == "in" else (K.INT, bit)
+        if isinstance(e, A.Fn):
+            raise self.err(e.loc, f"`{e.fn}(...)` may only appear in a property; a statement tests signals")
+        if isinstance(e, A.Not):
+            return K.NOT, self.cond(e.item)
+        op = K.AND if isinstance(e, A.And) else K.OR
+        parts = [self.cond(i) for i in e.items]
+        if op == K.OR and all(p[0] == K.IN for p in parts):
+            mask = 0
+            for p in parts:
+                mask |= p[1]
+            return K.IN, mask
+        acc = parts[0]
+        for p in parts[1:]:
+            acc = (op, acc, p)
+        return acc
+
+    def check_prop(self, p: A.PropDecl) -> None:
+        for e in (p.a, p.b):
+            if e is not None:
+                self.check_prop_expr(e)
+
+    def check_prop_expr(self, e: A.SigExpr) -> None:
+        if isinstance(e, A.SigRef):
+            self.resolve(e.name, e.loc)
+        elif isinstance(e, A.Fn):
+            if e.fn not in PROPERTY_FNS:
+                raise self.err(e.loc, f"unknown property atom `{e.fn}(...)`: use {', '.join(PROPERTY_FNS)}")
+            if e.arg not in self.tasks:
+                raise self.err(e.loc, f"`{e.fn}({e.arg})`: {e.arg} is not a declared task")
+        elif isinstance(e, A.Not):
+            self.check_prop_expr(e.item)
+        else:
+            for i in e.items:
+                self.check_prop_expr(i)
+
+    # statements -----------------------------------------------------------------------------------
+
+    def proc_term(self, p: A.ProcDecl, stack: list[str], *, in_safe: bool) -> K.Term:
+        if p.name in stack:
+            cycle = " -> ".join([*stack[stack.index(p.name) :], p.name])
+            raise self.err(
+                p.loc, f"procedure {p.name} calls itself ({cycle}); procedures cannot be recursive"
+            )
+        scope = _Scope(stack=[*stack, p.name], traps={}, depth=0, in_safe=in_safe)
+        body = self.stmt(p.body, scope)
+        if p.handlers:
+            body = self.handle(body, p.handlers, scope)
+        return body
+
+    def handle(self, body: K.Term, handlers: Iterable[A.Handler], scope: _Scope) -> K.Term:
+        conds: list[K.Cond] = []
+        terms: list[K.Term] = []
+        for h in handlers:
+            if h.cond is None:
+                mask = self.t3_of(body)
+                if not mask:
+                    raise self.err(
+                        h.loc, "`on fatal` here guards no Robot-Task (nothing can raise a type 3 exception)"
+                    )
+                conds.append((K.IN, mask))
+            else:
+                conds.append(self.cond(h.cond))
+            terms.append(self.stmt(h.body, scope))
+        return K.Handle(body, tuple(conds), tuple(terms))
+
+    def t3_of(self, t: K.Term) -> int:
+        mask = 0
+        for i in _tasks_in(t):
+            mask |= list(self.tasks.values())[i].mask("T3")
+        return mask
+
+    def stmt(self, s: A.Stmt, sc: _Scope) -> K.Term:
+        if isinstance(s, A.Seq):
+            terms = [self.stmt(i, sc) for i in s.items]
+            acc = terms[-1]
+            for t in reversed(terms[:-1]):
+                acc = K.Seq(t, acc)
+            return acc
+        if isinstance(s, A.Call | A.Run):
+            if s.name in self.tasks:
+                return K.Run(self.tasks[s.name].index, s.loc)
+            if isinstance(s, A.Call) and s.name in self.procs:
+                p = self.procs[s.name]
+                if p.role == "main":
+                    raise self.err(s.loc, f"{s.name} is the main procedure; it cannot be called")
+                if p.role == "safe":
+                    raise self.err(
+                        s.loc, f"{s.name} is the safe procedure: enter it with `safe`, not by calling it"
+                    )
+                return self.proc_term(p, sc.stack, in_safe=sc.in_safe)
+            if s.name in self.full or s.name in self.short:
+                raise self.err(s.loc, f"`{s.name}` is a signal: to wait for it write `await {s.name}`")
+            known = [*self.tasks, *self.procs]
+            near = difflib.get_close_matches(s.name, known, n=3)
+            hint = f"; did you mean {' or '.join(near)}?" if near else ""
+            raise self.err(s.loc, f"unknown task or procedure `{s.name}`{hint}")
+        if isinstance(s, A.Nothing):
+            return K.NOTHING
+        if isinstance(s, A.Pause):
+            return K.Pause()
+        if isinstance(s, A.Halt):
+            return K.Halt(s.loc)
+        if isinstance(s, A.Safe):
+            if sc.in_safe:
+                raise self.err(s.loc, "`safe` inside the safe procedure: it is already running")
+            return K.Exit(K.SAFE_CODE)
+        if isinstance(s, A.Emit):
+            where, bit = self.resolve(s.name, s.loc)
+            if where != "int":
+                msg = (f"cannot emit `{s.name}`: only `signal`s declared in the mission can be emitted "
+                       "(operator inputs and task events come from outside)")  # fmt: skip
+                raise self.err(s.loc, msg)
+            return K.Emit(bit)
+        if isinstance(s, A.Await):
+            return K.Await(self.cond(s.cond), s.immediate, s.loc)
+        if isinstance(s, A.When):
+            wait = K.Await(self.cond(s.cond), True, s.loc)
+            body = self.stmt(s.body, sc)
+            if s.until is not None:
+                body = K.Abort(body, self.cond(s.until), False, False)
+            return K.Seq(wait, body)
+        if isinstance(s, A.DoUntil):
+            return K.Abort(self.stmt(s.body, sc), self.cond(s.cond), s.weak, False)
+        if isinstance(s, A.Loop):
+            body = self.stmt(s.body, sc)
+            if K.DONE in first_codes(body):
+                msg = ("this loop's body can end in the instant it starts, so the loop would never pause; "
+                       "put a task, an `await` or a `pause` on every path through it")  # fmt: skip
+                raise self.err(s.loc, msg)
+            return K.Loop(body, s.loc)
+        if isinstance(s, A.Par):
+            return K.Par(tuple(self.stmt(b, sc) for b in s.branches))
+        if isinstance(s, A.Present):
+            orelse = self.stmt(s.orelse, sc) if s.orelse is not None else K.NOTHING
+            return K.Present(self.cond(s.cond), self.stmt(s.then, sc), orelse)
+        if isinstance(s, A.Trap):
+            if s.name in sc.traps:
+                raise self.err(s.loc, f"trap {s.name} is already open here (line {sc.traps[s.name][1].line})")
+            code = _TRAP_TOP - sc.depth
+            inner = _Scope(sc.stack, {**sc.traps, s.name: (code, s.loc)}, sc.depth + 1, sc.in_safe)
+            return K.Trap(code, self.stmt(s.body, inner))
+        if isinstance(s, A.Exit):
+            if s.name not in sc.traps:
+                open_ = ", ".join(sc.traps) or "none"
+                raise self.err(
+                    s.loc, f"`exit {s.name}` is not inside `trap {s.name}` (open traps here: {open_})"
+                )
+            return K.Exit(sc.traps[s.name][0])
+        if isinstance(s, A.Every):
+            c = self.cond(s.cond)
+            body = K.Abort(K.Seq(self.stmt(s.body, sc), K.Halt(s.loc)), c, False, False)
+            return K.Seq(K.Await(c, False, s.loc), K.Loop(body, s.loc))
+        if isinstance(s, A.Handle):
+            return self.handle(self.stmt(s.body, sc), s.handlers, sc)
+        raise AssertionError(f"unhandled statement {s!r}")  # pragma: no cover
+
+
+class _Scope:
+    __slots__ = ("depth", "in_safe", "stack", "traps")
+
+    def __init__(
+        self, stack: list[str], traps: dict[str, tuple[int, A.Loc]], depth: int, in_safe: bool
+    ) -> None:
+        self.stack = stack
+        self.traps = traps
+        self.depth = depth
+        self.in_safe = in_safe
+
+
+def _tasks_in(t: K.Term | None) -> set[int]:
+    """Every Robot-Task a term may run."""
+    if t is None:
+        return set()
+    if isinstance(t, K.Run | K.Running | K.Started):
+        return {t.task}
+    out: set[int] = set()
+    for child in _children(t):
+        out |= _tasks_in(child)
+    return out
+
+
+def _children(t: K.Term) -> list[K.Term | None]:
+    if isinstance(t, K.Seq):
+        return [t.first, t.then]
+    if isinstance(t, K.Par):
+        return list(t.branches)
+    if isinstance(t, K.Abort | K.Loop | K.Trap):
+        return [t.body]
+    if isinstance(t, K.Present):
+        return [t.then, t.orelse]
+    if isinstance(t, K.Handle):
+        return [t.body, *t.handlers]
+    return []
+
+
+def first_codes(t: K.Term) -> set[int]:
+    """Completion codes a term may return in the instant it starts (an over-approximation)."""
+    if isinstance(t, K.Nothing | K.Emit):
+        return {K.DONE}
+    if isinstance(t, K.Pause | K.Halt | K.Run | K.Running | K.Started):
+        return {K.PAUSED}
+    if isinstance(t, K.Await):
+        return {K.DONE, K.PAUSED} if t.armed else {K.PAUSED}
+    if isinstance(t, K.Exit):
+        return {t.code}
+    if isinstance(t, K.Present):
+        return first_codes(t.then) | first_codes(t.orelse)
+    if isinstance(t, K.Seq):
+        a = first_codes(t.first)
+        return (a - {K.DONE}) | first_codes(t.then) if K.DONE in a else a
+    if isinstance(t, K.Par):
+        acc = {K.DONE}
+        for b in t.branches:
+            codes = first_codes(b) if b is not None else {K.DONE}
+            acc = {max(x, y) for x in acc for y in codes}
+        return acc
+    if isinstance(t, K.Loop):
+        return first_codes(t.body) - {K.DONE}
+    if isinstance(t, K.Abort):
+        codes = first_codes(t.body)
+        return codes | {K.DONE} if t.armed else codes
+    if isinstance(t, K.Trap):
+        return {K.DONE if c == t.code else c for c in first_codes(t.body)}
+    if isinstance(t, K.Handle):
+        acc = first_codes(t.body)
+        for h in t.handlers:
+            acc |= first_codes(h)
+        return acc
+    return {K.DONE}

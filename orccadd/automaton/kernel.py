@@ -1,0 +1,371 @@
+"""The kernel of the mission language and its synchronous semantics (one reaction per instant).
+
+A mission is elaborated (`elaborate.py`) into a kernel term; a *reaction* rewrites the term given
+the input signals present in the instant and returns the residual term (the program's next state),
+a completion code and the actions. Esterel's completion codes: 0 terminated, 1 paused (alive),
+k ≥ 2 exit of the trap with code k (outer traps have larger codes, so a parallel takes the max).
+
+Signals an instant can hold: inputs (operator inputs and Robot-Task events, bits of `inputs`) and
+internal signals the program emits (bits of `emitted`). An internal signal's status in an instant
+is resolved by *logical correctness*: the program must have exactly one consistent status
+assignment for the signals it both tests and emits (`react` in `reaction.py`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from orccadd.automaton.ast import Loc
+
+DONE = 0
+PAUSED = 1
+SAFE_CODE = 1_000_000  # `safe`: the outermost exit, caught by the mission itself
+FAILED_CODE = 999_999  # a type 3 exception inside the safe procedure
+
+# Conditions are small tuples, cheap to hash and to evaluate:
+#   (IN, mask): some input bit of mask present       (INT, mask): some internal bit present
+#   (AND, a, b) (OR, a, b) (NOT, a)                    (TRUE,)
+IN, INT, AND, OR, NOT, TRUE = 0, 1, 2, 3, 4, 5
+Cond = tuple[Any, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Nothing:
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Pause:
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class Halt:
+    loc: Loc
+
+
+@dataclass(frozen=True, slots=True)
+class Emit:
+    bit: int
+
+
+@dataclass(frozen=True, slots=True)
+class Present:
+    cond: Cond
+    then: Term
+    orelse: Term
+
+
+@dataclass(frozen=True, slots=True)
+class Seq:
+    first: Term
+    then: Term
+
+
+@dataclass(frozen=True, slots=True)
+class Par:
+    branches: tuple[Term | None, ...]  # None: a branch that terminated, waiting for the join
+
+
+@dataclass(frozen=True, slots=True)
+class Loop:
+    body: Term
+    loc: Loc
+
+
+@dataclass(frozen=True, slots=True)
+class Abort:
+    """`do P until C` (strong) or `weak do P until C`. `armed`: C is tested from this instant on."""
+
+    body: Term
+    cond: Cond
+    weak: bool
+    armed: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Await:
+    cond: Cond
+    armed: bool
+    loc: Loc
+
+
+@dataclass(frozen=True, slots=True)
+class Trap:
+    code: int
+    body: Term
+
+
+@dataclass(frozen=True, slots=True)
+class Exit:
+    code: int
+
+
+@dataclass(frozen=True, slots=True)
+class Run:
+    """Activate a Robot-Task; it stays active until its postcondition, a type 2 or a type 3 exception."""
+
+    task: int
+    loc: Loc
+
+
+@dataclass(frozen=True, slots=True)
+class Running:
+    task: int
+    loc: Loc
+
+
+@dataclass(frozen=True, slots=True)
+class Started:
+    """A task activated in this very instant (settled into `Running` when the instant ends)."""
+
+    task: int
+    loc: Loc
+
+
+@dataclass(frozen=True, slots=True)
+class Handle:
+    """`handle P on C1 do H1 on C2 do H2 end`: immediate strong preemption of P, the first matching
+    handler takes over in the same instant."""
+
+    body: Term
+    conds: tuple[Cond, ...]
+    handlers: tuple[Term, ...]
+
+
+Term = (
+    Nothing
+    | Pause
+    | Halt
+    | Emit
+    | Present
+    | Seq
+    | Par
+    | Loop
+    | Abort
+    | Await
+    | Trap
+    | Exit
+    | Run
+    | Running
+    | Started
+    | Handle
+)
+NOTHING = Nothing()
+
+
+class InstantaneousLoopError(Exception):
+    """A loop body terminated in the instant it started: the reaction would never end."""
+
+    def __init__(self, loc: Loc) -> None:
+        super().__init__(loc)
+        self.loc = loc
+
+
+class Instant:
+    """What one evaluation of one instant reads and does."""
+
+    __slots__ = ("assumed", "cancelled", "emitted", "end_masks", "inputs", "reads", "started", "stopped")
+
+    def __init__(self, inputs: int, assumed: int, end_masks: tuple[int, ...]) -> None:
+        self.inputs = inputs
+        self.assumed = assumed  # guessed statuses of the internal signals (checked afterwards)
+        self.end_masks = end_masks  # per task: the input bits that end it (post, T2, T3)
+        self.emitted = 0
+        self.reads = 0
+        self.started: list[int] = []
+        self.stopped: list[int] = []
+        self.cancelled: list[int] = []
+
+    def test(self, c: Cond) -> bool:
+        op = c[0]
+        if op == IN:
+            return (self.inputs & int(c[1])) != 0
+        if op == INT:
+            self.reads |= int(c[1])
+            return (self.assumed & int(c[1])) != 0
+        if op == AND:
+            return self.test(c[1]) and self.test(c[2])
+        if op == OR:
+            return self.test(c[1]) or self.test(c[2])
+        if op == NOT:
+            return not self.test(c[1])
+        return True
+
+    def kill(self, t: Term | None) -> None:
+        """A paused term is preempted: its running tasks are stopped (or never started)."""
+        if t is None:
+            return
+        if isinstance(t, Running):
+            self.stopped.append(t.task)
+        elif isinstance(t, Started):
+            self.cancelled.append(t.task)
+        elif isinstance(t, Seq):
+            self.kill(t.first)  # `then` has not started yet
+        elif isinstance(t, Par):
+            for b in t.branches:
+                self.kill(b)
+        elif isinstance(t, Abort | Trap | Handle):
+            self.kill(t.body)
+
+
+def step(t: Term, r: Instant) -> tuple[int, Term]:
+    """One instant of `t`: (completion code, residual term; meaningful when the code is PAUSED)."""
+    if isinstance(t, Running | Started):
+        if r.inputs & r.end_masks[t.task]:
+            r.stopped.append(t.task)
+            return DONE, NOTHING
+        return PAUSED, t
+    if isinstance(t, Seq):
+        k, first = step(t.first, r)
+        if k == DONE:
+            return step(t.then, r)
+        if k == PAUSED:
+            return PAUSED, Seq(first, t.then)
+        return k, NOTHING
+    if isinstance(t, Par):
+        codes: list[int] = []
+        rest: list[Term | None] = []
+        for b in t.branches:
+            if b is None:
+                codes.append(DONE)
+                rest.append(None)
+                continue
+            k, res = step(b, r)
+            codes.append(k)
+            rest.append(res if k == PAUSED else None)
+        top = max(codes)
+        if top == PAUSED:
+            return PAUSED, Par(tuple(rest))
+        if top > PAUSED:
+            for paused in rest:
+                r.kill(paused)
+        return top, NOTHING
+    if isinstance(t, Abort):
+        if t.armed and not t.weak and r.test(t.cond):
+            r.kill(t.body)
+            return DONE, NOTHING
+        k, body = step(t.body, r)
+        if k != PAUSED:
+            return k, NOTHING
+        if t.armed and t.weak and r.test(t.cond):
+            r.kill(body)
+            return DONE, NOTHING
+        return PAUSED, Abort(body, t.cond, t.weak, True)
+    if isinstance(t, Await):
+        if t.armed and r.test(t.cond):
+            return DONE, NOTHING
+        return PAUSED, t if t.armed else Await(t.cond, True, t.loc)
+    if isinstance(t, Handle):
+        for cond, handler in zip(t.conds, t.handlers, strict=True):
+            if r.test(cond):
+                r.kill(t.body)
+                return step(handler, r)
+        k, body = step(t.body, r)
+        return (PAUSED, Handle(body, t.conds, t.handlers)) if k == PAUSED else (k, NOTHING)
+    if isinstance(t, Loop):
+        k, body = step(t.body, r)
+        if k == DONE:
+            raise InstantaneousLoopError(t.loc)
+        return (PAUSED, Seq(body, t)) if k == PAUSED else (k, NOTHING)
+    if isinstance(t, Trap):
+        k, body = step(t.body, r)
+        if k == PAUSED:
+            return PAUSED, Trap(t.code, body)
+        return (DONE if k in (DONE, t.code) else k), NOTHING
+    if isinstance(t, Run):
+        r.started.append(t.task)
+        return PAUSED, Started(t.task, t.loc)
+    if isinstance(t, Present):
+        return step(t.then if r.test(t.cond) else t.orelse, r)
+    if isinstance(t, Emit):
+        r.emitted |= t.bit
+        return DONE, NOTHING
+    if isinstance(t, Exit):
+        return t.code, NOTHING
+    if isinstance(t, Pause):
+        return PAUSED, NOTHING
+    if isinstance(t, Halt):
+        return PAUSED, t
+    return DONE, NOTHING  # Nothing
+
+
+def settle(t: Term) -> Term:
+    """End of the instant: tasks started in it become plain `Running` (one state, however reached)."""
+    if isinstance(t, Started):
+        return Running(t.task, t.loc)
+    if isinstance(t, Seq):
+        return Seq(settle(t.first), t.then)
+    if isinstance(t, Par):
+        return Par(tuple(None if b is None else settle(b) for b in t.branches))
+    if isinstance(t, Abort):
+        return Abort(settle(t.body), t.cond, t.weak, t.armed)
+    if isinstance(t, Trap):
+        return Trap(t.code, settle(t.body))
+    if isinstance(t, Handle):
+        return Handle(settle(t.body), t.conds, t.handlers)
+    return t
+
+
+def active_tasks(t: Term | None, out: list[int]) -> list[int]:
+    """The Robot-Tasks a paused term keeps active."""
+    if isinstance(t, Running | Started):
+        out.append(t.task)
+    elif isinstance(t, Seq):
+        active_tasks(t.first, out)
+    elif isinstance(t, Par):
+        for b in t.branches:
+            active_tasks(b, out)
+    elif isinstance(t, Abort | Trap | Handle):
+        active_tasks(t.body, out)
+    return out
+
+
+def cond_masks(c: Cond) -> tuple[int, int]:
+    """(input bits, internal bits) a condition mentions."""
+    if c[0] == IN:
+        return int(c[1]), 0
+    if c[0] == INT:
+        return 0, int(c[1])
+    if c[0] == TRUE:
+        return 0, 0
+    ins, ints = 0, 0
+    for sub in c[1:]:
+        a, b = cond_masks(sub)
+        ins |= a
+        ints |= b
+    return ins, ints
+
+
+def mentions(t: Term | None, end_masks: tuple[int, ...]) -> tuple[int, int]:
+    """(input bits, internal bits) the term may test from now on (an over-approximation)."""
+    if t is None:
+        return 0, 0
+    if isinstance(t, Running | Started | Run):
+        return end_masks[t.task], 0
+    if isinstance(t, Await):
+        return cond_masks(t.cond)
+    if isinstance(t, Seq):
+        return _union(mentions(t.first, end_masks), mentions(t.then, end_masks))
+    if isinstance(t, Par):
+        acc = (0, 0)
+        for b in t.branches:
+            acc = _union(acc, mentions(b, end_masks))
+        return acc
+    if isinstance(t, Abort):
+        return _union(cond_masks(t.cond), mentions(t.body, end_masks))
+    if isinstance(t, Loop | Trap):
+        return mentions(t.body, end_masks)
+    if isinstance(t, Present):
+        return _union(cond_masks(t.cond), _union(mentions(t.then, end_masks), mentions(t.orelse, end_masks)))
+    if isinstance(t, Handle):
+        acc = mentions(t.body, end_masks)
+        for c, h in zip(t.conds, t.handlers, strict=True):
+            acc = _union(acc, _union(cond_masks(c), mentions(h, end_masks)))
+        return acc
+    return 0, 0
+
+
+def _union(a: tuple[int, int], b: tuple[int, int]) -> tuple[int, int]:
+    return a[0] | b[0], a[1] | b[1]

@@ -1,0 +1,271 @@
+"""Mission text → syntax tree (`ast.py`). Every error is a `MissionError` citing file:line:col."""
+
+from __future__ import annotations
+
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import lark
+
+from orccadd.automaton import ast as A
+from orccadd.errors import MissionError
+
+GRAMMAR = Path(__file__).with_name("mission.lark")
+
+# What a user should read instead of lark's terminal names.
+_WORDS = {
+    "NAME": "a name",
+    "STRING": 'a "quoted path"',
+    "SEMICOLON": "`;`",
+    "LPAR": "`(`",
+    "RPAR": "`)`",
+    "COMMA": "`,`",
+    "COLON": "`:`",
+    "DOT": "`.`",
+    "__ANON_0": "`||`",
+    "__ANON_1": "`->`",
+    "EVKIND": "an event kind (post, pre, T2, T3, sync)",
+    "PROC_ROLE": "`main` or `safe`",
+}
+_DECL_START = ("mission", "resource", "input", "signal", "task", "procedure", "main", "safe", "property")
+
+
+@cache
+def _parser() -> lark.Lark:
+    return lark.Lark(GRAMMAR.read_text(), parser="lalr", propagate_positions=True, maybe_placeholders=True)
+
+
+def _word(terminal: str) -> str:
+    if terminal in _WORDS:
+        return _WORDS[terminal]
+    if terminal.isupper() and terminal.isalpha():
+        return f"`{terminal.lower()}`"
+    return terminal
+
+
+def _expected(names: set[str]) -> str:
+    words = sorted({_word(n) for n in names if not n.startswith("$")})
+    if not words:
+        return "the end of the file"
+    if len(words) > 8:
+        words = [*words[:8], "…"]
+    return ", ".join(words)
+
+
+def parse_mission(text: str, file: str = "<mission>") -> A.MissionAst:
+    """Parse a mission; raise `MissionError` (never anything else) on a syntax error."""
+    try:
+        tree = _parser().parse(text)
+    except lark.exceptions.UnexpectedToken as e:
+        tok = e.token
+        if tok.type == "$END":
+            line, col = _end_of(text)
+            raise MissionError(
+                file, line, col, f"the file ends too early: expected {_expected(e.expected)}", text
+            ) from None
+        found = f"`{tok}`"
+        if "NAME" in e.expected and tok.type != "NAME" and str(tok).isidentifier():
+            msg = f"`{tok}` is a keyword and cannot be used as a name here"
+        elif "NAME" not in e.expected and tok.type == "NAME" and str(tok).lower() in _DECL_START:
+            msg = f"unexpected {found}: the previous declaration is not finished (missing `end`?)"
+        else:
+            msg = f"unexpected {found}: expected {_expected(e.expected)}"
+        raise MissionError(file, tok.line or e.line, tok.column or e.column, msg, text) from None
+    except lark.exceptions.UnexpectedCharacters as e:
+        pos = e.pos_in_stream or 0
+        ch = text[pos] if 0 <= pos < len(text) else "?"
+        msg = f"unexpected character {ch!r}: expected {_expected(set(e.allowed))}"
+        raise MissionError(file, e.line, e.column, msg, text) from None
+    except lark.exceptions.UnexpectedEOF as e:
+        line, col = _end_of(text)
+        raise MissionError(
+            file, line, col, f"the file ends too early: expected {_expected(set(e.expected))}", text
+        ) from None
+    return _Builder(file, text).mission(tree)
+
+
+def _end_of(text: str) -> tuple[int, int]:
+    """Line and column just after the last non-blank character (where an EOF error points)."""
+    lines = text.rstrip().splitlines() or [""]
+    return len(lines), len(lines[-1]) + 1
+
+
+def load_mission_file(path: str | Path) -> A.MissionAst:
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as e:
+        raise MissionError(str(path), 0, 0, f"cannot read the mission file: {e.strerror}") from None
+    except UnicodeDecodeError as e:
+        raise MissionError(str(path), 1, 1, f"the mission file is not UTF-8 text ({e.reason})") from None
+    return parse_mission(text, str(path))
+
+
+class _Builder:
+    """lark parse tree → frozen syntax tree."""
+
+    def __init__(self, file: str, text: str) -> None:
+        self.file = file
+        self.text = text
+
+    def loc(self, node: Any) -> A.Loc:
+        if isinstance(node, lark.Token):
+            return A.Loc(self.file, node.line or 0, node.column or 0)
+        meta = node.meta
+        return A.Loc(self.file, getattr(meta, "line", 0), getattr(meta, "column", 0))
+
+    def err(self, node: Any, msg: str) -> MissionError:
+        loc = self.loc(node)
+        return MissionError(self.file, loc.line, loc.col, msg, self.text)
+
+    def mission(self, tree: lark.Tree[Any]) -> A.MissionAst:
+        name = ""
+        resources: list[A.NameDecl] = []
+        inputs: list[A.NameDecl] = []
+        signals: list[A.NameDecl] = []
+        tasks: list[A.TaskDecl] = []
+        procs: list[A.ProcDecl] = []
+        props: list[A.PropDecl] = []
+        for d in tree.children:
+            kind = d.data
+            if kind == "mission_decl":
+                if name:
+                    raise self.err(d, "a file holds one mission: a second `mission` line")
+                name = str(d.children[1])
+            elif kind in ("resource_decl", "input_decl", "signal_decl"):
+                target = {"resource_decl": resources, "input_decl": inputs, "signal_decl": signals}[kind]
+                target.extend(self.names(d.children[1]))
+            elif kind == "task_decl":
+                tasks.append(self.task(d))
+            elif kind == "proc_decl":
+                procs.append(self.procedure(d))
+            elif kind == "prop_decl":
+                props.append(self.prop(d))
+        return A.MissionAst(
+            self.file, self.text, name, tuple(resources), tuple(inputs), tuple(signals), tuple(tasks),
+            tuple(procs), tuple(props),
+        )  # fmt: skip
+
+    def names(self, node: lark.Tree[Any]) -> list[A.NameDecl]:
+        return [A.NameDecl(str(t), self.loc(t)) for t in node.children if isinstance(t, lark.Token)]
+
+    def task(self, d: lark.Tree[Any]) -> A.TaskDecl:
+        _, name, _, resource, _, joints, _, source, *events, _ = d.children
+        evs: list[A.EventDecl] = []
+        for e in events:
+            kind_tok, lst = e.children
+            kind = str(kind_tok)
+            kind = kind.upper() if kind.lower() in ("t2", "t3") else kind.lower()
+            if kind in ("post", "pre"):
+                if lst is not None:
+                    raise self.err(
+                        lst,
+                        f"`{kind}` takes no name: the event is called "
+                        f"{name}.{'done' if kind == 'post' else 'pre'}",
+                    )
+                evs.append(A.EventDecl(kind, "", self.loc(kind_tok)))
+                continue
+            if lst is None:
+                raise self.err(kind_tok, f"`{kind}` needs at least one event name")
+            evs.extend(A.EventDecl(kind, n.name, n.loc) for n in self.names(lst))
+        return A.TaskDecl(
+            str(name), str(resource), tuple(n.name for n in self.names(joints)) if joints is not None else (),
+            str(source)[1:-1] if source is not None else "", tuple(evs), self.loc(name), self.loc(resource),
+        )  # fmt: skip
+
+    def procedure(self, d: lark.Tree[Any]) -> A.ProcDecl:
+        role, _, name, body, *rest = d.children
+        handlers = tuple(self.handler(h) for h in rest[:-1])
+        return A.ProcDecl(
+            str(name),
+            str(role).lower() if role is not None else "",
+            self.block(body),
+            handlers,
+            self.loc(name),
+        )
+
+    def handler(self, h: lark.Tree[Any]) -> A.Handler:
+        _, cond, _, body = h.children
+        c = None if cond.data == "fatal_cond" else self.sexpr(cond.children[0])
+        return A.Handler(c, self.block(body), self.loc(h))
+
+    def prop(self, d: lark.Tree[Any]) -> A.PropDecl:
+        _, name, p = d.children
+        loc = self.loc(name)
+        if p.data == "never":
+            return A.PropDecl(str(name), "never", self.sexpr(p.children[1]), None, loc)
+        if p.data == "eventually":
+            return A.PropDecl(
+                str(name), "eventually", self.sexpr(p.children[0]), self.sexpr(p.children[2]), loc
+            )
+        both = self.sexpr(p.children[0])
+        if not isinstance(both, A.And) or len(both.items) != 2:
+            raise self.err(p, "`alternate` needs exactly two operands: `A and B alternate`")
+        return A.PropDecl(str(name), "alternate", both.items[0], both.items[1], loc)
+
+    # statements
+
+    def block(self, b: lark.Tree[Any]) -> A.Stmt:
+        items = [self.stmt(s) for s in b.children if isinstance(s, lark.Tree)]
+        return items[0] if len(items) == 1 else A.Seq(tuple(items), self.loc(b))
+
+    def stmt(self, s: lark.Tree[Any]) -> A.Stmt:
+        k = s.data
+        c = s.children
+        loc = self.loc(s)
+        if k == "call":
+            return A.Call(self.qname(c[0]), loc)
+        if k == "run":
+            return A.Run(self.qname(c[1]), loc)
+        if k in ("nothing", "pause", "halt", "safe"):
+            simple: dict[str, type[A.Nothing | A.Pause | A.Halt | A.Safe]] = {
+                "nothing": A.Nothing, "pause": A.Pause, "halt": A.Halt, "safe": A.Safe,
+            }  # fmt: skip
+            return simple[k](loc)
+        if k == "emit":
+            return A.Emit(self.qname(c[1]), loc)
+        if k == "await_":
+            return A.Await(self.sexpr(c[2]), c[1] is not None, loc)
+        if k == "when_until":
+            return A.When(self.sexpr(c[1]), self.block(c[3]), self.sexpr(c[5]), loc)
+        if k == "when_do":
+            return A.When(self.sexpr(c[1]), self.block(c[3]), None, loc)
+        if k == "do_until":
+            return A.DoUntil(self.block(c[1]), self.sexpr(c[3]), False, loc)
+        if k == "weak_do_until":
+            return A.DoUntil(self.block(c[2]), self.sexpr(c[4]), True, loc)
+        if k == "loop":
+            return A.Loop(self.block(c[1]), loc)
+        if k == "seq":
+            return self.block(c[1])
+        if k == "par":
+            return A.Par(tuple(self.block(x) for x in c[1:]), loc)
+        if k == "present":
+            return A.Present(
+                self.sexpr(c[1]), self.block(c[3]), self.block(c[5]) if c[5] is not None else None, loc
+            )
+        if k == "trap":
+            return A.Trap(str(c[1]), self.block(c[3]), loc)
+        if k == "exit":
+            return A.Exit(str(c[1]), loc)
+        if k == "every":
+            return A.Every(self.sexpr(c[1]), self.block(c[3]), loc)
+        if k == "handle":
+            return A.Handle(self.block(c[1]), tuple(self.handler(h) for h in c[2:-1]), loc)
+        raise AssertionError(f"unhandled statement {k}")  # pragma: no cover - grammar and builder agree
+
+    def qname(self, q: lark.Tree[Any]) -> str:
+        return ".".join(str(t) for t in q.children)
+
+    def sexpr(self, e: Any) -> A.SigExpr:
+        k = e.data
+        loc = self.loc(e)
+        if k == "sig":
+            return A.SigRef(self.qname(e.children[0]), loc)
+        if k == "fn":
+            return A.Fn(str(e.children[0]), str(e.children[1]), loc)
+        if k == "not_":
+            return A.Not(self.sexpr(e.children[1]), loc)
+        items = tuple(self.sexpr(x) for x in e.children if isinstance(x, lark.Tree))
+        return A.And(items, loc) if k == "and_expr" else A.Or(items, loc)

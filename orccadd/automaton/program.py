@@ -1,0 +1,93 @@
+"""A checked mission: its signals, Robot-Task signatures and kernel terms (input of the compiler)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from orccadd.automaton.ast import Loc, MissionAst, PropDecl, SigExpr
+from orccadd.automaton.kernel import Term
+
+# Event kinds of a Robot-Task as the mission sees them, in input-bit order within a task.
+EVENT_KINDS = ("post", "pre", "T2", "T3", "sync")
+# Runtime priority when one task reports several events in one tick (the environment model of the
+# verifier: one event per task per instant, the most severe kept).
+PRIORITY = {"T3": 0, "T2": 1, "post": 2, "pre": 3, "sync": 4}
+BUILTIN_T3 = ("LimitViolation", "ResourceFault", "CommLost", "Overrun")
+BUILTIN_T2 = ("PreconditionTimeout",)
+
+
+def event_full_name(task: str, kind: str, name: str) -> str:
+    if kind == "post":
+        return f"{task}.done"
+    if kind == "pre":
+        return f"{task}.pre"
+    return f"{task}.{kind}.{name}"
+
+
+@dataclass(frozen=True)
+class TaskInfo:
+    """A Robot-Task's signature: what it claims and which events it may raise."""
+
+    index: int
+    name: str
+    resource: str
+    joints: tuple[str, ...]  # empty: the whole resource
+    source: str
+    loc: Loc
+    events: tuple[tuple[str, str, int], ...]  # (kind, full name, input bit)
+
+    def mask(self, *kinds: str) -> int:
+        m = 0
+        for kind, _, bit in self.events:
+            if kind in kinds:
+                m |= bit
+        return m
+
+    def claims_overlap(self, other: TaskInfo) -> bool:
+        if self.resource != other.resource:
+            return False
+        if not self.joints or not other.joints:
+            return True
+        return bool(set(self.joints) & set(other.joints))
+
+
+@dataclass(frozen=True)
+class Program:
+    """Everything the compiler, the verifier and the interpreter need, all names resolved."""
+
+    name: str
+    file: str
+    text: str
+    inputs: tuple[str, ...]  # input bit i ↔ inputs[i]: operator inputs first, then task events
+    input_task: tuple[int, ...]  # per input bit: the task raising it, -1 for an operator input
+    input_kind: tuple[str, ...]  # per input bit: "operator" or an EVENT_KINDS entry
+    internals: tuple[str, ...]  # internal signal bit i ↔ internals[i]
+    tasks: tuple[TaskInfo, ...]
+    operator_mask: int
+    end_masks: tuple[int, ...]  # per task: post | T2 | T3 (what ends `run T`)
+    event_masks: tuple[int, ...]  # per task: every event it can raise
+    t3_masks: tuple[int, ...]
+    main: Term
+    safe: Term  # the safe procedure, wrapped so that a type 3 inside it ends the mission (failed)
+    properties: tuple[PropDecl, ...]
+    ast: MissionAst
+
+    def input_bit(self, name: str) -> int:
+        return 1 << self.inputs.index(name)
+
+    def describe_inputs(self, mask: int) -> str:
+        names = [n for i, n in enumerate(self.inputs) if mask >> i & 1]
+        return "{" + ", ".join(names) + "}"
+
+
+def sig_names(e: SigExpr) -> list[str]:
+    """Every signal name an expression mentions (for messages)."""
+    from orccadd.automaton import ast as A
+
+    if isinstance(e, A.SigRef):
+        return [e.name]
+    if isinstance(e, A.Fn):
+        return [f"{e.fn}({e.arg})"]
+    if isinstance(e, A.Not):
+        return sig_names(e.item)
+    return [n for i in e.items for n in sig_names(i)]
