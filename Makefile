@@ -4,7 +4,6 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 SYSTEM_STAMP := $(VENV)/.system-installed
-APT_PACKAGES := rt-tests graphviz spin systemd
 
 .PHONY: demo test lint typecheck unit bench setup system-deps clean
 
@@ -18,12 +17,13 @@ $(STAMP): pyproject.toml | $(VENV)/bin/python
 	$(PY) -m pip install --quiet -e '.[dev]'
 	touch $@
 
-# System tools: cyclictest (benchmarks), dot (graphs), spin (cross-check), systemd-analyze.
+# System tools: cyclictest (benchmarks), dot (graphs), spin + gcc (cross-check), systemd-analyze.
 $(SYSTEM_STAMP): | $(VENV)/bin/python
 	@missing=""; \
 	command -v cyclictest >/dev/null || missing="$$missing rt-tests"; \
 	command -v dot >/dev/null || missing="$$missing graphviz"; \
 	command -v spin >/dev/null || missing="$$missing spin"; \
+	command -v gcc >/dev/null || missing="$$missing gcc"; \
 	command -v systemd-analyze >/dev/null || missing="$$missing systemd"; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ]; then apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \

@@ -1,0 +1,39 @@
+"""Robot-Procedures: the mission language, compiled to one explicit automaton and verified.
+
+    text --parse--> syntax tree --elaborate--> Program (kernel terms) --compile--> Automaton --verify--> Report
+
+The automaton that passed `verify` is exactly what the execution machine steps (`Runner`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from orccadd.automaton.automaton import Automaton, Runner
+from orccadd.automaton.compiler import DEFAULT_MAX_STATES, compile_program
+from orccadd.automaton.elaborate import elaborate
+from orccadd.automaton.parser import load_mission_file, parse_mission
+from orccadd.automaton.program import Program
+from orccadd.automaton.verify import Report, verify
+
+__all__ = [
+    "Automaton",
+    "Program",
+    "Report",
+    "Runner",
+    "compile_file",
+    "compile_text",
+    "elaborate",
+    "load_mission_file",
+    "parse_mission",
+    "verify",
+]
+
+
+def compile_text(text: str, file: str = "<mission>", max_states: int = DEFAULT_MAX_STATES) -> Automaton:
+    """Parse, check and compile a mission; `MissionError` on any problem. Not for a tick."""
+    return compile_program(elaborate(parse_mission(text, file)), max_states)
+
+
+def compile_file(path: str | Path, max_states: int = DEFAULT_MAX_STATES) -> Automaton:
+    return compile_program(elaborate(load_mission_file(path)), max_states)

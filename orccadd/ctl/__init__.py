@@ -1,0 +1,1 @@
+"""`orccadctl`: the operator's command-line client (offline mission tools for now)."""

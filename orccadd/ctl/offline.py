@@ -1,0 +1,106 @@
+"""Commands that need no daemon: check a mission, draw it, export it for spin."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from orccadd.automaton import compile_file, verify
+from orccadd.automaton.promela import PROPERTIES, export_promela
+from orccadd.automaton.verify import format_trace
+from orccadd.automaton.views import full_view, minimize, project, render, to_dot
+from orccadd.errors import MissionError, OrccaddError
+
+EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
+
+
+def add_parsers(sub: Any) -> None:
+    p = sub.add_parser("check", help="compile a mission and run every check (no daemon needed)")
+    p.add_argument("file")
+    p.add_argument("--json", action="store_true", help="machine-readable verdicts")
+    p.add_argument("--max-states", type=int, default=200_000)
+    p.set_defaults(func=cmd_check)
+    g = sub.add_parser("graph", help="draw a mission's automaton, or an abstract view of it")
+    g.add_argument("file")
+    g.add_argument(
+        "--abstract", default="", help="comma-separated signals/tasks to keep (minimised by bisimulation)"
+    )
+    g.add_argument("--faults", action="store_true", help="keep type 3 exceptions in the picture")
+    g.add_argument("-o", "--output", required=True, help="out.svg, out.png, out.pdf or out.dot")
+    g.set_defaults(func=cmd_graph)
+    e = sub.add_parser("export-promela", help="write the mission as a Promela model for spin")
+    e.add_argument("file")
+    e.add_argument("-o", "--output", default="-", help="file, or - for standard output")
+    e.add_argument(
+        "--property", action="append", choices=PROPERTIES, help="assertions to include (default: all)"
+    )
+    e.set_defaults(func=cmd_export)
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    try:
+        a = compile_file(args.file, args.max_states)
+    except MissionError as e:
+        if args.json:
+            print(
+                json.dumps(
+                    {
+                        "ok": False,
+                        "error": {"file": e.file, "line": e.line, "col": e.col, "message": e.detail},
+                    }
+                )
+            )
+        else:
+            print(f"error: {e}", file=sys.stderr)
+        return EXIT_FAILED
+    report = verify(a)
+    if args.json:
+        print(json.dumps({
+            "ok": report.ok,
+            "mission": a.program.name,
+            "states": a.n_states,
+            "transitions": a.n_transitions,
+            "checks": [
+                {"name": r.name, "ok": r.ok, "summary": r.summary, "explanation": r.explanation,
+                 "counterexample": format_trace(a, r.counterexample) if not r.ok else []}
+                for r in report.results
+            ],
+            "notes": report.warnings,
+        }))  # fmt: skip
+    else:
+        print(report.format())
+    return EXIT_OK if report.ok else EXIT_FAILED
+
+
+def cmd_graph(args: argparse.Namespace) -> int:
+    a = compile_file(args.file)
+    names = [n for n in args.abstract.split(",") if n.strip()]
+    lts = minimize(project(a, names, faults=args.faults)) if names else full_view(a, faults=args.faults)
+    render(to_dot(lts, a.program.name), Path(args.output))
+    print(f"{args.output}: {lts.n} states, {len(lts.edges)} transitions")
+    return EXIT_OK
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    a = compile_file(args.file)
+    model = export_promela(a, tuple(args.property) if args.property else PROPERTIES)
+    if args.output == "-":
+        sys.stdout.write(model)
+    else:
+        Path(args.output).write_text(model)
+    return EXIT_OK
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        code: int = args.func(args)
+        return code
+    except MissionError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_FAILED
+    except OrccaddError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_ERROR
