@@ -1,6 +1,6 @@
 """Robot-Procedures: the mission language, compiled to one explicit automaton and verified.
 
-    text --parse--> syntax tree --elaborate--> Program (kernel terms) --compile--> Automaton --verify--> Report
+    text -parse-> syntax tree -elaborate-> Program (kernel terms) -compile-> Automaton -verify-> Report
 
 The automaton that passed `verify` is exactly what the execution machine steps (`Runner`).
 """
