@@ -264,3 +264,30 @@ class MissionAst:
     tasks: tuple[TaskDecl, ...]
     procedures: tuple[ProcDecl, ...]
     properties: tuple[PropDecl, ...]
+
+
+def substatements(s: Stmt) -> list[Stmt]:
+    """The statements directly inside `s` (handler bodies included)."""
+    if isinstance(s, Seq):
+        return list(s.items)
+    if isinstance(s, Par):
+        return list(s.branches)
+    if isinstance(s, When | DoUntil | Loop | Trap | Every):
+        return [s.body]
+    if isinstance(s, Present):
+        return [s.then] if s.orelse is None else [s.then, s.orelse]
+    if isinstance(s, Handle):
+        return [s.body, *(h.body for h in s.handlers)]
+    return []
+
+
+def show(e: SigExpr) -> str:
+    """A signal expression as it would be written."""
+    if isinstance(e, SigRef):
+        return e.name
+    if isinstance(e, Fn):
+        return f"{e.fn}({e.arg})"
+    if isinstance(e, Not):
+        return f"not {show(e.item)}"
+    sep = " and " if isinstance(e, And) else " or "
+    return "(" + sep.join(show(i) for i in e.items) + ")"

@@ -323,7 +323,8 @@ def _check_property(a: Automaton, g: _Graph, prop: A.PropDecl) -> CheckResult:
         node = queue.popleft()
         s, obs = node
         if prop.kind == "eventually" and obs == 1 and (a.phase[s] == END or s not in can_b):
-            bad = (node, None, "B can no longer happen" if a.phase[s] != END else "the mission ended first")
+            why = "can no longer happen" if a.phase[s] != END else "did not happen before the mission ended"
+            bad = (node, None, f"after {A.show(prop.a)}, {A.show(prop.b)} {why}")
             break
         for inputs, (n, actions) in a.table[s].items():
             ha, hb = holds(prop.a, inputs, actions, n), holds(prop.b, inputs, actions, n)
@@ -332,10 +333,10 @@ def _check_property(a: Automaton, g: _Graph, prop: A.PropDecl) -> CheckResult:
                 nobs = 0 if hb else (1 if (ha or obs == 1) else 0)
             else:  # alternate: A first; an instant with both counts as B then A
                 if obs == 0 and hb:
-                    bad = (node, step, "B without an A before it")
+                    bad = (node, step, f"{A.show(prop.b)} without {A.show(prop.a)} before it")
                     break
                 if obs == 1 and ha and not hb:
-                    bad = (node, step, "A twice without B between")
+                    bad = (node, step, f"{A.show(prop.a)} twice without {A.show(prop.b)} between")
                     break
                 nobs = 1 if ha else (0 if hb else obs)
             nxt = (n, nobs)
