@@ -236,17 +236,10 @@ class _Elaborator:
         }
         for kind, name, loc in declared:
             if name not in has[kind]:
-                what = (
-                    f"a {kind} event {name}"
-                    if name
-                    else f"a {kind}condition"
-                    if kind in ("pre", "post")
-                    else kind
-                )
+                what = f"{kind} event {name}" if name else f"{kind}condition"
                 offered = ", ".join(f"{k} {n}".strip() for k in EVENT_KINDS for n in sorted(has[k])) or "none"
-                raise self.err(
-                    loc, f"signature mismatch: {path} gives {t.name} no {what} (it has: {offered})"
-                )
+                msg = f"signature mismatch: {path} declares no {what} for {t.name} (it has: {offered})"
+                raise self.err(loc, msg)
         if spec.task.resource != t.resource:
             raise self.err(
                 t.resource_loc,
@@ -283,7 +276,7 @@ class _Elaborator:
             raise self.err(
                 loc, f"task {head} has no event `{name[len(head) + 1 :]}`; its events: {', '.join(own)}"
             )
-        near = difflib.get_close_matches(name, [*self.full, *self.short], n=3)
+        near = difflib.get_close_matches(name, list(dict.fromkeys([*self.full, *self.short])), n=3)
         hint = f"; did you mean {' or '.join(near)}?" if near else ""
         raise self.err(loc, f"unknown signal `{name}`{hint}")
 

@@ -28,7 +28,7 @@ _WORDS = {
     "EVKIND": "an event kind (post, pre, T2, T3, sync)",
     "PROC_ROLE": "`main` or `safe`",
 }
-_DECL_START = ("mission", "resource", "input", "signal", "task", "procedure", "main", "safe", "property")
+_DECL_TOKENS = ("MISSION", "RESOURCE", "INPUT", "SIGNAL", "TASK", "PROCEDURE", "PROC_ROLE", "PROPERTY")
 
 
 @cache
@@ -67,7 +67,7 @@ def parse_mission(text: str, file: str = "<mission>") -> A.MissionAst:
         found = f"`{tok}`"
         if "NAME" in e.expected and tok.type != "NAME" and str(tok).isidentifier():
             msg = f"`{tok}` is a keyword and cannot be used as a name here"
-        elif "NAME" not in e.expected and tok.type == "NAME" and str(tok).lower() in _DECL_START:
+        elif tok.type in _DECL_TOKENS and tok.type not in e.expected:
             msg = f"unexpected {found}: the previous declaration is not finished (missing `end`?)"
         else:
             msg = f"unexpected {found}: expected {_expected(e.expected)}"
@@ -242,9 +242,9 @@ class _Builder:
         if k == "par":
             return A.Par(tuple(self.block(x) for x in c[1:]), loc)
         if k == "present":
-            return A.Present(
-                self.sexpr(c[1]), self.block(c[3]), self.block(c[5]) if c[5] is not None else None, loc
-            )
+            then = self.block(c[3]) if c[3] is not None else A.Nothing(loc)
+            orelse = self.block(c[5]) if c[5] is not None else None
+            return A.Present(self.sexpr(c[1]), then, orelse, loc)
         if k == "trap":
             return A.Trap(str(c[1]), self.block(c[3]), loc)
         if k == "exit":

@@ -42,7 +42,10 @@ def test_mutant_without_the_t2_guard_fails_the_conflict_check_with_a_counterexam
     assert not report.ok
     conflict = next(r for r in report.results if r.name == "conflicts")
     assert not conflict.ok
-    assert "KeepStableUS and KeepStableCam" in conflict.summary or "KeepStableCam and KeepStableUS" in conflict.summary
+    assert (
+        "KeepStableUS and KeepStableCam" in conflict.summary
+        or "KeepStableCam and KeepStableUS" in conflict.summary
+    )
     text = report.format()
     assert "instant 2: inputs {KeepStableUS.T2.Stabilized}" in text
     assert "start KeepStableCam" in text

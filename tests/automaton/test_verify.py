@@ -107,7 +107,9 @@ def test_liveness_fails_when_success_cannot_be_reached() -> None:
 
 
 def test_liveness_accepts_a_loop_left_by_an_operator_input() -> None:
-    _, report = check("main procedure P\n handle do loop Move; Swing end until Stop on fatal do safe end\nend")
+    _, report = check(
+        "main procedure P\n handle do loop Move; Swing end until Stop on fatal do safe end\nend"
+    )
     assert report.ok, report.format()
 
 
