@@ -25,56 +25,10 @@ from orccadd.automaton.program import (
 )
 from orccadd.errors import MissionError, OrccaddError
 
+# Words that would be read as a keyword where a name can stand (statements, signal expressions).
 KEYWORDS = frozenset(
-    [
-        "mission",
-        "resource",
-        "input",
-        "signal",
-        "task",
-        "on",
-        "joints",
-        "from",
-        "end",
-        "post",
-        "pre",
-        "t2",
-        "t3",
-        "sync",
-        "main",
-        "safe",
-        "procedure",
-        "fatal",
-        "do",
-        "property",
-        "never",
-        "eventually",
-        "alternate",
-        "run",
-        "nothing",
-        "pause",
-        "halt",
-        "emit",
-        "await",
-        "immediate",
-        "when",
-        "until",
-        "weak",
-        "loop",
-        "seq",
-        "par",
-        "present",
-        "then",
-        "else",
-        "trap",
-        "in",
-        "exit",
-        "every",
-        "handle",
-        "or",
-        "and",
-        "not",
-    ]
+    "run nothing pause halt safe emit await immediate when until do weak loop seq par present then else "
+    "trap in exit every handle on end fatal and or not never eventually alternate".split()  # noqa: SIM905
 )
 PROPERTY_FNS = ("active", "start", "stop")
 _TRAP_TOP = 500_000
