@@ -26,10 +26,11 @@ from orccadd.automaton.program import (
 from orccadd.errors import MissionError, OrccaddError
 
 # Words that would be read as a keyword where a name can stand (statements, signal expressions).
-KEYWORDS = frozenset(
+_RESERVED = (
     "run nothing pause halt safe emit await immediate when until do weak loop seq par present then else "
-    "trap in exit every handle on end fatal and or not never eventually alternate".split()  # noqa: SIM905
+    "trap in exit every handle on end fatal and or not never eventually alternate"
 )
+KEYWORDS = frozenset(_RESERVED.split())
 PROPERTY_FNS = ("active", "start", "stop")
 _TRAP_TOP = 500_000
 
