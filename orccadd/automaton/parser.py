@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -59,6 +60,10 @@ def parse_mission(text: str, file: str = "<mission>") -> A.MissionAst:
         tree = _parser().parse(text)
     except lark.exceptions.UnexpectedToken as e:
         tok = e.token
+        missing = _missing_name(text, len(text) if tok.type == "$END" else (tok.start_pos or 0))
+        if missing is not None:
+            line, col, msg = missing
+            raise MissionError(file, line, col, msg, text) from None
         if tok.type == "$END":
             line, col = _end_of(text)
             raise MissionError(
@@ -83,6 +88,31 @@ def parse_mission(text: str, file: str = "<mission>") -> A.MissionAst:
             file, line, col, f"the file ends too early: expected {_expected(set(e.expected))}", text
         ) from None
     return _Builder(file, text).mission(tree)
+
+
+# After these words a name must follow; a keyword there was read as that name.
+_NAME_FOLLOWS = frozenset(["until", "await", "emit", "when", "every", "present", "exit", "trap", "immediate", "not", "and", "or"])
+_KEYWORD_WORDS = frozenset(
+    ["end", "do", "then", "else", "loop", "on", "until", "when", "par", "seq", "safe", "pause", "halt", "nothing", "emit", "await", "every", "trap", "exit", "handle"]
+)
+
+
+def _missing_name(text: str, pos: int) -> tuple[int, int, str] | None:
+    """`do A until` followed by `end`: the keyword was taken for a signal; say that a name is missing."""
+    words = list(re.finditer(r"[A-Za-z_][A-Za-z0-9_]*", _strip_comments(text[:pos])))
+    if len(words) < 2:
+        return None
+    before, last = words[-2], words[-1]
+    if before.group().lower() in _NAME_FOLLOWS and last.group().lower() in _KEYWORD_WORDS:
+        line = text.count("\n", 0, last.start()) + 1
+        col = last.start() - (text.rfind("\n", 0, last.start()) + 1) + 1
+        return line, col, f"a name is missing after `{before.group()}` (`{last.group()}` is a keyword)"
+    return None
+
+
+def _strip_comments(text: str) -> str:
+    """Comments blanked out, positions kept."""
+    return re.sub(r"(--|#)[^\n]*", lambda m: " " * len(m.group()), text)
 
 
 def _end_of(text: str) -> tuple[int, int]:

@@ -1,0 +1,68 @@
+"""`orccadctl check | graph | export-promela`, run as a user would, in a separate process."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from tests.automaton.conftest import KEEPSTABLE, NO_GUARD
+from tests.conftest import ROOT
+
+
+def ctl(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "orccadd.cli", *args], capture_output=True, text=True, timeout=120, cwd=ROOT
+    )
+
+
+def test_check_passes_keepstable() -> None:
+    r = ctl("check", str(KEEPSTABLE))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "ok   conflicts" in r.stdout
+
+
+def test_check_refuses_the_mutant_with_its_counterexample_as_json() -> None:
+    r = ctl("check", "--json", str(NO_GUARD))
+    assert r.returncode == 1
+    out = json.loads(r.stdout)
+    assert out["ok"] is False
+    conflicts = next(c for c in out["checks"] if c["name"] == "conflicts")
+    assert not conflicts["ok"]
+    assert conflicts["counterexample"][0].startswith("instant 1:")
+
+
+def test_check_reports_a_syntax_error_with_its_place(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.mission"
+    bad.write_text("mission M\nmain procedure P\n  do Go until\nend\n")
+    r = ctl("check", str(bad))
+    assert r.returncode == 1
+    assert f"{bad}:4:1:" in r.stderr
+    assert "Traceback" not in r.stderr
+    j = ctl("check", "--json", str(bad))
+    assert json.loads(j.stdout)["error"]["line"] == 4
+
+
+def test_graph_draws_the_abstract_view(tmp_path: Path) -> None:
+    out = tmp_path / "view.svg"
+    r = ctl("graph", str(KEEPSTABLE), "--abstract", "KeepStableCam,KeepStableUS,Stop", "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "4 states, 5 transitions" in r.stdout
+    assert out.read_text().lstrip().startswith(("<?xml", "<svg"))
+    dot = tmp_path / "full.dot"
+    assert ctl("graph", str(KEEPSTABLE), "-o", str(dot)).returncode == 0
+    assert dot.read_text().startswith('digraph "KeepStable"')
+
+
+def test_graph_refuses_an_unknown_signal(tmp_path: Path) -> None:
+    r = ctl("graph", str(KEEPSTABLE), "--abstract", "Nope", "-o", str(tmp_path / "x.svg"))
+    assert r.returncode == 2
+    assert "'Nope' is unknown" in r.stderr
+
+
+def test_export_promela_writes_a_model(tmp_path: Path) -> None:
+    out = tmp_path / "ks.pml"
+    r = ctl("export-promela", str(KEEPSTABLE), "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "active proctype mission()" in out.read_text()
