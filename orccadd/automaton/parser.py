@@ -91,9 +91,11 @@ def parse_mission(text: str, file: str = "<mission>") -> A.MissionAst:
 
 
 # After these words a name must follow; a keyword there was read as that name.
-_NAME_FOLLOWS = frozenset(["until", "await", "emit", "when", "every", "present", "exit", "trap", "immediate", "not", "and", "or"])
+_NAME_FOLLOWS = frozenset("until await emit when every present exit trap immediate not and or".split(" "))
 _KEYWORD_WORDS = frozenset(
-    ["end", "do", "then", "else", "loop", "on", "until", "when", "par", "seq", "safe", "pause", "halt", "nothing", "emit", "await", "every", "trap", "exit", "handle"]
+    "end do then else loop on until when par seq safe pause halt nothing emit await every trap exit handle".split(
+        " "
+    )
 )
 
 
