@@ -92,11 +92,10 @@ def parse_mission(text: str, file: str = "<mission>") -> A.MissionAst:
 
 # After these words a name must follow; a keyword there was read as that name.
 _NAME_FOLLOWS = frozenset("until await emit when every present exit trap immediate not and or".split(" "))
-_KEYWORD_WORDS = frozenset(
-    "end do then else loop on until when par seq safe pause halt nothing emit await every trap exit handle".split(
-        " "
-    )
+_KEYWORDS_READ_AS_NAMES = (
+    "end do then else loop on until when par seq safe pause halt nothing emit await every trap exit handle"
 )
+_KEYWORD_WORDS = frozenset(_KEYWORDS_READ_AS_NAMES.split())
 
 
 def _missing_name(text: str, pos: int) -> tuple[int, int, str] | None:
