@@ -87,15 +87,24 @@ class Reactor:
     def __init__(self, p: Program, layout: ActionLayout) -> None:
         self.p = p
         self.layout = layout
+        # the safe procedure can start within any instant of the main one: its tests count there too
+        self.safe_mentions = K.mentions(p.safe, p.end_masks)
 
-    def react(self, top: Top, inputs: int) -> tuple[Top, int]:
+    def mentions(self, top: Top) -> tuple[int, int]:
+        """(inputs, internal signals) an instant of this state may test; computed once per state."""
+        if top.phase == END:
+            return 0, 0
+        ins, internal = K.mentions(top.term, self.p.end_masks)
+        if top.phase == MAIN:
+            ins |= self.safe_mentions[0]
+            internal |= self.safe_mentions[1]
+        return ins, internal
+
+    def react(self, top: Top, inputs: int, internal: int) -> tuple[Top, int]:
         """(next state, action bits). Raises K.InstantaneousLoopError or _CausalityError."""
-        p = self.p
         if top.phase == END:
             return top, 0
-        _, internal = K.mentions(top.term, p.end_masks)
-        if top.phase == MAIN:
-            internal |= K.mentions(p.safe, p.end_masks)[1]
+        p = self.p
         solutions: dict[tuple[int, int], tuple[Top, int]] = {}
         candidates = bits_of(internal)
         for n in range(len(candidates) + 1):
@@ -186,7 +195,8 @@ def compile_program(p: Program, max_states: int = DEFAULT_MAX_STATES) -> Automat
         possible = p.operator_mask
         for t in act:
             possible |= p.event_masks[t]
-        rel = K.mentions(top.term, p.end_masks)[0] & possible if top.phase != END else 0
+        ins, internal = reactor.mentions(top)
+        rel = ins & possible
         try:
             combos = input_combinations(p, act, rel)
         except OverflowError as e:
@@ -196,7 +206,7 @@ def compile_program(p: Program, max_states: int = DEFAULT_MAX_STATES) -> Automat
         row: dict[int, tuple[int, int]] = {}
         for inputs in combos:
             try:
-                nxt, actions = reactor.react(top, inputs)
+                nxt, actions = reactor.react(top, inputs, internal)
             except K.InstantaneousLoopError as e:
                 path = [*path_to(parent, s), inputs]
                 msg = "this loop restarts within one instant: its body ended in the instant it started"

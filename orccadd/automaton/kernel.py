@@ -13,7 +13,7 @@ assignment for the signals it both tests and emits (`react` in `reaction.py`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from orccadd.automaton.ast import Loc
@@ -32,22 +32,24 @@ Cond = tuple[Any, ...]
 
 @dataclass(frozen=True, slots=True)
 class Nothing:
-    pass
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
 class Pause:
-    pass
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
 class Halt:
     loc: Loc
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
 class Emit:
     bit: int
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,23 +57,27 @@ class Present:
     cond: Cond
     then: Term
     orelse: Term
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
 class Seq:
     first: Term
     then: Term
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
 class Par:
     branches: tuple[Term | None, ...]  # None: a branch that terminated, waiting for the join
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
 class Loop:
     body: Term
     loc: Loc
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,6 +88,7 @@ class Abort:
     cond: Cond
     weak: bool
     armed: bool
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,17 +96,20 @@ class Await:
     cond: Cond
     armed: bool
     loc: Loc
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
 class Trap:
     code: int
     body: Term
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
 class Exit:
     code: int
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,12 +118,14 @@ class Run:
 
     task: int
     loc: Loc
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
 class Running:
     task: int
     loc: Loc
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,6 +134,7 @@ class Started:
 
     task: int
     loc: Loc
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -132,6 +145,7 @@ class Handle:
     body: Term
     conds: tuple[Cond, ...]
     handlers: tuple[Term, ...]
+    _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
 Term = (
@@ -153,6 +167,42 @@ Term = (
     | Handle
 )
 NOTHING = Nothing()
+
+
+def _cache_hash(cls: type) -> None:
+    """Terms are hashed at every state lookup; each computes its (recursive) hash once."""
+    names = tuple(f.name for f in fields(cls) if f.name != "_h")
+    tag = cls.__name__
+
+    def cached_hash(self: Any) -> int:
+        h: int = self._h
+        if h == 0:
+            h = hash((tag, *(getattr(self, n) for n in names))) or 1
+            object.__setattr__(self, "_h", h)
+        return h
+
+    cls.__hash__ = cached_hash  # type: ignore[method-assign,assignment]
+
+
+for _cls in (
+    Nothing,
+    Pause,
+    Halt,
+    Emit,
+    Present,
+    Seq,
+    Par,
+    Loop,
+    Abort,
+    Await,
+    Trap,
+    Exit,
+    Run,
+    Running,
+    Started,
+    Handle,
+):
+    _cache_hash(_cls)
 
 
 class InstantaneousLoopError(Exception):
