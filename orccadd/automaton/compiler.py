@@ -12,8 +12,10 @@ import itertools
 from collections import deque
 from dataclasses import dataclass
 
+from orccadd.automaton import ast as A
 from orccadd.automaton import kernel as K
 from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
+from orccadd.automaton.causality import dependencies, find_cycle
 from orccadd.automaton.program import Program
 from orccadd.errors import MissionError
 
@@ -251,26 +253,25 @@ def path_to(parent: list[tuple[int, int]], s: int) -> list[int]:
 
 
 def _causality_error(p: Program, e: _CausalityError, path: list[int]) -> MissionError:
-    names = [p.internals[i] for i in range(len(p.internals)) if e.internal >> i & 1]
-    loc = _first_use(p, names)
-    if e.solutions == 0:
-        msg = (f"not causal: no consistent status for {', '.join(names)} in this instant (an emission "
-               "depends on its own absence: `present S else emit S`)")  # fmt: skip
+    names = {p.internals[i] for i in range(len(p.internals)) if e.internal >> i & 1}
+    deps = dependencies(p.ast, p.internals)
+    cycle = find_cycle(deps, names)
+    if cycle:
+        chain = " -> ".join([cycle[0].tested, *(d.emitted for d in cycle)])
+        why = "; ".join(
+            f"`emit {d.emitted}` at line {d.emitted_at.line} depends on {d.tested} (tested at line "
+            f"{d.tested_at.line})"
+            for d in cycle
+        )
+        at = cycle[0].emitted_at
     else:
-        msg = (f"not causal: {', '.join(names)} could be present or absent in this instant (an emission "
-               "justifies itself: `present S then emit S`)")  # fmt: skip
-    return ReactionError(p, loc[0], loc[1], msg, path)
-
-
-def _first_use(p: Program, names: list[str]) -> tuple[int, int]:
-    import re
-
-    for i, line in enumerate(p.text.splitlines(), start=1):
-        for n in names:
-            m = re.search(rf"\bemit\s+{re.escape(n)}\b", line)
-            if m:
-                return i, m.start() + 1
-    return 1, 1
+        chain, why = ", ".join(sorted(names)), "no emission chain found"
+        at = next((d.emitted_at for d in deps if d.emitted in names), A.Loc(p.file, 1, 1))
+    if e.solutions == 0:
+        kind = "no consistent status (an emission depends on its own absence)"
+    else:
+        kind = "two consistent statuses (an emission justifies itself)"
+    return ReactionError(p, at.line, at.col, f"not causal, cycle {chain}: {kind}; {why}", path)
 
 
 def describe_state(p: Program, top: Top) -> str:

@@ -64,9 +64,9 @@ CASES = [
     ("alternate needs two operands", main("  MoveHome") + "property X: Go and Stop and Ready alternate\n", N + 4, 13,
      "`alternate` needs exactly two operands"),
     ("non-causal emission", main("  present Ready else emit Ready end; MoveHome"), N + 2, 22,
-     "not causal: no consistent status for Ready"),
+     "not causal, cycle Ready -> Ready: no consistent status"),
     ("self-justifying emission", main("  present Ready then emit Ready end; MoveHome"), N + 2, 22,
-     "could be present or absent"),
+     "two consistent statuses"),
     ("fatal guarding nothing", main("  handle await Go on fatal do safe end"), N + 2, 19, "guards no Robot-Task"),
     ("calling the safe procedure", main("  Rest"), N + 2, 3, "enter it with `safe`"),
     ("unknown event of a task", main("  await MoveHome.Collision"), N + 2, 9, "task MoveHome has no event `Collision`"),
@@ -136,3 +136,12 @@ def test_too_many_tasks_active_at_once_is_refused_clearly() -> None:
     text += f"main procedure P\n handle par({branches}) on fatal do safe end\nend\n"
     with pytest.raises(MissionError, match="input combinations"):
         compile_text(text, "wide.mission")
+
+
+def test_non_causal_cycle_through_two_signals_is_named() -> None:
+    text = DECLS.replace("signal Ready", "signal Ready, Set") + (
+        "main procedure P\n  par(present Ready then emit Set end || present Set else emit Ready end); MoveHome\nend\n"
+    )
+    with pytest.raises(MissionError) as info:
+        compile_text(text, "cycle.mission")
+    assert "cycle Ready -> Set -> Ready" in str(info.value)
