@@ -85,7 +85,9 @@ class Runner:
 
     def __init__(self, automaton: Automaton) -> None:
         self.automaton = automaton
-        self.table = automaton.table
+        # a private plain-dict copy: the automaton's rows are read-only views, a lookup through one
+        # costs about 50 ns more; built once when the mission is loaded, never in a tick
+        self.table = tuple(dict(row) for row in automaton.table)
         self.relevant = automaton.relevant
         self.state = 0
 

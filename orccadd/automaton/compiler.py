@@ -11,6 +11,7 @@ from __future__ import annotations
 import itertools
 from collections import deque
 from dataclasses import dataclass
+from types import MappingProxyType
 
 from orccadd.automaton import ast as A
 from orccadd.automaton import kernel as K
@@ -227,7 +228,7 @@ def compile_program(p: Program, max_states: int = DEFAULT_MAX_STATES) -> Automat
     return Automaton(
         program=p,
         relevant=tuple(relevant),
-        table=tuple(table),
+        table=tuple(MappingProxyType(row) for row in table),  # read-only: the checked table is what runs
         active=tuple(active),
         phase=tuple(t.phase for t in states),
         where=where,
