@@ -162,15 +162,15 @@ def _nominal(a: Automaton, inputs: int) -> bool:
 
 
 def _backward(
-    a: Automaton, g: _Graph, goal: Callable[[int, int], bool], keep: Callable[[int], bool]
+    a: Automaton, g: _Graph, goal: Callable[[int, int, int], bool], keep: Callable[[int], bool]
 ) -> set[int]:
-    """States from which a transition satisfying goal(inputs, actions) is reachable over kept edges."""
+    """States from which a transition with goal(inputs, actions, next) is reachable over kept edges."""
     preds: dict[int, list[int]] = {}
     good: set[int] = set()
     for s, inputs, n, actions in g.edges():
         if not keep(inputs):
             continue
-        if goal(inputs, actions):
+        if goal(inputs, actions, n):
             good.add(s)
         preds.setdefault(n, []).append(s)
     queue = deque(good)
@@ -188,8 +188,8 @@ def _check_liveness(a: Automaton, g: _Graph) -> CheckResult:
     def nominal(inputs: int) -> bool:
         return _nominal(a, inputs)
 
-    can_succeed = _backward(a, g, lambda i, act: bool(act & a.success_bit), nominal)
-    can_finish_safe = _backward(a, g, lambda i, act: bool(act & (a.safe_done_bit | a.failed_bit)), nominal)
+    can_succeed = _backward(a, g, lambda i, act, n: bool(act & a.success_bit), nominal)
+    can_finish_safe = _backward(a, g, lambda i, act, n: bool(act & (a.safe_done_bit | a.failed_bit)), nominal)
     for s in sorted(g.parent, key=lambda x: len(g.path(x)) if x < 2000 else x):
         if a.phase[s] == MAIN and s not in can_succeed:
             return CheckResult(
@@ -318,7 +318,12 @@ def _check_property(a: Automaton, g: _Graph, prop: A.PropDecl) -> CheckResult:
     seen = {start}
     queue = deque([start])
     bad: tuple[tuple[int, int], Step | None, str] | None = None
-    can_b = _can_reach_atom(a, g, prop.b) if prop.kind == "eventually" else set()
+    b = prop.b
+    can_b = (
+        _backward(a, g, lambda i, act, n: holds(b, i, act, n), lambda i: True)
+        if prop.kind == "eventually"
+        else set()
+    )
     while queue and bad is None:
         node = queue.popleft()
         s, obs = node
@@ -353,20 +358,3 @@ def _check_property(a: Automaton, g: _Graph, prop: A.PropDecl) -> CheckResult:
         trace.append(st)
     trace.reverse()
     return CheckResult(name, False, f"violated: {why}", trace)
-
-
-def _can_reach_atom(a: Automaton, g: _Graph, e: A.SigExpr) -> set[int]:
-    good: set[int] = set()
-    preds: dict[int, list[int]] = {}
-    for s, inputs, n, actions in g.edges():
-        if _atom_holds(a, e, inputs, actions, n):
-            good.add(s)
-        preds.setdefault(n, []).append(s)
-    queue = deque(good)
-    while queue:
-        n = queue.popleft()
-        for s in preds.get(n, []):
-            if s not in good:
-                good.add(s)
-                queue.append(s)
-    return good
