@@ -142,6 +142,7 @@ class _Elaborator:
             safe=safe,
             properties=m.properties,
             ast=m,
+            names=self.spellings(),
         )
 
     def task(self, t: A.TaskDecl, index: int) -> TaskInfo:
@@ -210,6 +211,11 @@ class _Elaborator:
                 f"signature mismatch: {path} claims joints {list(spec.task.joints)}, not {list(t.joints)}",
             )
         return t.joints or spec.task.joints
+
+    def spellings(self) -> dict[str, tuple[str, ...]]:
+        out = {name: tuple(dict.fromkeys(full)) for name, full in self.short.items()}
+        out.update({full: (full,) for full in self.full})
+        return out
 
     # signals --------------------------------------------------------------------------------------
 

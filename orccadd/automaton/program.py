@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from orccadd.automaton.ast import Loc, MissionAst, PropDecl, SigExpr
 from orccadd.automaton.kernel import Term
+from orccadd.errors import OrccaddError
 
 # Event kinds of a Robot-Task as the mission sees them, in input-bit order within a task.
 EVENT_KINDS = ("post", "pre", "T2", "T3", "sync")
@@ -71,6 +73,17 @@ class Program:
     safe: Term  # the safe procedure, wrapped so that a type 3 inside it ends the mission (failed)
     properties: tuple[PropDecl, ...]
     ast: MissionAst
+    names: Mapping[str, tuple[str, ...]]  # every accepted spelling (full or short) -> full names
+
+    def signal(self, name: str) -> str:
+        """The full name of a signal as the mission may write it; OrccaddError if unknown or ambiguous."""
+        full = self.names.get(name, ())
+        if len(full) == 1:
+            return full[0]
+        what = f"ambiguous ({', '.join(full)})" if full else "unknown"
+        raise OrccaddError(
+            f"signal {name!r} is {what}; known signals: {', '.join([*self.inputs, *self.internals])}"
+        )
 
     def input_bit(self, name: str) -> int:
         return 1 << self.inputs.index(name)

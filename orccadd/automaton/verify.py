@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 
 from orccadd.automaton import ast as A
 from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
-from orccadd.automaton.program import Program
 
 
 @dataclass(frozen=True)
@@ -190,7 +189,7 @@ def _check_liveness(a: Automaton, g: _Graph) -> CheckResult:
 
     can_succeed = _backward(a, g, lambda i, act, n: bool(act & a.success_bit), nominal)
     can_finish_safe = _backward(a, g, lambda i, act, n: bool(act & (a.safe_done_bit | a.failed_bit)), nominal)
-    for s in sorted(g.parent, key=lambda x: len(g.path(x)) if x < 2000 else x):
+    for s in g.parent:  # breadth-first order: the first stuck state has the shortest path
         if a.phase[s] == MAIN and s not in can_succeed:
             return CheckResult(
                 "liveness", False, "success is unreachable from a reachable state without an exception",
@@ -267,7 +266,7 @@ def _warnings(a: Automaton, g: _Graph) -> list[str]:
 def _atom_holds(a: Automaton, e: A.SigExpr, inputs: int, actions: int, nxt: int) -> bool:
     p = a.program
     if isinstance(e, A.SigRef):
-        name = _resolve(p, e.name)
+        name = p.signal(e.name)
         if name in p.inputs:
             return bool(inputs >> p.inputs.index(name) & 1)
         return bool(actions >> (a.emit_base + p.internals.index(name)) & 1)
@@ -282,17 +281,6 @@ def _atom_holds(a: Automaton, e: A.SigExpr, inputs: int, actions: int, nxt: int)
     if isinstance(e, A.And):
         return all(_atom_holds(a, x, inputs, actions, nxt) for x in e.items)
     return any(_atom_holds(a, x, inputs, actions, nxt) for x in e.items)
-
-
-def _resolve(p: Program, name: str) -> str:
-    """A name as the elaborator accepted it → the full signal name."""
-    if name in p.inputs or name in p.internals:
-        return name
-    for full in p.inputs:
-        parts = full.split(".")
-        if parts[-1] == name or f"{parts[0]}.{parts[-1]}" == name:
-            return full
-    return name
 
 
 def _check_property(a: Automaton, g: _Graph, prop: A.PropDecl) -> CheckResult:

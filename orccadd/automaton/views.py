@@ -66,12 +66,7 @@ def resolve_atoms(a: Automaton, names: Iterable[str]) -> list[_Atom]:
         elif n in p.internals:
             out.append(_Atom(n, "action", 1 << (a.emit_base + p.internals.index(n))))
         else:
-            full = [f for f in p.inputs if f == n or f.split(".")[-1] == n or f.endswith("." + n)]
-            if len(full) != 1:
-                known = ", ".join([*p.inputs, *p.internals, *tasks])
-                what = "ambiguous" if full else "unknown"
-                raise OrccaddError(f"{raw!r} is {what}; known signals and tasks: {known}")
-            out.append(_Atom(n, "input", 1 << p.inputs.index(full[0])))
+            out.append(_Atom(n, "input", 1 << p.inputs.index(p.signal(n))))
     return out
 
 
