@@ -311,9 +311,10 @@ class _Elaborator:
         return K.Handle(body, tuple(conds), tuple(terms))
 
     def t3_of(self, t: K.Term) -> int:
+        by_index = {info.index: info for info in self.tasks.values()}
         mask = 0
         for i in _tasks_in(t):
-            mask |= list(self.tasks.values())[i].mask("T3")
+            mask |= by_index[i].mask("T3")
         return mask
 
     def stmt(self, s: A.Stmt, sc: _Scope) -> K.Term:
