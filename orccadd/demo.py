@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
                 phase = loop.run_task(task, timeout_s=10.0)
                 elapsed = time.monotonic() - t0
                 err = float(np.abs(session.resource.state.q_rad - goal).max())
-                names = [n.split(".", 1)[1] for n in session.event_names()]
+                names = [n.split(".", 1)[1] for n in session.event_names() if not n.endswith(".pre")]
                 print(
                     f"motion {i}/{len(TARGETS_RAD)} {name:6s} target {np.round(goal, 2).tolist()}: "
                     f"{phase.name.lower()} in {elapsed:5.2f} s, final error {err:.4f} rad "

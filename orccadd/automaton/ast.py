@@ -219,6 +219,16 @@ class EventDecl:
 
 
 @dataclass(frozen=True)
+class ParamSet:
+    """`set MODULE.PARAM = value` in a task declaration: this instance's parameter value."""
+
+    module: str
+    param: str
+    value: float | tuple[float, ...]
+    loc: Loc
+
+
+@dataclass(frozen=True)
 class TaskDecl:
     name: str
     resource: str
@@ -227,6 +237,7 @@ class TaskDecl:
     events: tuple[EventDecl, ...]
     loc: Loc
     resource_loc: Loc
+    params: tuple[ParamSet, ...] = ()
 
 
 @dataclass(frozen=True)

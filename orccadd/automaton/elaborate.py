@@ -28,7 +28,7 @@ from orccadd.errors import MissionError, OrccaddError
 # Words that would be read as a keyword where a name can stand (statements, signal expressions).
 _RESERVED = (
     "run nothing pause halt safe emit await immediate when until do weak loop seq par present then else "
-    "trap in exit every handle on end fatal and or not never eventually alternate"
+    "trap in exit every handle on end fatal and or not never eventually alternate set"
 )
 KEYWORDS = frozenset(_RESERVED.split())
 PROPERTY_FNS = ("active", "start", "stop")
@@ -150,6 +150,8 @@ class _Elaborator:
         joints = t.joints
         if t.source:
             joints = self.check_against_file(t, declared)
+        elif t.params:
+            raise self.err(t.params[0].loc, f"task {t.name}: `set` needs a task file (`from \"file.toml\"`)")
         seen: dict[tuple[str, str], A.Loc] = {}
         for kind, name, loc in declared:
             if (kind, name) in seen:
@@ -196,6 +198,12 @@ class _Elaborator:
                 offered = ", ".join(f"{k} {n}".strip() for k in EVENT_KINDS for n in sorted(has[k])) or "none"
                 msg = f"signature mismatch: {path} declares no {what} for {t.name} (it has: {offered})"
                 raise self.err(loc, msg)
+        modules = {m.name for m in spec.modules}
+        for ps in t.params:
+            if ps.module not in modules:
+                raise self.err(
+                    ps.loc, f"task {t.name}: {path} has no module {ps.module!r} (modules: {', '.join(sorted(modules))})"
+                )
         if spec.task.resource != t.resource:
             raise self.err(
                 t.resource_loc,

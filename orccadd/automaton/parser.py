@@ -28,6 +28,10 @@ _WORDS = {
     "__ANON_1": "`->`",
     "EVKIND": "an event kind (post, pre, T2, T3, sync)",
     "PROC_ROLE": "`main` or `safe`",
+    "NUMBER": "a number",
+    "EQUAL": "`=`",
+    "LSQB": "`[`",
+    "RSQB": "`]`",
 }
 _DECL_TOKENS = ("MISSION", "RESOURCE", "INPUT", "SIGNAL", "TASK", "PROCEDURE", "PROC_ROLE", "PROPERTY")
 
@@ -182,9 +186,13 @@ class _Builder:
         return [A.NameDecl(str(t), self.loc(t)) for t in node.children if isinstance(t, lark.Token)]
 
     def task(self, d: lark.Tree[Any]) -> A.TaskDecl:
-        _, name, _, resource, _, joints, _, source, *events, _ = d.children
+        _, name, _, resource, _, joints, _, source, *items, _ = d.children
         evs: list[A.EventDecl] = []
-        for e in events:
+        params: list[A.ParamSet] = []
+        for e in items:
+            if e.data == "task_set":
+                params.append(self.param_set(e))
+                continue
             kind_tok, lst = e.children
             kind = str(kind_tok)
             kind = kind.upper() if kind.lower() in ("t2", "t3") else kind.lower()
@@ -203,7 +211,14 @@ class _Builder:
         return A.TaskDecl(
             str(name), str(resource), tuple(n.name for n in self.names(joints)) if joints is not None else (),
             str(source)[1:-1] if source is not None else "", tuple(evs), self.loc(name), self.loc(resource),
+            tuple(params),
         )  # fmt: skip
+
+    def param_set(self, e: lark.Tree[Any]) -> A.ParamSet:
+        _, module, param, value = e.children
+        numbers = [float(t) for t in value.children if isinstance(t, lark.Token)]
+        v: float | tuple[float, ...] = numbers[0] if value.data == "number" else tuple(numbers)
+        return A.ParamSet(str(module), str(param), v, self.loc(module))
 
     def procedure(self, d: lark.Tree[Any]) -> A.ProcDecl:
         role, _, name, body, *rest = d.children

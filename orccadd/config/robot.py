@@ -75,6 +75,31 @@ class LimitsConfig:
 
 
 @dataclass(frozen=True)
+class DaemonConfig:
+    """How `orccadd` runs this robot: socket, access roles, priorities, fault policies.
+
+    The socket's directory gets mode 0750 and the socket 0660, both owned by `socket_group`
+    (empty: the daemon's own group). A peer is allowed the control role if its uid is root or
+    the daemon's, or its user/group is listed in `control_users`/`control_groups`; the read-only
+    role (status, monitor, events, params) likewise with `read_users`/`read_groups`.
+    """
+
+    socket: str = field(default="/run/orccadd/orccadd.sock")
+    socket_group: str = field(default="")
+    control_users: tuple[str, ...] = field(default=())
+    control_groups: tuple[str, ...] = field(default=("orccadd",))
+    read_users: tuple[str, ...] = field(default=())
+    read_groups: tuple[str, ...] = field(default=("orccadd-ro",))
+    hold_task: str = field(default="../tasks/hold.toml")
+    control_priority: int = field(default=80, bounds=(0, 98))
+    automaton_priority: int = field(default=90, bounds=(0, 99))
+    overrun_limit: int = field(default=5, bounds=(1, 1000))
+    switch_blend_s: float = field(default=0.02, bounds=(0.0, 1.0))
+    on_command_daemon_loss: Literal["continue", "safe_stop"] = field(default="continue")
+    watchdog_stale_periods: int = field(default=50, bounds=(2, 100000))
+
+
+@dataclass(frozen=True)
 class ResourceConfig:
     """The Physical Resource backend (`sim`, later `canopen`, `dynamixel`, `ur_rtde`)."""
 
@@ -94,6 +119,7 @@ class RobotConfig:
     resource: ResourceConfig = field()
     safe_stop: SafeStopConfig = field(default=SafeStopConfig())
     limits: LimitsConfig = field(default=LimitsConfig())
+    daemon: DaemonConfig = field(default=DaemonConfig())
     source: str = ""  # the file it was loaded from (set by the loader)
     backend_settings: Any = None  # the backend's typed settings (set by the loader)
 

@@ -155,6 +155,7 @@ def build_task(
     t2 = [e.name for e in spec.events.T2]
     if spec.preconditions:
         builtin[PRECONDITION_TIMEOUT] = registry.register(h.name, EventKind.T2, PRECONDITION_TIMEOUT)
+        builtin["pre"] = registry.register(h.name, EventKind.PRE, "pre")
         t2.append(PRECONDITION_TIMEOUT)
     sig = TaskSignature(
         name=h.name,

@@ -20,6 +20,7 @@ class EventKind(IntEnum):
     T2 = 2  # type 2 exception: the task cannot complete, the procedure chooses what next
     T3 = 3  # type 3 exception: fatal, safe stop at once, then the safe procedure
     SYNC = 4  # synchronisation signal
+    PRE = 5  # the preconditions held: the law started (only for tasks with preconditions)
 
 
 KIND_PREFIX = {
@@ -28,6 +29,7 @@ KIND_PREFIX = {
     EventKind.T2: "T2.",
     EventKind.T3: "T3.",
     EventKind.SYNC: "sync.",
+    EventKind.PRE: "",
 }
 
 # Type 3 exceptions every task has, raised by the resource layer and the executor.
@@ -38,6 +40,8 @@ PRECONDITION_TIMEOUT = "PreconditionTimeout"
 def event_name(task: str, kind: EventKind, name: str) -> str:
     if kind is EventKind.POST:
         return f"{task}.done"
+    if kind is EventKind.PRE:
+        return f"{task}.pre"
     return f"{task}.{KIND_PREFIX[kind]}{name}"
 
 

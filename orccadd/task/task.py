@@ -139,6 +139,14 @@ class RobotTask:
         self._pre_started = False
         self._pending: list[tuple[Module, Parameter, npt.NDArray[np.float64]]] = []
         self._tunable = {f"{m.name}.{p.name}": (m, p) for m in modules for p in m.parameters.values()}
+        # bumpless transfer: the first command continues the previous task's last one
+        self.sent = np.zeros_like(command)  # the last command sent (after blending)
+        self.wrote = False  # a command was sent in the last tick
+        self._offset = np.zeros_like(command)
+        self._blended = np.zeros_like(command)
+        self._blend_ticks = 0
+        self._blend_left = 0
+        self._holding_previous = False
 
     # ---- control (not for a tick unless said) ---------------------------------------------
     def activate(self) -> None:
@@ -149,9 +157,20 @@ class RobotTask:
         for ev in self.events:
             ev.prev = False
         self._pre_started = False
+        self._holding_previous = False
+        self._blend_left = 0
+
+    def continue_from(self, previous: npt.NDArray[np.float64], blend_ticks: int) -> None:
+        """Switching (seed §5.1): until the law starts, keep sending `previous` (the outgoing
+        task's last command); then blend the difference between it and this law's first command
+        out linearly over `blend_ticks`, so the command never jumps. Call after `activate`."""
+        self.sent[:] = previous
+        self._holding_previous = True
+        self._blend_ticks = self._blend_left = max(0, blend_ticks)
 
     def deactivate(self) -> None:
         self.phase = Phase.IDLE
+        self.wrote = False
 
     def tune(self, path: str, value: Any) -> None:
         """Check `MODULE.PARAM = value` now; apply it in place at the next tick boundary."""
@@ -181,6 +200,7 @@ class RobotTask:
     def tick(self, t_s: float) -> None:
         """One period: read → preconditions or law → shell events → write."""
         res = self.resource
+        self.wrote = False
         st = res.read(t_s)
         if st.status & T3_MASK:
             self._resource_t3(t_s, st.status)
@@ -191,15 +211,21 @@ class RobotTask:
                 self._pre_started = True
                 self.t_started_s = t_s
             if not self._preconditions_hold(t_s):
+                if self._holding_previous and self.phase is Phase.PRE:
+                    self._send(t_s, self.sent)  # the outgoing command, until the law starts
                 return
             for m in self.modules:
                 m.start(st)
             self.phase = phase = Phase.RUN
             self.t_started_s = t_s
+            if self.preconditions:
+                self.queue.push(t_s, self.builtin_ids["pre"])
         if phase not in RUNNING:
             return
         self.ticks += 1
         if self.decimation > 1 and (self.ticks - 1) % self.decimation:
+            if self._holding_previous:
+                self._send(t_s, self.sent)
             return
         if self._pending:
             self._apply(self._pending)
@@ -213,7 +239,23 @@ class RobotTask:
             ev.prev = fired
         if self.phase is Phase.FAULT:
             return
-        flags = res.write(t_s, self.command)
+        cmd = self.command
+        if self._holding_previous:
+            self._holding_previous = False
+            if self._blend_ticks:
+                np.subtract(self.sent, cmd, out=self._offset)
+        if self._blend_left:
+            np.multiply(self._offset, self._blend_left / self._blend_ticks, out=self._blended)
+            np.add(self._blended, cmd, out=self._blended)
+            cmd = self._blended
+            self._blend_left -= 1
+        self._send(t_s, cmd)
+
+    def _send(self, t_s: float, cmd: npt.NDArray[np.float64]) -> None:
+        flags = self.resource.write(t_s, cmd)
+        if cmd is not self.sent:
+            self.sent[:] = cmd
+        self.wrote = True
         self.last_write_flags = flags
         if flags & T3_MASK:
             self._resource_t3(t_s, flags)

@@ -31,7 +31,7 @@ def test_motion_through_the_process_link(session: Session) -> None:
     task = session.task(MOVE_TASK)
     loop = session.loop(WallClock(), overrun_limit=10**6)
     assert loop.run_task(task, timeout_s=6.0) is Phase.DONE
-    assert session.event_names() == ["MoveJoints.done"]
+    assert session.event_names() == ["MoveJoints.pre", "MoveJoints.done"]
 
 
 def test_plant_killed_is_comm_lost_type_3(session: Session) -> None:

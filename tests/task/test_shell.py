@@ -27,7 +27,7 @@ def test_t1_lowers_speed_locally_and_task_completes(task_variant) -> None:  # ty
     traj.configure({"target_rad": FAR})
     assert loop.run_task(task, timeout_s=10.0) is Phase.DONE
     names = s.event_names()
-    assert names[0] == "MoveJoints.T1.TrackingDrift" and names[-1] == "MoveJoints.done"
+    assert names[:2] == ["MoveJoints.pre", "MoveJoints.T1.TrackingDrift"] and names[-1] == "MoveJoints.done"
     assert float(traj.speed_scale.value) == pytest.approx(0.4)
 
 
@@ -74,7 +74,7 @@ def test_t3_from_a_watcher_safe_stops_the_arm(task_variant) -> None:  # type: ig
     )
     next(m for m in task.modules if m.name == "traj").configure({"target_rad": FAR})
     assert loop.run_task(task, timeout_s=10.0) is Phase.FAULT
-    assert s.event_names() == ["MoveJoints.T3.NearJointLimit"]
+    assert s.event_names() == ["MoveJoints.pre", "MoveJoints.T3.NearJointLimit"]
     assert s.resource.stopping_or_stopped
     assert np.abs(s.resource.state.dq_rad_s).max() > 0.5  # it was moving fast
     check_stopped_safely(s, loop, category_torque_off=True)  # category 1: brakes, torque off

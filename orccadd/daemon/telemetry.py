@@ -1,0 +1,244 @@
+"""Telemetry from the real-time process to the command daemon: one shared-memory block.
+
+The real-time process writes, never waits and never learns whether anyone reads. Layout
+(float64 throughout, so one numpy view per area):
+
+- header: sizes, the writer's pid, a heartbeat (monotonic ns of the last tick);
+- status: the machine's state and timing figures, under a sequence lock (odd while writing);
+- tick ring: one record per control tick (time, timing, active task, q, dq, tau, command);
+- trace ring: one record per automaton instant or operator action (inputs, actions, states).
+
+Ring protocol: the writer marks a slot invalid (`seq = -1`), fills it, then stores its sequence
+number and advances the head. A reader copies a slot and keeps it only if its sequence number is
+the one expected both before and after the copy, so it never keeps a torn record; records that
+were overwritten before it came are counted as lost.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from enum import IntEnum
+from multiprocessing import resource_tracker, shared_memory
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+MAGIC = 0x0CCADD01
+HEADER_LEN = 16
+STATUS_LEN = 48
+TRACE_IDX = 16  # input / action indices kept per trace record
+
+
+class H(IntEnum):
+    """Header slots."""
+
+    MAGIC = 0
+    DOF = 1
+    TICK_LEN = 2
+    TICK_WIDTH = 3
+    TICK_HEAD = 4
+    TRACE_LEN = 5
+    TRACE_WIDTH = 6
+    TRACE_HEAD = 7
+    PID = 8
+    HEARTBEAT_NS = 9
+    PERIOD_S = 10
+
+
+class S(IntEnum):
+    """Status slots (under the sequence lock in slot 0)."""
+
+    SEQ = 0
+    MACHINE = 1  # MachineState
+    AUTOMATON_STATE = 2
+    ACTIVE_TASK = 3  # task id (0: Hold, k: the mission's task k-1), -1: none
+    TASK_PHASE = 4
+    TICKS = 5
+    OVERRUNS = 6
+    CONSECUTIVE_OVERRUNS = 7
+    WAKE_P50_US = 8
+    WAKE_P99_US = 9
+    WAKE_MAX_US = 10
+    COMPUTE_P50_US = 11
+    COMPUTE_P99_US = 12
+    COMPUTE_MAX_US = 13
+    MISSION_GEN = 14  # changes each time a mission is loaded
+    INSTANTS = 15
+    RESOURCE_STATUS = 16
+    PLANT_PID = 17
+    RESULT = 18  # MissionResult of the last run
+    SWITCHES = 19
+    EVENTS_DROPPED = 20
+    HOLDING = 21
+
+
+class Trace(IntEnum):
+    """What a trace record is."""
+
+    INSTANT = 0  # an automaton reaction: inputs -> actions
+    EVENT = 1  # a task event the automaton does not see (T1, the Hold task's events)
+    COMMAND = 2  # an operator action (start, stop, abort, hold, resume, reset, tune)
+
+
+# trace record: seq, kind, t_s, wall_s, state_from, state_to, code, n_in, n_act, in[16], act[16]
+TRACE_WIDTH = 9 + 2 * TRACE_IDX
+
+
+def tick_width(dof: int) -> int:
+    """seq, t_s, wake_us, compute_us, task, phase, wrote, then q, dq, tau, command."""
+    return 7 + 4 * dof
+
+
+TICK_FIELDS = ("seq", "t_s", "wake_us", "compute_us", "task", "phase", "wrote")
+
+
+@dataclass(frozen=True)
+class Layout:
+    dof: int
+    tick_len: int
+    trace_len: int
+
+    @property
+    def size_bytes(self) -> int:
+        n = HEADER_LEN + STATUS_LEN + self.tick_len * tick_width(self.dof) + self.trace_len * TRACE_WIDTH
+        return 8 * n
+
+
+class TelemetryBlock:
+    """Views on the block. The real-time process creates it; the command daemon attaches."""
+
+    def __init__(self, shm: shared_memory.SharedMemory, owner: bool) -> None:
+        self.shm = shm
+        self.owner = owner
+        buf = np.ndarray((shm.size // 8,), dtype=np.float64, buffer=shm.buf)
+        self.header = buf[:HEADER_LEN]
+        if int(self.header[H.MAGIC]) != MAGIC:
+            raise ValueError(f"shared memory {shm.name!r} is not an orccadd telemetry block")
+        self.dof = int(self.header[H.DOF])
+        self.tick_len = int(self.header[H.TICK_LEN])
+        self.trace_len = int(self.header[H.TRACE_LEN])
+        o = HEADER_LEN
+        self.status = buf[o : o + STATUS_LEN]
+        o += STATUS_LEN
+        tw = tick_width(self.dof)
+        self.ticks = buf[o : o + self.tick_len * tw].reshape(self.tick_len, tw)
+        o += self.tick_len * tw
+        self.trace = buf[o : o + self.trace_len * TRACE_WIDTH].reshape(self.trace_len, TRACE_WIDTH)
+
+    @staticmethod
+    def create(layout: Layout, period_s: float, name: str | None = None) -> TelemetryBlock:
+        shm = shared_memory.SharedMemory(name=name, create=True, size=layout.size_bytes)
+        buf = np.ndarray((shm.size // 8,), dtype=np.float64, buffer=shm.buf)
+        buf[:] = 0.0
+        hdr = buf[:HEADER_LEN]
+        hdr[H.DOF] = layout.dof
+        hdr[H.TICK_LEN] = layout.tick_len
+        hdr[H.TICK_WIDTH] = tick_width(layout.dof)
+        hdr[H.TRACE_LEN] = layout.trace_len
+        hdr[H.TRACE_WIDTH] = TRACE_WIDTH
+        hdr[H.PID] = os.getpid()
+        hdr[H.PERIOD_S] = period_s
+        hdr[H.MAGIC] = MAGIC
+        return TelemetryBlock(shm, owner=True)
+
+    @staticmethod
+    def attach(name: str) -> TelemetryBlock:
+        shm = shared_memory.SharedMemory(name=name, create=False)
+        # Python < 3.13 registers attached blocks too and would unlink the owner's block at exit
+        resource_tracker.unregister(shm._name, "shared_memory")  # type: ignore[attr-defined]
+        return TelemetryBlock(shm, owner=False)
+
+    @property
+    def name(self) -> str:
+        return self.shm.name
+
+    @property
+    def period_s(self) -> float:
+        return float(self.header[H.PERIOD_S])
+
+    def close(self) -> None:
+        for attr in ("header", "status", "ticks", "trace"):
+            setattr(self, attr, None)
+        self.shm.close()
+        if self.owner:
+            try:
+                self.shm.unlink()
+            except FileNotFoundError:
+                pass
+
+    # ---- writer side (the real-time process; tick-safe, allocation-free) ------------------
+    def begin_tick(self) -> FloatArray:
+        """The slot for the next tick record (marked invalid); fill it, then `commit_tick`."""
+        head = int(self.header[H.TICK_HEAD])
+        rec = self.ticks[head % self.tick_len]
+        rec[0] = -1.0
+        return rec
+
+    def commit_tick(self, rec: FloatArray, heartbeat_ns: int) -> None:
+        head = self.header[H.TICK_HEAD] + 1.0
+        rec[0] = head
+        self.header[H.TICK_HEAD] = head
+        self.header[H.HEARTBEAT_NS] = heartbeat_ns
+
+    def begin_trace(self) -> FloatArray:
+        head = int(self.header[H.TRACE_HEAD])
+        rec = self.trace[head % self.trace_len]
+        rec[0] = -1.0
+        rec[1:] = 0.0
+        return rec
+
+    def commit_trace(self, rec: FloatArray) -> None:
+        head = self.header[H.TRACE_HEAD] + 1.0
+        rec[0] = head
+        self.header[H.TRACE_HEAD] = head
+
+    def write_status(self, values: dict[int, float]) -> None:
+        st = self.status
+        st[S.SEQ] += 1.0  # odd: writing
+        for k, v in values.items():
+            st[k] = v
+        st[S.SEQ] += 1.0
+
+
+class RingReader:
+    """Follows one ring of a block from a chosen start; `poll()` returns the new records."""
+
+    def __init__(self, ring: FloatArray, header: FloatArray, head_slot: int, from_now: bool = True) -> None:
+        self.ring = ring
+        self.header = header
+        self.head_slot = head_slot
+        self.next = int(header[head_slot]) if from_now else max(0, int(header[head_slot]) - len(ring))
+        self.lost = 0
+
+    def poll(self, max_records: int = 100_000) -> FloatArray:
+        head = int(self.header[self.head_slot])
+        n = len(self.ring)
+        if head - self.next > n:
+            self.lost += head - n - self.next
+            self.next = head - n
+        stop = min(head, self.next + max_records)
+        if stop <= self.next:
+            return np.empty((0, self.ring.shape[1]))
+        idx = np.arange(self.next, stop) % n
+        out = self.ring[idx].copy()  # fancy indexing copies
+        expect = np.arange(self.next + 1, stop + 1, dtype=np.float64)
+        ok = (out[:, 0] == expect) & (self.ring[idx, 0] == expect)
+        self.lost += int((~ok).sum())
+        self.next = stop
+        return out[ok]
+
+
+def read_status(block: TelemetryBlock, tries: int = 100) -> FloatArray:
+    """A consistent copy of the status area (retries while the writer is in the middle)."""
+    st = block.status
+    for _ in range(tries):
+        s0 = st[S.SEQ]
+        if int(s0) % 2:
+            continue
+        copy = st.copy()
+        if st[S.SEQ] == s0:
+            return copy
+    return st.copy()
