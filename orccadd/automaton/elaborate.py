@@ -28,7 +28,7 @@ from orccadd.errors import MissionError, OrccaddError
 # Words that would be read as a keyword where a name can stand (statements, signal expressions).
 _RESERVED = (
     "run nothing pause halt safe emit await immediate when until do weak loop seq par present then else "
-    "trap in exit every handle on end fatal and or not never eventually alternate set"
+    "trap in exit every handle on end fatal and or not never eventually alternate"
 )
 KEYWORDS = frozenset(_RESERVED.split())
 PROPERTY_FNS = ("active", "start", "stop")
