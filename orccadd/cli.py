@@ -1,29 +1,34 @@
-"""Console entry points: `orccadd` (the daemon, next issue) and `orccadctl` (the client)."""
+"""Console entry points: `orccadd` (the real-time daemon) and `orccadctl` (the client)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-from orccadd.ctl import offline
+from orccadd.ctl import offline, online
 
 
 def orccadd_main() -> int:
-    print("orccadd: the daemon is not built yet; try `python -m orccadd.demo`", file=sys.stderr)
-    return 2
+    from orccadd.daemon.rtproc import main
+
+    return main()
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="orccadctl", description="Check, draw and (soon) run orccadd missions."
+        prog="orccadctl", description="Check, draw, run, monitor and tune orccadd missions."
     )
     sub = parser.add_subparsers(dest="command", required=True)
     offline.add_parsers(sub)
+    online.add_parsers(sub)
     return parser
 
 
 def orccadctl_main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if getattr(args, "online", None) or args.command == "plot":
+        code: int = args.func(args)
+        return code
     return offline.run(args)
 
 

@@ -151,7 +151,7 @@ class _Elaborator:
         if t.source:
             joints = self.check_against_file(t, declared)
         elif t.params:
-            raise self.err(t.params[0].loc, f"task {t.name}: `set` needs a task file (`from \"file.toml\"`)")
+            raise self.err(t.params[0].loc, f'task {t.name}: `set` needs a task file (`from "file.toml"`)')
         seen: dict[tuple[str, str], A.Loc] = {}
         for kind, name, loc in declared:
             if (kind, name) in seen:
@@ -201,8 +201,9 @@ class _Elaborator:
         modules = {m.name for m in spec.modules}
         for ps in t.params:
             if ps.module not in modules:
+                known = ", ".join(sorted(modules))
                 raise self.err(
-                    ps.loc, f"task {t.name}: {path} has no module {ps.module!r} (modules: {', '.join(sorted(modules))})"
+                    ps.loc, f"task {t.name}: {path} has no module {ps.module!r} (modules: {known})"
                 )
         if spec.task.resource != t.resource:
             raise self.err(

@@ -16,6 +16,7 @@ were overwritten before it came are counted as lost.
 
 from __future__ import annotations
 
+import contextlib
 import os
 from dataclasses import dataclass
 from enum import IntEnum
@@ -46,6 +47,10 @@ class H(IntEnum):
     PID = 8
     HEARTBEAT_NS = 9
     PERIOD_S = 10
+    TICKS = 11  # written by the control thread every tick
+    OVERRUNS = 12
+    CONSECUTIVE_OVERRUNS = 13
+    SWITCHES = 14
 
 
 class S(IntEnum):
@@ -54,25 +59,11 @@ class S(IntEnum):
     SEQ = 0
     MACHINE = 1  # MachineState
     AUTOMATON_STATE = 2
-    ACTIVE_TASK = 3  # task id (0: Hold, k: the mission's task k-1), -1: none
-    TASK_PHASE = 4
-    TICKS = 5
-    OVERRUNS = 6
-    CONSECUTIVE_OVERRUNS = 7
-    WAKE_P50_US = 8
-    WAKE_P99_US = 9
-    WAKE_MAX_US = 10
-    COMPUTE_P50_US = 11
-    COMPUTE_P99_US = 12
-    COMPUTE_MAX_US = 13
-    MISSION_GEN = 14  # changes each time a mission is loaded
-    INSTANTS = 15
-    RESOURCE_STATUS = 16
-    PLANT_PID = 17
-    RESULT = 18  # MissionResult of the last run
-    SWITCHES = 19
-    EVENTS_DROPPED = 20
-    HOLDING = 21
+    MISSION_GEN = 3  # changes each time a mission is loaded (names may change)
+    INSTANTS = 4
+    RESULT = 5  # MissionResult of the last run
+    FAULTED = 6  # 1: the resource was safe-stopped; `reset` is needed before motion
+    PLANT_PID = 7
 
 
 class Trace(IntEnum):
@@ -87,12 +78,13 @@ class Trace(IntEnum):
 TRACE_WIDTH = 9 + 2 * TRACE_IDX
 
 
+TICK_FIELDS = ("seq", "t_s", "wake_us", "compute_us", "task", "phase", "wrote", "status")
+TICK_VECTORS = ("q", "dq", "tau", "cmd")
+
+
 def tick_width(dof: int) -> int:
-    """seq, t_s, wake_us, compute_us, task, phase, wrote, then q, dq, tau, command."""
-    return 7 + 4 * dof
-
-
-TICK_FIELDS = ("seq", "t_s", "wake_us", "compute_us", "task", "phase", "wrote")
+    """The scalar fields, then q, dq, tau and the command sent, one value per joint each."""
+    return len(TICK_FIELDS) + len(TICK_VECTORS) * dof
 
 
 @dataclass(frozen=True)
@@ -164,10 +156,8 @@ class TelemetryBlock:
             setattr(self, attr, None)
         self.shm.close()
         if self.owner:
-            try:
+            with contextlib.suppress(FileNotFoundError):
                 self.shm.unlink()
-            except FileNotFoundError:
-                pass
 
     # ---- writer side (the real-time process; tick-safe, allocation-free) ------------------
     def begin_tick(self) -> FloatArray:
@@ -175,7 +165,7 @@ class TelemetryBlock:
         head = int(self.header[H.TICK_HEAD])
         rec = self.ticks[head % self.tick_len]
         rec[0] = -1.0
-        return rec
+        return rec  # type: ignore[no-any-return]
 
     def commit_tick(self, rec: FloatArray, heartbeat_ns: int) -> None:
         head = self.header[H.TICK_HEAD] + 1.0
@@ -188,7 +178,7 @@ class TelemetryBlock:
         rec = self.trace[head % self.trace_len]
         rec[0] = -1.0
         rec[1:] = 0.0
-        return rec
+        return rec  # type: ignore[no-any-return]
 
     def commit_trace(self, rec: FloatArray) -> None:
         head = self.header[H.TRACE_HEAD] + 1.0
@@ -228,7 +218,7 @@ class RingReader:
         ok = (out[:, 0] == expect) & (self.ring[idx, 0] == expect)
         self.lost += int((~ok).sum())
         self.next = stop
-        return out[ok]
+        return out[ok]  # type: ignore[no-any-return]
 
 
 def read_status(block: TelemetryBlock, tries: int = 100) -> FloatArray:

@@ -182,9 +182,9 @@ class PhysicalResource(ABC):
             raise ResourceError(
                 f"resource {self.name!r}: cannot clear the stop while faulted ({self.fault_message})"
             )
-        self._stop_flags = 0
-        self._on_clear_stop()
+        self._on_clear_stop()  # the device first; commands stay ignored until it confirmed
         self._last_pos_cmd[:] = self.state.q_rad
+        self._stop_flags = 0
 
     # ---- tick methods ---------------------------------------------------------------------
     def read(self, t_s: float) -> JointState:

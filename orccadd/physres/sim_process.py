@@ -63,6 +63,7 @@ class SimProcessArm(PhysicalResource):
         self._silent_reads = 0
         self._wrote = False
         self._last_cmd: FloatArray = np.zeros(self.dof)
+        self._settled_heartbeat = 0
 
     # ---- lifecycle ------------------------------------------------------------------------
     def _on_configure(self) -> None:
@@ -143,6 +144,9 @@ class SimProcessArm(PhysicalResource):
 
     def _on_clear_stop(self) -> None:
         self._request(Request.CLEAR_STOP)
+        # the plant acknowledges before it publishes its next state: until then the state it
+        # last published still says "stopped", which must not read as a stop of its own
+        self._settled_heartbeat = int(self._ch().ctl[Ctl.HEARTBEAT]) + 1
 
     def inject_fault(self, message: str, code: int = 0x1000) -> None:
         """Make the plant report a device fault (tests). Not for a tick."""
@@ -194,7 +198,9 @@ class SimProcessArm(PhysicalResource):
         if self._silent_reads >= self.settings.heartbeat_timeout_periods:
             flags |= Status.COMM_LOST
             self.fault_message = "the plant process stopped answering"
-        if status & SELF_STOPPED:
+        if status & SELF_STOPPED and hb < self._settled_heartbeat:
+            flags = flags  # a state published before the stop was cleared: not news
+        elif status & SELF_STOPPED:
             if not self._stop_flags:  # the arm stopped by itself (its watchdog): fatal here
                 flags |= Status.FAULT
                 self.fault_message = "the arm stopped on its own (command watchdog)"

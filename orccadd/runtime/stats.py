@@ -48,8 +48,12 @@ class TimingStats:
         self.missed_ticks = 0
         self.consecutive_overruns = 0
         self.max_consecutive_overruns = 0
+        self.last_latency_ns = 0
+        self.last_compute_ns = 0
 
     def record(self, latency_ns: int, compute_ns: int, overrun: bool, missed: int) -> None:
+        self.last_latency_ns = latency_ns
+        self.last_compute_ns = compute_ns
         i = self.ticks % self._cap
         self._lat[i] = latency_ns
         self._cmp[i] = compute_ns

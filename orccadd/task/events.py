@@ -106,6 +106,11 @@ class EventQueue:
             self._tail += 1
             self.dropped += 1
 
+    @property
+    def pushed(self) -> int:
+        """How many events were ever pushed (the producer's counter)."""
+        return self._head
+
     def drain(self) -> list[tuple[float, int]]:
         out = []
         while self._tail < self._head:

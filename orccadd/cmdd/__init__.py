@@ -1,0 +1,1 @@
+"""The companion command daemon: orccadctl's counterpart, a separate process from the real-time one."""

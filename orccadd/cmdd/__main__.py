@@ -1,0 +1,3 @@
+from orccadd.cmdd.server import main
+
+raise SystemExit(main())

@@ -1,0 +1,402 @@
+"""The companion command daemon (after seed 001's target daemon): the only process clients talk to.
+
+It serves orccadctl over the public Unix socket (asyncio, bounded: clients, line length, one
+request at a time per client), checks every request (protocol, then the peer's role from
+SO_PEERCRED), forwards what the real-time process must do over the SEQPACKET link, and serves
+status, monitor, events and logs from shared memory without asking it. If it dies, the mission
+goes on (or safe-stops, by config) and the real-time process starts a new one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import grp
+import json
+import os
+import pwd
+import signal
+import socket
+import stat
+import struct
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from orccadd.cmdd import views
+from orccadd.cmdd.protocol import COMMANDS, CONTROL, MAX_LINE, ProtocolError, encode, parse_request
+from orccadd.config.robot import DaemonConfig, load_robot_config
+from orccadd.daemon.telemetry import H, RingReader, S, TelemetryBlock, read_status
+
+MAX_CLIENTS = 32
+RT_TIMEOUT_S = 5.0
+LOAD_TIMEOUT_S = 600.0
+RT_MAX = 1 << 20
+
+
+def peer_credentials(sock: socket.socket) -> tuple[int, int, int]:
+    """(pid, uid, gid) of the process at the other end of a Unix socket."""
+    raw = sock.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i"))
+    pid, uid, gid = struct.unpack("3i", raw)
+    return pid, uid, gid
+
+
+class Roles:
+    """Who may do what: `control` ⊃ `read`. Root and the daemon's own user always control."""
+
+    def __init__(self, cfg: DaemonConfig) -> None:
+        self.cfg = cfg
+
+    def _groups(self, uid: int, gid: int) -> set[str]:
+        names = set()
+        gids = {gid}
+        with contextlib.suppress(KeyError):
+            user = pwd.getpwuid(uid).pw_name
+            gids |= set(os.getgrouplist(user, gid))
+        for g in gids:
+            with contextlib.suppress(KeyError):
+                names.add(grp.getgrgid(g).gr_name)
+        return names
+
+    def role(self, uid: int, gid: int) -> str | None:
+        if uid in (0, os.getuid()):
+            return CONTROL
+        try:
+            user = pwd.getpwuid(uid).pw_name
+        except KeyError:
+            user = str(uid)
+        groups = self._groups(uid, gid)
+        c = self.cfg
+        if user in c.control_users or groups & set(c.control_groups):
+            return CONTROL
+        if user in c.read_users or groups & set(c.read_groups):
+            return "read"
+        return None
+
+
+class RtLink:
+    """The SEQPACKET link to the real-time process: one request at a time, answers matched by id."""
+
+    def __init__(self, path: str) -> None:
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET | socket.SOCK_CLOEXEC)
+        self.sock.connect(path)
+        self.sock.setblocking(False)
+        self.lock = asyncio.Lock()
+        self.next_id = 0
+        self.closed = False
+
+    async def call(self, cmd: str, args: dict[str, Any], timeout_s: float = RT_TIMEOUT_S) -> dict[str, Any]:
+        loop = asyncio.get_running_loop()
+        async with self.lock:
+            self.next_id += 1
+            rid = self.next_id
+            try:
+                await loop.sock_sendall(self.sock, json.dumps({"id": rid, "cmd": cmd, "args": args}).encode())
+                deadline = time.monotonic() + timeout_s
+                while True:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        return {
+                            "ok": False,
+                            "error": f"the real-time process did not answer within {timeout_s:g} s",
+                        }
+                    data = await asyncio.wait_for(loop.sock_recv(self.sock, RT_MAX), left)
+                    if not data:
+                        self.closed = True
+                        return {"ok": False, "error": "the real-time process is gone"}
+                    reply: dict[str, Any] = json.loads(data)
+                    if reply.get("id") == rid:
+                        return reply
+            except TimeoutError:
+                return {"ok": False, "error": f"the real-time process did not answer within {timeout_s:g} s"}
+            except OSError as e:
+                self.closed = True
+                return {"ok": False, "error": f"link to the real-time process lost: {e}"}
+
+
+class CommandDaemon:
+    def __init__(self, cfg: DaemonConfig, socket_path: str, rt_path: str, telemetry: str) -> None:
+        self.cfg = cfg
+        self.socket_path = socket_path
+        self.rt = RtLink(rt_path)
+        self.tel = TelemetryBlock.attach(telemetry)
+        self.roles = Roles(cfg)
+        self.desc: dict[str, Any] = {}
+        self.clients = 0
+        self.csv: views.CsvLog | None = None
+        self.last_log: dict[str, Any] | None = None
+        self.server: asyncio.AbstractServer | None = None
+        self.done = asyncio.Event()
+        self.sock_ino = 0
+
+    async def refresh(self) -> None:
+        gen = int(read_status(self.tel)[S.MISSION_GEN])
+        if not self.desc or self.desc.get("generation") != gen:
+            reply = await self.rt.call("describe", {})
+            if reply.get("ok"):
+                self.desc = reply["result"]
+
+    # ---- socket ---------------------------------------------------------------------------
+    def _prepare_socket(self) -> socket.socket:
+        path = Path(self.socket_path)
+        d = path.parent
+        d.mkdir(parents=True, exist_ok=True)
+        gid = -1
+        if self.cfg.socket_group:
+            try:
+                gid = grp.getgrnam(self.cfg.socket_group).gr_gid
+            except KeyError:
+                raise SystemExit(
+                    f"orccadd-cmdd: socket_group {self.cfg.socket_group!r} does not exist"
+                ) from None
+        os.chmod(d, 0o750)
+        if gid >= 0:
+            os.chown(d, -1, gid)
+        with contextlib.suppress(FileNotFoundError):
+            if stat.S_ISSOCK(os.lstat(path).st_mode):
+                os.unlink(path)
+        s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
+        old = os.umask(0o117)
+        try:
+            s.bind(str(path))
+        finally:
+            os.umask(old)
+        if gid >= 0:
+            os.chown(path, -1, gid)
+        self.sock_ino = os.stat(path).st_ino
+        return s
+
+    async def serve(self) -> None:
+        sock = self._prepare_socket()
+        self.server = await asyncio.start_unix_server(self._client, sock=sock, limit=MAX_LINE)
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, self.done.set)
+        await self.refresh()
+        pump = asyncio.create_task(self._pump())
+        await self.done.wait()
+        pump.cancel()
+        self.server.close()
+        if self.csv is not None:
+            self.csv.close()
+        with contextlib.suppress(FileNotFoundError):
+            if os.stat(self.socket_path).st_ino == self.sock_ino:
+                os.unlink(self.socket_path)
+
+    async def _pump(self) -> None:
+        """Background: follow the log, notice the real-time process going away."""
+        while True:
+            await asyncio.sleep(0.05)
+            if self.csv is not None:
+                self.csv.pump()
+            if self.rt.closed or not _alive(int(self.tel.header[H.PID])):
+                print("orccadd-cmdd: the real-time process is gone; exiting", file=sys.stderr)
+                self.done.set()
+                return
+
+    # ---- clients --------------------------------------------------------------------------
+    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        sock = writer.get_extra_info("socket")
+        _, uid, gid = peer_credentials(sock)
+        self.clients += 1
+        try:
+            if self.clients > MAX_CLIENTS:
+                writer.write(
+                    encode({"id": None, "ok": False, "error": f"too many clients (max {MAX_CLIENTS})"})
+                )
+                return
+            role = self.roles.role(uid, gid)
+            while True:
+                try:
+                    line = await reader.readuntil(b"\n")
+                except asyncio.IncompleteReadError:
+                    return
+                except asyncio.LimitOverrunError:
+                    writer.write(
+                        encode({"id": None, "ok": False, "error": f"request longer than {MAX_LINE} bytes"})
+                    )
+                    await writer.drain()
+                    return  # the stream cannot be resynchronised: close
+                await self._request(line, role, uid, writer)
+        except (ConnectionError, BrokenPipeError):
+            return
+        finally:
+            self.clients -= 1
+            with contextlib.suppress(Exception):
+                writer.close()
+
+    async def _request(self, line: bytes, role: str | None, uid: int, writer: asyncio.StreamWriter) -> None:
+        rid: Any = None
+        try:
+            rid, cmd, args = parse_request(line)
+        except ProtocolError as e:
+            writer.write(encode({"id": rid, "ok": False, "error": str(e)}))
+            await writer.drain()
+            return
+        spec = COMMANDS[cmd]
+        if role is None or (spec.role == CONTROL and role != CONTROL):
+            who = _user(uid)
+            need = "the control role" if spec.role == CONTROL else "the read-only role"
+            writer.write(
+                encode(
+                    {"id": rid, "ok": False, "error": f"not authorised: user {who} lacks {need} for {cmd!r}"}
+                )
+            )
+            await writer.drain()
+            return
+        if spec.forward:
+            timeout = LOAD_TIMEOUT_S if cmd == "load" else RT_TIMEOUT_S
+            reply = await self.rt.call(cmd, args, timeout)
+            reply["id"] = rid
+            if cmd in ("load",) and reply.get("ok"):
+                await self.refresh()
+            writer.write(encode(reply))
+        else:
+            handler = getattr(self, f"do_{cmd}")
+            try:
+                result = await handler(writer, rid, **args)
+                writer.write(encode({"id": rid, "ok": True, "result": result}))
+            except ValueError as e:
+                writer.write(encode({"id": rid, "ok": False, "error": str(e)}))
+        await writer.drain()
+
+    # ---- local commands -------------------------------------------------------------------
+    async def do_ping(self, writer: asyncio.StreamWriter, rid: Any) -> dict[str, Any]:
+        return {"pong": True, "pid": os.getpid()}
+
+    async def do_status(self, writer: asyncio.StreamWriter, rid: Any) -> dict[str, Any]:
+        await self.refresh()
+        log = self.csv.describe() if self.csv else self.last_log
+        out = views.status(self.tel, self.desc, log)
+        return out
+
+    async def do_monitor(
+        self,
+        writer: asyncio.StreamWriter,
+        rid: Any,
+        signals: list[Any] | None = None,
+        rate_hz: float = 10.0,
+        count: int = 0,
+        duration_s: float = 0.0,
+    ) -> dict[str, Any]:
+        await self.refresh()
+        if not all(isinstance(s, str) for s in signals or []):
+            raise ValueError("monitor: signals must be a list of names")
+        sel = views.SignalSelection(list(signals or []), self.desc.get("joints", []))
+        max_rate = 1.0 / self.tel.period_s
+        if not 0 < rate_hz <= max_rate:
+            raise ValueError(f"monitor: rate_hz (={rate_hz}) must be in (0, {max_rate:g}] (the control rate)")
+        if count < 0 or duration_s < 0:
+            raise ValueError("monitor: count and duration_s must be positive")
+        sent = 0
+        t_end = time.monotonic() + duration_s if duration_s else float("inf")
+        writer.write(encode({"id": rid, "ok": True, "stream": {"signals": ["t_s", *sel.labels]}}))
+        period = 1.0 / rate_hz
+        nxt = time.monotonic()
+        while (not count or sent < count) and time.monotonic() < t_end and not self.done.is_set():
+            rec = views.latest_tick(self.tel)
+            if rec is not None:
+                writer.write(
+                    encode({"id": rid, "ok": True, "stream": {"t_s": rec[1], "values": sel.values(rec)}})
+                )
+                await writer.drain()
+                sent += 1
+            nxt += period
+            await asyncio.sleep(max(0.0, nxt - time.monotonic()))
+        return {"samples": sent}
+
+    async def do_events(
+        self,
+        writer: asyncio.StreamWriter,
+        rid: Any,
+        last: int = 50,
+        follow: bool = False,
+        duration_s: float = 0.0,
+    ) -> dict[str, Any]:
+        await self.refresh()
+        if not 0 <= last <= 100_000:
+            raise ValueError("events: last must be in [0, 100000]")
+        r = RingReader(self.tel.trace, self.tel.header, H.TRACE_HEAD, from_now=False)
+        recs: Any = r.poll()[-last:] if last else []
+        out = [views.decode_trace(rec, self.desc) for rec in recs]
+        if not follow:
+            return {"events": out, "lost": r.lost}
+        for e in out:
+            writer.write(encode({"id": rid, "ok": True, "stream": e}))
+        t_end = time.monotonic() + duration_s if duration_s else float("inf")
+        while time.monotonic() < t_end and not self.done.is_set():
+            await asyncio.sleep(0.05)
+            new = r.poll()
+            if len(new):
+                await self.refresh()
+            for rec in new:
+                writer.write(encode({"id": rid, "ok": True, "stream": views.decode_trace(rec, self.desc)}))
+            await writer.drain()
+        return {"lost": r.lost}
+
+    async def do_log(
+        self,
+        writer: asyncio.StreamWriter,
+        rid: Any,
+        action: str,
+        signals: list[Any] | None = None,
+        path: str = "",
+    ) -> dict[str, Any]:
+        if action == "start":
+            if self.csv is not None:
+                raise ValueError(f"log: already logging to {self.csv.path} (log stop first)")
+            await self.refresh()
+            sel = views.SignalSelection(
+                [str(s) for s in signals or ["q", "dq", "tau", "cmd"]], self.desc["joints"]
+            )
+            target = Path(path or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv")
+            if not target.is_absolute():
+                raise ValueError(f"log: path {path!r} must be absolute (orccadctl makes it so)")
+            try:
+                self.csv = views.CsvLog(self.tel, target, sel)
+            except OSError as e:
+                raise ValueError(f"log: cannot write {target}: {e.strerror}") from None
+            return self.csv.describe()
+        if action == "stop":
+            if self.csv is None:
+                raise ValueError("log: not logging")
+            self.last_log = self.csv.close()
+            self.csv = None
+            return self.last_log
+        raise ValueError(f"log: action {action!r} must be start or stop")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+        return True
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+
+
+def _user(uid: int) -> str:
+    try:
+        return pwd.getpwuid(uid).pw_name
+    except KeyError:
+        return str(uid)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="orccadd-cmdd", description="the orccadd command daemon")
+    ap.add_argument("--config", required=True)
+    ap.add_argument("--socket", required=True)
+    ap.add_argument("--rt-socket", required=True)
+    ap.add_argument("--telemetry", required=True, help="the real-time process's shared-memory block")
+    args = ap.parse_args(argv)
+    cfg = load_robot_config(args.config, check_model=False)
+    try:
+        d = CommandDaemon(cfg.daemon, args.socket, args.rt_socket, args.telemetry)
+    except (OSError, ValueError) as e:
+        print(f"orccadd-cmdd: cannot attach to the real-time process: {e}", file=sys.stderr)
+        return 2
+    asyncio.run(d.serve())
+    return 0

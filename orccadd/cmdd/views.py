@@ -1,0 +1,213 @@
+"""What the command daemon reads out of the real-time process's telemetry block.
+
+Status, monitor samples, the reactive trace and full-rate logs are all built here, from shared
+memory, without asking the real-time process anything (it is only asked to `describe` itself
+when a new mission was loaded, to learn the names behind the indices).
+"""
+
+from __future__ import annotations
+
+import csv
+import time
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from orccadd.daemon.machine import Command, MachineState, MissionResult
+from orccadd.daemon.telemetry import (
+    TICK_FIELDS,
+    TICK_VECTORS,
+    TRACE_IDX,
+    H,
+    RingReader,
+    S,
+    TelemetryBlock,
+    Trace,
+    read_status,
+)
+from orccadd.physres.base import Status
+from orccadd.task.task import Phase
+
+NF = len(TICK_FIELDS)
+
+
+class SignalSelection:
+    """Signal names → columns of a tick record: `q`, `dq.3`, `tau.elbow_joint`, `wake_us`, ..."""
+
+    def __init__(self, names: list[str], joints: list[str]) -> None:
+        n = len(joints)
+        cols: list[int] = []
+        labels: list[str] = []
+        for raw in names or ["q"]:
+            base, _, idx = raw.partition(".")
+            if base in TICK_FIELDS and not idx and base != "seq":
+                cols.append(TICK_FIELDS.index(base))
+                labels.append(base)
+                continue
+            if base not in TICK_VECTORS:
+                allowed = ", ".join([*TICK_FIELDS[1:], *TICK_VECTORS])
+                raise ValueError(
+                    f"unknown signal {raw!r} (signals: {allowed}; a joint: q.0 or q.<joint name>)"
+                )
+            start = NF + TICK_VECTORS.index(base) * n
+            if not idx:
+                picked = list(range(n))
+            elif idx.isdigit() and int(idx) < n:
+                picked = [int(idx)]
+            elif idx in joints:
+                picked = [joints.index(idx)]
+            else:
+                raise ValueError(f"signal {raw!r}: no joint {idx!r} (0..{n - 1} or {', '.join(joints)})")
+            for j in picked:
+                cols.append(start + j)
+                labels.append(f"{base}.{joints[j]}")
+        self.cols = cols
+        self.labels = labels
+
+    def values(self, rec: np.ndarray) -> list[float]:
+        return [float(rec[c]) for c in self.cols]
+
+
+def latest_tick(tel: TelemetryBlock) -> np.ndarray | None:
+    """A consistent copy of the newest tick record (or None before the first tick)."""
+    for _ in range(10):
+        head = int(tel.header[H.TICK_HEAD])
+        if head == 0:
+            return None
+        slot = tel.ticks[(head - 1) % tel.tick_len]
+        rec = slot.copy()
+        if rec[0] == head and slot[0] == head:
+            return rec  # type: ignore[no-any-return]
+    return None
+
+
+def timing(tel: TelemetryBlock, window_s: float = 5.0) -> dict[str, float]:
+    """Wake-up latency and compute time over the last `window_s` of ticks (µs)."""
+    head = int(tel.header[H.TICK_HEAD])
+    n = min(head, tel.tick_len, max(1, int(window_s / tel.period_s)))
+    if n == 0:
+        return {}
+    idx = np.arange(head - n, head) % tel.tick_len
+    rec = tel.ticks[idx]
+    wake, comp = rec[:, 2], rec[:, 3]
+    out: dict[str, float] = {"window_ticks": float(n)}
+    for name, arr in (("wake", wake), ("compute", comp)):
+        q = np.percentile(arr, [50, 99])
+        out[f"{name}_median_us"] = round(float(q[0]), 1)
+        out[f"{name}_p99_us"] = round(float(q[1]), 1)
+        out[f"{name}_max_us"] = round(float(arr.max()), 1)
+    return out
+
+
+def status(tel: TelemetryBlock, desc: dict[str, Any], log: dict[str, Any] | None) -> dict[str, Any]:
+    st = read_status(tel)
+    hdr = tel.header
+    rec = latest_tick(tel)
+    tasks: list[str] = desc.get("tasks", [])
+    joints: list[str] = desc.get("joints", [])
+    n = len(joints)
+    out: dict[str, Any] = {
+        "robot": desc.get("robot"),
+        "state": MachineState(int(st[S.MACHINE])).name.lower(),
+        "mission": (desc.get("mission") or {}).get("name"),
+        "automaton_state": int(st[S.AUTOMATON_STATE]),
+        "instants": int(st[S.INSTANTS]),
+        "result": MissionResult(int(st[S.RESULT])).name.lower(),
+        "faulted": bool(st[S.FAULTED]),
+        "ticks": int(hdr[H.TICKS]),
+        "overruns": int(hdr[H.OVERRUNS]),
+        "switches": int(hdr[H.SWITCHES]),
+        "heartbeat_age_s": round((time.monotonic_ns() - hdr[H.HEARTBEAT_NS]) * 1e-9, 4),
+        "timing": timing(tel),
+        "log": log,
+    }
+    if rec is not None:
+        tid = int(rec[4])
+        out["active_task"] = tasks[tid] if 0 <= tid < len(tasks) else None
+        out["task_phase"] = Phase(int(rec[5])).name.lower()
+        out["resource_status"] = [f.name.lower() for f in Status if f and int(rec[7]) & f]  # type: ignore[union-attr]
+        out["joints"] = [
+            {
+                "name": joints[j],
+                "q_rad": round(float(rec[NF + j]), 5),
+                "dq_rad_s": round(float(rec[NF + n + j]), 5),
+                "tau_nm": round(float(rec[NF + 2 * n + j]), 3),
+                "cmd": round(float(rec[NF + 3 * n + j]), 3),
+            }
+            for j in range(n)
+        ]
+    return out
+
+
+def decode_trace(rec: np.ndarray, desc: dict[str, Any]) -> dict[str, Any]:
+    kind = Trace(int(rec[1]))
+    mission = desc.get("mission") or {}
+    inputs: list[str] = mission.get("inputs", [])
+    actions: list[str] = mission.get("actions", [])
+    events: list[str] = desc.get("events", [])
+    out: dict[str, Any] = {
+        "seq": int(rec[0]),
+        "kind": kind.name.lower(),
+        "t_s": round(float(rec[2]), 6),
+        "time": time.strftime("%H:%M:%S", time.localtime(rec[3])) + f".{int(rec[3] % 1 * 1000):03d}",
+    }
+    code = int(rec[6])
+    if kind is Trace.INSTANT:
+        n_in, n_act = int(rec[7]), int(rec[8])
+        ins = [int(i) for i in rec[9 : 9 + n_in]]
+        acts = [int(i) for i in rec[9 + TRACE_IDX : 9 + TRACE_IDX + n_act]]
+        out["from"] = int(rec[4])
+        out["to"] = int(rec[5])
+        out["inputs"] = [inputs[i] if i < len(inputs) else f"#{i}" for i in ins]
+        out["actions"] = [actions[i] if i < len(actions) else f"#{i}" for i in acts]
+    elif kind is Trace.EVENT:
+        out["event"] = events[code] if 0 <= code < len(events) else f"#{code}"
+    else:
+        out["command"] = Command(code).name.lower() if code in Command._value2member_map_ else code
+    return out
+
+
+def format_trace(e: dict[str, Any]) -> str:
+    head = f"{e['time']} t={e['t_s']:.3f}"
+    if e["kind"] == "instant":
+        ins = ", ".join(e["inputs"]) or "-"
+        acts = ", ".join(e["actions"]) or "-"
+        return f"{head}  instant {e['from']}->{e['to']}  inputs {{{ins}}}  actions {{{acts}}}"
+    if e["kind"] == "event":
+        return f"{head}  event   {e['event']}"
+    return f"{head}  command {e['command']}"
+
+
+class CsvLog:
+    """Chosen signals at full rate into a CSV file (PlotJuggler: File > Load Data, time column `time_s`)."""
+
+    def __init__(self, tel: TelemetryBlock, path: Path, selection: SignalSelection) -> None:
+        self.path = path
+        self.sel = selection
+        self.reader = RingReader(tel.ticks, tel.header, H.TICK_HEAD, from_now=True)
+        self.fh: IO[str] = path.open("w", newline="")
+        self.writer = csv.writer(self.fh)
+        self.writer.writerow(["time_s", *selection.labels])
+        self.rows = 0
+        self.started = time.time()
+
+    def pump(self) -> None:
+        recs = self.reader.poll()
+        cols = self.sel.cols
+        for rec in recs:
+            self.writer.writerow([f"{rec[1]:.6f}", *(f"{rec[c]:.9g}" for c in cols)])
+        self.rows += len(recs)
+
+    def close(self) -> dict[str, Any]:
+        self.pump()
+        self.fh.close()
+        return self.describe()
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "file": str(self.path),
+            "rows": self.rows,
+            "lost": self.reader.lost,
+            "signals": self.sel.labels,
+        }

@@ -1,0 +1,84 @@
+"""A small blocking client of the orccadd protocol (orccadd/cmdd/protocol.py)."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+from collections.abc import Iterator
+from typing import Any
+
+DEFAULT_SOCKET = "/run/orccadd/orccadd.sock"
+
+
+def default_socket() -> str:
+    return os.environ.get("ORCCADD_SOCKET", DEFAULT_SOCKET)
+
+
+class ClientError(Exception):
+    """The daemon cannot be reached, or answered with an error (the message is its words)."""
+
+
+class Client:
+    def __init__(self, path: str | None = None, timeout_s: float = 10.0) -> None:
+        self.path = path or default_socket()
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.sock.settimeout(timeout_s)
+        try:
+            self.sock.connect(self.path)
+        except OSError as e:
+            self.sock.close()
+            raise ClientError(f"cannot reach orccadd at {self.path}: {e.strerror or e}") from None
+        self.file = self.sock.makefile("rb")
+        self.next_id = 0
+
+    def close(self) -> None:
+        self.file.close()
+        self.sock.close()
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def send_raw(self, data: bytes) -> dict[str, Any]:
+        """Send bytes as they are; read one reply line (for protocol tests)."""
+        self.sock.sendall(data)
+        return self._line()
+
+    def _line(self) -> dict[str, Any]:
+        line = self.file.readline()
+        if not line:
+            raise ClientError("orccadd closed the connection")
+        reply: dict[str, Any] = json.loads(line)
+        return reply
+
+    def _send(self, cmd: str, args: dict[str, Any]) -> int:
+        self.next_id += 1
+        msg = {"id": self.next_id, "cmd": cmd, "args": args}
+        self.sock.sendall((json.dumps(msg) + "\n").encode())
+        return self.next_id
+
+    def reply(self, cmd: str, **args: Any) -> dict[str, Any]:
+        """The whole reply (ok or not)."""
+        self._send(cmd, args)
+        return self._line()
+
+    def call(self, cmd: str, **args: Any) -> Any:
+        """The result, or `ClientError` with the daemon's message."""
+        r = self.reply(cmd, **args)
+        if not r.get("ok"):
+            raise ClientError(str(r.get("error")))
+        return r.get("result")
+
+    def stream(self, cmd: str, **args: Any) -> Iterator[dict[str, Any]]:
+        """The stream items of a streaming command, until its final reply."""
+        self._send(cmd, args)
+        while True:
+            r = self._line()
+            if not r.get("ok"):
+                raise ClientError(str(r.get("error")))
+            if "stream" not in r:
+                return
+            yield r["stream"]

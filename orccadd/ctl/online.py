@@ -1,0 +1,233 @@
+"""orccadctl commands that talk to a running orccadd (through its command daemon)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from orccadd.ctl.client import Client, ClientError, default_socket
+
+EXIT_OK, EXIT_REFUSED, EXIT_ERROR = 0, 1, 2
+
+
+def add_parsers(sub: Any) -> None:
+    def add(name: str, help_: str) -> argparse.ArgumentParser:
+        p: argparse.ArgumentParser = sub.add_parser(name, help=help_)
+        p.add_argument("--socket", default=None, help=f"the daemon's socket (default {default_socket()})")
+        p.add_argument("--json", action="store_true", help="print the daemon's JSON reply")
+        p.set_defaults(func=run_online, online=name)
+        return p
+
+    add("status", "state, mission, active task, joints, timing")
+    add("describe", "robot, tasks, the mission's signals and actions")
+    p = add("load", "load a mission (refused with the failing check's counterexample)")
+    p.add_argument("mission")
+    p = add("start", "start the loaded mission")
+    p.add_argument("procedure", nargs="?", default="")
+    add("stop", "graceful stop (the mission's Stop input)")
+    add("abort", "immediate safe stop")
+    add("hold", "suspend the mission and hold position")
+    add("resume", "resume the held mission")
+    add("reset", "clear a safe stop once the arm is at rest")
+    p = add("send", "send an operator input of the mission")
+    p.add_argument("input")
+    p = add("params", "tunable parameters (value, bounds, unit)")
+    p.add_argument("task", nargs="?", default="")
+    p = add("tune", "set TASK.MODULE.PARAM to VALUE at the next tick boundary")
+    p.add_argument("path")
+    p.add_argument("value", help="a number or a JSON list")
+    p = add("monitor", "live signals (q, dq, tau, cmd, wake_us, compute_us, q.<joint>...)")
+    p.add_argument("signals", nargs="*")
+    p.add_argument("--rate", type=float, default=10.0, help="samples per second")
+    p.add_argument("--count", type=int, default=0, help="stop after N samples")
+    p.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
+    p = add("events", "the reactive trace: each instant's inputs and actions")
+    p.add_argument("--last", type=int, default=50)
+    p.add_argument("--follow", action="store_true")
+    p.add_argument("--duration", type=float, default=0.0)
+    p = add("top", "a live terminal view (state, tasks, joints, timing, last events)")
+    p.add_argument("--rate", type=float, default=4.0)
+    p.add_argument("--count", type=int, default=0, help="refreshes before exiting (0: until Ctrl-C)")
+    p = add("log", "start or stop a full-rate CSV log (PlotJuggler opens it)")
+    p.add_argument("action", choices=("start", "stop"))
+    p.add_argument("signals", nargs="*")
+    p.add_argument("-o", "--output", default="", help="CSV file (default ./orccadd-DATE.csv)")
+    p = add("inject", "inject a fault (daemon started with --allow-fault-injection)")
+    p.add_argument("fault", choices=("resource", "overrun"))
+    p.add_argument("--ticks", type=int, default=20)
+    p.add_argument("--extra-ms", type=float, default=0.0)
+    p = sub.add_parser("plot", help="plot a CSV log to a PNG (no daemon needed)")
+    p.add_argument("log")
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--signals", default="", help="comma-separated column prefixes (default: all)")
+    p.set_defaults(func=run_plot)
+
+
+def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
+    cmd = a.online
+    if cmd == "load":
+        return cmd, {"path": str(Path(a.mission).resolve())}
+    if cmd == "start":
+        return cmd, {"procedure": a.procedure} if a.procedure else {}
+    if cmd == "send":
+        return cmd, {"input": a.input}
+    if cmd == "params":
+        return cmd, {"task": a.task} if a.task else {}
+    if cmd == "tune":
+        try:
+            value = json.loads(a.value)
+        except ValueError:
+            raise ClientError(f"tune: value {a.value!r} is not a number or a JSON list") from None
+        return cmd, {"path": a.path, "value": value}
+    if cmd == "log":
+        args: dict[str, Any] = {"action": a.action}
+        if a.action == "start":
+            args["signals"] = a.signals or ["q", "dq", "tau", "cmd"]
+            out = a.output or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv"
+            args["path"] = str(Path(out).resolve())
+        return cmd, args
+    if cmd == "inject":
+        return cmd, {"fault": a.fault, "ticks": a.ticks, "extra_ms": a.extra_ms}
+    return cmd, {}
+
+
+def run_online(a: argparse.Namespace) -> int:
+    try:
+        with Client(a.socket) as c:
+            if a.online == "monitor":
+                return _monitor(c, a)
+            if a.online == "events" and a.follow:
+                return _follow(c, a)
+            if a.online == "top":
+                return _top(c, a)
+            if a.online == "events":
+                r = c.reply("events", last=a.last)
+            else:
+                cmd, args = _args(a)
+                r = c.reply(cmd, **args)
+    except ClientError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_ERROR
+    if a.json:
+        print(json.dumps(r, indent=1))
+        return EXIT_OK if r.get("ok") else EXIT_REFUSED
+    if not r.get("ok"):
+        print(f"refused: {r.get('error')}", file=sys.stderr)
+        return EXIT_REFUSED
+    _print(a.online, r["result"])
+    return EXIT_OK
+
+
+def _print(cmd: str, res: Any) -> None:
+    if cmd == "status":
+        print(format_status(res))
+    elif cmd == "events":
+        from orccadd.cmdd.views import format_trace
+
+        for e in res["events"]:
+            print(format_trace(e))
+    elif cmd == "load":
+        print(res["report"])
+    elif cmd == "params":
+        for task, params in res["params"].items():
+            for p in params:
+                flag = "" if p["tunable"] else "  (not tunable)"
+                print(f"{task}.{p['name']:28s} = {p['value']}  {p['bounds']} {p['unit']}{flag}")
+    else:
+        print(json.dumps(res) if not isinstance(res, str) else res)
+
+
+def format_status(s: dict[str, Any]) -> str:
+    lines = [
+        f"{s.get('robot')}: {s['state']}"
+        + (f", mission {s['mission']}" if s.get("mission") else "")
+        + (f" (automaton state {s['automaton_state']})" if s["automaton_state"] >= 0 else "")
+        + (", FAULTED (reset needed)" if s.get("faulted") else ""),
+        f"active task {s.get('active_task')} ({s.get('task_phase')}), last result {s['result']}, "
+        f"resource {','.join(s.get('resource_status') or ['ok'])}",
+    ]
+    t = s.get("timing") or {}
+    if t:
+        lines.append(
+            f"loop: {s['ticks']} ticks, {s['overruns']} overruns, {s['switches']} switches; wake-up median "
+            f"{t['wake_median_us']} p99 {t['wake_p99_us']} max {t['wake_max_us']} µs; compute median "
+            f"{t['compute_median_us']} p99 {t['compute_p99_us']} µs"
+        )
+    lines.append(f"{'joint':22s} {'q rad':>10s} {'dq rad/s':>10s} {'tau N.m':>10s} {'cmd':>10s}")
+    for j in s.get("joints", []):
+        lines.append(
+            f"{j['name']:22s} {j['q_rad']:10.4f} {j['dq_rad_s']:10.4f} {j['tau_nm']:10.2f} {j['cmd']:10.2f}"
+        )
+    if s.get("log"):
+        lg = s["log"]
+        lines.append(f"log: {lg['file']} ({lg['rows']} rows, {lg['lost']} lost)")
+    return "\n".join(lines)
+
+
+def _monitor(c: Client, a: argparse.Namespace) -> int:
+    args: dict[str, Any] = {"signals": a.signals, "rate_hz": a.rate}
+    if a.count:
+        args["count"] = a.count
+    if a.duration:
+        args["duration_s"] = a.duration
+    try:
+        for item in c.stream("monitor", **args):
+            if a.json:
+                print(json.dumps(item), flush=True)
+            elif "signals" in item:
+                print(" ".join(f"{n:>14s}" for n in item["signals"]), flush=True)
+            else:
+                print(" ".join(f"{v:14.5f}" for v in [item["t_s"], *item["values"]]), flush=True)
+    except KeyboardInterrupt:
+        pass
+    return EXIT_OK
+
+
+def _follow(c: Client, a: argparse.Namespace) -> int:
+    from orccadd.cmdd.views import format_trace
+
+    args: dict[str, Any] = {"last": a.last, "follow": True}
+    if a.duration:
+        args["duration_s"] = a.duration
+    try:
+        for e in c.stream("events", **args):
+            print(json.dumps(e) if a.json else format_trace(e), flush=True)
+    except KeyboardInterrupt:
+        pass
+    return EXIT_OK
+
+
+def _top(c: Client, a: argparse.Namespace) -> int:
+    from orccadd.cmdd.views import format_trace
+
+    n = 0
+    try:
+        while not a.count or n < a.count:
+            s = c.call("status")
+            ev = c.call("events", last=8)["events"]
+            screen = format_status(s) + "\n\nlast events:\n" + "\n".join(format_trace(e) for e in ev)
+            if sys.stdout.isatty():
+                print("\x1b[H\x1b[2J" + screen, flush=True)
+            else:
+                print(screen + "\n", flush=True)
+            n += 1
+            time.sleep(1.0 / a.rate)
+    except KeyboardInterrupt:
+        pass
+    return EXIT_OK
+
+
+def run_plot(a: argparse.Namespace) -> int:
+    from orccadd.ctl.plot import plot_csv
+
+    try:
+        info = plot_csv(Path(a.log), Path(a.output), [s for s in a.signals.split(",") if s])
+    except (OSError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_ERROR
+    print(info)
+    return EXIT_OK

@@ -1,0 +1,1 @@
+"""The real-time process of orccadd: control thread, automaton thread, telemetry."""

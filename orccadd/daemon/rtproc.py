@@ -1,0 +1,394 @@
+"""`orccadd`: the real-time process.
+
+Two threads, both real-time where permitted, and nothing else:
+
+- the control thread (SCHED_FIFO `control_priority`) ticks the active Robot-Task every period;
+- the main thread is the automaton thread (SCHED_FIFO `automaton_priority`, above the control
+  thread): it sleeps in `poll()` on the control thread's event pipe, the command daemon's
+  connection, signals and the command daemon's pidfd, and reacts.
+
+Commands arrive from the companion command daemon (`orccadd.cmdd`, a separate process this one
+spawns and respawns) over a SOCK_SEQPACKET socket whose kernel buffer is the bounded command
+queue; replies are sent without blocking. Telemetry leaves through shared memory only.
+SIGTERM/SIGINT: safe stop first, then the hardware is released.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import select
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from orccadd.config.robot import RobotConfig, load_robot_config, with_backend
+from orccadd.daemon.machine import Command, CommandError, Machine, MachineState, MissionResult
+from orccadd.daemon.notify import Notifier
+from orccadd.daemon.telemetry import H, Layout, TelemetryBlock, Trace
+from orccadd.errors import OrccaddError
+from orccadd.physres import CommandMode, create_resource
+from orccadd.physres.base import Status
+from orccadd.runtime import WallClock, enter_realtime, leave_realtime
+
+MAX_MESSAGE = 65536
+TICK_RING_S = 16.0  # seconds of ticks the telemetry ring keeps
+RESPAWN_DELAY_S = 1.0
+GIL_SWITCH_INTERVAL_S = 0.0002
+
+
+@contextlib.contextmanager
+def background_priority() -> Iterator[None]:
+    """Run the calling thread at normal priority for a while (mission loading), then restore it."""
+    try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except OSError:
+        yield
+        return
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, policy, param)
+
+
+def rt_socket_path(public: str) -> str:
+    return public + ".rt"
+
+
+class RealtimeProcess:
+    def __init__(self, cfg: RobotConfig, socket_path: str, args: argparse.Namespace) -> None:
+        self.cfg = cfg
+        self.args = args
+        self.socket_path = socket_path
+        self.rt_path = rt_socket_path(socket_path)
+        self.notifier = Notifier()
+        self.clock = WallClock(spin_margin_s=args.spin_us * 1e-6)
+        self.resource = create_resource(cfg)
+        self.tel: TelemetryBlock | None = None
+        self.listener: socket.socket | None = None
+        self.conn: socket.socket | None = None
+        self.cmdd: subprocess.Popen[bytes] | None = None
+        self.cmdd_pidfd = -1
+        self.respawn_at = 0.0
+        self.control_error = ""
+        self.stop_requested = ""
+        self.thread: threading.Thread | None = None
+
+    # ---- startup --------------------------------------------------------------------------
+    def start(self) -> None:
+        cfg = self.cfg
+        self.resource.configure()
+        self.resource.activate(CommandMode.TORQUE)
+        ticks = int(TICK_RING_S / cfg.control_period_s)
+        self.tel = TelemetryBlock.create(Layout(cfg.dof, ticks, 8192), cfg.control_period_s)
+        self.wake_r, self.wake_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+        self.machine = Machine(
+            cfg,
+            self.resource,
+            self.clock,
+            self.tel,
+            self.wake_w,
+            allow_fault_injection=self.args.allow_fault_injection,
+        )
+        if self.args.mission:
+            self.machine.cmd_load(self.args.mission)
+        self._open_socket()
+        self.thread = threading.Thread(target=self._control_main, name="control", daemon=True)
+        self.thread.start()
+        if not self.args.no_command_daemon:
+            self._spawn_cmdd()
+
+    def _open_socket(self) -> None:
+        d = Path(self.socket_path).parent
+        d.mkdir(parents=True, exist_ok=True)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.rt_path)
+        s = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET | socket.SOCK_CLOEXEC | socket.SOCK_NONBLOCK)
+        old = os.umask(0o177)
+        try:
+            s.bind(self.rt_path)  # 0600: only this user (the command daemon runs as it)
+        finally:
+            os.umask(old)
+        s.listen(2)
+        self.listener = s
+
+    def _spawn_cmdd(self) -> None:
+        assert self.tel is not None
+        cmd = [
+            sys.executable, "-m", "orccadd.cmdd", "--config", self.cfg.source, "--socket", self.socket_path,
+            "--rt-socket", self.rt_path, "--telemetry", self.tel.name,
+        ]  # fmt: skip
+        self.cmdd = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+        try:
+            self.cmdd_pidfd = os.pidfd_open(self.cmdd.pid)
+        except OSError:
+            self.cmdd_pidfd = -1
+
+    # ---- the control thread ----------------------------------------------------------------
+    def _control_main(self) -> None:
+        rt = enter_realtime(self.cfg.daemon.control_priority)
+        for w in rt.warnings:
+            print(f"orccadd: warning: control thread: {w}", file=sys.stderr)
+        try:
+            self.machine.loop.executor.run()
+        except BaseException as e:
+            self.control_error = f"control thread failed: {type(e).__name__}: {e}"
+            self.resource.safe_stop()
+            with contextlib.suppress(OSError):
+                os.write(self.wake_w, b"x")
+        finally:
+            leave_realtime(rt)
+
+    # ---- the automaton thread (main) ------------------------------------------------------
+    def run(self) -> int:
+        rt = enter_realtime(self.cfg.daemon.automaton_priority)
+        for w in rt.warnings:
+            print(f"orccadd: warning: automaton thread: {w}", file=sys.stderr)
+        sig_r, sig_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+        signal.set_wakeup_fd(sig_w, warn_on_full_buffer=False)
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, self._on_signal)
+        print(
+            f"orccadd: {self.cfg.name} ({self.cfg.dof} joints, {self.cfg.resource.backend}), period "
+            f"{self.cfg.control_period_s * 1e3:g} ms, socket {self.socket_path}, {rt.describe()}",
+            file=sys.stderr,
+            flush=True,
+        )
+        self.notifier.send("READY=1", f"STATUS=idle on {self.socket_path}")
+        next_ping = 0.0
+        poller = select.poll()
+        registered: set[int] = set()
+        try:
+            while not self.stop_requested and not self.control_error:
+                fds = {self.wake_r, sig_r, self.listener.fileno() if self.listener else -1}
+                if self.conn is not None:
+                    fds.add(self.conn.fileno())
+                if self.cmdd_pidfd >= 0:
+                    fds.add(self.cmdd_pidfd)
+                fds.discard(-1)
+                for fd in registered - fds:
+                    poller.unregister(fd)
+                for fd in fds - registered:
+                    poller.register(fd, select.POLLIN)
+                registered = fds
+                ready = poller.poll(100)
+                for fd, _ in ready:
+                    if fd == self.wake_r:
+                        with contextlib.suppress(BlockingIOError):
+                            os.read(self.wake_r, 4096)
+                        self.machine.on_events()
+                    elif fd == sig_r:
+                        with contextlib.suppress(BlockingIOError):
+                            os.read(sig_r, 64)
+                    elif self.listener is not None and fd == self.listener.fileno():
+                        self._accept()
+                    elif self.conn is not None and fd == self.conn.fileno():
+                        self._serve()
+                    elif fd == self.cmdd_pidfd:
+                        self._cmdd_exited()
+                if self.cmdd is None and self.respawn_at and time.monotonic() >= self.respawn_at:
+                    self.respawn_at = 0.0
+                    self._spawn_cmdd()
+                now = time.monotonic()
+                if now >= next_ping:
+                    next_ping = now + self._ping()
+        finally:
+            code = self.shutdown()
+            leave_realtime(rt)
+        return code
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        self.stop_requested = signal.Signals(signum).name
+
+    def _healthy(self) -> bool:
+        assert self.tel is not None
+        age_ns = time.monotonic_ns() - int(self.tel.header[H.HEARTBEAT_NS])
+        stale = self.cfg.daemon.watchdog_stale_periods * self.cfg.control_period_s
+        return self.thread is not None and self.thread.is_alive() and age_ns < stale * 1e9
+
+    def _ping(self) -> float:
+        """WATCHDOG=1 only while the control loop is healthy; returns when to ping next."""
+        wd = self.notifier.watchdog_s
+        if not wd:
+            return 1.0
+        if self._healthy():
+            self.notifier.send("WATCHDOG=1")
+        return max(0.05, wd / 4)
+
+    # ---- the command daemon link ----------------------------------------------------------
+    def _accept(self) -> None:
+        assert self.listener is not None
+        try:
+            conn, _ = self.listener.accept()
+        except BlockingIOError:
+            return
+        conn.setblocking(False)
+        if self.conn is not None:  # a new command daemon attaches: it replaces the old link
+            self.conn.close()
+        self.conn = conn
+        self.machine.note("command daemon attached")
+
+    def _serve(self) -> None:
+        conn = self.conn
+        assert conn is not None
+        for _ in range(16):  # bounded work per wake-up
+            try:
+                data = conn.recv(MAX_MESSAGE)
+            except BlockingIOError:
+                return
+            except OSError:
+                data = b""
+            if not data:
+                conn.close()
+                self.conn = None
+                self._link_lost("command daemon disconnected")
+                return
+            reply = self._handle(data)
+            # if the command daemon is not reading, it times out; the loop carries on
+            with contextlib.suppress(BlockingIOError, OSError):
+                conn.send(json.dumps(reply, default=str).encode())
+
+    def _handle(self, data: bytes) -> dict[str, Any]:
+        try:
+            msg = json.loads(data)
+            rid = msg.get("id") if isinstance(msg, dict) else None
+            if not isinstance(msg, dict) or not isinstance(msg.get("cmd"), str):
+                return {"id": rid, "ok": False, "error": "a request is an object with a string 'cmd'"}
+            args = msg.get("args", {})
+            if not isinstance(args, dict):
+                return {"id": rid, "ok": False, "error": "'args' must be an object"}
+            if msg["cmd"] == "load":  # long and not real-time: below the control thread, GIL shared
+                with background_priority():
+                    result = self.machine.command("load", args)
+            else:
+                result = self.machine.command(msg["cmd"], args)
+            return {"id": rid, "ok": True, "result": result}
+        except CommandError as e:
+            return {"id": rid, "ok": False, "error": str(e)}
+        except TypeError as e:
+            return {"id": rid, "ok": False, "error": f"bad arguments: {e}"}
+        except ValueError as e:
+            return {"id": None, "ok": False, "error": f"not JSON: {e}"}
+
+    def _cmdd_exited(self) -> None:
+        if self.cmdd is not None:
+            code = self.cmdd.poll()
+            if code is None:
+                return
+            self.cmdd = None
+        if self.cmdd_pidfd >= 0:
+            os.close(self.cmdd_pidfd)
+            self.cmdd_pidfd = -1
+        self._link_lost(f"command daemon exited (code {code})")
+        self.respawn_at = time.monotonic() + RESPAWN_DELAY_S
+
+    def _link_lost(self, why: str) -> None:
+        m = self.machine
+        m.note(why)
+        policy = self.cfg.daemon.on_command_daemon_loss
+        if policy == "safe_stop" and m.state in (MachineState.RUNNING, MachineState.HOLDING):
+            m.abort(f"{why} (on_command_daemon_loss = safe_stop)")
+            m.publish()
+
+    # ---- shutdown -------------------------------------------------------------------------
+    def abandon(self) -> None:
+        """Undo a failed `start` (nothing moved yet): release what was acquired."""
+        if self.cmdd is not None:
+            self.cmdd.terminate()
+            self.cmdd.wait()
+        if self.listener is not None:
+            self.listener.close()
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(self.rt_path)
+        with contextlib.suppress(OrccaddError):
+            self.resource.shutdown()
+        if self.tel is not None:
+            self.tel.close()
+
+    def shutdown(self) -> int:
+        m, res = self.machine, self.resource
+        why = self.stop_requested or self.control_error
+        print(f"orccadd: stopping ({why}): safe stop first", file=sys.stderr, flush=True)
+        self.notifier.send("STOPPING=1", f"STATUS=stopping ({why})")
+        if m.state in (MachineState.RUNNING, MachineState.HOLDING):
+            m.result = MissionResult.STOPPED
+        m.trace(Trace.COMMAND, m.now_s(), Command.SHUTDOWN)
+        res.safe_stop()
+        deadline = time.monotonic() + self.cfg.safe_stop.timeout_s + 1.0
+        stopped = False
+        while time.monotonic() < deadline and self.thread is not None and self.thread.is_alive():
+            if res.state.status & Status.STOPPED:
+                stopped = True
+                break
+            time.sleep(0.01)
+        m.loop.executor.stop()
+        if self.thread is not None:
+            self.thread.join(timeout=2.0)
+        m.state = MachineState.IDLE
+        m.publish()
+        if self.cmdd is not None:
+            self.cmdd.terminate()
+            try:
+                self.cmdd.wait(timeout=3.0)
+            except subprocess.TimeoutExpired:
+                self.cmdd.kill()
+                self.cmdd.wait()
+        for s in (self.conn, self.listener):
+            if s is not None:
+                s.close()
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.rt_path)
+        res.shutdown()
+        if self.tel is not None:
+            self.tel.close()
+        print(
+            f"orccadd: {'arm at rest' if stopped else 'safe stop not confirmed'}, hardware released",
+            file=sys.stderr,
+            flush=True,
+        )
+        return 1 if self.control_error or not stopped else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="orccadd", description="the orccadd real-time controller daemon")
+    ap.add_argument("--config", required=True, help="robot config (configs/robots/*.toml)")
+    ap.add_argument("--mission", help="load this mission at startup (it does not start)")
+    ap.add_argument("--socket", help="the command socket (default: the config's daemon.socket)")
+    ap.add_argument("--no-command-daemon", action="store_true", help="do not spawn the command daemon")
+    ap.add_argument("--allow-fault-injection", action="store_true", help="accept `orccadctl inject`")
+    ap.add_argument("--in-process-sim", action="store_true", help="simulate the arm inside this process")
+    ap.add_argument("--spin-us", type=float, default=0.0, help="wake early and spin (µs)")
+    args = ap.parse_args(argv)
+    # Only real-time threads live here, but a long Python computation (loading a mission) must
+    # hand the GIL to the control thread within a fraction of a period, not the default 5 ms.
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+    try:
+        cfg = load_robot_config(args.config)
+        if cfg.resource.backend == "sim" and not args.in_process_sim:
+            # the simulated arm lives in its own process, like a real arm outside the controller
+            cfg = with_backend(cfg, "sim_process")
+        proc = RealtimeProcess(cfg, args.socket or cfg.daemon.socket, args)
+    except OrccaddError as e:
+        print(f"orccadd: {e}", file=sys.stderr)
+        return 2
+    try:
+        proc.start()
+    except (OrccaddError, CommandError) as e:
+        print(f"orccadd: {e}", file=sys.stderr)
+        proc.abandon()
+        return 2
+    return proc.run()
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,115 @@
+"""A real orccadd (real-time process + command daemon + plant process) per test, on a temporary socket."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from orccadd.ctl.client import Client, ClientError
+
+ROOT = Path(__file__).resolve().parents[2]
+ROBOT = ROOT / "configs/robots/sim-ur5e.toml"
+MISSIONS = Path(__file__).resolve().parent / "missions"
+
+
+def robot_config(tmp: Path, daemon: str = "") -> Path:
+    """sim-ur5e with a [daemon] section, written next to the test (paths made absolute)."""
+    text = ROBOT.read_text().replace(
+        'urdf = "../urdf/ur5e.urdf"', f'urdf = "{ROOT / "configs/urdf/ur5e.urdf"}"'
+    )
+    text += f'\n[daemon]\nhold_task = "{ROOT / "configs/tasks/hold.toml"}"\n{daemon}\n'
+    path = tmp / "robot.toml"
+    path.write_text(text)
+    return path
+
+
+class Daemon:
+    def __init__(self, proc: subprocess.Popen[bytes], socket: str, log: Path) -> None:
+        self.proc = proc
+        self.socket = socket
+        self.log = log
+
+    def client(self) -> Client:
+        return Client(self.socket)
+
+    def call(self, cmd: str, **args: object) -> object:
+        with self.client() as c:
+            return c.call(cmd, **args)
+
+    def reply(self, cmd: str, **args: object) -> dict[str, object]:
+        with self.client() as c:
+            return c.reply(cmd, **args)
+
+    def status(self) -> dict[str, object]:
+        s = self.call("status")
+        assert isinstance(s, dict)
+        return s
+
+    def wait(self, pred: Callable[[dict[str, object]], bool], timeout_s: float = 30.0) -> dict[str, object]:
+        end = time.monotonic() + timeout_s
+        while True:
+            s = self.status()
+            if pred(s):
+                return s
+            if time.monotonic() > end:
+                raise AssertionError(f"timed out; last status: {s}\nlog:\n{self.log.read_text()}")
+            time.sleep(0.1)
+
+    def ctl(self, *argv: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]:
+        env = {**os.environ, "ORCCADD_SOCKET": self.socket}
+        return subprocess.run(
+            [sys.executable, "-m", "orccadd.cli", *argv],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=timeout_s,
+        )
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                return self.proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return int(self.proc.returncode)
+
+
+def start_daemon(tmp: Path, *extra: str, daemon_cfg: str = "") -> Daemon:
+    sock = str(tmp / "run" / "orccadd.sock")
+    log = tmp / "orccadd.log"
+    cmd = [
+        sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(robot_config(tmp, daemon_cfg)),
+        "--socket", sock, "--allow-fault-injection", *extra,
+    ]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=log.open("w"), stderr=subprocess.STDOUT)
+    d = Daemon(proc, sock, log)
+    end = time.monotonic() + 60
+    while True:
+        if proc.poll() is not None:
+            raise AssertionError(f"orccadd exited ({proc.returncode}):\n{log.read_text()}")
+        try:
+            d.call("ping")
+            return d
+        except (ClientError, OSError):
+            if time.monotonic() > end:
+                d.stop()
+                raise AssertionError(f"orccadd did not come up:\n{log.read_text()}") from None
+            time.sleep(0.2)
+
+
+@pytest.fixture
+def daemon(tmp_path: Path) -> Iterator[Daemon]:
+    d = start_daemon(tmp_path)
+    try:
+        yield d
+    finally:
+        d.stop()
