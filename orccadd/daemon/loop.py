@@ -52,6 +52,11 @@ class SwitchingLoop(ControlLoop):
         self.busy_ticks = 0
 
     # ---- the automaton thread's side -------------------------------------------------------
+    @property
+    def pending_task(self) -> RobotTask:
+        """The task of the last switch request (applied or not)."""
+        return self._request[1]
+
     def request_switch(self, task: RobotTask) -> None:
         """Make `task` the active one at the next tick (restarted if it already is)."""
         self._request = (self._request[0] + 1, task)

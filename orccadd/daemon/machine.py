@@ -419,7 +419,9 @@ class Machine:
         rest = f"{parts[1]}.{parts[2]}"
         old = next((p["value"] for p in task.parameters() if p["name"] == rest), None)
         try:
-            task.tune(rest, value)
+            # a task the control thread is not (about to be) ticking takes the value at once
+            idle = task is not self.loop.active and task is not self.loop.pending_task
+            task.tune(rest, value, now=idle)
         except ParameterError as e:
             raise CommandError(str(e)) from None
         self.trace(Trace.COMMAND, self.now_s(), Command.TUNE)

@@ -172,8 +172,9 @@ class RobotTask:
         self.phase = Phase.IDLE
         self.wrote = False
 
-    def tune(self, path: str, value: Any) -> None:
-        """Check `MODULE.PARAM = value` now; apply it in place at the next tick boundary."""
+    def tune(self, path: str, value: Any, *, now: bool = False) -> None:
+        """Check `MODULE.PARAM = value` now; apply it in place at the next tick boundary
+        (`now=True`: at once, only for a task no thread is ticking)."""
         if path not in self._tunable:
             raise ParameterError(
                 f"task {self.name} has no parameter {path!r} (parameters: {', '.join(sorted(self._tunable))})"
@@ -182,7 +183,10 @@ class RobotTask:
         if not param.tunable:
             raise ParameterError(f"{self.name}.{path} is not tunable at run time")
         arr = param.check(value)
-        self._pending = [*self._pending, (module, param, arr)]
+        if now:
+            self._apply([(module, param, arr)])
+        else:
+            self._pending = [*self._pending, (module, param, arr)]
 
     def parameters(self) -> list[dict[str, Any]]:
         return [p.describe() for _, p in self._tunable.values()]

@@ -1,0 +1,199 @@
+"""orccadctl and the protocol against a running orccadd: commands, refusals, malformed requests, roles."""
+
+from __future__ import annotations
+
+import json
+import os
+import pwd
+import socket
+import threading
+from pathlib import Path
+
+import pytest
+
+from orccadd.ctl.client import Client
+from tests.daemon.conftest import ROOT, Daemon, start_daemon
+
+DEMO = str(ROOT / "configs/missions/demo.mission")
+UNHANDLED = str(ROOT / "tests/automaton/missions/unhandled_t3.mission")
+
+MALFORMED: list[bytes] = [
+    b"not json\n",
+    b"{\n",
+    b"[]\n",
+    b'"status"\n',
+    b"42\n",
+    b"null\n",
+    b"{}\n",
+    b'{"cmd": 7}\n',
+    b'{"cmd": null}\n',
+    b'{"cmd": "fly"}\n',
+    b'{"cmd": "status", "args": []}\n',
+    b'{"cmd": "status", "args": "x"}\n',
+    b'{"cmd": "status", "extra": 1}\n',
+    b'{"cmd": "load"}\n',
+    b'{"cmd": "load", "args": {"path": 5}}\n',
+    b'{"cmd": "tune", "args": {"path": "Hold.pd.kp"}}\n',
+    b'{"cmd": "tune", "args": {"path": "Hold.pd.kp", "value": "high"}}\n',
+    b'{"cmd": "monitor", "args": {"rate_hz": true}}\n',
+    b'{"cmd": "start", "args": {"procedure": "x", "now": 1}}\n',
+    b"\xff\xfe\xfd\n",
+    b'{"cmd": "monitor", "args": {"rate_hz": 1e9, "count": 1}}\n',
+    b'{"cmd": "monitor", "args": {"signals": ["zz"], "count": 1}}\n',
+    b'{"cmd": "events", "args": {"last": -5}}\n',
+    b'{"cmd": "log", "args": {"action": "explode"}}\n',
+]
+
+
+def test_malformed_requests_get_an_error_and_change_nothing(daemon: Daemon) -> None:
+    before = daemon.status()
+    with daemon.client() as c:
+        for raw in MALFORMED:
+            r = c.send_raw(raw)
+            assert r["ok"] is False and r["error"], raw
+        assert c.call("ping")["pong"]  # same connection still served
+    with daemon.client() as c:  # an oversized line: error, then the connection is closed
+        r = c.send_raw(b'{"cmd": "status", "args": {"x": "' + b"a" * 70_000 + b'"}}\n')
+        assert r["ok"] is False and "longer than" in r["error"]
+    after = daemon.status()
+    assert after["state"] == before["state"] == "idle" and not after["faulted"]
+    assert int(after["ticks"]) > int(before["ticks"])  # the loop carried on
+    assert len(MALFORMED) >= 20
+
+
+def test_refused_mission_shows_the_counterexample(daemon: Daemon) -> None:
+    p = daemon.ctl("load", UNHANDLED)
+    assert p.returncode == 1
+    assert "counterexample" in p.stderr and "safety" in p.stderr
+    assert daemon.status()["state"] == "idle"
+
+
+def test_params_and_tune(daemon: Daemon) -> None:
+    daemon.call("load", path=DEMO)
+    params = daemon.call("params", task="Reach")
+    assert isinstance(params, dict)
+    kp = next(p for p in params["params"]["Reach"] if p["name"] == "ct.kp")
+    assert kp["tunable"] and kp["unit"]
+    ok = daemon.ctl("tune", "Reach.ct.kp", "500")
+    assert ok.returncode == 0, ok.stderr
+    params = daemon.call("params", task="Reach")
+    assert next(p for p in params["params"]["Reach"] if p["name"] == "ct.kp")["value"] in (500.0, [500.0] * 6)
+    for path, value, why in [
+        ("Reach.ct.kp", "-3", "must be in"),
+        ("Reach.ct.nope", "1", "no parameter"),
+        ("Nobody.ct.kp", "1", "no task"),
+        ("Reach.kp", "1", "TASK.MODULE.PARAM"),
+    ]:
+        p = daemon.ctl("tune", path, value)
+        assert p.returncode == 1 and why in p.stderr, (path, p.stderr)
+    ev = daemon.call("events")
+    assert isinstance(ev, dict)
+    assert [e["command"] for e in ev["events"] if e["kind"] == "command"].count("tune") == 1
+
+
+def test_two_clients_monitor_while_another_commands(daemon: Daemon) -> None:
+    samples: list[dict[str, object]] = []
+
+    def watch() -> None:
+        with daemon.client() as c:
+            samples.extend(c.stream("monitor", signals=["q", "wake_us"], rate_hz=50.0, count=60))
+
+    t = threading.Thread(target=watch)
+    t.start()
+    daemon.call("load", path=DEMO)
+    daemon.call("start")
+    t.join(timeout=30)
+    assert not t.is_alive()
+    assert samples[0]["signals"][0] == "t_s" and len(samples) == 61  # type: ignore[index]
+    times = [s["t_s"] for s in samples[1:]]
+    assert times == sorted(times)
+    daemon.call("abort")
+
+
+def test_monitor_and_log_through_orccadctl(daemon: Daemon, tmp_path: Path) -> None:
+    out = tmp_path / "run.csv"
+    assert daemon.ctl("log", "start", "q", "tau", "-o", str(out)).returncode == 0
+    p = daemon.ctl("monitor", "q.0", "compute_us", "--rate", "20", "--count", "5", "--json")
+    assert p.returncode == 0, p.stderr
+    lines = [json.loads(x) for x in p.stdout.splitlines()]
+    assert lines[0]["signals"] == ["t_s", "q.shoulder_pan_joint", "compute_us"] and len(lines) == 6
+    stop = daemon.ctl("log", "stop", "--json")
+    info = json.loads(stop.stdout)["result"]
+    assert info["rows"] > 100 and info["lost"] == 0
+    header = out.read_text().splitlines()[0].split(",")
+    assert header[0] == "time_s" and len(header) == 13
+    png = tmp_path / "run.png"
+    assert daemon.ctl("plot", str(out), "-o", str(png)).returncode == 0
+    assert png.stat().st_size > 1000
+
+
+def _as_nobody(sock: str, cmd: str) -> dict[str, object]:
+    """One request from a forked child running as user nobody (its peer credentials)."""
+    nobody = pwd.getpwnam("nobody")
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # child: drop to nobody, ask, report through the pipe, exit
+        try:
+            os.setgroups([])
+            os.setgid(nobody.pw_gid)
+            os.setuid(nobody.pw_uid)
+            s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            s.settimeout(10)
+            s.connect(sock)
+            s.sendall(json.dumps({"cmd": cmd}).encode() + b"\n")
+            os.write(w, s.makefile("rb").readline())
+        except BaseException as e:
+            os.write(w, json.dumps({"child_error": repr(e)}).encode())
+        finally:
+            os._exit(0)
+    os.close(w)
+    with os.fdopen(r, "rb") as fh:
+        data = fh.read()
+    os.waitpid(pid, 0)
+    out: dict[str, object] = json.loads(data)
+    assert "child_error" not in out, out
+    return out
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root to run a client as another user")
+def test_unauthorised_peer_is_refused(tmp_path: Path) -> None:
+    tmp_path.chmod(0o755)
+    for p in tmp_path.parents:
+        if str(p).startswith("/tmp/") and p != Path("/tmp"):
+            p.chmod(p.stat().st_mode | 0o005)
+    # nobody may reach the socket (group nogroup) but holds no role at first
+    nogroup = "nogroup"
+    d = start_daemon(tmp_path, daemon_cfg=f'socket_group = "{nogroup}"')
+    try:
+        mode = (Path(d.socket).stat().st_mode & 0o777, Path(d.socket).parent.stat().st_mode & 0o777)
+        assert mode == (0o660, 0o750)
+        r = _as_nobody(d.socket, "status")
+        assert r["ok"] is False and "not authorised" in str(r["error"])
+        assert d.status()["state"] == "idle"
+    finally:
+        d.stop()
+    d = start_daemon(tmp_path, daemon_cfg=f'socket_group = "{nogroup}"\nread_groups = ["{nogroup}"]')
+    try:
+        assert _as_nobody(d.socket, "status")["ok"] is True  # read-only role
+        r = _as_nobody(d.socket, "abort")
+        assert r["ok"] is False and "control role" in str(r["error"])
+        assert not d.status()["faulted"]
+    finally:
+        d.stop()
+    assert pwd.getpwnam("nobody")
+
+
+def test_too_many_clients(daemon: Daemon) -> None:
+    socks = []
+    try:
+        for _ in range(40):
+            s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            s.connect(daemon.socket)
+            socks.append(s)
+        with Client(daemon.socket) as c:
+            r = c.reply("ping")
+        assert r["ok"] is False and "too many clients" in str(r["error"])
+    finally:
+        for s in socks:
+            s.close()
+    assert daemon.call("ping")
