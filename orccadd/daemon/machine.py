@@ -177,6 +177,7 @@ class Machine:
             "joints": list(self.cfg.joint_names),
             "period_s": self.cfg.control_period_s,
             "telemetry": self.tel.name,
+            "plant_channel": getattr(getattr(self.resource, "channel", None), "name", None),
             "generation": self.generation,
             "tasks": self.task_names(),
             "events": self.registry.names(),
@@ -391,6 +392,10 @@ class Machine:
         try:
             if hasattr(self.resource, "reset_fault"):
                 self.resource.reset_fault()
+                # the control thread's next reads show whether the device left its fault
+                end = time.monotonic() + 100 * self.cfg.control_period_s
+                while self.resource.state.status & Status.FAULT and time.monotonic() < end:
+                    time.sleep(self.cfg.control_period_s)
             self.resource.clear_stop()
         except OrccaddError as e:
             raise CommandError(str(e)) from None
