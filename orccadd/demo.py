@@ -1,84 +1,138 @@
-"""`make demo`: a short mission by hand on the simulated UR5e, on the wall clock.
+"""`make demo`: orccadd on the simulated UR5e, driven through orccadctl's protocol like an operator.
 
-Moves home with Ruckig + computed torque, then to two more targets, one progress line per
-motion, and the loop's timing statistics at the end. A motion stopped by the type 3 exception
-Overrun (this shared VM can stall the loop for tens of ms) is retried, as an operator would:
-the safe stop completes, the stop is cleared, the motion restarts from the measured state.
-(The execution-machine issue turns this into the daemon running a verified Robot-Procedure.)
+Starts the daemon (real-time process, command daemon, plant process) on a private socket, loads
+and verifies configs/missions/demo.mission (three motions and a type 2 recovery), records a
+full-rate CSV log, starts the mission and follows its reactive trace live, tunes a gain mid-run,
+prints a summary when the mission ends, writes a plot PNG and stops the daemon with SIGTERM
+(safe stop first). A mission stopped by a type 3 exception (e.g. the shared machine stalled the
+loop) is reported, reset and run once more, as an operator would.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
-import numpy as np
-
-from orccadd.runtime import WallClock, enter_realtime, leave_realtime
-from orccadd.session import Session
+from orccadd.cmdd.views import format_trace
+from orccadd.ctl.client import Client, ClientError
+from orccadd.ctl.online import format_status
+from orccadd.ctl.plot import plot_csv
 
 ROOT = Path(__file__).resolve().parent.parent
-TARGETS_RAD = {
-    "home": None,
-    "reach": [0.8, -1.2, 1.2, -1.6, -1.2, 0.4],
-    "tuck": [-0.5, -2.0, 2.2, -1.8, -1.57, -0.3],
-}
+
+
+def wait_up(sock: str, proc: subprocess.Popen[bytes], timeout_s: float = 90.0) -> None:
+    end = time.monotonic() + timeout_s
+    while True:
+        if proc.poll() is not None:
+            raise SystemExit(f"orccadd exited with code {proc.returncode}")
+        try:
+            with Client(sock) as c:
+                c.call("ping")
+            return
+        except (ClientError, OSError):
+            if time.monotonic() > end:
+                raise SystemExit("orccadd did not come up") from None
+            time.sleep(0.2)
+
+
+def follow(c: Client, seen: int, tuned: list[bool]) -> tuple[int, dict[str, Any]]:
+    """Print new trace entries; tune once while Reach runs. Returns (last seq, status)."""
+    for e in c.call("events", last=100)["events"]:
+        if e["seq"] > seen:
+            print("  " + format_trace(e), flush=True)
+            seen = e["seq"]
+    s: dict[str, Any] = c.call("status")
+    if not tuned[0] and s.get("active_task") == "Reach":
+        r = c.call("tune", path="Approach.traj.speed_scale", value=0.6)
+        print(
+            f"  tune Approach.traj.speed_scale: {r['previous']} -> {r['value']} (applied at a tick boundary)"
+        )
+        tuned[0] = True
+    return seen, s
+
+
+def run_mission(c: Client, seen: int, tuned: list[bool]) -> tuple[int, dict[str, Any]]:
+    c.call("start")
+    t0 = time.monotonic()
+    while True:
+        time.sleep(0.1)
+        seen, s = follow(c, seen, tuned)
+        if s["state"] == "ready" or (s["faulted"] and s["state"] == "running"):
+            break
+        if time.monotonic() - t0 > 60:
+            c.call("abort")
+            raise SystemExit("the mission did not end within 60 s")
+    print(f"mission ended: {s['result']} in {time.monotonic() - t0:.1f} s", flush=True)
+    return seen, s
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--robot", default=str(ROOT / "configs/robots/sim-ur5e.toml"))
-    ap.add_argument("--task", default=str(ROOT / "configs/tasks/move_joints.toml"))
-    ap.add_argument("--priority", type=int, default=80, help="SCHED_FIFO priority (0: none)")
-    ap.add_argument("--spin-us", type=float, default=0.0, help="wake early and spin (µs)")
-    ap.add_argument("--overrun-limit", type=int, default=3, help="overruns in a row that raise T3 Overrun")
-    ap.add_argument("--retries", type=int, default=2, help="retries of a motion stopped by T3 Overrun")
+    ap.add_argument("--mission", default=str(ROOT / "configs/missions/demo.mission"))
+    ap.add_argument("--out", default=str(ROOT / "demo-out"), help="folder for the log and the plot")
     args = ap.parse_args(argv)
-
-    session = Session.open(args.robot)
-    task = session.task(args.task)
-    loop = session.loop(WallClock(spin_margin_s=args.spin_us * 1e-6), overrun_limit=args.overrun_limit)
-    traj = next(m for m in task.modules if m.type_name == "ruckig_trajectory")
-    cfg = session.config
-    rt = enter_realtime(args.priority)
-    for w in rt.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    print(
-        f"orccadd demo: {cfg.name} ({cfg.dof} joints, {cfg.resource.backend}), "
-        f"period {cfg.control_period_s * 1e3:g} ms, {rt.describe()}"
-    )
-    failures = 0
+    out = Path(args.out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix="orccadd-demo-")
+    sock = f"{tmp}/orccadd.sock"
+    daemon_log = out / "orccadd.log"
+    cmd = [sys.executable, "-m", "orccadd.daemon.rtproc", "--config", args.robot, "--socket", sock]
+    print(f"$ orccadd --config {args.robot} --socket {sock}", flush=True)
+    proc = subprocess.Popen(cmd, stdout=daemon_log.open("w"), stderr=subprocess.STDOUT)
+    code = 1
     try:
-        for i, (name, target) in enumerate(TARGETS_RAD.items(), start=1):
-            goal = session.resource.model.home_rad if target is None else np.array(target)
-            for attempt in range(args.retries + 1):
-                traj.configure({"target_rad": goal})
-                t0 = time.monotonic()
-                phase = loop.run_task(task, timeout_s=10.0)
-                elapsed = time.monotonic() - t0
-                err = float(np.abs(session.resource.state.q_rad - goal).max())
-                names = [n.split(".", 1)[1] for n in session.event_names() if not n.endswith(".pre")]
-                print(
-                    f"motion {i}/{len(TARGETS_RAD)} {name:6s} target {np.round(goal, 2).tolist()}: "
-                    f"{phase.name.lower()} in {elapsed:5.2f} s, final error {err:.4f} rad "
-                    f"[events: {', '.join(names) or 'none'}]"
-                )
-                if names != ["T3.Overrun"] or attempt == args.retries:
-                    break
-                # The machine stalled the loop, not the arm: let the safe stop finish, clear, retry.
-                loop.run_for(1.0)
-                session.resource.clear_stop()
-                print(f"  {args.overrun_limit} overrun(s) in a row (the machine stalled the loop): "
-                      "the arm safe-stopped; stop cleared, retrying")  # fmt: skip
-            failures += phase.name != "DONE"
-        loop.run_for(0.2)  # hold at the last target
+        wait_up(sock, proc)
+        with Client(sock, timeout_s=120) as c:
+            print(format_status(c.call("status")))
+            print(f"$ orccadctl load {args.mission}")
+            print(c.call("load", path=args.mission)["report"])
+            csv = out / "demo.csv"
+            c.call(
+                "log",
+                action="start",
+                signals=["q", "dq", "tau", "cmd", "wake_us", "compute_us"],
+                path=str(csv),
+            )
+            print(f"$ orccadctl log start -o {csv}")
+            tuned = [False]
+            seen, s = run_mission(c, 0, tuned)
+            if s["result"] != "success":
+                print(f"type 3 exception ({s['result']}): acknowledge (Stop), reset, run again", flush=True)
+                if s["state"] == "running":
+                    c.call("stop")
+                time.sleep(1.0)
+                while c.call("status")["faulted"]:
+                    try:
+                        c.call("reset")
+                    except ClientError:
+                        time.sleep(0.5)
+                seen, s = run_mission(c, seen, tuned)
+            time.sleep(0.3)
+            info = c.call("log", action="stop")
+            print(f"log: {info['file']}: {info['rows']} rows at full rate, {info['lost']} lost")
+            print(format_status(c.call("status")))
+            png = out / "demo.png"
+            print(plot_csv(csv, png, ["q", "tau", "wake_us"]))
+            code = 0 if s["result"] == "success" else 1
     finally:
-        leave_realtime(rt)
-        session.close()
-    print(loop.stats.report("control loop"))
-    return 1 if failures else 0
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                rc = proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                rc = proc.wait()
+            print(f"orccadd stopped (exit {rc}): {daemon_log.read_text().strip().splitlines()[-1]}")
+            code = code or (1 if rc else 0)
+    return code
 
 
 if __name__ == "__main__":

@@ -42,7 +42,7 @@ def test_resource_fault_raises_type_3_then_reset_and_move_again(daemon: Daemon) 
     daemon.call("start")
     daemon.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
     daemon.call("inject", fault="resource")
-    s = daemon.wait(lambda s: "stopped" in s.get("resource_status", []))
+    daemon.wait(lambda s: "stopped" in s.get("resource_status", []))
     ev = daemon.call("events", last=30)
     inputs = [i for e in ev["events"] if e["kind"] == "instant" for i in e["inputs"]]  # type: ignore[index]
     assert "Reach.T3.ResourceFault" in inputs
