@@ -321,8 +321,8 @@ class Machine:
     def operator_input(self, name: str) -> int:
         mission = self.mission
         assert mission is not None
-        desc = mission.describe()
-        ops: list[str] = desc["operator_inputs"]  # type: ignore[assignment]
+        p = mission.automaton.program
+        ops = [n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator"]
         for op in ops:
             if op == name or op.lower() == name.lower():
                 return 1 << mission.automaton.program.inputs.index(op)

@@ -198,9 +198,8 @@ class SimProcessArm(PhysicalResource):
         if self._silent_reads >= self.settings.heartbeat_timeout_periods:
             flags |= Status.COMM_LOST
             self.fault_message = "the plant process stopped answering"
-        if status & SELF_STOPPED and hb < self._settled_heartbeat:
-            flags = flags  # a state published before the stop was cleared: not news
-        elif status & SELF_STOPPED:
+        # a state published before a cleared stop was confirmed still says "stopped": not news
+        if status & SELF_STOPPED and hb >= self._settled_heartbeat:
             if not self._stop_flags:  # the arm stopped by itself (its watchdog): fatal here
                 flags |= Status.FAULT
                 self.fault_message = "the arm stopped on its own (command watchdog)"
