@@ -50,7 +50,9 @@ def enter_realtime(
             rep.warnings.append(f"CPU affinity {sorted(cpus)} refused ({e}): the thread may migrate")
     if priority > 0:
         try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+            # reset on fork: a process this thread starts (the command daemon, a plant) runs at
+            # normal priority unless it asks for more, never above the loop by inheritance
+            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
             rep.sched_fifo_priority = priority
         except (PermissionError, OSError) as e:
             rep.warnings.append(

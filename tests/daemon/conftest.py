@@ -24,7 +24,9 @@ def robot_config(tmp: Path, daemon: str = "") -> Path:
     text = ROBOT.read_text().replace(
         'urdf = "../urdf/ur5e.urdf"', f'urdf = "{ROOT / "configs/urdf/ur5e.urdf"}"'
     )
-    text += f'\n[daemon]\nhold_task = "{ROOT / "configs/tasks/hold.toml"}"\n{daemon}\n'
+    text = text.replace(
+        "\n[daemon]\n", f'\n[daemon]\nhold_task = "{ROOT / "configs/tasks/hold.toml"}"\n{daemon}\n'
+    )
     path = tmp / "robot.toml"
     path.write_text(text)
     return path

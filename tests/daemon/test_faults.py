@@ -24,7 +24,8 @@ def test_consecutive_overruns_raise_type_3_and_the_safe_procedure(daemon: Daemon
     daemon.call("load", path=DEMO)
     daemon.call("start")
     daemon.wait(lambda s: s["active_task"] == "Reach")
-    daemon.call("inject", fault="overrun", ticks=30)  # each tick takes 1.5 periods: real overruns
+    # each tick takes 1.5 periods: real overruns, more in a row than sim-ur5e's overrun_limit (25)
+    daemon.call("inject", fault="overrun", ticks=60)
     s = daemon.wait(lambda s: s["faulted"] and "stopped" in s.get("resource_status", []))
     ev = daemon.call("events", last=30)
     inputs = [i for e in ev["events"] if e["kind"] == "instant" for i in e["inputs"]]  # type: ignore[index]
@@ -72,6 +73,8 @@ def test_command_daemon_killed_mission_goes_on_and_a_new_one_attaches(daemon: Da
             pass
         assert time.monotonic() < end, daemon.log.read_text()
         time.sleep(0.2)
+    # started by the SCHED_FIFO automaton thread, it must not inherit a real-time priority
+    assert os.sched_getscheduler(new) == os.SCHED_OTHER
     s = daemon.wait(lambda s: s["state"] == "ready", timeout_s=60)
     assert s["result"] == "success" and not s["faulted"]
 
