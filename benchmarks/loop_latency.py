@@ -14,14 +14,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
-import re
-import shutil
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from harness import cyclictest
 
 from orccadd.config import load_robot_config, with_backend
 from orccadd.runtime import Summary, WallClock, enter_realtime, leave_realtime
@@ -98,31 +95,8 @@ def run_ours(
 
 
 def run_cyclictest(period_s: float, duration_s: float, priority: int) -> Summary | None:
-    exe = shutil.which("cyclictest")
-    if exe is None:
-        print("cyclictest not found (apt-get install rt-tests): no baseline", file=sys.stderr)
-        return None
-    loops = int(duration_s / period_s)
-    cmd = [exe, "-m", "-q", f"-p{priority}", f"-i{int(period_s * 1e6)}", f"-l{loops}", "-h20000"]
-    out = subprocess.run(cmd, capture_output=True, text=True, timeout=duration_s * 3 + 30).stdout
-    hist = {}
-    for line in out.splitlines():
-        m = re.match(r"^(\d+)\s+(\d+)\s*$", line)
-        if m and int(m.group(2)):
-            hist[int(m.group(1))] = int(m.group(2))
-    max_m = re.search(r"# Max Latencies:\s+(\d+)", out)
-    if not hist:
-        print(f"cyclictest printed no histogram:\n{out[-500:]}", file=sys.stderr)
-        return None
-    values = np.array(sorted(hist))
-    counts = np.array([hist[v] for v in values])
-    cum = np.cumsum(counts) / counts.sum()
-
-    def pct(p: float) -> float:
-        return float(values[np.searchsorted(cum, p)])
-
-    mx = float(max_m.group(1)) if max_m else float(values[-1])
-    return Summary(pct(0.5), pct(0.99), pct(0.999), mx)
+    samples_us = cyclictest(period_s, duration_s, priority)
+    return None if samples_us is None else Summary.of(samples_us * 1000.0)
 
 
 def main() -> int:

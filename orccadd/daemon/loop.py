@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import select
 import time
 
 from orccadd.daemon.telemetry import TICK_FIELDS, H, TelemetryBlock
@@ -50,6 +51,8 @@ class SwitchingLoop(ControlLoop):
         self.switches = 0
         self.busy_ns = 0  # fault injection: extra compute per tick (real overruns)
         self.busy_ticks = 0
+        self._slack_r, self._slack_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+        self._slack_wanted = False
 
     # ---- the automaton thread's side -------------------------------------------------------
     @property
@@ -60,6 +63,18 @@ class SwitchingLoop(ControlLoop):
     def request_switch(self, task: RobotTask) -> None:
         """Make `task` the active one at the next tick (restarted if it already is)."""
         self._request = (self._request[0] + 1, task)
+
+    def wait_for_slack(self, timeout_s: float) -> bool:
+        """Block until the control thread has just finished a tick (False after `timeout_s`:
+        the loop is stopped or late, so there is nothing to keep out of the way of)."""
+        with contextlib.suppress(BlockingIOError):
+            os.read(self._slack_r, 64)
+        self._slack_wanted = True
+        ready, _, _ = select.select([self._slack_r], [], [], timeout_s)
+        self._slack_wanted = False
+        with contextlib.suppress(BlockingIOError):
+            os.read(self._slack_r, 64)
+        return bool(ready)
 
     # ---- the control thread ---------------------------------------------------------------
     def step(self, t_s: float) -> None:
@@ -81,6 +96,10 @@ class SwitchingLoop(ControlLoop):
             self._notified = pushed
             with contextlib.suppress(BlockingIOError):  # wake-ups already pending
                 os.write(self.wake_fd, b"e")
+        if self._slack_wanted:
+            self._slack_wanted = False
+            with contextlib.suppress(BlockingIOError):
+                os.write(self._slack_w, b"s")
 
     def _switch(self, new: RobotTask) -> None:
         old = self.active

@@ -253,6 +253,7 @@ class RealtimeProcess:
                 self.conn = None
                 self._link_lost("command daemon disconnected")
                 return
+            self.machine.loop.wait_for_slack(2 * self.cfg.control_period_s)
             reply = self._handle(data)
             # if the command daemon is not reading, it times out; the loop carries on
             with contextlib.suppress(BlockingIOError, OSError):

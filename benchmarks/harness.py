@@ -1,0 +1,88 @@
+"""What the daemon benchmarks share: a running orccadd on a private socket, and figures."""
+
+from __future__ import annotations
+
+import contextlib
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from orccadd.demo import wait_up
+
+ROOT = Path(__file__).resolve().parent.parent
+UR5E = ROOT / "configs/robots/sim-ur5e.toml"
+
+
+@dataclass
+class RunningDaemon:
+    proc: subprocess.Popen[bytes]
+    socket: str
+    tmp: Path
+    log: Path
+
+
+@contextlib.contextmanager
+def running_daemon(config: Path = UR5E, *extra: str) -> Iterator[RunningDaemon]:
+    """`orccadd --config CONFIG` with its command daemon, stopped (SIGTERM) on exit."""
+    tmp = Path(tempfile.mkdtemp(prefix="orccadd-bench-"))
+    sock = str(tmp / "orccadd.sock")
+    log = tmp / "orccadd.log"
+    cmd = [sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(config), "--socket", sock, *extra]
+    proc = subprocess.Popen(cmd, stdout=log.open("w"), stderr=subprocess.STDOUT)
+    try:
+        wait_up(sock, proc)
+        yield RunningDaemon(proc, sock, tmp, log)
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def figures(values: np.ndarray | list[float], unit: str, digits: int = 1) -> str:
+    """`median … p99 … max …` of `values` in `unit`."""
+    v = np.asarray(values, dtype=float)
+    if v.size == 0:
+        return "no samples"
+    med, p99 = np.percentile(v, [50, 99])
+    f = f"{{:.{digits}f}}"
+    return f"median {f.format(med)}  p99 {f.format(p99)}  max {f.format(v.max())} {unit}  (n={v.size})"
+
+
+def cyclictest(period_s: float, duration_s: float, priority: int) -> np.ndarray | None:
+    """Wake-up latencies (µs) of Debian's `cyclictest` (rt-tests), one thread, from its histogram.
+
+    None (and a note on stderr) when cyclictest is not installed.
+    """
+    exe = shutil.which("cyclictest")
+    if exe is None:
+        print("cyclictest not found (apt-get install rt-tests): no baseline", file=sys.stderr)
+        return None
+    loops = max(1, int(duration_s / period_s))
+    cmd = [exe, "-m", "-q", f"-p{priority}", f"-i{int(period_s * 1e6)}", f"-l{loops}", "-h20000"]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=duration_s * 3 + 30).stdout
+    values, counts = [], []
+    for line in out.splitlines():
+        m = re.match(r"^(\d+)\s+(\d+)\s*$", line)
+        if m and int(m.group(2)):
+            values.append(int(m.group(1)))
+            counts.append(int(m.group(2)))
+    if not values:
+        print(f"cyclictest printed no histogram:\n{out[-500:]}", file=sys.stderr)
+        return None
+    samples = np.repeat(np.array(values, dtype=float), counts)
+    max_m = re.search(r"# Max Latencies:\s+(\d+)", out)
+    if max_m and float(max_m.group(1)) > samples[-1]:  # beyond the histogram's range
+        samples[-1] = float(max_m.group(1))
+    return samples
