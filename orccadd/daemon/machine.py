@@ -74,6 +74,9 @@ def _bits(mask: int) -> list[int]:
     return out
 
 
+MAX_INJECTED_MS = 5000.0  # longest injected tick: a stall, not a hang
+
+
 class Machine:
     """Missions, the automaton and commands. Methods run in the automaton thread only."""
 
@@ -444,6 +447,8 @@ class Machine:
                 raise CommandError(f"resource {self.resource.name!r} cannot inject faults")
             inject("injected fault")
         elif fault == "overrun":
+            if not 0.0 <= extra_ms <= MAX_INJECTED_MS:
+                raise CommandError(f"inject: extra_ms (={extra_ms:g}) must be in [0, {MAX_INJECTED_MS:g}]")
             period_ms = self.cfg.control_period_s * 1e3
             self.loop.busy_ns = int((extra_ms or 1.5 * period_ms) * 1e6)
             self.loop.busy_ticks = max(1, min(int(ticks), 10_000))
