@@ -66,3 +66,19 @@ def test_export_promela_writes_a_model(tmp_path: Path) -> None:
     r = ctl("export-promela", str(KEEPSTABLE), "-o", str(out))
     assert r.returncode == 0, r.stderr
     assert "active proctype mission()" in out.read_text()
+
+
+def test_export_promela_refuses_an_unknown_property(tmp_path: Path) -> None:
+    r = ctl("export-promela", str(KEEPSTABLE), "--property", "liveness", "-o", str(tmp_path / "x.pml"))
+    assert r.returncode == 2
+    assert "liveness: unknown (properties: safety, conflicts)" in r.stderr
+    assert not (tmp_path / "x.pml").exists()
+
+
+def test_online_commands_do_not_load_the_compiler() -> None:
+    code = (
+        "import sys, orccadd.cli\n"
+        "print(any(m.startswith(('lark', 'orccadd.automaton')) for m in sys.modules))"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert r.stdout.strip() == "False", r.stderr
