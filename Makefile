@@ -46,8 +46,12 @@ unit: setup
 
 test: lint typecheck unit
 
+# Timing scripts (run as root for SCHED_FIFO); each prints median / p99 / max and its targets.
 bench: setup
 	$(PY) benchmarks/loop_latency.py
+	$(PY) benchmarks/switching.py
+	$(PY) benchmarks/isolation.py
+	$(PY) benchmarks/automaton.py --skip-large
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache
