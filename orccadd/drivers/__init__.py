@@ -1,0 +1,1 @@
+"""Protocol layers under the hardware Physical Resources (CANopen CiA 402, ...)."""
