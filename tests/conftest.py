@@ -42,3 +42,28 @@ def robot_variant(tmp_path: Path) -> Callable[..., Path]:
 def task_variant(tmp_path: Path) -> Callable[..., Path]:
     """Write a variant of the shipped move task; returns its path."""
     return _variant_writer(tmp_path, MOVE_TASK, "task.toml")
+
+
+def _testdata_dir() -> Path | None:
+    """The shared public test data (EDS/DCF files): $ORCCADD_TESTDATA, or ../shared/testdata
+    next to the project, or /work/shared/testdata (these machines)."""
+    import os
+
+    for cand in (
+        os.environ.get("ORCCADD_TESTDATA", ""),
+        ROOT.parent / "shared/testdata",
+        "/work/shared/testdata",
+    ):
+        if cand and Path(cand, "eds").is_dir():
+            return Path(cand)
+    return None
+
+
+TESTDATA = _testdata_dir()
+
+
+def eds(relative: str) -> Path:
+    """A public EDS/DCF file by its path under testdata/eds/ (the test is skipped without them)."""
+    if TESTDATA is None:
+        pytest.skip("public EDS files not found (set ORCCADD_TESTDATA to shared/testdata)")
+    return TESTDATA / "eds" / relative

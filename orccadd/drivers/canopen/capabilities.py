@@ -1,0 +1,107 @@
+"""What a drive can do, read from its object dictionary (EDS/DCF) before anything starts.
+
+A cyclic synchronous mode needs its target object and its actual value mapped into PDOs:
+
+    csp  0x607A target position  -> 0x6064 position actual value
+    csv  0x60FF target velocity  -> 0x606C velocity actual value
+    cst  0x6071 target torque    -> 0x6077 torque actual value
+
+plus 0x6040 controlword, 0x6041 statusword and 0x6060/0x6061 modes of operation. A description
+that lacks one of them cannot do that mode: `require` says so with the file and the object.
+0x6502 (supported drive modes) is only a hint here (its default in an EDS is often stale); the
+driver reads the drive's own value at startup.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import canopen
+
+MODES: dict[str, tuple[int, int, int]] = {  # name -> (target, actual, 0x6502 bit)
+    "csp": (0x607A, 0x6064, 7),
+    "csv": (0x60FF, 0x606C, 8),
+    "cst": (0x6071, 0x6077, 9),
+}
+MODE_NAMES = {
+    "csp": "cyclic synchronous position",
+    "csv": "cyclic synchronous velocity",
+    "cst": "cyclic synchronous torque",
+}
+COMMON = {
+    0x6040: "controlword",
+    0x6041: "statusword",
+    0x6060: "modes of operation",
+    0x6061: "modes of operation display",
+}
+STANDARD_NAMES = {
+    0x607A: "target position",
+    0x6064: "position actual value",
+    0x60FF: "target velocity",
+    0x606C: "velocity actual value",
+    0x6071: "target torque",
+    0x6077: "torque actual value",
+    **COMMON,
+}
+
+
+@dataclass(frozen=True)
+class DriveCapabilities:
+    source: str
+    modes: frozenset[str]
+    missing: dict[str, tuple[int, ...]]  # mode -> objects the description lacks (or cannot map)
+    supported_modes_hint: int | None  # 0x6502 default in the description, if any
+    heartbeat_consumer: bool  # 0x1016
+    rpdos: int
+    tpdos: int
+
+    def require(self, mode: str) -> None:
+        """Raise ValueError (a sentence naming the description and the objects) if `mode` is impossible."""
+        if mode not in MODES:
+            raise ValueError(f"unknown mode {mode!r} (modes: {', '.join(MODES)})")
+        if mode in self.modes:
+            return
+        lacks = ", ".join(f"0x{i:04X} {STANDARD_NAMES.get(i, '')}".strip() for i in self.missing[mode])
+        can = ", ".join(sorted(self.modes)) or "no cyclic synchronous mode"
+        raise ValueError(
+            f"{MODE_NAMES[mode]} ({mode}) is not possible with {self.source}: it lacks {lacks} "
+            f"(this drive can do: {can})"
+        )
+
+    def hint_excludes(self, mode: str) -> bool:
+        """The description's 0x6502 default says the mode is unsupported (a warning, not a refusal)."""
+        hint = self.supported_modes_hint
+        return hint is not None and not hint >> MODES[mode][2] & 1
+
+
+def read_capabilities(path: str | Path, node_id: int = 1) -> DriveCapabilities:
+    od = canopen.import_od(str(path), node_id)
+    missing: dict[str, tuple[int, ...]] = {}
+    modes = set()
+    for mode, (target, actual, _bit) in MODES.items():
+        lacks = tuple(i for i in (*COMMON, target, actual) if not _mappable(od, i, i in COMMON))
+        missing[mode] = lacks
+        if not lacks:
+            modes.add(mode)
+    hint = od.get(0x6502)
+    default = getattr(hint, "default", None)
+    return DriveCapabilities(
+        source=Path(path).name,
+        modes=frozenset(modes),
+        missing=missing,
+        supported_modes_hint=int(default) if isinstance(default, int) else None,
+        heartbeat_consumer=0x1016 in od,
+        rpdos=sum(1 for i in range(0x1600, 0x1800) if i in od),
+        tpdos=sum(1 for i in range(0x1A00, 0x1C00) if i in od),
+    )
+
+
+def _mappable(od: canopen.ObjectDictionary, index: int, sdo_ok: bool) -> bool:
+    """Present, and PDO-mappable unless it may be reached by SDO (modes of operation)."""
+    if index not in od:
+        return False
+    var = od[index]
+    if not isinstance(var, canopen.objectdictionary.ODVariable):
+        return False
+    return sdo_ok or index in (0x6060, 0x6061) or bool(var.pdo_mappable)
