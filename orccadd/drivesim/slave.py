@@ -1,0 +1,502 @@
+"""A CANopen slave node (CiA 301) over an object dictionary from an EDS/DCF file.
+
+No I/O here: frames come in through `on_frame`, time through `poll`, and frames go out
+through the `send` callable given at construction. What it does:
+
+- NMT: boot-up message, PRE-OPERATIONAL / OPERATIONAL / STOPPED, reset node and reset
+  communication (object values back to the description's defaults), addressed or broadcast;
+- SDO server: expedited and segmented upload and download, abort codes of CiA 301 for a
+  missing object or sub-index, a read-only object, a wrong length, a value out of range,
+  a toggle error; block transfers are refused (abort "command not valid");
+- PDOs from 0x1400/0x1600 (receive) and 0x1800/0x1A00 (transmit), reconfigurable over SDO
+  following CiA 301's procedure (disable the PDO, set the count to 0, write the entries, set
+  the count), entries checked (exists, mappable, at most 64 bits); RPDOs with a synchronous
+  transmission type are applied at the next SYNC, others at once; TPDOs of type 1-240 go out
+  every n-th SYNC, type 0 on SYNC when changed, 254/255 on their event timer;
+- heartbeat producer (0x1017) and consumer (0x1016, a lost producer is reported to the owner),
+  EMCY (0x1014, default 0x80 + node id) with the error register 0x1001.
+
+Write hooks (`on_write`) let the drive behind the node react to controlword and friends,
+whether they arrive by PDO or SDO.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any
+
+import can
+import canopen
+from canopen.objectdictionary import ODArray, ODRecord, ODVariable
+
+# SDO abort codes (CiA 301, 7.2.4.3.17)
+ABORT_TOGGLE = 0x05030000
+ABORT_COMMAND = 0x05040001
+ABORT_UNSUPPORTED_ACCESS = 0x06010000
+ABORT_WRITE_ONLY = 0x06010001
+ABORT_READ_ONLY = 0x06010002
+ABORT_NO_OBJECT = 0x06020000
+ABORT_NOT_MAPPABLE = 0x06040041
+ABORT_PDO_LENGTH = 0x06040042
+ABORT_LENGTH = 0x06070010
+ABORT_NO_SUBINDEX = 0x06090011
+ABORT_VALUE_HIGH = 0x06090031
+ABORT_VALUE_LOW = 0x06090032
+ABORT_DEVICE_STATE = 0x08000022
+
+ABORT_GENERAL = 0x08000000
+
+COB_NMT, COB_SYNC = 0x000, 0x080
+_EMPTY: dict[int, Any] = {
+    canopen.objectdictionary.VISIBLE_STRING: "",
+    canopen.objectdictionary.UNICODE_STRING: "",
+    canopen.objectdictionary.OCTET_STRING: b"",
+    canopen.objectdictionary.DOMAIN: b"",
+}
+PDO_INVALID = 1 << 31
+
+
+class Nmt(IntEnum):
+    """NMT states with their heartbeat codes."""
+
+    INITIALISING = 0x00
+    STOPPED = 0x04
+    OPERATIONAL = 0x05
+    PRE_OPERATIONAL = 0x7F
+
+
+class SdoAbortError(Exception):
+    def __init__(self, code: int) -> None:
+        super().__init__(f"SDO abort 0x{code:08X}")
+        self.code = code
+
+
+@dataclass
+class Pdo:
+    """One PDO as configured now: its COB-ID, transmission type and mapped entries."""
+
+    comm: int  # 0x1400+k or 0x1800+k
+    mapping: int  # 0x1600+k or 0x1A00+k
+    transmit: bool
+    cob_id: int = 0
+    valid: bool = False
+    trans_type: int = 255
+    event_timer_ms: int = 0
+    entries: list[tuple[int, int, int]] = field(default_factory=list)  # (index, sub, bits)
+    sync_count: int = 0
+    pending: bytes | None = None  # a synchronous RPDO waiting for the next SYNC
+    last_data: bytes = b""
+    next_event_s: float = 0.0
+
+
+@dataclass
+class _Segmented:
+    index: int
+    sub: int
+    upload: bool
+    data: bytearray
+    toggle: int = 0
+    size: int | None = None
+
+
+class SlaveNode:
+    def __init__(self, node_id: int, eds: str, send: Callable[[can.Message], None]) -> None:
+        self.node_id = node_id
+        self.eds = eds
+        self.od = canopen.import_od(eds, node_id)
+        self.send = send
+        self.vars: dict[tuple[int, int], ODVariable] = {}
+        for obj in self.od.values():
+            if isinstance(obj, ODVariable):
+                self.vars[(obj.index, 0)] = obj
+            elif isinstance(obj, ODRecord | ODArray):
+                for sub in obj.values():
+                    self.vars[(sub.index, sub.subindex)] = sub
+        self.values: dict[tuple[int, int], Any] = {}
+        self.on_write: dict[tuple[int, int], Callable[[Any], None]] = {}
+        self.on_heartbeat_lost: Callable[[int], None] = lambda producer: None
+        self.nmt = Nmt.INITIALISING
+        self.silent = False  # fault injection: the node sends nothing at all
+        self.heartbeat_silent = False  # fault injection: no heartbeat
+        self.rpdos: dict[int, Pdo] = {}
+        self.tpdos: dict[int, Pdo] = {}
+        self._seg: _Segmented | None = None
+        self._next_heartbeat_s = 0.0
+        self._consumers: dict[int, tuple[float, float]] = {}  # producer -> (timeout_s, last_seen_s)
+        self._lost: set[int] = set()
+
+    # ---- object values -------------------------------------------------------------------
+    def get(self, index: int, sub: int = 0) -> Any:
+        return self.values[(index, sub)]
+
+    def set(self, index: int, sub: int, value: Any) -> None:
+        """Set a value from the drive's side (no hooks, no access check)."""
+        self.values[(index, sub)] = value
+
+    def has(self, index: int, sub: int = 0) -> bool:
+        return (index, sub) in self.values
+
+    def _defaults(self, comm_only: bool) -> None:
+        for key, var in self.vars.items():
+            if comm_only and not 0x1000 <= key[0] <= 0x1FFF:
+                continue
+            default = var.value if var.value is not None else var.default
+            if default is None:
+                default = _EMPTY.get(var.data_type or 0, 0)
+            self.values[key] = default
+        self._build_pdos()
+
+    # ---- NMT -------------------------------------------------------------------------------
+    def boot(self, now_s: float) -> None:
+        """Power on (or reset node): defaults, boot-up message, PRE-OPERATIONAL."""
+        self._reset(now_s, comm_only=False)
+
+    def _reset(self, now_s: float, comm_only: bool) -> None:
+        self._defaults(comm_only)
+        self._seg = None
+        self.nmt = Nmt.PRE_OPERATIONAL
+        self._lost.clear()
+        self._configure_consumers(now_s)
+        self._emit(0x700 + self.node_id, b"\x00")  # boot-up
+        self._next_heartbeat_s = now_s
+
+    def _nmt_command(self, cs: int, now_s: float) -> None:
+        if cs == 0x01:
+            self.nmt = Nmt.OPERATIONAL
+        elif cs == 0x02:
+            self.nmt = Nmt.STOPPED
+        elif cs == 0x80:
+            self.nmt = Nmt.PRE_OPERATIONAL
+        elif cs == 0x81:
+            self.on_reset_node()
+            self._reset(now_s, comm_only=False)
+        elif cs == 0x82:
+            self._reset(now_s, comm_only=True)
+
+    def on_reset_node(self) -> None:
+        """Hook: the application is reset too (the drive behind the node)."""
+
+    # ---- frames in -----------------------------------------------------------------------
+    def on_frame(self, msg: can.Message, now_s: float) -> None:
+        cob = msg.arbitration_id
+        data = bytes(msg.data)
+        if msg.is_extended_id or msg.is_remote_frame:
+            return
+        if cob == COB_NMT:
+            if len(data) == 2 and data[1] in (0, self.node_id):
+                self._nmt_command(data[0], now_s)
+            return
+        if self.nmt is Nmt.STOPPED:
+            if 0x700 <= cob <= 0x77F:
+                self._heartbeat_seen(cob - 0x700, now_s)
+            return
+        if cob == 0x600 + self.node_id:
+            if len(data) == 8:
+                self._sdo(data)
+            return
+        if 0x700 <= cob <= 0x77F:
+            self._heartbeat_seen(cob - 0x700, now_s)
+            return
+        if self.nmt is not Nmt.OPERATIONAL:
+            return
+        for pdo in self.rpdos.values():
+            if pdo.valid and pdo.cob_id == cob:
+                if pdo.trans_type <= 240:
+                    pdo.pending = data
+                else:
+                    self._apply_rpdo(pdo, data)
+                return
+
+    def on_sync(self, now_s: float) -> None:
+        """A SYNC arrived: apply synchronous RPDOs (the owner then runs its cycle and calls
+        `transmit_sync_pdos`)."""
+        if self.nmt is not Nmt.OPERATIONAL:
+            return
+        for pdo in self.rpdos.values():
+            if pdo.pending is not None:
+                data, pdo.pending = pdo.pending, None
+                self._apply_rpdo(pdo, data)
+
+    def transmit_sync_pdos(self) -> None:
+        if self.nmt is not Nmt.OPERATIONAL:
+            return
+        for pdo in self.tpdos.values():
+            if not pdo.valid or pdo.trans_type > 240:
+                continue
+            if pdo.trans_type == 0:
+                data = self._pack(pdo)
+                if data != pdo.last_data:
+                    self._send_pdo(pdo, data)
+                continue
+            pdo.sync_count += 1
+            if pdo.sync_count >= pdo.trans_type:
+                pdo.sync_count = 0
+                self._send_pdo(pdo, self._pack(pdo))
+
+    def poll(self, now_s: float) -> None:
+        """Timers: heartbeat producer, event-timer TPDOs, heartbeat consumers."""
+        if self.nmt is Nmt.INITIALISING:
+            return
+        period_ms = int(self.values.get((0x1017, 0), 0) or 0)
+        if period_ms and now_s >= self._next_heartbeat_s:
+            self._next_heartbeat_s = max(self._next_heartbeat_s + period_ms / 1000, now_s)
+            if not self.heartbeat_silent:
+                self._emit(0x700 + self.node_id, bytes([self.nmt]))
+        if self.nmt is Nmt.OPERATIONAL:
+            for pdo in self.tpdos.values():
+                if pdo.valid and pdo.trans_type >= 254 and pdo.event_timer_ms and now_s >= pdo.next_event_s:
+                    pdo.next_event_s = now_s + pdo.event_timer_ms / 1000
+                    self._send_pdo(pdo, self._pack(pdo))
+        for producer, (timeout_s, last_s) in self._consumers.items():
+            if producer not in self._lost and last_s and now_s - last_s > timeout_s:
+                self._lost.add(producer)
+                self.on_heartbeat_lost(producer)
+
+    def emergency(self, code: int, register: int, manufacturer: bytes = b"") -> None:
+        """Send an EMCY (code 0 = error reset / no error) and store the error register."""
+        if self.has(0x1001):
+            self.values[(0x1001, 0)] = register
+        cob = int(self.values.get((0x1014, 0), 0x80 + self.node_id)) & 0x7FF
+        payload = struct.pack("<HB", code, register) + manufacturer[:5].ljust(5, b"\x00")
+        self._emit(cob, payload)
+
+    # ---- heartbeat consumer ----------------------------------------------------------------
+    def _configure_consumers(self, now_s: float) -> None:
+        self._consumers = {}
+        n = int(self.values.get((0x1016, 0), 0) or 0)
+        for sub in range(1, n + 1):
+            entry = int(self.values.get((0x1016, sub), 0) or 0)
+            producer, time_ms = entry >> 16 & 0x7F, entry & 0xFFFF
+            if producer and time_ms:
+                self._consumers[producer] = (time_ms / 1000, 0.0)  # armed by the first heartbeat
+
+    def _heartbeat_seen(self, producer: int, now_s: float) -> None:
+        if producer in self._consumers:
+            timeout_s, _ = self._consumers[producer]
+            self._consumers[producer] = (timeout_s, now_s)
+            self._lost.discard(producer)
+
+    # ---- PDOs --------------------------------------------------------------------------------
+    def _build_pdos(self) -> None:
+        self.rpdos = self._pdos(0x1400, 0x1600, transmit=False)
+        self.tpdos = self._pdos(0x1800, 0x1A00, transmit=True)
+
+    def _pdos(self, comm0: int, map0: int, transmit: bool) -> dict[int, Pdo]:
+        out = {}
+        for k in range(512):
+            if (comm0 + k, 1) not in self.values or (map0 + k, 0) not in self.values:
+                continue
+            pdo = Pdo(comm0 + k, map0 + k, transmit)
+            self._load_pdo(pdo)
+            out[comm0 + k] = pdo
+        return out
+
+    def _load_pdo(self, pdo: Pdo) -> None:
+        cob = int(self.values[(pdo.comm, 1)])
+        pdo.cob_id = cob & 0x7FF
+        pdo.valid = not cob & PDO_INVALID and pdo.cob_id != 0
+        pdo.trans_type = int(self.values.get((pdo.comm, 2), 255))
+        pdo.event_timer_ms = int(self.values.get((pdo.comm, 5), 0) or 0) if pdo.transmit else 0
+        n = int(self.values[(pdo.mapping, 0)])
+        pdo.entries = []
+        for sub in range(1, n + 1):
+            e = int(self.values.get((pdo.mapping, sub), 0))
+            pdo.entries.append((e >> 16, e >> 8 & 0xFF, e & 0xFF))
+        pdo.sync_count = 0
+        pdo.pending = None
+        pdo.last_data = b""
+
+    def _pack(self, pdo: Pdo) -> bytes:
+        parts = []
+        for index, sub, _bits in pdo.entries:
+            parts.append(self.vars[(index, sub)].encode_raw(self.values[(index, sub)]))
+        return b"".join(parts)
+
+    def _apply_rpdo(self, pdo: Pdo, data: bytes) -> None:
+        offset = 0
+        for index, sub, bits in pdo.entries:
+            n = bits // 8
+            chunk = data[offset : offset + n]
+            offset += n
+            if len(chunk) < n:
+                return  # a short frame: the drive ignores it (real drives raise an EMCY 0x8210)
+            if (index, sub) not in self.vars:  # dummy mapping
+                continue
+            value = self.vars[(index, sub)].decode_raw(chunk)
+            self.values[(index, sub)] = value
+            hook = self.on_write.get((index, sub))
+            if hook is not None:
+                hook(value)
+
+    def _send_pdo(self, pdo: Pdo, data: bytes) -> None:
+        pdo.last_data = data
+        self._emit(pdo.cob_id, data)
+
+    def _check_mapping_write(self, index: int, sub: int, value: int) -> None:
+        pdo = self._pdo_by_mapping(index)
+        if pdo is None:
+            return
+        if pdo.valid:
+            raise SdoAbortError(ABORT_DEVICE_STATE)  # disable the PDO first (CiA 301)
+        if sub == 0:
+            if value > 8:
+                raise SdoAbortError(ABORT_VALUE_HIGH)
+            total = 0
+            for s in range(1, value + 1):
+                e = int(self.values.get((index, s), 0))
+                total += self._check_entry(e, pdo.transmit)
+            if total > 64:
+                raise SdoAbortError(ABORT_PDO_LENGTH)
+        elif int(self.values.get((index, 0), 0)) != 0:
+            raise SdoAbortError(ABORT_DEVICE_STATE)  # set the count to 0 first (CiA 301)
+        else:
+            self._check_entry(value, pdo.transmit)
+
+    def _check_entry(self, entry: int, transmit: bool) -> int:
+        index, sub, bits = entry >> 16, entry >> 8 & 0xFF, entry & 0xFF
+        if 1 <= index <= 7:  # dummy entries (data types) for unused bytes
+            return bits
+        var = self.vars.get((index, sub))
+        if var is None:
+            raise SdoAbortError(ABORT_NO_OBJECT)
+        access_ok = var.readable if transmit else var.writable
+        if not var.pdo_mappable or not access_ok or bits != len(var) or bits % 8:
+            raise SdoAbortError(ABORT_NOT_MAPPABLE)
+        return bits
+
+    def _pdo_by_mapping(self, index: int) -> Pdo | None:
+        for pdo in (*self.rpdos.values(), *self.tpdos.values()):
+            if pdo.mapping == index:
+                return pdo
+        return None
+
+    def _pdo_by_comm(self, index: int) -> Pdo | None:
+        return self.rpdos.get(index) or self.tpdos.get(index)
+
+    # ---- SDO server ----------------------------------------------------------------------------
+    def _sdo(self, req: bytes) -> None:
+        cmd = req[0]
+        ccs = cmd >> 5
+        try:
+            if ccs == 4:  # abort from the client
+                self._seg = None
+                return
+            if ccs in (0, 3):
+                self._segment(req)
+                return
+            index, sub = struct.unpack_from("<HB", req, 1)
+            if ccs == 1:
+                self._download_initiate(cmd, index, sub, req)
+            elif ccs == 2:
+                self._upload_initiate(index, sub)
+            else:
+                raise SdoAbortError(ABORT_COMMAND)  # block transfers are not offered
+        except SdoAbortError as e:
+            self._abort(ccs, req, e.code)
+        except (ValueError, TypeError, struct.error):  # a value the description cannot encode
+            self._abort(ccs, req, ABORT_GENERAL)
+
+    def _abort(self, ccs: int, req: bytes, code: int) -> None:
+        self._seg = None
+        idx, sb = struct.unpack_from("<HB", req, 1) if ccs not in (0, 3) else (0, 0)
+        self._sdo_reply(struct.pack("<BHBI", 0x80, idx, sb, code))
+
+    def _var(self, index: int, sub: int) -> ODVariable:
+        var = self.vars.get((index, sub))
+        if var is None:
+            raise SdoAbortError(
+                ABORT_NO_SUBINDEX if any(k[0] == index for k in self.vars) else ABORT_NO_OBJECT
+            )
+        return var
+
+    def _upload_initiate(self, index: int, sub: int) -> None:
+        var = self._var(index, sub)
+        if not var.readable:
+            raise SdoAbortError(ABORT_WRITE_ONLY)
+        data = var.encode_raw(self.values[(index, sub)])
+        if len(data) <= 4:
+            n = 4 - len(data)
+            self._sdo_reply(struct.pack("<BHB", 0x43 | n << 2, index, sub) + data.ljust(4, b"\x00"))
+        else:
+            self._seg = _Segmented(index, sub, upload=True, data=bytearray(data))
+            self._sdo_reply(struct.pack("<BHBI", 0x41, index, sub, len(data)))
+
+    def _download_initiate(self, cmd: int, index: int, sub: int, req: bytes) -> None:
+        var = self._var(index, sub)
+        if not var.writable:
+            raise SdoAbortError(ABORT_READ_ONLY)
+        expedited, sized = bool(cmd & 0x02), bool(cmd & 0x01)
+        if expedited:
+            n = 4 - (cmd >> 2 & 0x3) if sized else 4
+            self._store(var, bytes(req[4 : 4 + n]))
+            self._sdo_reply(struct.pack("<BHB", 0x60, index, sub) + b"\x00" * 4)
+        else:
+            total: int | None = struct.unpack_from("<I", req, 4)[0] if sized else None
+            self._seg = _Segmented(index, sub, upload=False, data=bytearray(), size=total)
+            self._sdo_reply(struct.pack("<BHB", 0x60, index, sub) + b"\x00" * 4)
+
+    def _segment(self, req: bytes) -> None:
+        seg = self._seg
+        cmd = req[0]
+        if seg is None or seg.upload != (cmd >> 5 == 3):
+            raise SdoAbortError(ABORT_COMMAND)
+        toggle = cmd >> 4 & 1
+        if toggle != seg.toggle:
+            raise SdoAbortError(ABORT_TOGGLE)
+        seg.toggle ^= 1
+        if seg.upload:
+            chunk, seg.data = seg.data[:7], seg.data[7:]
+            last = not seg.data
+            n = 7 - len(chunk)
+            self._sdo_reply(bytes([toggle << 4 | n << 1 | int(last)]) + bytes(chunk).ljust(7, b"\x00"))
+            if last:
+                self._seg = None
+            return
+        n = 7 - (cmd >> 1 & 0x7)
+        seg.data += req[1 : 1 + n]
+        if cmd & 0x01:  # last segment
+            self._seg = None
+            if seg.size is not None and seg.size != len(seg.data):
+                raise SdoAbortError(ABORT_LENGTH)
+            self._store(self._var(seg.index, seg.sub), bytes(seg.data))
+        self._sdo_reply(bytes([0x20 | toggle << 4]) + b"\x00" * 7)
+
+    def _store(self, var: ODVariable, data: bytes) -> None:
+        fixed = var.data_type not in (
+            canopen.objectdictionary.VISIBLE_STRING,
+            canopen.objectdictionary.OCTET_STRING,
+            canopen.objectdictionary.UNICODE_STRING,
+            canopen.objectdictionary.DOMAIN,
+        )
+        if fixed and len(data) != len(var) // 8:
+            raise SdoAbortError(ABORT_LENGTH)
+        value = var.decode_raw(data)
+        if isinstance(value, int | float):
+            if var.max is not None and value > var.max:
+                raise SdoAbortError(ABORT_VALUE_HIGH)
+            if var.min is not None and value < var.min:
+                raise SdoAbortError(ABORT_VALUE_LOW)
+        key = (var.index, var.subindex)
+        if isinstance(value, int):
+            self._check_mapping_write(var.index, var.subindex, value)
+        self.values[key] = value
+        pdo = self._pdo_by_comm(var.index)
+        if pdo is not None or self._pdo_by_mapping(var.index) is not None:
+            target = pdo or self._pdo_by_mapping(var.index)
+            assert target is not None
+            self._load_pdo(target)
+        if var.index == 0x1016:
+            self._configure_consumers(0.0)
+        hook = self.on_write.get(key)
+        if hook is not None:
+            hook(value)
+
+    def _sdo_reply(self, payload: bytes) -> None:
+        self._emit(0x580 + self.node_id, payload)
+
+    def _emit(self, cob: int, data: bytes) -> None:
+        if not self.silent:
+            self.send(can.Message(arbitration_id=cob, data=data, is_extended_id=False))

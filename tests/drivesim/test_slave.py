@@ -1,0 +1,152 @@
+"""The simulated CANopen slave against canopen's own master, on python-can's in-process bus."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+
+import can
+import canopen
+import pytest
+
+from orccadd.drivesim.slave import Nmt, SlaveNode
+from tests.conftest import eds
+
+NODE = 5
+
+
+class Harness:
+    """A slave node served by a thread on one end of a virtual bus, canopen's master on the other."""
+
+    def __init__(self, eds_file: str) -> None:
+        channel = f"slave-test-{id(self)}"
+        self.bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        self.lock = threading.Lock()
+        self.node = SlaveNode(NODE, eds_file, self.bus.send)
+        self.network = canopen.Network()
+        self.network.connect(interface="virtual", channel=channel, receive_own_messages=False)
+        self.master = canopen.RemoteNode(NODE, eds_file)
+        self.network.add_node(self.master)
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+        with self.lock:
+            self.node.boot(time.monotonic())
+
+    def _serve(self) -> None:
+        while not self.stop.is_set():
+            msg = self.bus.recv(0.005)
+            with self.lock:
+                now = time.monotonic()
+                if msg is not None:
+                    self.node.on_frame(msg, now)
+                    if msg.arbitration_id == 0x80:
+                        self.node.on_sync(now)
+                        self.node.transmit_sync_pdos()
+                self.node.poll(now)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join()
+        self.network.disconnect()
+        self.bus.shutdown()
+
+
+@pytest.fixture
+def h() -> Iterator[Harness]:
+    harness = Harness(str(eds("ros_canopen/Elmo.dcf")))
+    try:
+        yield harness
+    finally:
+        harness.close()
+
+
+def test_sdo_expedited_and_segmented(h: Harness) -> None:
+    assert h.master.sdo[0x1000].raw == h.node.get(0x1000)
+    name = h.master.sdo[0x1008].raw  # a string longer than 4 bytes: segmented upload
+    assert isinstance(name, str) and name == h.node.get(0x1008)
+    h.master.sdo[0x1017].raw = 50
+    assert h.node.get(0x1017) == 50 and h.master.sdo[0x1017].raw == 50
+
+
+@pytest.mark.parametrize(
+    ("index", "sub", "value", "code"),
+    [
+        (0x5555, 0, 1, 0x06020000),  # no such object
+        (0x1018, 9, 1, 0x06090011),  # no such sub-index
+        (0x1000, 0, 1, 0x06010002),  # read-only
+    ],
+)
+def test_sdo_aborts(h: Harness, index: int, sub: int, value: int, code: int) -> None:
+    with pytest.raises(canopen.SdoAbortedError) as e:
+        h.master.sdo.download(index, sub, value.to_bytes(4, "little"))
+    assert e.value.code == code
+
+
+def test_nmt_and_heartbeat(h: Harness) -> None:
+    h.master.sdo[0x1017].raw = 20
+    h.master.nmt.wait_for_heartbeat(2.0)
+    assert h.master.nmt.state == "PRE-OPERATIONAL"
+    h.master.nmt.state = "OPERATIONAL"
+    h.master.nmt.wait_for_heartbeat(2.0)
+    assert h.master.nmt.state == "OPERATIONAL" and h.node.nmt is Nmt.OPERATIONAL
+    h.master.nmt.state = "STOPPED"
+    time.sleep(0.1)
+    assert h.node.nmt is Nmt.STOPPED
+    with pytest.raises(canopen.SdoCommunicationError):  # no SDO in STOPPED
+        h.master.sdo[0x1000].raw  # noqa: B018
+    h.master.nmt.state = "RESET"
+    h.master.nmt.wait_for_bootup(2.0)
+    var = h.node.vars[(0x1017, 0)]
+    assert h.node.get(0x1017) == (var.value if var.value is not None else var.default) != 20
+
+
+def test_pdo_remap_over_sdo_and_tpdo_on_sync(h: Harness) -> None:
+    h.master.tpdo.read()
+    t = h.master.tpdo[1]
+    t.clear()
+    t.add_variable(0x6041)
+    t.add_variable(0x6064)
+    t.trans_type = 1
+    t.enabled = True
+    t.save()
+    assert [(i, s) for i, s, _ in h.node.tpdos[0x1800].entries] == [(0x6041, 0), (0x6064, 0)]
+    with h.lock:
+        h.node.set(0x6064, 0, -123456)
+        h.node.set(0x6041, 0, 0x0237)
+    h.master.nmt.state = "OPERATIONAL"
+    time.sleep(0.05)
+    h.network.sync.transmit()
+    assert t.wait_for_reception(2.0)
+    assert t[0x6041].raw == 0x0237 and t[0x6064].raw == -123456
+
+
+def test_mapping_rules_of_cia_301(h: Harness) -> None:
+    # an enabled PDO's mapping cannot change; entries need the count at 0; unmappable refused
+    with pytest.raises(canopen.SdoAbortedError) as e:
+        h.master.sdo[0x1A00][0].raw = 0
+    assert e.value.code == 0x08000022
+    h.master.sdo[0x1800][1].raw = h.node.tpdos[0x1800].cob_id | 1 << 31
+    h.master.sdo[0x1A00][0].raw = 0
+    with pytest.raises(canopen.SdoAbortedError) as e:
+        h.master.sdo[0x1A00][1].raw = 0x10000020  # 0x1000 device type: not mappable
+    assert e.value.code == 0x06040041
+
+
+def test_rpdo_applied_and_hook_called(h: Harness) -> None:
+    seen: list[int] = []
+    h.node.on_write[(0x6040, 0)] = seen.append
+    h.master.rpdo.read()
+    r = h.master.rpdo[1]
+    assert r.enabled and 0x6040 in [v.index for v in r.map]
+    h.master.nmt.state = "OPERATIONAL"
+    time.sleep(0.05)
+    r[0x6040].raw = 0x0F
+    r.transmit()
+    time.sleep(0.05)
+    if r.trans_type <= 240:  # synchronous: applied at the next SYNC
+        assert seen == []
+        h.network.sync.transmit()
+        time.sleep(0.05)
+    assert seen == [0x0F] and h.node.get(0x6040) == 0x0F
