@@ -118,6 +118,7 @@ class SlaveNode:
         self.values: dict[tuple[int, int], Any] = {}
         self.on_write: dict[tuple[int, int], Callable[[Any], None]] = {}
         self.on_heartbeat_lost: Callable[[int], None] = lambda producer: None
+        self.on_reset_node: Callable[[], None] = lambda: None  # the application resets too
         self.nmt = Nmt.INITIALISING
         self.silent = False  # fault injection: the node sends nothing at all
         self.heartbeat_silent = False  # fault injection: no heartbeat
@@ -175,9 +176,6 @@ class SlaveNode:
             self._reset(now_s, comm_only=False)
         elif cs == 0x82:
             self._reset(now_s, comm_only=True)
-
-    def on_reset_node(self) -> None:
-        """Hook: the application is reset too (the drive behind the node)."""
 
     # ---- frames in -----------------------------------------------------------------------
     def on_frame(self, msg: can.Message, now_s: float) -> None:

@@ -1,0 +1,223 @@
+"""One simulated CiA 402 drive: a `SlaveNode` for the bus, a `DriveStateMachine`, and joint `j`
+of the shared `DriveTrainArm`.
+
+Units as on a real drive: positions in encoder increments, velocities in increments per
+second, torques in thousandths of the rated torque (0x6076, motor side), through the gear:
+
+    increments = rad × counts_per_rev × gear_ratio / 2π
+    per mille  = τ_joint / (gear_ratio × rated_torque_nm) × 1000
+
+Every SYNC (`cycle`): the mode display follows 0x6060; in OPERATION ENABLED the target of the
+mode (CSP 0x607A, CSV 0x60FF, CST 0x6071, plus the torque offset 0x60B2 if mapped) becomes the
+joint's reference; a quick stop or a fault reaction ramps the joint down at the quick-stop
+deceleration (0x6085) and then switches the power stage off; a CSP following error beyond the
+window (0x6065) for its time-out (0x6066) is a fault (EMCY 0x8611). Actual values (0x6064,
+0x606C, 0x6077) and the statusword are refreshed before the TPDOs go out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from orccadd.drivers.canopen.cia402 import (
+    MODE_CSP,
+    MODE_CST,
+    MODE_CSV,
+    SW_FOLLOWING,
+    SW_FOLLOWING_ERROR,
+    SW_TARGET_REACHED,
+    SW_WARNING,
+    DriveStateMachine,
+    State,
+)
+from orccadd.drivesim.plant import Drive, DriveTrainArm
+from orccadd.drivesim.slave import SlaveNode
+
+# EMCY error codes (CiA 301 / CiA 402)
+EMCY_OVERCURRENT = 0x2310
+EMCY_FOLLOWING_ERROR = 0x8611
+EMCY_HEARTBEAT = 0x8130
+EMCY_RESET = 0x0000
+ERR_REG_GENERIC, ERR_REG_CURRENT, ERR_REG_COMM, ERR_REG_MANUFACTURER = 0x01, 0x02, 0x10, 0x80
+
+STOP_SPEED_RAD_S = 0.01
+
+
+@dataclass(frozen=True)
+class AxisUnits:
+    counts_per_rev: int
+    gear_ratio: float
+    rated_torque_nm: float  # motor side
+
+    @property
+    def counts_per_rad(self) -> float:
+        return self.counts_per_rev * self.gear_ratio / (2 * math.pi)
+
+    @property
+    def nm_per_mille(self) -> float:  # joint N·m per thousandth of rated torque
+        return self.gear_ratio * self.rated_torque_nm / 1000.0
+
+
+class Axis:
+    def __init__(self, node: SlaveNode, joint: int, arm: DriveTrainArm, units: AxisUnits) -> None:
+        self.node = node
+        self.j = joint
+        self.arm = arm
+        self.units = units
+        self.sm = DriveStateMachine(self._get(0x605A, 2))
+        self.fault_code = 0
+        self._following_since: float | None = None
+        self._stop_v0 = 0.0
+        self._stop_t0 = 0.0
+        self._prev_target: float | None = None
+        node.on_write[(0x6040, 0)] = self._controlword
+        node.on_reset_node = self.reset
+        node.on_heartbeat_lost = lambda producer: self.fault(EMCY_HEARTBEAT, ERR_REG_COMM)
+
+    # ---- object access with defaults for objects a description may lack -----------------------
+    def _get(self, index: int, default: int, sub: int = 0) -> int:
+        return int(self.node.get(index, sub)) if self.node.has(index, sub) else default
+
+    def _set(self, index: int, value: int, sub: int = 0) -> None:
+        if self.node.has(index, sub):
+            var = self.node.vars[(index, sub)]
+            lo, hi = _range(var.data_type)
+            self.node.set(index, sub, max(lo, min(hi, value)))
+
+    # ---- state machine -------------------------------------------------------------------------
+    def boot(self) -> None:
+        self.sm = DriveStateMachine(self._get(0x605A, 2))
+        self.sm.boot()
+        self._publish()
+
+    def reset(self) -> None:
+        """NMT reset node: the drive restarts (power stage off, fault cleared)."""
+        self.arm.drive[self.j] = Drive.OFF
+        self.fault_code = 0
+        self.sm = DriveStateMachine()
+
+    def _controlword(self, cw: int) -> None:
+        before = self.sm.state
+        t = self.sm.controlword(int(cw))
+        if t == 15:  # fault reset: the error is acknowledged
+            self.fault_code = 0
+            self.node.emergency(EMCY_RESET, 0)
+        if (
+            t is not None
+            and self.sm.state is State.OPERATION_ENABLED
+            and before is not State.OPERATION_ENABLED
+        ):
+            self._enable()
+        if t == 11:
+            self._begin_stop()
+
+    def fault(self, code: int, register: int = ERR_REG_GENERIC) -> None:
+        """A drive fault: EMCY, then the fault reaction (a controlled stop), then FAULT."""
+        if self.sm.fault() is None:
+            return
+        self.fault_code = code
+        self._set(0x603F, code)
+        self.node.emergency(code, register | ERR_REG_GENERIC)
+        self._begin_stop()
+
+    def _enable(self) -> None:
+        """Power stage on: hold where the joint is until the first target arrives."""
+        self.arm.position_ref[self.j] = self.arm.q[self.j]
+        self.arm.velocity_ref[self.j] = 0.0
+        self._prev_target = None
+        if self._mode() == MODE_CSP:
+            self._set(0x607A, round(self.arm.q[self.j] * self.units.counts_per_rad))
+
+    def _begin_stop(self) -> None:
+        self._stop_v0 = float(self.arm.dq[self.j])
+        self._stop_t0 = float(self.arm.t_sim_s or 0.0)
+
+    def _mode(self) -> int:
+        return self._get(0x6060, 0)
+
+    # ---- the drive's cycle, once per SYNC --------------------------------------------------------
+    def cycle(self, now_s: float, period_s: float) -> None:
+        arm, j, sm = self.arm, self.j, self.sm
+        mode = self._mode()
+        self._set(0x6061, mode)
+        st = sm.state
+        if st is State.OPERATION_ENABLED and mode in (MODE_CSP, MODE_CSV, MODE_CST):
+            self._follow(mode, now_s, period_s)
+        elif st in (State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE):
+            if self._ramp_down():
+                arm.drive[j] = Drive.OFF
+                if st is State.QUICK_STOP_ACTIVE:
+                    if sm.quick_stop_done() is None:  # options 5-8: stay, holding position
+                        arm.drive[j] = Drive.POSITION
+                        arm.position_ref[j] = arm.q[j]
+                        arm.velocity_ref[j] = 0.0
+                else:
+                    sm.fault_reaction_done()
+        elif st is State.OPERATION_ENABLED:
+            arm.drive[j] = Drive.POSITION  # a mode this simulation does not run: hold
+        else:
+            arm.drive[j] = Drive.OFF
+        self._publish()
+
+    def _follow(self, mode: int, now_s: float, period_s: float) -> None:
+        arm, j, u = self.arm, self.j, self.units
+        if mode == MODE_CST:
+            offset = self._get(0x60B2, 0)
+            arm.drive[j] = Drive.TORQUE
+            arm.torque_ref[j] = (self._get(0x6071, 0) + offset) * u.nm_per_mille
+        elif mode == MODE_CSV:
+            arm.drive[j] = Drive.VELOCITY
+            arm.velocity_ref[j] = self._get(0x60FF, 0) / u.counts_per_rad
+        else:
+            target = self._get(0x607A, 0) / u.counts_per_rad
+            prev = self._prev_target if self._prev_target is not None else target
+            arm.drive[j] = Drive.POSITION
+            arm.position_ref[j] = target
+            arm.velocity_ref[j] = (target - prev) / period_s
+            self._prev_target = target
+            self._check_following(now_s)
+
+    def _check_following(self, now_s: float) -> None:
+        window = self._get(0x6065, 0)
+        if not window or window == 0xFFFFFFFF:
+            return
+        err = abs(self.arm.position_ref[self.j] - self.arm.q[self.j]) * self.units.counts_per_rad
+        if err <= window:
+            self._following_since = None
+            return
+        if self._following_since is None:
+            self._following_since = now_s
+        if (now_s - self._following_since) * 1000 >= self._get(0x6066, 0):
+            self._following_since = None
+            self.fault(EMCY_FOLLOWING_ERROR)
+
+    def _ramp_down(self) -> bool:
+        """Velocity ramp to standstill at the quick stop deceleration; True once stopped."""
+        arm, j = self.arm, self.j
+        decel = self._get(0x6085, 0) / self.units.counts_per_rad or 10.0  # rad/s²
+        elapsed = float(arm.t_sim_s or 0.0) - self._stop_t0
+        v = max(abs(self._stop_v0) - decel * elapsed, 0.0)
+        arm.drive[j] = Drive.VELOCITY
+        arm.velocity_ref[j] = math.copysign(v, self._stop_v0)
+        return v == 0.0 and abs(arm.dq[j]) < STOP_SPEED_RAD_S
+
+    def _publish(self) -> None:
+        arm, j, u = self.arm, self.j, self.units
+        self._set(0x6064, round(arm.q[j] * u.counts_per_rad))
+        self._set(0x606C, round(arm.dq[j] * u.counts_per_rad))
+        self._set(0x6077, round(arm.tau_applied[j] / u.nm_per_mille))
+        sw = self.sm.statusword
+        if self.sm.state is State.OPERATION_ENABLED and self._mode() in (MODE_CSP, MODE_CSV, MODE_CST):
+            sw |= SW_FOLLOWING
+            if self._following_since is not None:
+                sw |= SW_FOLLOWING_ERROR | SW_WARNING
+        if abs(arm.dq[j]) < STOP_SPEED_RAD_S:
+            sw |= SW_TARGET_REACHED
+        self._set(0x6041, sw)
+
+
+def _range(data_type: int | None) -> tuple[int, int]:
+    bits = {2: 8, 3: 16, 4: 32, 5: 8, 6: 16, 7: 32, 0x15: 64, 0x1B: 64}.get(data_type or 0, 32)
+    signed = data_type in (2, 3, 4, 0x15)
+    return (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
