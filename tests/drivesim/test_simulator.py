@@ -96,3 +96,133 @@ def test_basenode402_enables_and_moves_a_drive_in_csp(rig: Rig) -> None:
     while node.state != "SWITCH ON DISABLED" and time.monotonic() < deadline:
         time.sleep(0.02)
     assert node.state == "SWITCH ON DISABLED"
+
+
+def _cyclic_node(rig: Rig, target: int, mode: int) -> canopen.BaseNode402:
+    """Node 1 with TPDO1 = statusword + actual of `target`'s mode, RPDO1 = controlword + target,
+    both on every SYNC, in OPERATION ENABLED in `mode`."""
+    actual = {0x607A: 0x6064, 0x60FF: 0x606C, 0x6071: 0x6077}[target]
+    node = canopen.BaseNode402(1, rig.sim.nodes[0].eds)
+    rig.network.add_node(node)
+    node.nmt.state = "PRE-OPERATIONAL"
+    node.tpdo.read()
+    node.rpdo.read()
+    for pdos, objs in ((node.tpdo, (0x6041, actual)), (node.rpdo, (0x6040, target))):
+        for k in range(2, 5):
+            if k in pdos.map:
+                pdos[k].enabled = False
+        pdos[1].clear()
+        for index in objs:
+            pdos[1].add_variable(index)
+        pdos[1].trans_type = 1
+        pdos[1].enabled = True
+        pdos.save()
+    node.setup_402_state_machine(read_pdos=False)
+    node.sdo[0x6060].raw = mode
+    rig.network.sync.start(0.004)
+    node.nmt.state = "OPERATIONAL"
+    node.rpdo[1][0x6040].raw = 0
+    node.rpdo[1][target].raw = round(rig.sim.arm.q[0] * UNITS.counts_per_rad) if target == 0x607A else 0
+    node.rpdo[1].start(0.004)
+    node.tpdo[1].wait_for_reception(2.0)
+    node.state = "OPERATION ENABLED"
+    return node
+
+
+@pytest.fixture
+def elmo() -> Iterator[Rig]:
+    r = Rig(str(eds("ros_canopen/Elmo.dcf")))
+    try:
+        yield r
+    finally:
+        r.close()
+
+
+def test_csv_moves_the_joint_at_the_commanded_speed(elmo: Rig) -> None:
+    node = _cyclic_node(elmo, 0x60FF, 9)
+    q0 = elmo.sim.arm.q[0]
+    node.rpdo[1][0x60FF].raw = round(0.2 * UNITS.counts_per_rad)  # 0.2 rad/s
+    time.sleep(1.0)
+    node.rpdo[1][0x60FF].raw = 0
+    time.sleep(0.3)
+    moved = elmo.sim.arm.q[0] - q0
+    assert 0.15 < moved < 0.25, moved
+
+
+def test_cst_torque_reaches_the_joint(elmo: Rig) -> None:
+    node = _cyclic_node(elmo, 0x6071, 10)
+    # wrist 3 carries almost no gravity load: a small positive torque accelerates it
+    time.sleep(0.1)
+    q0 = elmo.sim.arm.q[0]
+    node.rpdo[1][0x6071].raw = 150  # 15 % of rated: 0.075 N·m × 100 = 7.5 N·m at the joint
+    time.sleep(0.3)
+    assert elmo.sim.arm.q[0] > q0 + 0.005
+    assert abs(node.tpdo[1][0x6077].raw - 150) <= 2  # the torque actual value reports it
+
+
+def test_an_injected_fault_sends_emcy_and_the_drive_ends_in_fault(elmo: Rig) -> None:
+    node = _cyclic_node(elmo, 0x607A, 8)
+    elmo.sim.inject(1, "overcurrent")
+    deadline = time.monotonic() + 3
+    while node.state != "FAULT" and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert node.state == "FAULT"
+    assert node.emcy.active and node.emcy.active[-1].code == 0x2310
+    assert elmo.sim.arm.drive[0] == 0  # power stage off, brake on
+    node.rpdo[1][0x6040].raw = 0x80  # fault reset (rising edge)
+    deadline = time.monotonic() + 2
+    while node.state != "SWITCH ON DISABLED" and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert node.state == "SWITCH ON DISABLED"
+    assert not node.emcy.active  # the error reset EMCY cleared it
+
+
+def test_lost_controller_heartbeat_faults_the_drive() -> None:
+    # Elmo's description caps 0x1016 entries at 0xFFFF (no room for a producer id): another one
+    elmo = Rig(str(eds("ros2_canopen/canopen_tests_config_cia402_cia402_slave.eds")))
+    try:
+        _lost_heartbeat(elmo)
+    finally:
+        elmo.close()
+
+
+def _lost_heartbeat(elmo: Rig) -> None:
+    node = _cyclic_node(elmo, 0x607A, 8)
+    node.sdo[0x1016][1].raw = 0x7F << 16 | 100  # consume node 0x7F's heartbeat, 100 ms
+    beating = threading.Event()
+    beating.set()
+
+    def heartbeat() -> None:
+        while beating.is_set():
+            elmo.network.send_message(0x77F, b"\x05")
+            time.sleep(0.02)
+
+    t = threading.Thread(target=heartbeat, daemon=True)
+    t.start()
+    time.sleep(0.3)
+    assert node.state == "OPERATION ENABLED"
+    beating.clear()
+    t.join()
+    deadline = time.monotonic() + 2
+    while node.state != "FAULT" and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert node.state == "FAULT" and node.emcy.active[-1].code == 0x8130
+
+
+def test_silences(elmo: Rig) -> None:
+    node = canopen.RemoteNode(2, elmo.sim.nodes[1].eds)
+    elmo.network.add_node(node)
+    node.sdo[0x1017].raw = 20
+    node.nmt.wait_for_heartbeat(1.0)
+    elmo.sim.inject(2, "heartbeat_silence")
+    time.sleep(0.1)
+    with pytest.raises(canopen.nmt.NmtError):
+        node.nmt.wait_for_heartbeat(0.3)
+    assert node.sdo[0x1000].raw  # SDO still answers
+    elmo.sim.inject(2, "node_silence")
+    with pytest.raises(canopen.SdoCommunicationError):
+        node.sdo[0x1000].raw  # noqa: B018
+    elmo.sim.inject(2, "clear")
+    node.nmt.wait_for_heartbeat(1.0)
+    with pytest.raises(ValueError, match="no drive with node id 9"):
+        elmo.sim.inject(9, "overcurrent")
