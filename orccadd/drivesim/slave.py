@@ -481,11 +481,9 @@ class SlaveNode:
         if isinstance(value, int):
             self._check_mapping_write(var.index, var.subindex, value)
         self.values[key] = value
-        pdo = self._pdo_by_comm(var.index)
-        if pdo is not None or self._pdo_by_mapping(var.index) is not None:
-            target = pdo or self._pdo_by_mapping(var.index)
-            assert target is not None
-            self._load_pdo(target)
+        pdo = self._pdo_by_comm(var.index) or self._pdo_by_mapping(var.index)
+        if pdo is not None:  # a PDO's parameters changed: it follows at once
+            self._load_pdo(pdo)
         if var.index == 0x1016:
             self._configure_consumers(0.0)
         hook = self.on_write.get(key)
