@@ -22,6 +22,7 @@ from orccadd.physres.base import (
 BACKENDS: dict[str, tuple[str, str]] = {
     "sim": ("orccadd.physres.sim", "SimulatedArm"),
     "sim_process": ("orccadd.physres.sim_process", "SimProcessArm"),
+    "canopen402": ("orccadd.physres.canopen402", "Canopen402Arm"),
 }
 
 

@@ -14,8 +14,9 @@
     gear_ratio = 100.0
     rated_torque_nm = 0.5          # the motor's rated torque (0x6076): torques are per mille of it
 
-One RPDO (controlword + target) and one TPDO (statusword + position actual + torque actual)
-per axis, both synchronous: the layout the bus load is computed for. Every check happens here,
+One RPDO (controlword + the mode's target + the torque or position target it may switch
+with) and one TPDO (statusword + position actual + torque actual) per axis, 8 bytes each, both
+synchronous: the layout the bus load is computed for (see `master`). Every check happens here,
 before anything starts: axes per joint, unique node ids, descriptions found and able to do the
 mode, the bus load within 90 %.
 """
@@ -33,9 +34,6 @@ from orccadd.config.schema import field, load_dataclass
 from orccadd.drivers.canopen.busload import Traffic, bus_load
 from orccadd.drivers.canopen.capabilities import read_capabilities
 from orccadd.errors import ConfigError
-
-BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
-TARGET_BYTES = {"csp": 4, "csv": 4, "cst": 2}
 
 
 @dataclass(frozen=True)
@@ -74,7 +72,7 @@ class CanopenSettings:
         n = len(self.axes)
         return [
             Traffic("SYNC", 0),
-            Traffic("RPDO", 2 + TARGET_BYTES[self.mode], per_cycle=n),
+            Traffic("RPDO", 8, per_cycle=n),  # controlword + the mode's target + its partner's
             Traffic("TPDO", 8, per_cycle=n),
             Traffic("drive heartbeats", 1, rate_hz=n * 1000 / self.heartbeat_ms),
             Traffic("controller heartbeat", 1, rate_hz=1000 / self.controller_heartbeat_ms),

@@ -41,9 +41,9 @@ def test_1_khz_is_refused_with_the_shortest_period_that_fits() -> None:
     with pytest.raises(ConfigError) as e:
         load_canopen_settings(raw(), ur5e(0.001), FILE)
     assert str(e.value).startswith("robot.toml: control_period_s (=0.001): bus load")
-    # worst case per cycle 55 + 6 × 115 + 6 × 135 = 1,555 bits; heartbeats 80/s × 65 bits
-    # 1,555 / (0.9 × 1e6 - 5,200) = 1.738 ms
-    assert "shortest period that fits is 1.74 ms" in str(e.value)
+    # worst case per cycle 55 + 12 × 135 = 1,675 bits; heartbeats 80/s × 65 bits
+    # 1,675 / (0.9 × 1e6 - 5,200) = 1.872 ms
+    assert "shortest period that fits is 1.88 ms" in str(e.value)
 
 
 def test_csv_on_a_drive_without_0x60ff_is_refused_before_startup() -> None:

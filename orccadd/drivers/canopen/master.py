@@ -1,0 +1,401 @@
+"""The controller's side of a CANopen CiA 402 bus: startup over SDO, then the cyclic exchange.
+
+Startup (`CanopenMaster.start`, before the control loop runs; blocking SDO through the
+`canopen` library): NMT reset, wait for every boot-up, check the drive's own supported modes
+(0x6502), map one RPDO and one TPDO per axis, both synchronous (type 1), set the heartbeat
+producer (0x1017) and, where the description lets us, a consumer of our heartbeat (0x1016), the
+SYNC COB-ID and the communication cycle, the mode of operation; NMT start; SYNC production
+through python-can's periodic send (the kernel's broadcast manager on SocketCAN).
+
+    RPDO (0x200 + id):  controlword 0x6040 | target of the mode (0x607A or 0x60FF, 4 bytes)
+                        | target torque 0x6071 (2 bytes) when the drive has CST, so the tasks
+                        can switch between the mode and torque without remapping
+    TPDO (0x180 + id):  statusword 0x6041 | position actual 0x6064 | torque actual 0x6077
+
+Velocity is not mapped (it would not fit the 8 bytes): it is estimated from successive
+positions. Cyclic part (`receive` at the start of a tick, `transmit` at its end; no thread, no
+blocking call): frames already on the bus are drained and decoded (TPDOs, EMCY, heartbeats,
+boot-ups, answers to our non-blocking SDO writes), watchdogs are checked (a TPDO missing for
+`missed_tpdo_periods`, a heartbeat silent for 3 × `heartbeat_ms`, a drive that rebooted, a bus
+error), and each axis's RPDO goes out with the controlword that the resource's state asks for.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import struct
+import time
+from dataclasses import dataclass, field
+
+import can
+import canopen
+import numpy as np
+
+from orccadd.drivers.canopen import cia402
+from orccadd.drivers.canopen.capabilities import MODES
+from orccadd.drivers.canopen.settings import CanopenSettings
+from orccadd.errors import ResourceError
+
+CONTROLLER_NODE_ID = 0x7F  # our heartbeat's producer id (drives consume it)
+MODE_CODES = {"csp": cia402.MODE_CSP, "csv": cia402.MODE_CSV, "cst": cia402.MODE_CST}
+_TARGET_OF = {cia402.MODE_CSP: 0x607A, cia402.MODE_CSV: 0x60FF, cia402.MODE_CST: 0x6071}
+_TARGET_FMT = {0x607A: "i", 0x60FF: "i", 0x6071: "h"}
+
+# python-can's socketcand client warns on every TCP read that ends mid-message
+logging.getLogger("can.interfaces.socketcand.socketcand").setLevel(logging.ERROR)
+
+
+@dataclass
+class AxisLink:
+    """What the master knows of one drive (updated by `receive`)."""
+
+    node_id: int
+    name: str
+    counts_per_rad: float
+    nm_per_mille: float
+    has_torque_actual: bool
+    statusword: int = 0
+    position_counts: int = 0
+    torque_per_mille: int = 0
+    tpdo_seen_tick: int = -1
+    heartbeat_s: float = 0.0
+    emcy_code: int = 0
+    emcy_text: str = ""
+    rebooted: bool = False
+    mode_code: int = 0
+    sdo_pending: tuple[int, int, float] | None = None  # (index, sub, deadline_s) of a write
+    sdo_error: str = ""
+    controlword: int = 0
+    consumer_ok: bool = False  # the drive watches our heartbeat
+    rx_objects: tuple[int, ...] = ()  # the RPDO's targets after the controlword
+    rx_format: str = "<H"
+
+    @property
+    def modes(self) -> frozenset[int]:
+        """Modes this axis can be switched to at run time (its RPDO carries their targets)."""
+        return frozenset(code for code, target in _TARGET_OF.items() if target in self.rx_objects)
+
+    @property
+    def state(self) -> cia402.State:
+        return cia402.decode_state(self.statusword)
+
+
+@dataclass
+class CycleReport:
+    """What `receive` found wrong, for the resource's status flags and messages."""
+
+    comm_lost: str = ""
+    fault: str = ""
+    fault_code: int = 0
+    notes: list[str] = field(default_factory=list)
+
+
+class CanopenMaster:
+    def __init__(self, settings: CanopenSettings, joint_names: list[str], period_s: float) -> None:
+        self.s = settings
+        self.period_s = period_s
+        self.names = joint_names
+        self.bus: can.BusABC | None = None
+        self.network: canopen.Network | None = None
+        self.nodes: list[canopen.RemoteNode] = []
+        self.axes: list[AxisLink] = []
+        self.sync_task: can.broadcastmanager.CyclicSendTaskABC | None = None
+        self.tick = 0
+        self.bus_error = ""
+        self._next_heartbeat_s = 0.0
+        self._rx_tpdo: dict[int, AxisLink] = {}
+        self._by_id: dict[int, AxisLink] = {}
+
+    # ---- startup (blocking, before the loop) ------------------------------------------------
+    def start(self) -> list[str]:
+        """Open the bus and bring every drive to OPERATIONAL in its mode; warnings returned."""
+        s = self.s
+        warnings: list[str] = []
+        try:
+            self.bus = can.Bus(**s.bus_kwargs())
+        except (can.CanError, OSError, ValueError) as e:
+            raise ResourceError(f"CAN bus {_where(s)}: cannot open: {e}") from None
+        net = canopen.Network(self.bus)
+        net.NOTIFIER_CYCLE = 0.05
+        net.connect()
+        self.network = net
+        try:
+            for i, ax in enumerate(s.axes):
+                node = canopen.RemoteNode(ax.node_id, s.eds_paths[i])
+                node.sdo.RESPONSE_TIMEOUT = s.sdo_timeout_s
+                net.add_node(node)
+                self.nodes.append(node)
+            for node in self.nodes:
+                node.nmt.send_command(0x81)  # reset node
+            for node, name in zip(self.nodes, self.names, strict=True):
+                try:
+                    node.nmt.wait_for_bootup(s.startup_timeout_s)
+                except canopen.nmt.NmtError:
+                    raise ResourceError(
+                        f"CAN bus {_where(s)}: node {node.id} ({name}) did not boot within "
+                        f"{s.startup_timeout_s:g} s after NMT reset (wrong node id, bus, or power?)"
+                    ) from None
+            for i, node in enumerate(self.nodes):
+                self.axes.append(self._configure_axis(i, node, warnings))
+            for node in self.nodes:
+                node.nmt.send_command(0x01)  # start: OPERATIONAL
+        except (canopen.SdoAbortedError, canopen.SdoCommunicationError) as e:
+            self.close()
+            raise ResourceError(f"CAN bus {_where(s)}: SDO configuration failed: {e}") from None
+        except ResourceError:
+            self.close()
+            raise
+        self._by_id = {a.node_id: a for a in self.axes}
+        self._rx_tpdo = {0x180 + a.node_id: a for a in self.axes}
+        if net.notifier is not None:  # from now on the control thread reads the bus itself
+            net.notifier.stop(1.0)
+            net.notifier = None
+        now = time.monotonic()
+        for a in self.axes:
+            a.heartbeat_s = now
+        self.sync_task = self.bus.send_periodic(
+            can.Message(arbitration_id=0x80, data=b"", is_extended_id=False), self.period_s
+        )
+        return warnings
+
+    def _configure_axis(self, i: int, node: canopen.RemoteNode, warnings: list[str]) -> AxisLink:
+        s, ax, name = self.s, self.s.axes[i], self.names[i]
+        od = node.object_dictionary
+        mode = s.mode
+        if 0x6502 in od:
+            supported = int(node.sdo[0x6502].raw)
+            bit = MODES[mode][2]
+            if not supported >> bit & 1:
+                raise ResourceError(
+                    f"node {node.id} ({name}): the drive reports supported drive modes 0x{supported:X} "
+                    f"(0x6502) without {mode}: it cannot run this config"
+                )
+
+        def mappable(index: int) -> bool:
+            var = od.get(index)
+            return isinstance(var, canopen.objectdictionary.ODVariable) and bool(var.pdo_mappable)
+
+        has_tq = mappable(0x6077)
+        node.tpdo.read()  # type: ignore[no-untyped-call]
+        node.rpdo.read()  # type: ignore[no-untyped-call]
+        target = MODES[mode][0]
+        # the mode's target, and the one it may switch with at run time: torque, or from
+        # torque, position
+        partner = 0x607A if target == 0x6071 else 0x6071
+        rx = [0x6040, target] + ([partner] if mappable(partner) else [])
+        tx = [0x6041, 0x6064] + ([0x6077] if has_tq else [])
+        for pdos, objs, base in ((node.rpdo, rx, 0x200), (node.tpdo, tx, 0x180)):
+            for k, pdo in (pdos.map or {}).items():
+                pdo.clear()
+                pdo.enabled = k == 1
+                if k == 1:
+                    for index in objs:
+                        pdo.add_variable(index)
+                    pdo.cob_id = base + ax.node_id
+                    pdo.trans_type = 1
+                pdo.save()
+        node.sdo[0x1017].raw = s.heartbeat_ms
+        consumer_ok = False
+        if 0x1016 in od:
+            try:
+                node.sdo[0x1016][1].raw = CONTROLLER_NODE_ID << 16 | 3 * s.controller_heartbeat_ms
+                consumer_ok = True
+            except (canopen.SdoAbortedError, ValueError, KeyError) as e:
+                warnings.append(f"node {node.id} ({name}): cannot watch our heartbeat (0x1016: {e})")
+        else:
+            warnings.append(f"node {node.id} ({name}): its description has no heartbeat consumer (0x1016)")
+        if 0x1005 in od:
+            node.sdo[0x1005].raw = 0x80
+        if 0x1006 in od:
+            node.sdo[0x1006].raw = round(self.period_s * 1e6)
+        node.sdo[0x6060].raw = MODE_CODES[mode]
+        shown = int(node.sdo[0x6061].raw)
+        if shown != MODE_CODES[mode]:
+            raise ResourceError(
+                f"node {node.id} ({name}): asked mode {mode}, the drive shows {shown} (0x6061)"
+            )
+        gear = ax.gear_ratio
+        return AxisLink(
+            node_id=ax.node_id,
+            name=name,
+            counts_per_rad=ax.counts_per_rev * gear / (2 * np.pi),
+            nm_per_mille=gear * ax.rated_torque_nm / 1000.0,
+            has_torque_actual=has_tq,
+            mode_code=MODE_CODES[mode],
+            consumer_ok=consumer_ok,
+            rx_objects=tuple(rx[1:]),
+            rx_format="<H" + "".join(_TARGET_FMT[i] for i in rx[1:]),
+        )
+
+    # ---- cyclic part (tick-safe: no blocking call, no allocation beyond frames) --------------
+    def receive(self, now_s: float) -> CycleReport:
+        """Drain the bus and check the watchdogs (start of a tick)."""
+        self.tick += 1
+        rep = CycleReport()
+        bus = self.bus
+        if bus is None:
+            rep.comm_lost = f"CAN bus {_where(self.s)}: closed"
+            return rep
+        try:
+            while True:
+                msg = bus.recv(0.0)
+                if msg is None:
+                    break
+                self._frame(msg, now_s)
+        except (can.CanError, OSError) as e:
+            self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
+        if self.bus_error:
+            rep.comm_lost = self.bus_error
+        hb_timeout = 3 * self.s.heartbeat_ms / 1000
+        for a in self.axes:
+            if a.rebooted:
+                rep.comm_lost = rep.comm_lost or f"node {a.node_id} ({a.name}) rebooted (boot-up message)"
+            elif self.tick - a.tpdo_seen_tick > self.s.missed_tpdo_periods and a.tpdo_seen_tick >= 0:
+                rep.comm_lost = rep.comm_lost or (
+                    f"node {a.node_id} ({a.name}) silent: no TPDO for {self.tick - a.tpdo_seen_tick} periods"
+                )
+            elif now_s - a.heartbeat_s > hb_timeout:
+                rep.comm_lost = rep.comm_lost or (
+                    f"node {a.node_id} ({a.name}): heartbeat lost ({(now_s - a.heartbeat_s) * 1e3:.0f} ms "
+                    f"> 3 × {self.s.heartbeat_ms} ms)"
+                )
+            if a.state in (cia402.State.FAULT, cia402.State.FAULT_REACTION_ACTIVE) and not rep.fault:
+                code = a.emcy_code
+                rep.fault = f"node {a.node_id} ({a.name}): drive fault" + (
+                    f", EMCY 0x{code:04X} {a.emcy_text}" if code else ""
+                )
+                rep.fault_code = code
+            if a.sdo_pending is not None and now_s > a.sdo_pending[2]:
+                a.sdo_error = f"node {a.node_id} ({a.name}): no answer to SDO write 0x{a.sdo_pending[0]:04X}"
+                a.sdo_pending = None
+            if a.sdo_error and not rep.comm_lost:
+                rep.comm_lost = a.sdo_error
+        return rep
+
+    def _frame(self, msg: can.Message, now_s: float) -> None:
+        cob = msg.arbitration_id
+        if msg.is_extended_id or msg.is_error_frame:
+            return
+        a = self._rx_tpdo.get(cob)
+        data = msg.data
+        if a is not None:
+            if len(data) >= 6:
+                a.statusword, a.position_counts = struct.unpack_from("<Hi", data, 0)
+                if a.has_torque_actual and len(data) >= 8:
+                    a.torque_per_mille = struct.unpack_from("<h", data, 6)[0]
+                a.tpdo_seen_tick = self.tick
+            return
+        node_id = cob & 0x7F
+        a = self._by_id.get(node_id)
+        if a is None:
+            return
+        kind = cob & 0x780
+        if kind == 0x700:
+            a.heartbeat_s = now_s
+            if len(data) >= 1 and data[0] == 0:
+                a.rebooted = True
+        elif kind == 0x080 and len(data) >= 3:
+            a.emcy_code = struct.unpack_from("<H", data, 0)[0]
+            a.emcy_text = _emcy_text(a.emcy_code)
+        elif kind == 0x580 and a.sdo_pending is not None and len(data) >= 4:
+            index, sub = struct.unpack_from("<HB", data, 1)
+            if (index, sub) == a.sdo_pending[:2]:
+                if data[0] == 0x80:
+                    code = struct.unpack_from("<I", data, 4)[0]
+                    a.sdo_error = (
+                        f"node {a.node_id} ({a.name}): SDO write 0x{index:04X} refused (abort 0x{code:08X})"
+                    )
+                a.sdo_pending = None
+
+    def transmit(
+        self, now_s: float, position_rad: np.ndarray, velocity_rad_s: np.ndarray, torque_nm: np.ndarray
+    ) -> None:
+        """One RPDO per axis (end of a tick): its controlword and every target it carries, the
+        active mode's from the command and the others holding (consistent while a mode switch
+        is under way)."""
+        bus = self.bus
+        if bus is None:
+            return
+        try:
+            for j, a in enumerate(self.axes):
+                values = []
+                for index in a.rx_objects:
+                    if index == 0x607A:
+                        values.append(round(float(position_rad[j]) * a.counts_per_rad))
+                    elif index == 0x60FF:
+                        values.append(round(float(velocity_rad_s[j]) * a.counts_per_rad))
+                    else:
+                        values.append(_per_mille(float(torque_nm[j]), a))
+                body = struct.pack(a.rx_format, a.controlword, *values)
+                bus.send(can.Message(arbitration_id=0x200 + a.node_id, data=body, is_extended_id=False))
+            if now_s >= self._next_heartbeat_s:
+                self._next_heartbeat_s = now_s + self.s.controller_heartbeat_ms / 1000
+                bus.send(
+                    can.Message(arbitration_id=0x700 + CONTROLLER_NODE_ID, data=b"\x05", is_extended_id=False)
+                )
+        except (can.CanError, OSError) as e:
+            self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
+
+    def write_mode(self, code: int) -> None:
+        """Ask every drive for mode `code` (0x6060) by a non-blocking SDO write; answers are
+        matched in `receive`, a refusal or silence becomes a communication fault."""
+        if self.bus is None:
+            return
+        deadline = time.monotonic() + self.s.sdo_timeout_s
+        for a in self.axes:
+            a.sdo_pending = (0x6060, 0, deadline)
+            a.mode_code = code
+            req = struct.pack("<BHBb3x", 0x2F, 0x6060, 0, code)
+            try:
+                self.bus.send(can.Message(arbitration_id=0x600 + a.node_id, data=req, is_extended_id=False))
+            except (can.CanError, OSError) as e:
+                self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
+
+    # ---- shutdown ------------------------------------------------------------------------------
+    def close(self) -> None:
+        if self.sync_task is not None:
+            self.sync_task.stop()
+            self.sync_task = None
+        if self.bus is not None:
+            for a in self.axes or []:
+                try:  # disable voltage: the drives switch their power stage off, brakes on
+                    body = struct.pack(a.rx_format, 0, *(0 for _ in a.rx_objects))
+                    self.bus.send(
+                        can.Message(arbitration_id=0x200 + a.node_id, data=body, is_extended_id=False)
+                    )
+                except (can.CanError, OSError):
+                    break
+        net = self.network
+        if net is not None:
+            if net.notifier is not None:
+                net.notifier.stop(1.0)
+                net.notifier = None
+            self.network = None
+        if self.bus is not None:
+            with contextlib.suppress(can.CanError, OSError):
+                self.bus.shutdown()
+            self.bus = None
+
+
+def _per_mille(tau_nm: float, a: AxisLink) -> int:
+    return max(-32768, min(32767, round(tau_nm / a.nm_per_mille)))
+
+
+def _where(s: CanopenSettings) -> str:
+    return f"{s.channel} (socketcand {s.host}:{s.port})" if s.interface == "socketcand" else s.channel
+
+
+EMCY_TEXTS = {
+    0x2310: "over-current",
+    0x3210: "DC link over-voltage",
+    0x4310: "drive over-temperature",
+    0x8110: "CAN overrun",
+    0x8130: "heartbeat / life guard error",
+    0x8611: "following error",
+    0x7300: "sensor (encoder) error",
+}
+
+
+def _emcy_text(code: int) -> str:
+    return EMCY_TEXTS.get(code, EMCY_TEXTS.get(code & 0xFF00, ""))
