@@ -72,6 +72,7 @@ class Axis:
         self._stop_t0 = 0.0
         self._prev_target: float | None = None
         node.on_write[(0x6040, 0)] = self._controlword
+        node.on_write[(0x6060, 0)] = lambda mode: self._set(0x6061, int(mode))  # shown at once
         node.on_reset_node = self.reset
         node.on_heartbeat_lost = lambda producer: self.fault(EMCY_HEARTBEAT, ERR_REG_COMM)
 
@@ -92,10 +93,11 @@ class Axis:
         self._publish()
 
     def reset(self) -> None:
-        """NMT reset node: the drive restarts (power stage off, fault cleared)."""
+        """NMT reset node: the drive restarts (power stage off, fault cleared, self-test done)."""
         self.arm.drive[self.j] = Drive.OFF
         self.fault_code = 0
-        self.sm = DriveStateMachine()
+        self.sm = DriveStateMachine(self._get(0x605A, 2))
+        self.sm.boot()
 
     def _controlword(self, cw: int) -> None:
         before = self.sm.state

@@ -65,8 +65,6 @@ class Canopen402Arm(PhysicalResource):
         self._pos = np.zeros(n)
         self._vel = np.zeros(n)
         self._tau = np.zeros(n)
-        self._prev_q = np.zeros(n)
-        self._have_prev = False
         self._enabling = False
         self._fault_reset = False
         self._stop_t0 = 0.0
@@ -78,9 +76,7 @@ class Canopen402Arm(PhysicalResource):
             print(f"orccadd: warning: {self.name}: {w}", file=sys.stderr)
         modes = frozenset.intersection(*(a.modes for a in self.master.axes))
         self.supported_modes = frozenset(COMMAND_OF[m] for m in modes)  # type: ignore[misc]
-        self._wait(
-            lambda: all(a.tpdo_seen_tick >= 0 for a in self.master.axes), "a first TPDO from every drive"
-        )
+        self._wait(lambda: all(a.tpdo_seen_s for a in self.master.axes), "a first TPDO from every drive")
 
     def _on_activate(self, mode: CommandMode) -> None:
         self._set_mode_blocking(mode)
@@ -177,18 +173,17 @@ class Canopen402Arm(PhysicalResource):
         m = self.master
         rep = m.receive(time.monotonic())
         flags = 0
-        period = self.config.control_period_s
         powered = True
         for j, a in enumerate(m.axes):
-            q = a.position_counts / a.counts_per_rad
-            if self._have_prev:
-                dq = (q - self._prev_q[j]) / period
-                state.dq_rad_s[j] += VELOCITY_FILTER * (dq - state.dq_rad_s[j])
-            self._prev_q[j] = q
-            state.q_rad[j] = q
+            state.q_rad[j] = a.position_counts / a.counts_per_rad
+            if a.fresh:  # velocity over the drive's own sampling interval, not our tick's
+                a.fresh = False
+                dt = a.position_time_s - a.prev_position_time_s
+                if a.prev_position_time_s and 1e-4 < dt < 0.5:
+                    dq = (a.position_counts - a.prev_position_counts) / a.counts_per_rad / dt
+                    state.dq_rad_s[j] += VELOCITY_FILTER * (dq - state.dq_rad_s[j])
             state.tau_nm[j] = a.torque_per_mille * a.nm_per_mille if a.has_torque_actual else self._tau[j]
             powered = powered and a.state in POWERED
-        self._have_prev = True
         if rep.comm_lost:
             flags |= Status.COMM_LOST
             self.fault_message = rep.comm_lost

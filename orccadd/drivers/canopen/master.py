@@ -5,7 +5,8 @@ Startup (`CanopenMaster.start`, before the control loop runs; blocking SDO throu
 (0x6502), map one RPDO and one TPDO per axis, both synchronous (type 1), set the heartbeat
 producer (0x1017) and, where the description lets us, a consumer of our heartbeat (0x1016), the
 SYNC COB-ID and the communication cycle, the mode of operation; NMT start; SYNC production
-through python-can's periodic send (the kernel's broadcast manager on SocketCAN).
+through python-can's periodic send on SocketCAN (the kernel's broadcast manager), else by the
+control loop itself once per tick (python-can would use a thread in the real-time process).
 
     RPDO (0x200 + id):  controlword 0x6040 | target of the mode (0x607A or 0x60FF, 4 bytes)
                         | target torque 0x6071 (2 bytes) when the drive has CST, so the tasks
@@ -57,8 +58,13 @@ class AxisLink:
     has_torque_actual: bool
     statusword: int = 0
     position_counts: int = 0
+    position_time_s: float = 0.0  # the frame's timestamp (kernel or hub receive time)
+    prev_position_counts: int = 0
+    prev_position_time_s: float = 0.0
+    fresh: bool = False  # a TPDO arrived since the resource last looked
     torque_per_mille: int = 0
-    tpdo_seen_tick: int = -1
+    tpdo_seen_s: float = 0.0  # when the last TPDO was drained (0: none yet)
+    tpdo_seen_sync: int = 0  # how many SYNCs we had sent then (loop-produced SYNC)
     heartbeat_s: float = 0.0
     emcy_code: int = 0
     emcy_text: str = ""
@@ -106,6 +112,12 @@ class CanopenMaster:
         self._next_heartbeat_s = 0.0
         self._rx_tpdo: dict[int, AxisLink] = {}
         self._by_id: dict[int, AxisLink] = {}
+        self._sync_msg = can.Message(arbitration_id=0x80, data=b"", is_extended_id=False)
+        # SocketCAN: the kernel's broadcast manager produces SYNC, jitter-free and independent
+        # of the loop. Elsewhere python-can would need a thread in the real-time process for it:
+        # the control loop sends SYNC itself, once per tick, after draining the bus.
+        self.sync_by_kernel = settings.interface == "socketcan"
+        self.syncs_sent = 0
 
     # ---- startup (blocking, before the loop) ------------------------------------------------
     def start(self) -> list[str]:
@@ -126,16 +138,7 @@ class CanopenMaster:
                 node.sdo.RESPONSE_TIMEOUT = s.sdo_timeout_s
                 net.add_node(node)
                 self.nodes.append(node)
-            for node in self.nodes:
-                node.nmt.send_command(0x81)  # reset node
-            for node, name in zip(self.nodes, self.names, strict=True):
-                try:
-                    node.nmt.wait_for_bootup(s.startup_timeout_s)
-                except canopen.nmt.NmtError:
-                    raise ResourceError(
-                        f"CAN bus {_where(s)}: node {node.id} ({name}) did not boot within "
-                        f"{s.startup_timeout_s:g} s after NMT reset (wrong node id, bus, or power?)"
-                    ) from None
+            self._reset_and_wait_for_bootups(net)
             for i, node in enumerate(self.nodes):
                 self.axes.append(self._configure_axis(i, node, warnings))
             for node in self.nodes:
@@ -154,10 +157,36 @@ class CanopenMaster:
         now = time.monotonic()
         for a in self.axes:
             a.heartbeat_s = now
-        self.sync_task = self.bus.send_periodic(
-            can.Message(arbitration_id=0x80, data=b"", is_extended_id=False), self.period_s
-        )
+        if self.sync_by_kernel:
+            self.sync_task = self.bus.send_periodic(self._sync_msg, self.period_s)
         return warnings
+
+    def _reset_and_wait_for_bootups(self, net: canopen.Network) -> None:
+        """NMT reset node on every drive; every boot-up message seen (in any order) or an error."""
+        booted: set[int] = set()
+
+        def on_boot(can_id: int, data: bytearray, timestamp: float) -> None:
+            if len(data) >= 1 and data[0] == 0:
+                booted.add(can_id - 0x700)
+
+        ids = [ax.node_id for ax in self.s.axes]
+        for i in ids:
+            net.subscribe(0x700 + i, on_boot)
+        try:
+            for node in self.nodes:
+                node.nmt.send_command(0x81)
+            end = time.monotonic() + self.s.startup_timeout_s
+            while not booted.issuperset(ids) and time.monotonic() < end:
+                time.sleep(0.01)
+        finally:
+            for i in ids:
+                net.unsubscribe(0x700 + i, on_boot)
+        missing = [f"{i} ({self.names[k]})" for k, i in enumerate(ids) if i not in booted]
+        if missing:
+            raise ResourceError(
+                f"CAN bus {_where(self.s)}: node {', '.join(missing)} did not boot within "
+                f"{self.s.startup_timeout_s:g} s after NMT reset (wrong node id, bus, or power?)"
+            )
 
     def _configure_axis(self, i: int, node: canopen.RemoteNode, warnings: list[str]) -> AxisLink:
         s, ax, name = self.s, self.s.axes[i], self.names[i]
@@ -243,17 +272,22 @@ class CanopenMaster:
                 if msg is None:
                     break
                 self._frame(msg, now_s)
+            if not self.sync_by_kernel and self.network is not None and self.network.notifier is None:
+                bus.send(self._sync_msg)
+                self.syncs_sent += 1
         except (can.CanError, OSError) as e:
             self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
         if self.bus_error:
             rep.comm_lost = self.bus_error
         hb_timeout = 3 * self.s.heartbeat_ms / 1000
+        tpdo_timeout = self.s.missed_tpdo_periods * self.period_s
         for a in self.axes:
             if a.rebooted:
                 rep.comm_lost = rep.comm_lost or f"node {a.node_id} ({a.name}) rebooted (boot-up message)"
-            elif self.tick - a.tpdo_seen_tick > self.s.missed_tpdo_periods and a.tpdo_seen_tick >= 0:
+            elif a.tpdo_seen_s and self._tpdo_missing(a, now_s, tpdo_timeout):
                 rep.comm_lost = rep.comm_lost or (
-                    f"node {a.node_id} ({a.name}) silent: no TPDO for {self.tick - a.tpdo_seen_tick} periods"
+                    f"node {a.node_id} ({a.name}) silent: no TPDO for {(now_s - a.tpdo_seen_s) * 1e3:.0f} ms "
+                    f"(> {self.s.missed_tpdo_periods} SYNC periods)"
                 )
             elif now_s - a.heartbeat_s > hb_timeout:
                 rep.comm_lost = rep.comm_lost or (
@@ -273,6 +307,13 @@ class CanopenMaster:
                 rep.comm_lost = a.sdo_error
         return rep
 
+    def _tpdo_missing(self, a: AxisLink, now_s: float, timeout_s: float) -> bool:
+        """Kernel SYNC: by time. Loop SYNC: by SYNCs sent since (a stalled loop sent none, and
+        its drives owe nothing)."""
+        if self.sync_by_kernel:
+            return now_s - a.tpdo_seen_s > timeout_s
+        return self.syncs_sent - a.tpdo_seen_sync > self.s.missed_tpdo_periods
+
     def _frame(self, msg: can.Message, now_s: float) -> None:
         cob = msg.arbitration_id
         if msg.is_extended_id or msg.is_error_frame:
@@ -281,10 +322,14 @@ class CanopenMaster:
         data = msg.data
         if a is not None:
             if len(data) >= 6:
+                a.prev_position_counts, a.prev_position_time_s = a.position_counts, a.position_time_s
                 a.statusword, a.position_counts = struct.unpack_from("<Hi", data, 0)
+                a.position_time_s = msg.timestamp
+                a.fresh = True
                 if a.has_torque_actual and len(data) >= 8:
                     a.torque_per_mille = struct.unpack_from("<h", data, 6)[0]
-                a.tpdo_seen_tick = self.tick
+                a.tpdo_seen_s = now_s
+                a.tpdo_seen_sync = self.syncs_sent
             return
         node_id = cob & 0x7F
         a = self._by_id.get(node_id)
