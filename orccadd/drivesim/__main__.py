@@ -36,9 +36,10 @@ from orccadd.physres.sim import SimSettings, load_sim_settings
 def plant_config(cfg: RobotConfig, plant_file: str) -> RobotConfig:
     """The robot with `sim` settings for the arm behind the drives (friction, initial pose)."""
     raw = read_toml(Path(plant_file)) if plant_file else {}
-    # 1 ms sub-steps: stable with the drives' servo gains, and light enough for a process
-    # that must also answer every SYNC in time (the `sim` default, 0.2 ms, costs a whole core)
-    raw = {"substep_s": min(0.001, cfg.control_period_s), **raw}
+    # 0.5 ms sub-steps: stable with the drives' servo gains on light wrist joints (1 ms is not),
+    # and light enough for a process that must also answer every SYNC in time (the `sim`
+    # default, 0.2 ms, costs a whole core of this machine)
+    raw = {"substep_s": min(0.0005, cfg.control_period_s), **raw}
     settings = load_sim_settings(SimSettings, raw, cfg, plant_file or cfg.source)
     resource = replace(cfg.resource, backend="sim", settings=raw)
     return replace(cfg, resource=resource, backend_settings=settings)

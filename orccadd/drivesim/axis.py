@@ -42,6 +42,7 @@ EMCY_RESET = 0x0000
 ERR_REG_GENERIC, ERR_REG_CURRENT, ERR_REG_COMM, ERR_REG_MANUFACTURER = 0x01, 0x02, 0x10, 0x80
 
 STOP_SPEED_RAD_S = 0.01
+STOP_TIMEOUT_S = 1.0  # after the ramp, longest wait for standstill before the brake
 
 
 @dataclass(frozen=True)
@@ -202,7 +203,8 @@ class Axis:
         v = max(abs(self._stop_v0) - decel * elapsed, 0.0)
         arm.drive[j] = Drive.VELOCITY
         arm.velocity_ref[j] = math.copysign(v, self._stop_v0)
-        return v == 0.0 and abs(arm.dq[j]) < STOP_SPEED_RAD_S
+        settled = v == 0.0 and abs(arm.dq[j]) < STOP_SPEED_RAD_S
+        return settled or elapsed > abs(self._stop_v0) / decel + STOP_TIMEOUT_S  # then brake anyway
 
     def _publish(self) -> None:
         arm, j, u = self.arm, self.j, self.units

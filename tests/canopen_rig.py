@@ -1,0 +1,52 @@
+"""A CANopen test rig in separate processes: the virtual bus (or vcan0) and simulated drives."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from orccadd.drivesim.process import DriveSimProcess
+from tests.conftest import ROOT, eds
+from tools.virtual_can.process import HubProcess, vcan_available
+
+CANOPEN_6AXIS = ROOT / "configs/robots/canopen-6axis.toml"
+
+
+@dataclass
+class Rig:
+    config: Path
+    hub: HubProcess | None
+    drives: DriveSimProcess
+
+
+def rig_config(tmp: Path, eds_file: str, port: int | None, extra: str = "") -> Path:
+    """canopen-6axis.toml on this rig: the bus, the URDF path, every axis on `eds_file`."""
+    text = CANOPEN_6AXIS.read_text().replace('urdf = "../urdf/', f'urdf = "{ROOT}/configs/urdf/')
+    text = text.replace('eds = "Elmo.dcf"', f'eds = "{eds(eds_file)}"')
+    if port is None:  # the kernel's virtual CAN
+        text = text.replace('interface = "socketcand"', 'interface = "socketcan"').replace(
+            'channel = "can0"', 'channel = "vcan0"'
+        )
+    else:
+        text = text.replace("port = 29536", f"port = {port}")
+    text = text.replace("[daemon]\n", f"[daemon]\n{extra}\n")
+    path = tmp / "canopen-robot.toml"
+    path.write_text(text)
+    return path
+
+
+@contextmanager
+def canopen_rig(tmp: Path, eds_file: str = "ros_canopen/Elmo.dcf", daemon_extra: str = "") -> Iterator[Rig]:
+    hub = None if vcan_available() else HubProcess()
+    try:
+        config = rig_config(tmp, eds_file, hub.port if hub else None, daemon_extra)
+        drives = DriveSimProcess(config)
+        try:
+            yield Rig(config, hub, drives)
+        finally:
+            drives.stop()
+    finally:
+        if hub is not None:
+            hub.stop()
