@@ -31,6 +31,7 @@ def rig_config(tmp: Path, eds_file: str, port: int | None, extra: str = "") -> P
         )
     else:
         text = text.replace("port = 29536", f"port = {port}")
+    text = text.replace('hold_task = "../tasks/', f'hold_task = "{ROOT}/configs/tasks/')
     text = text.replace("[daemon]\n", f"[daemon]\n{extra}\n")
     path = tmp / "canopen-robot.toml"
     path.write_text(text)
@@ -39,10 +40,14 @@ def rig_config(tmp: Path, eds_file: str, port: int | None, extra: str = "") -> P
 
 @contextmanager
 def canopen_rig(tmp: Path, eds_file: str = "ros_canopen/Elmo.dcf", daemon_extra: str = "") -> Iterator[Rig]:
-    hub = None if vcan_available() else HubProcess()
+    # The bus and the drives are hardware on a robot: their timing must not depend on the
+    # controller's load. The hub (light) runs at real-time priority below the controller's; the
+    # drives (a Pinocchio simulation, ~40 % of a core here) at a high weight but normal policy:
+    # at SCHED_FIFO they made the kernel throttle real-time tasks on this 2-core machine.
+    hub = None if vcan_available() else HubProcess("--priority", "70")
     try:
         config = rig_config(tmp, eds_file, hub.port if hub else None, daemon_extra)
-        drives = DriveSimProcess(config)
+        drives = DriveSimProcess(config, "--priority", "70")
         try:
             yield Rig(config, hub, drives)
         finally:

@@ -132,8 +132,10 @@ class CommandDaemon:
         self.sock_ino = 0
 
     async def refresh(self) -> None:
-        gen = int(read_status(self.tel)[S.MISSION_GEN])
-        if not self.desc or self.desc.get("generation") != gen:
+        st = read_status(self.tel)
+        gen, faulted = int(st[S.MISSION_GEN]), bool(st[S.FAULTED])
+        stale = self.desc.get("generation") != gen or bool(self.desc.get("fault")) != faulted
+        if not self.desc or stale:  # a new mission, or a fault to explain (or one cleared)
             reply = await self.rt.call("describe", {})
             if reply.get("ok"):
                 self.desc = reply["result"]

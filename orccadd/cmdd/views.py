@@ -115,6 +115,7 @@ def status(tel: TelemetryBlock, desc: dict[str, Any], log: dict[str, Any] | None
         "instants": int(st[S.INSTANTS]),
         "result": MissionResult(int(st[S.RESULT])).name.lower(),
         "faulted": bool(st[S.FAULTED]),
+        "fault": desc.get("fault") or None if st[S.FAULTED] else None,  # why, in words
         "plant_pid": int(st[S.PLANT_PID]),
         "ticks": int(hdr[H.TICKS]),
         "overruns": int(hdr[H.OVERRUNS]),

@@ -146,7 +146,7 @@ def format_status(s: dict[str, Any]) -> str:
         f"{s.get('robot')}: {s['state']}"
         + (f", mission {s['mission']}" if s.get("mission") else "")
         + (f" (automaton state {s['automaton_state']})" if s["automaton_state"] >= 0 else "")
-        + (", FAULTED (reset needed)" if s.get("faulted") else ""),
+        + (f", FAULTED: {s.get('fault') or '?'} (reset needed)" if s.get("faulted") else ""),
         f"active task {s.get('active_task')} ({s.get('task_phase')}), last result {s['result']}, "
         f"resource {','.join(s.get('resource_status') or ['ok'])}",
     ]

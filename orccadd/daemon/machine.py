@@ -186,6 +186,7 @@ class Machine:
             "events": self.registry.names(),
             "mission": self.mission.describe() if self.mission else None,
             "log": self.log[-10:],
+            "fault": self.fault,
         }
 
     # ---- events from the control thread ---------------------------------------------------

@@ -38,6 +38,7 @@ from orccadd.errors import OrccaddError
 from orccadd.physres import CommandMode, create_resource
 from orccadd.physres.base import Status
 from orccadd.runtime import WallClock, enter_realtime, leave_realtime
+from orccadd.task import load_task_file
 
 MAX_MESSAGE = 65536
 TICK_RING_S = 16.0  # seconds of ticks the telemetry ring keeps
@@ -87,8 +88,9 @@ class RealtimeProcess:
     # ---- startup --------------------------------------------------------------------------
     def start(self) -> None:
         cfg = self.cfg
+        hold = load_task_file(cfg.resolve(cfg.daemon.hold_task))  # checked before anything moves
         self.resource.configure()
-        self.resource.activate(CommandMode.TORQUE)
+        self.resource.activate(CommandMode[hold.task.command.upper()])  # the Hold task's mode
         ticks = int(TICK_RING_S / cfg.control_period_s)
         self.tel = TelemetryBlock.create(Layout(cfg.dof, ticks, 8192), cfg.control_period_s)
         self.wake_r, self.wake_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import socket
 import sys
@@ -31,6 +32,7 @@ from orccadd.drivesim.axis import AxisUnits
 from orccadd.drivesim.simulator import AxisSpec, DriveSimulator
 from orccadd.errors import OrccaddError
 from orccadd.physres.sim import SimSettings, load_sim_settings
+from orccadd.runtime import enter_realtime
 
 
 def plant_config(cfg: RobotConfig, plant_file: str) -> RobotConfig:
@@ -85,6 +87,14 @@ def main(argv: list[str] | None = None) -> int:
         "--plant", default="", help="TOML table of `sim` settings for the arm (friction, initial_q_rad)"
     )
     ap.add_argument("--control-port", type=int, default=0)
+    ap.add_argument(
+        "--priority",
+        type=int,
+        default=0,
+        help="SCHED_FIFO priority (drives are hardware: their timing "
+        "should not depend on the controller's load); 0: normal",
+    )
+    ap.add_argument("--nice", type=int, default=0, help="scheduling weight at normal priority (-20..19)")
     args = ap.parse_args(argv)
     try:
         cfg = load_robot_config(args.config)
@@ -105,6 +115,14 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(sig, lambda *_: stop.set())
     srv = socket.create_server(("127.0.0.1", args.control_port))
     threading.Thread(target=serve_control, args=(sim, srv, stop), daemon=True).start()
+    if args.nice:
+        try:
+            os.nice(args.nice)
+        except OSError as e:
+            print(f"drivesim: warning: nice {args.nice} refused ({e.strerror})", file=sys.stderr)
+    if args.priority:
+        for w in enter_realtime(args.priority, lock_memory=False, freeze_gc=False).warnings:
+            print(f"drivesim: warning: {w}", file=sys.stderr)
     runner = threading.Thread(target=sim.run, args=(stop.is_set,), daemon=True)
     runner.start()
     print(f"drivesim: ready, control 127.0.0.1:{srv.getsockname()[1]}", flush=True)

@@ -63,8 +63,9 @@ class DriveSimulator:
                 node.boot(now)
                 axis.boot()
 
-    def run(self, stop: Callable[[], bool], poll_s: float = 0.0005) -> None:
-        """Serve the bus until `stop()` (checked at least every `poll_s`)."""
+    def run(self, stop: Callable[[], bool], poll_s: float = 0.005) -> None:
+        """Serve the bus until `stop()` (checked at least every `poll_s`; frames wake it at once,
+        and the arm is integrated up to each frame's arrival)."""
         self.boot()
         while not stop():
             try:

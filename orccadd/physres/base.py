@@ -103,6 +103,8 @@ class PhysicalResource(ABC):
         self._last_pos_cmd: FloatArray = np.zeros(self.dof)
         self._scratch: FloatArray = np.zeros(self.dof)
         self._mask = np.zeros(self.dof, dtype=np.bool_)
+        self._abs_step: FloatArray = np.zeros(self.dof)
+        self._too_fast = np.zeros(self.dof, dtype=np.bool_)
         self._limit_q_lo = model.q_min_rad - config.limits.position_tolerance_rad
         self._limit_q_hi = model.q_max_rad + config.limits.position_tolerance_rad
         self._limit_dq = model.v_max_rad_s * config.limits.velocity_tolerance
@@ -224,8 +226,11 @@ class PhysicalResource(ABC):
             clamp(command, m.q_min_rad, m.q_max_rad, cmd)
             step = self._scratch
             np.subtract(cmd, self._last_pos_cmd, out=step)
-            clamp(step, self._neg_step_max, self._step_max, step)
-            np.add(self._last_pos_cmd, step, out=cmd)
+            np.abs(step, out=self._abs_step)
+            np.greater(self._abs_step, self._step_max, out=self._too_fast)
+            if any_true(self._too_fast):  # only then: last + (cmd - last) need not equal cmd
+                clamp(step, self._neg_step_max, self._step_max, step)
+                np.add(self._last_pos_cmd, step, out=cmd)
             self._last_pos_cmd[:] = cmd
         np.not_equal(cmd, command, out=mask)
         if any_true(mask):

@@ -178,8 +178,10 @@ class Canopen402Arm(PhysicalResource):
             state.q_rad[j] = a.position_counts / a.counts_per_rad
             if a.fresh:  # velocity over the drive's own sampling interval, not our tick's
                 a.fresh = False
-                dt = a.position_time_s - a.prev_position_time_s
-                if a.prev_position_time_s and 1e-4 < dt < 0.5:
+                # the drive samples at SYNC, and SYNCs are at least a period apart; frames can
+                # reach us closer together (in a burst after a stall of the bus): never less
+                dt = max(a.position_time_s - a.prev_position_time_s, self.config.control_period_s)
+                if a.prev_position_time_s and dt < 0.5:
                     dq = (a.position_counts - a.prev_position_counts) / a.counts_per_rad / dt
                     state.dq_rad_s[j] += VELOCITY_FILTER * (dq - state.dq_rad_s[j])
             state.tau_nm[j] = a.torque_per_mille * a.nm_per_mille if a.has_torque_actual else self._tau[j]

@@ -86,10 +86,15 @@ class Daemon:
 
 
 def start_daemon(tmp: Path, *extra: str, daemon_cfg: str = "") -> Daemon:
+    return start_daemon_with(tmp, robot_config(tmp, daemon_cfg), *extra)
+
+
+def start_daemon_with(tmp: Path, config: Path, *extra: str) -> Daemon:
+    """orccadd on `config`, a socket in `tmp`, fault injection allowed; up and answering."""
     sock = str(tmp / "run" / "orccadd.sock")
     log = tmp / "orccadd.log"
     cmd = [
-        sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(robot_config(tmp, daemon_cfg)),
+        sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(config),
         "--socket", sock, "--allow-fault-injection", *extra,
     ]  # fmt: skip
     proc = subprocess.Popen(cmd, stdout=log.open("w"), stderr=subprocess.STDOUT)

@@ -53,6 +53,25 @@ def test_torque_beyond_limit_is_clamped(resource: PhysicalResource) -> None:
     resource.safe_stop()
 
 
+def test_position_steps_within_the_speed_limit_pass_unchanged(resource: PhysicalResource) -> None:
+    # 0.1 + (0.3 - 0.1) == 0.30000000000000004: a step that needs no clamping must not be
+    # rebuilt from the last command (that flagged a limit violation on exact commands)
+    resource.activate(CommandMode.POSITION)
+    q = resource.read(time.monotonic()).q_rad.copy()
+    for x in np.linspace(q[0], 0.0, 100):  # bring joint 0 to zero at an allowed speed
+        q[0] = x
+        assert not resource.write(time.monotonic(), q) & Status.LIMIT_VIOLATION
+    for k in range(1, 200):  # hovering around zero, as a held joint does: there it rounds
+        cmd = q.copy()
+        cmd[0] = 1e-7 * k * (1.0 if k % 3 else -0.37)
+        flags = resource.write(time.monotonic(), cmd)
+        assert not flags & (Status.CMD_CLAMPED | Status.LIMIT_VIOLATION), (k, flags)
+    fast = q + 1.0  # a jump no joint can make in one period
+    flags = resource.write(time.monotonic(), fast)
+    assert flags & Status.CMD_CLAMPED and flags & Status.LIMIT_VIOLATION
+    resource.safe_stop()
+
+
 def test_safe_stop_brings_the_arm_to_rest(resource: PhysicalResource) -> None:
     resource.activate(CommandMode.TORQUE)
     drive(resource, 0.3, extra_nm=3.0)

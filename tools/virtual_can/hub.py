@@ -186,7 +186,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--port", type=int, default=29536, help="TCP port on 127.0.0.1 (0: any free port)")
     ap.add_argument("--port-file", default="", help="also write the port to this file when ready")
     ap.add_argument("--max-backlog-bytes", type=int, default=4 << 20)
+    ap.add_argument(
+        "--priority", type=int, default=0, help="SCHED_FIFO priority (a bus has no load); 0: normal"
+    )
     args = ap.parse_args(argv)
+    if args.priority:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.priority))
+        except OSError as e:
+            print(
+                f"virtual_can: SCHED_FIFO {args.priority} refused ({e.strerror}): normal priority",
+                file=sys.stderr,
+            )
     try:
         asyncio.run(run(args.port, args.port_file, args.max_backlog_bytes))
     except OSError as e:

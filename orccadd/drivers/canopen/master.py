@@ -4,7 +4,8 @@ Startup (`CanopenMaster.start`, before the control loop runs; blocking SDO throu
 `canopen` library): NMT reset, wait for every boot-up, check the drive's own supported modes
 (0x6502), map one RPDO and one TPDO per axis, both synchronous (type 1), set the heartbeat
 producer (0x1017) and, where the description lets us, a consumer of our heartbeat (0x1016), the
-SYNC COB-ID and the communication cycle, the mode of operation; NMT start; SYNC production
+SYNC COB-ID and the communication cycle, the EMCY COB-ID, the following error window in the
+drive's increments, the mode of operation; NMT start; SYNC production
 through python-can's periodic send on SocketCAN (the kernel's broadcast manager), else by the
 control loop itself once per tick (python-can would use a thread in the real-time process).
 
@@ -226,14 +227,33 @@ class CanopenMaster:
                 pdo.save()
         node.sdo[0x1017].raw = s.heartbeat_ms
         consumer_ok = False
-        if 0x1016 in od:
+        entry = CONTROLLER_NODE_ID << 16 | 3 * s.controller_heartbeat_ms
+        consumer = od.get(0x1016)
+        limit = _sub_max(consumer, 1)
+        if consumer is not None and limit is not None and entry > limit:
+            warnings.append(
+                f"node {node.id} ({name}): its description caps heartbeat consumer entries (0x1016:01) "
+                f"at 0x{limit:X}, no room for a producer id: the drive cannot watch our heartbeat"
+            )
+        elif consumer is not None:
             try:
-                node.sdo[0x1016][1].raw = CONTROLLER_NODE_ID << 16 | 3 * s.controller_heartbeat_ms
+                node.sdo[0x1016][1].raw = entry
                 consumer_ok = True
             except (canopen.SdoAbortedError, ValueError, KeyError) as e:
                 warnings.append(f"node {node.id} ({name}): cannot watch our heartbeat (0x1016: {e})")
         else:
             warnings.append(f"node {node.id} ({name}): its description has no heartbeat consumer (0x1016)")
+        counts_per_rad = ax.counts_per_rev * ax.gear_ratio / (2 * np.pi)
+        for index, value in (
+            (0x6065, round(s.following_error_rad * counts_per_rad)),  # in the drive's increments
+            (0x6066, s.following_error_timeout_ms),
+        ):
+            var = od.get(index)
+            if isinstance(var, canopen.objectdictionary.ODVariable) and var.writable:
+                node.sdo[index].raw = min(value, 0xFFFFFFFE)
+        emcy = od.get(0x1014)
+        if isinstance(emcy, canopen.objectdictionary.ODVariable) and emcy.writable:
+            node.sdo[0x1014].raw = 0x80 + ax.node_id  # some descriptions fix it (e35: 0x81 for all)
         if 0x1005 in od:
             node.sdo[0x1005].raw = 0x80
         if 0x1006 in od:
@@ -421,6 +441,14 @@ class CanopenMaster:
             with contextlib.suppress(can.CanError, OSError):
                 self.bus.shutdown()
             self.bus = None
+
+
+def _sub_max(obj: object, sub: int) -> int | None:
+    """The description's upper bound of `obj`[sub], if it has one."""
+    if isinstance(obj, canopen.objectdictionary.ODArray | canopen.objectdictionary.ODRecord) and sub in obj:
+        hi = obj[sub].max
+        return int(hi) if hi is not None else None
+    return None
 
 
 def _per_mille(tau_nm: float, a: AxisLink) -> int:
