@@ -74,6 +74,7 @@ def _bits(mask: int) -> list[int]:
     return out
 
 
+RESET_WAIT_S = 2.0  # longest wait for a device to leave its fault after a reset (bus round trips)
 MAX_INJECTED_MS = 5000.0  # longest injected tick: a stall, not a hang
 
 
@@ -397,7 +398,7 @@ class Machine:
             if hasattr(self.resource, "reset_fault"):
                 self.resource.reset_fault()
                 # the control thread's next reads show whether the device left its fault
-                end = time.monotonic() + 100 * self.cfg.control_period_s
+                end = time.monotonic() + max(100 * self.cfg.control_period_s, RESET_WAIT_S)
                 while self.resource.state.status & Status.FAULT and time.monotonic() < end:
                     time.sleep(self.cfg.control_period_s)
             self.resource.clear_stop()
