@@ -18,6 +18,8 @@ import numpy as np
 from orccadd.demo import wait_up
 
 ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:  # the CANopen rig of the tests (bus hub + simulated drives)
+    sys.path.insert(0, str(ROOT))
 UR5E = ROOT / "configs/robots/sim-ur5e.toml"
 
 

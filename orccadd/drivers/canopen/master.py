@@ -63,6 +63,7 @@ class AxisLink:
     prev_position_counts: int = 0
     prev_position_time_s: float = 0.0
     fresh: bool = False  # a TPDO arrived since the resource last looked
+    tpdo_count: int = 0
     torque_per_mille: int = 0
     tpdo_seen_s: float = 0.0  # when the last TPDO was drained (0: none yet)
     tpdo_seen_sync: int = 0  # how many SYNCs we had sent then (loop-produced SYNC)
@@ -346,6 +347,7 @@ class CanopenMaster:
                 a.statusword, a.position_counts = struct.unpack_from("<Hi", data, 0)
                 a.position_time_s = msg.timestamp
                 a.fresh = True
+                a.tpdo_count += 1
                 if a.has_torque_actual and len(data) >= 8:
                     a.torque_per_mille = struct.unpack_from("<h", data, 6)[0]
                 a.tpdo_seen_s = now_s
