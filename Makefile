@@ -52,6 +52,7 @@ bench: setup
 	$(PY) benchmarks/switching.py
 	$(PY) benchmarks/isolation.py
 	$(PY) benchmarks/automaton.py --skip-large
+	$(PY) benchmarks/canopen_cycle.py
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache
