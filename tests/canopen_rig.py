@@ -32,6 +32,9 @@ def rig_config(tmp: Path, eds_file: str, port: int | None, extra: str = "") -> P
     else:
         text = text.replace("port = 29536", f"port = {port}")
     text = text.replace('hold_task = "../tasks/', f'hold_task = "{ROOT}/configs/tasks/')
+    # this VM stalls processes for up to ~0.3 s now and then: heartbeats every 250 ms (a lost
+    # drive is still reported within 3 × 250 ms)
+    text = text.replace("heartbeat_ms = 100", "heartbeat_ms = 250")
     text = text.replace("[daemon]\n", f"[daemon]\n{extra}\n")
     path = tmp / "canopen-robot.toml"
     path.write_text(text)
