@@ -107,6 +107,7 @@ def run_rate(rate_hz: float, duration_s: float) -> None:
             sdo.join(5)
             syncs = arm.master.syncs_sent - syncs0
             tpdos = np.array([a.tpdo_count for a in axes]) - count0
+            ages = rig.drives.status()["frame_age_ms"]
             arm.shutdown()
         print(
             f"  {rate_hz:g} Hz: {ticks} cycles in {elapsed:.1f} s = {ticks / elapsed:.1f} Hz achieved "
@@ -115,6 +116,10 @@ def run_rate(rate_hz: float, duration_s: float) -> None:
         print(f"    wake-up jitter {figures(wake, 'µs')}")
         print(f"    SYNCs sent {syncs}; TPDOs lost per axis (SYNCs - TPDOs): {(syncs - tpdos).tolist()}")
         print(f"    ticks without a fresh TPDO (late) per axis: {late.tolist()}; comm-lost ticks {comm_lost}")
+        print(
+            "    frame age at the drives (hub forward -> drive simulator reads it, last frames): "
+            + ", ".join(f"{k} {v:.2f} ms" for k, v in ages.items())
+        )
         print(f"    SDO round trip (upload 0x1000 from a second client) {figures(rtts, 'ms', 2)}")
 
 

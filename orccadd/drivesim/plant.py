@@ -37,8 +37,13 @@ class DriveTrainArm(SimulatedArm):
         self.velocity_ref = np.zeros(n)
         self.position_ref = np.zeros(n)
         self._g = np.zeros(n)
-        self._pos = np.zeros(n)
-        self._vel = np.zeros(n)
+        self._err = np.zeros(n)
+        # per joint, from `drive` at the start of each integration (the modes are held in it):
+        self._torque_on = np.zeros(n)  # 1 where the torque reference applies
+        self._gravity_on = np.zeros(n)  # 1 where the drive's servo compensates gravity
+        self._kp_on = np.zeros(n)  # position gain, 0 unless POSITION
+        self._kd_on = np.zeros(n)  # velocity gain: kd (POSITION), 4 kd (VELOCITY), else 0
+        self._brake_on = np.zeros(n)  # the holding brake's torque where the power stage is off
         self.configure()
         self.activate(CommandMode.TORQUE)  # the base class's lifecycle: powered, per-joint below
 
@@ -46,22 +51,34 @@ class DriveTrainArm(SimulatedArm):
         """Integrate the dynamics up to `t_s` (wall time, seconds) with the references held."""
         if self.t_sim_s is None:
             self.t_sim_s = t_s
+        d = self.drive
+        pos, vel = d == POSITION, d == VELOCITY
+        self._torque_on[:] = d == TORQUE
+        self._gravity_on[:] = pos | vel
+        self._kp_on[:] = self._kp * pos
+        self._kd_on[:] = self._kd * pos + self._kd_velocity * vel
+        self._brake_on[:] = self._brake * (d == OFF)  # holding brakes engaged
         self._advance_to(t_s)
 
     def _motor_torque(self, out: np.ndarray) -> None:
-        d = self.drive
-        self._g[:] = pin.computeGeneralizedGravity(self._pin, self._data, self.q)
-        np.subtract(self.velocity_ref, self.dq, out=self._vel)
-        np.subtract(self.position_ref, self.q, out=self._pos)
-        pos = self._g + self._kp * self._pos + self._kd * self._vel
-        vel = self._g + self._kd_velocity * self._vel
-        out[:] = np.where(d == Drive.TORQUE, self.torque_ref, np.where(d == Drive.POSITION, pos, vel))
-        out[d == Drive.OFF] = 0.0
+        """torque_on·τ_ref + gravity_on·g(q) + kp_on·(q_ref − q) + kd_on·(v_ref − dq), saturated."""
+        err = self._err
+        np.multiply(pin.computeGeneralizedGravity(self._pin, self._data, self.q), self._gravity_on, out=out)
+        np.subtract(self.position_ref, self.q, out=err)
+        err *= self._kp_on
+        out += err
+        np.subtract(self.velocity_ref, self.dq, out=err)
+        err *= self._kd_on
+        out += err
+        np.multiply(self.torque_ref, self._torque_on, out=err)
+        out += err
         np.clip(out, self._neg_tau_max, self.model.tau_max_nm, out=out)
 
     def _update_friction(self, h: float) -> None:
         dv = self._dv_friction
-        braked = self.drive == Drive.OFF
-        np.add(self._coulomb, np.where(braked, self._brake, 0.0), out=dv)  # holding brakes
+        np.add(self._coulomb, self._brake_on, out=dv)
         dv *= self._minv_diag
         dv *= h
+
+
+OFF, TORQUE, VELOCITY, POSITION = (int(m) for m in Drive)  # plain ints for the per-step arithmetic

@@ -123,6 +123,7 @@ class SlaveNode:
         self.silent = False  # fault injection: the node sends nothing at all
         self.heartbeat_silent = False  # fault injection: no heartbeat
         self.rpdos: dict[int, Pdo] = {}
+        self.pdo_generation = 0  # bumped whenever a PDO's parameters are (re)loaded
         self.tpdos: dict[int, Pdo] = {}
         self._seg: _Segmented | None = None
         self._next_heartbeat_s = 0.0
@@ -292,7 +293,13 @@ class SlaveNode:
             out[comm0 + k] = pdo
         return out
 
+    def unicast_cobs(self) -> frozenset[int]:
+        """The COB-IDs only this node consumes: its SDO requests and its valid RPDOs (NMT, SYNC
+        and heartbeats concern every node). Changes when `pdo_generation` does."""
+        return frozenset({0x600 + self.node_id, *(p.cob_id for p in self.rpdos.values() if p.valid)})
+
     def _load_pdo(self, pdo: Pdo) -> None:
+        self.pdo_generation += 1
         cob = int(self.values[(pdo.comm, 1)])
         pdo.cob_id = cob & 0x7FF
         pdo.valid = not cob & PDO_INVALID and pdo.cob_id != 0

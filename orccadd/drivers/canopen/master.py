@@ -259,6 +259,16 @@ class CanopenMaster:
             node.sdo[0x1005].raw = 0x80
         if 0x1006 in od:
             node.sdo[0x1006].raw = round(self.period_s * 1e6)
+        interpolation = od.get(0x60C2)
+        if isinstance(interpolation, canopen.objectdictionary.ODRecord) and {1, 2} <= set(
+            interpolation.subindices
+        ):
+            try:  # the drive interpolates (and derives its CSP velocity feed-forward) over this time
+                value, exponent = interpolation_time_period(self.period_s)
+                node.sdo[0x60C2][1].raw = value
+                node.sdo[0x60C2][2].raw = exponent
+            except ValueError as e:
+                warnings.append(f"node {node.id} ({name}): interpolation time period left as it is: {e}")
         node.sdo[0x6060].raw = MODE_CODES[mode]
         shown = int(node.sdo[0x6061].raw)
         if shown != MODE_CODES[mode]:
@@ -443,6 +453,16 @@ class CanopenMaster:
             with contextlib.suppress(can.CanError, OSError):
                 self.bus.shutdown()
             self.bus = None
+
+
+def interpolation_time_period(period_s: float) -> tuple[int, int]:
+    """0x60C2 as (value, exponent): value × 10^exponent s = `period_s`, value ≤ 255, the
+    coarsest exponent first (2 ms is (2, -3), 250 µs is (25, -5))."""
+    for exponent in range(-3, -7, -1):
+        value = period_s / 10.0**exponent
+        if abs(value - round(value)) < 1e-6 and 1 <= round(value) <= 255:
+            return round(value), exponent
+    raise ValueError(f"a period of {period_s * 1e3:g} ms has no 0x60C2 encoding (value 1-255 × 10^-3..-6 s)")
 
 
 def _sub_max(obj: object, sub: int) -> int | None:

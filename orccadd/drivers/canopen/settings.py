@@ -67,7 +67,10 @@ class CanopenSettings:
     def bus_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of python-can's `can.Bus` for this bus."""
         if self.interface == "socketcand":
-            return {"interface": "socketcand", "host": self.host, "port": self.port, "channel": self.channel}
+            # tcp_tune (TCP_NODELAY): a tick's SYNC and RPDOs leave at once, not held by Nagle's
+            # algorithm until the server acknowledges the first frame
+            tcp = {"host": self.host, "port": self.port, "tcp_tune": True}
+            return {"interface": "socketcand", "channel": self.channel, **tcp}
         return {"interface": "socketcan", "channel": self.channel, "bitrate": self.bitrate_bit_s}
 
     def traffic(self) -> list[Traffic]:

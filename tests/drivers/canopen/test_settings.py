@@ -32,6 +32,7 @@ def test_six_axes_at_500_hz_are_accepted_with_a_bus_load_warning(capsys: pytest.
         "interface": "socketcand",
         "host": "127.0.0.1",
         "port": 29536,
+        "tcp_tune": True,  # TCP_NODELAY: a tick's frames are not held back by Nagle's algorithm
         "channel": "can0",
     }
     assert "warning: bus load" in capsys.readouterr().err
