@@ -36,7 +36,6 @@ class DriveTrainArm(SimulatedArm):
         self.torque_ref = np.zeros(n)
         self.velocity_ref = np.zeros(n)
         self.position_ref = np.zeros(n)
-        self._g = np.zeros(n)
         self._err = np.zeros(n)
         # per joint, from `drive` at the start of each integration (the modes are held in it):
         self._torque_on = np.zeros(n)  # 1 where the torque reference applies
