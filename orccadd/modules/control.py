@@ -7,6 +7,7 @@ import pinocchio as pin
 
 from orccadd.modules.base import Module, ModuleContext, register
 from orccadd.physres.base import JointState
+from orccadd.vec import clamp
 
 
 class JointController(Module):
@@ -45,22 +46,32 @@ class ComputedTorque(JointController):
             "integral_limit_rad_s", 0.05, bounds=(0.0, 10.0), unit="rad.s", tunable=True
         )
         self._a = np.zeros(n)
-        self._ie = np.zeros(n)
+        self._e_sum = np.zeros(n)  # Σe over the ticks: ∫e = Σe·dt
         self._dt = ctx.period_s
+        # derived from the parameters (on_parameter_change): ki·dt, and the clamp of Σe
+        self._ki_dt = np.zeros(n)
+        self._sum_max = 0.0
+        self._integral = False
+        self.on_parameter_change("ki")
+
+    def on_parameter_change(self, name: str) -> None:
+        np.multiply(self.ki.value, self._dt, out=self._ki_dt)
+        self._sum_max = float(self.i_max.value) / self._dt
+        self._integral = bool(self.ki.value.any())
 
     def start(self, state: JointState) -> None:
-        self._ie[:] = 0.0
+        self._e_sum[:] = 0.0
 
     def update(self, t_s: float) -> None:
-        a, e, ie = self._a, self._e, self._ie
+        a, e = self._a, self._e
         np.subtract(self.q_des.value, self.q.value, out=e)
         np.multiply(self.kp.value, e, out=a)
-        e *= self._dt
-        ie += e
-        lim = float(self.i_max.value)
-        np.clip(ie, -lim, lim, out=ie)
-        np.multiply(self.ki.value, ie, out=e)
-        a += e
+        if self._integral:
+            e_sum = self._e_sum
+            e_sum += e
+            clamp(e_sum, -self._sum_max, self._sum_max, e_sum)
+            np.multiply(self._ki_dt, e_sum, out=e)
+            a += e
         np.subtract(self.dq_des.value, self.dq.value, out=e)
         e *= self.kd.value
         a += e

@@ -16,8 +16,8 @@ import numpy as np
 import numpy.typing as npt
 
 
-class Ctl(IntEnum):
-    """Indices in the int64 control area."""
+class Ctl:
+    """Indices in the int64 control area (plain ints: indexing with an IntEnum costs ~0.2 µs more)."""
 
     STATE_SEQ = 0
     CMD_SEQ = 1

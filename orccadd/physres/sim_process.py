@@ -184,10 +184,7 @@ class SimProcessArm(PhysicalResource):
         status = ch.read_state(self._buf)
         if status < 0:  # the plant is mid-write: keep the previous measurement this tick
             return int(ch.ctl[Ctl.STATUS]) & int(Status.FAULT)
-        n, buf = self.dof, self._buf
-        state.q_rad[:] = buf[1 : 1 + n]
-        state.dq_rad_s[:] = buf[1 + n : 1 + 2 * n]
-        state.tau_nm[:] = buf[1 + 2 * n :]
+        state.vector[:] = self._buf[1:]  # q, dq, tau
         state.fault_code = int(ch.ctl[Ctl.FAULT_CODE])
         hb = int(ch.ctl[Ctl.HEARTBEAT])
         if hb == self._last_heartbeat:
