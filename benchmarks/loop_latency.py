@@ -148,8 +148,8 @@ def main() -> int:
         print(f"  ratio p99 ours/cyclictest = {ratio:.2f}  (target ≤ 1.0)")
     print(f"  task ended {ours['phase']}; events: {', '.join(ours['events']) or 'none'}")  # type: ignore[arg-type]
     print("  targets: compute p99 ≤ 100 µs, never 3 overruns in a row")
-    if ours["phase"] == "FAULT":
-        print("  INVALID: the task faulted, so the figures above are not of the control law")
+    if ours["phase"] in ("FAULT", "PRE_FAILED"):
+        print(f"  INVALID: the task ended {ours['phase']}, so the figures above are not of the control law")
         return 1
     return 0
 

@@ -1,11 +1,17 @@
 """Small-vector helpers for the tick path.
 
-On joint vectors (6–7 elements) numpy's reductions cost 1.5–4.5 µs a call, mostly overhead;
-these equivalents cost 0.2–0.7 µs (measured on the project's 2-core machines). None
-allocates an array.
+Joint vectors have 6–7 elements: numpy's cost there is all per-call overhead (0.7–0.9 µs a
+ufunc hot, 1.5–4.5 µs a reduction), and it grows 2–5× when the tick runs paced, with caches cold
+after each idle stretch of the period. Python's builtins on lists (`tolist()`, `map`, `max`,
+`min`, `abs`) are leaner and stay lean when cold. Measured on the project's 2-core VM, the same
+20 operations: numpy 12 µs hot, 24 µs median and 119 µs p99 paced at 1 kHz; on lists 9.4 µs hot,
+12.6 µs median and 26 µs p99 paced. Ports stay numpy buffers (shared by wiring, no allocation);
+a tick reads them with `tolist()` and computes on lists. Nothing here allocates an array.
 """
 
 from __future__ import annotations
+
+from operator import gt, lt, sub
 
 import numpy as np
 import numpy.typing as npt
@@ -24,6 +30,41 @@ def max_of(a: npt.NDArray[np.float64]) -> float:
 def min_of(a: npt.NDArray[np.float64]) -> float:
     """`a.min()` for a small vector."""
     return min(a.tolist())  # type: ignore[no-any-return]
+
+
+def max_abs(a: list[float]) -> float:
+    """max |a_i|."""
+    return max(map(abs, a))
+
+
+def max_abs_diff(a: list[float], b: list[float]) -> float:
+    """max |a_i − b_i|."""
+    return max(map(abs, map(sub, a, b)))  # type: ignore[no-any-return]
+
+
+def any_below(a: list[float], lo: list[float]) -> bool:
+    """Some a_i < lo_i (False for NaN, as the comparison is)."""
+    return any(map(lt, a, lo))
+
+
+def any_above(a: list[float], hi: list[float]) -> bool:
+    """Some a_i > hi_i (False for NaN)."""
+    return any(map(gt, a, hi))
+
+
+def outside(a: list[float], lo: list[float], hi: list[float]) -> bool:
+    """Some a_i outside [lo_i, hi_i]."""
+    return any(map(lt, a, lo)) or any(map(gt, a, hi))
+
+
+def clamped(a: list[float], lo: list[float], hi: list[float]) -> list[float]:
+    """[min(max(a_i, lo_i), hi_i)] (a NaN stays NaN: check finiteness separately).
+
+    Conditional expressions, not min/max (0.8 µs against 1.9 µs for 6 joints); zip without
+    `strict=True` in the tick path (it costs 0.3–0.7 µs a call): the vectors have the robot's
+    dof by construction.
+    """
+    return [l_i if a_i < l_i else h_i if a_i > h_i else a_i for a_i, l_i, h_i in zip(a, lo, hi)]  # noqa: B905
 
 
 def clamp(

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from operator import add, mul, sub
+
 import numpy as np
 import pinocchio as pin
 
 from orccadd.modules.base import Module, ModuleContext, register
 from orccadd.physres.base import JointState
-from orccadd.vec import clamp
+from orccadd.vec import clamped
 
 
 class JointController(Module):
@@ -46,37 +48,40 @@ class ComputedTorque(JointController):
             "integral_limit_rad_s", 0.05, bounds=(0.0, 10.0), unit="rad.s", tunable=True
         )
         self._a = np.zeros(n)
-        self._e_sum = np.zeros(n)  # Σe over the ticks: ∫e = Σe·dt
+        self._e_sum = [0.0] * n  # Σe over the ticks: ∫e = Σe·dt
         self._dt = ctx.period_s
-        # derived from the parameters (on_parameter_change): ki·dt, and the clamp of Σe
-        self._ki_dt = np.zeros(n)
-        self._sum_max = 0.0
+        # from the parameters (on_parameter_change), as lists: the tick computes on lists
+        self._kp: list[float] = []
+        self._kd: list[float] = []
+        self._ki_dt: list[float] = []  # ki·dt
+        self._sum_max_list: list[float] = []  # the clamp of Σe
+        self._sum_min_list: list[float] = []
         self._integral = False
         self.on_parameter_change("ki")
 
     def on_parameter_change(self, name: str) -> None:
-        np.multiply(self.ki.value, self._dt, out=self._ki_dt)
-        self._sum_max = float(self.i_max.value) / self._dt
-        self._integral = bool(self.ki.value.any())
+        self._kp, self._kd = self.kp.value.tolist(), self.kd.value.tolist()
+        self._ki_dt = (self.ki.value * self._dt).tolist()
+        sum_max = float(self.i_max.value) / self._dt
+        self._sum_max_list, self._sum_min_list = [sum_max] * self.ctx.dof, [-sum_max] * self.ctx.dof
+        self._integral = any(self._ki_dt)
 
     def start(self, state: JointState) -> None:
-        self._e_sum[:] = 0.0
+        self._e_sum = [0.0] * self.ctx.dof
 
     def update(self, t_s: float) -> None:
-        a, e = self._a, self._e
-        np.subtract(self.q_des.value, self.q.value, out=e)
-        np.multiply(self.kp.value, e, out=a)
+        q, dq = self.q.value, self.dq.value
+        e = list(map(sub, self.q_des.value.tolist(), q.tolist()))
+        de = map(sub, self.dq_des.value.tolist(), dq.tolist())
+        ddq_des = self.ddq_des.value.tolist()
+        terms = zip(ddq_des, self._kp, e, self._kd, de)  # noqa: B905 (see orccadd.vec.clamped)
+        a = [ddq + kp * e_i + kd * de_i for ddq, kp, e_i, kd, de_i in terms]
         if self._integral:
-            e_sum = self._e_sum
-            e_sum += e
-            clamp(e_sum, -self._sum_max, self._sum_max, e_sum)
-            np.multiply(self._ki_dt, e_sum, out=e)
-            a += e
-        np.subtract(self.dq_des.value, self.dq.value, out=e)
-        e *= self.kd.value
-        a += e
-        a += self.ddq_des.value
-        self.tau.value[:] = pin.rnea(self._model, self._data, self.q.value, self.dq.value, a)
+            hi, lo = self._sum_max_list, self._sum_min_list
+            self._e_sum = e_sum = clamped(list(map(add, self._e_sum, e)), lo, hi)
+            a = list(map(add, a, map(mul, self._ki_dt, e_sum)))
+        self._a[:] = a
+        self.tau.value[:] = pin.rnea(self._model, self._data, q, dq, self._a)
 
 
 @register("joint_pd_gravity")

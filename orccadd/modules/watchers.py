@@ -10,7 +10,7 @@ import numpy as np
 
 from orccadd.modules.base import Module, ModuleContext, register
 from orccadd.physres.base import JointState
-from orccadd.vec import any_true, max_of
+from orccadd.vec import max_abs, max_abs_diff, outside
 
 
 class Watcher(Module):
@@ -22,8 +22,6 @@ class Watcher(Module):
         self.ticks = self.add_parameter("ticks", 1, bounds=(1, 100000), unit="ticks", tunable=True)
         self._count = 0
         self._ticks_needed = 1
-        self._scratch = np.zeros(ctx.dof)
-        self._mask = np.zeros(ctx.dof, dtype=np.bool_)
 
     def start(self, state: JointState) -> None:
         self._count = 0
@@ -51,10 +49,8 @@ class TrackingErrorWatch(Watcher):
         )
 
     def update(self, t_s: float) -> None:
-        e = self._scratch
-        np.subtract(self.q_des.value, self.q.value, out=e)
-        np.abs(e, out=e)
-        self._debounce(max_of(e) > float(self.threshold.value))
+        error_rad = max_abs_diff(self.q_des.value.tolist(), self.q.value.tolist())
+        self._debounce(error_rad > float(self.threshold.value))
 
 
 @register("joint_limit_watch")
@@ -70,27 +66,24 @@ class JointLimitWatch(Watcher):
         self.margin = self.add_parameter("margin_rad", 0.05, bounds=(0.0, 1.0), unit="rad", tunable=True)
         self.vfrac = self.add_parameter("velocity_fraction", 0.95, bounds=(0.01, 1.5), unit="1", tunable=True)
         self._lo, self._hi, self._vmax = m.q_min_rad, m.q_max_rad, m.v_max_rad_s
-        self._lo_in = np.zeros(n)
-        self._hi_in = np.zeros(n)
-        self._v_in = np.zeros(n)
+        # the bounds that fire, as lists (set from the parameters)
+        self._q_lo: list[float] = []
+        self._q_hi: list[float] = []
+        self._dq_hi: list[float] = []
+        self._dq_lo: list[float] = []
         self.on_parameter_change("margin_rad")
 
     def on_parameter_change(self, name: str) -> None:
         super().on_parameter_change(name)
         margin = float(self.margin.value)
-        np.add(self._lo, margin, out=self._lo_in)
-        np.subtract(self._hi, margin, out=self._hi_in)
-        np.multiply(self._vmax, float(self.vfrac.value), out=self._v_in)
+        self._q_lo = (self._lo + margin).tolist()
+        self._q_hi = (self._hi - margin).tolist()
+        self._dq_hi = (self._vmax * float(self.vfrac.value)).tolist()
+        self._dq_lo = [-v for v in self._dq_hi]
 
     def update(self, t_s: float) -> None:
-        q, s, mask = self.q.value, self._scratch, self._mask
-        np.less(q, self._lo_in, out=mask)
-        hit = any_true(mask)
-        np.greater(q, self._hi_in, out=mask)
-        hit = hit or any_true(mask)
-        np.abs(self.dq.value, out=s)
-        np.greater(s, self._v_in, out=mask)
-        self._debounce(hit or any_true(mask))
+        near = outside(self.q.value.tolist(), self._q_lo, self._q_hi)
+        self._debounce(near or outside(self.dq.value.tolist(), self._dq_lo, self._dq_hi))
 
 
 @register("target_reached")
@@ -109,12 +102,8 @@ class TargetReached(Watcher):
         )
 
     def update(self, t_s: float) -> None:
-        e = self._scratch
-        np.subtract(self.q_goal.value, self.q.value, out=e)
-        np.abs(e, out=e)
-        ok = max_of(e) < float(self.tol.value)
-        np.abs(self.dq.value, out=e)
-        self._debounce(ok and max_of(e) < float(self.vtol.value))
+        ok = max_abs_diff(self.q_goal.value.tolist(), self.q.value.tolist()) < float(self.tol.value)
+        self._debounce(ok and max_abs(self.dq.value.tolist()) < float(self.vtol.value))
 
 
 @register("timeout_watch")

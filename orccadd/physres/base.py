@@ -14,6 +14,8 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from enum import IntEnum, IntFlag
+from math import isfinite
+from operator import add, sub
 from typing import Any, ClassVar
 
 import numpy as np
@@ -22,7 +24,7 @@ import numpy.typing as npt
 from orccadd.config.robot import RobotConfig
 from orccadd.errors import LifecycleError, ResourceError
 from orccadd.model import RobotModel
-from orccadd.vec import any_true, clamp
+from orccadd.vec import clamped, outside
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -57,7 +59,9 @@ class Status(IntFlag):
     TORQUE_OFF = 64  # no torque on the motors
 
 
-LIMIT_VIOLATION = int(Status.LIMIT_VIOLATION)  # as a plain int: IntFlag arithmetic costs ~1 µs a call
+# as plain ints: IntFlag arithmetic costs ~1 µs a call
+LIMIT_VIOLATION = int(Status.LIMIT_VIOLATION)
+CMD_CLAMPED = int(Status.CMD_CLAMPED)
 T3_MASK = int(Status.LIMIT_VIOLATION | Status.FAULT | Status.COMM_LOST)
 
 # Lifecycle transitions allowed: (from, method) -> to.
@@ -108,22 +112,19 @@ class PhysicalResource(ABC):
         self.fault_message = ""
         self._cmd: FloatArray = np.zeros(self.dof)
         self._last_pos_cmd: FloatArray = np.zeros(self.dof)
-        self._scratch: FloatArray = np.zeros(self.dof)
-        self._mask = np.zeros(self.dof, dtype=np.bool_)
-        self._abs_step: FloatArray = np.zeros(self.dof)
-        self._too_fast = np.zeros(self.dof, dtype=np.bool_)
-        # measured-state limits on (q, dq) stacked, as `JointState.q_dq`
+        # limits as lists: the tick checks them with list builtins (see orccadd.vec)
         tol_q = config.limits.position_tolerance_rad
         dq_max = model.v_max_rad_s * config.limits.velocity_tolerance
-        self._limit_lo = np.concatenate([model.q_min_rad - tol_q, -dq_max])
-        self._limit_hi = np.concatenate([model.q_max_rad + tol_q, dq_max])
-        self._limit_mask = np.zeros(2 * self.dof, dtype=np.bool_)
+        self._limit_lo: list[float] = [*(model.q_min_rad - tol_q).tolist(), *(-dq_max).tolist()]  # on q_dq
+        self._limit_hi: list[float] = [*(model.q_max_rad + tol_q).tolist(), *dq_max.tolist()]
+        self._tau_lo, self._tau_hi = (-model.tau_max_nm).tolist(), model.tau_max_nm.tolist()
+        self._v_lo, self._v_hi = (-model.v_max_rad_s).tolist(), model.v_max_rad_s.tolist()
+        self._q_lo, self._q_hi = model.q_min_rad.tolist(), model.q_max_rad.tolist()
+        step_max = model.v_max_rad_s * config.control_period_s * config.limits.velocity_tolerance
+        self._step_max: list[float] = step_max.tolist()
         self._stop_flags = 0
         self.clamp_count = 0
-        self._neg_tau_max = -model.tau_max_nm
-        self._neg_v_max = -model.v_max_rad_s
-        self._step_max = model.v_max_rad_s * config.control_period_s * config.limits.velocity_tolerance
-        self._neg_step_max = -self._step_max
+        self.rejected_count = 0  # commands with a NaN or an infinity, never sent
 
     # ---- settings -------------------------------------------------------------------------
     @classmethod
@@ -204,13 +205,8 @@ class PhysicalResource(ABC):
         st = self.state
         st.status = self._read_into(t_s, st) | self._stop_flags
         st.t_s = t_s
-        mask = self._limit_mask
-        np.less(st.q_dq, self._limit_lo, out=mask)
-        bad = any_true(mask)
-        if not bad:
-            np.greater(st.q_dq, self._limit_hi, out=mask)
-            bad = any_true(mask)
-        if bad:
+        q_dq = st.q_dq.tolist()
+        if outside(q_dq, self._limit_lo, self._limit_hi) or not all(map(isfinite, q_dq)):
             st.status |= LIMIT_VIOLATION
         return st
 
@@ -219,35 +215,36 @@ class PhysicalResource(ABC):
 
         Torques are clamped to max_torque_nm (CMD_CLAMPED). Position and velocity commands
         outside the limits, or position steps faster than max_velocity, are clamped and also
-        flagged LIMIT_VIOLATION (a type 3 exception for the task). During a safe stop the
-        command is ignored.
+        flagged LIMIT_VIOLATION (a type 3 exception for the task). A command with a NaN or an
+        infinity is not sent and flagged LIMIT_VIOLATION. During a safe stop the command is
+        ignored.
         """
         if self._stop_flags:
             return self._stop_flags | self.state.status
-        cmd, mask = self._cmd, self._mask
-        m = self.model
+        wanted = command.tolist()
+        if not all(map(isfinite, wanted)):
+            self.rejected_count += 1
+            self.fault_message = f"a command with a NaN or an infinity was not sent: {wanted}"
+            return LIMIT_VIOLATION
+        mode = self.mode
+        if mode is CommandMode.TORQUE:
+            sent = clamped(wanted, self._tau_lo, self._tau_hi)
+        elif mode is CommandMode.VELOCITY:
+            sent = clamped(wanted, self._v_lo, self._v_hi)
+        else:  # position: within the joint range, and no faster than max_velocity from the last one
+            sent = clamped(wanted, self._q_lo, self._q_hi)
+            last = self._last_pos_cmd.tolist()
+            step = self._step_max
+            sent = clamped(sent, list(map(sub, last, step)), list(map(add, last, step)))
         flags = 0
-        if self.mode is CommandMode.TORQUE:
-            clamp(command, self._neg_tau_max, m.tau_max_nm, cmd)
-        elif self.mode is CommandMode.VELOCITY:
-            clamp(command, self._neg_v_max, m.v_max_rad_s, cmd)
-        else:
-            clamp(command, m.q_min_rad, m.q_max_rad, cmd)
-            step = self._scratch
-            np.subtract(cmd, self._last_pos_cmd, out=step)
-            np.abs(step, out=self._abs_step)
-            np.greater(self._abs_step, self._step_max, out=self._too_fast)
-            if any_true(self._too_fast):  # only then: last + (cmd - last) need not equal cmd
-                clamp(step, self._neg_step_max, self._step_max, step)
-                np.add(self._last_pos_cmd, step, out=cmd)
-            self._last_pos_cmd[:] = cmd
-        np.not_equal(cmd, command, out=mask)
-        if any_true(mask):
-            flags |= Status.CMD_CLAMPED
+        if sent != wanted:
+            flags = CMD_CLAMPED if mode is CommandMode.TORQUE else CMD_CLAMPED | LIMIT_VIOLATION
             self.clamp_count += 1
-            if self.mode is not CommandMode.TORQUE:
-                flags |= Status.LIMIT_VIOLATION
-        return flags | self._write_command(t_s, self.mode, cmd)
+        cmd = self._cmd
+        cmd[:] = sent
+        if mode is CommandMode.POSITION:
+            self._last_pos_cmd[:] = cmd
+        return flags | self._write_command(t_s, mode, cmd)
 
     def safe_stop(self) -> None:
         """Bring the arm to rest by the configured stop category (tick-safe, idempotent)."""

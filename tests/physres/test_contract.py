@@ -89,3 +89,20 @@ def test_device_fault_is_reported(resource: PhysicalResource) -> None:
     resource.inject_fault("over-current")  # type: ignore[attr-defined]
     drive(resource, 0.05)
     assert resource.state.status & Status.FAULT
+
+
+@pytest.mark.parametrize("mode", [CommandMode.TORQUE, CommandMode.POSITION])
+def test_a_command_with_nan_or_inf_is_not_sent(resource: PhysicalResource, mode: CommandMode) -> None:
+    resource.activate(mode)
+    st = resource.read(time.monotonic())
+    good = np.zeros(resource.dof) if mode is CommandMode.TORQUE else st.q_rad.copy()
+    for bad_value in (np.nan, np.inf, -np.inf):
+        bad = good.copy()
+        bad[2] = bad_value
+        flags = resource.write(time.monotonic(), bad)
+        assert flags & Status.LIMIT_VIOLATION, (bad_value, flags)  # a type 3 exception for the task
+    assert resource.rejected_count == 3
+    assert "NaN or an infinity" in resource.fault_message
+    drive(resource, 0.05)  # the device never saw them: the arm's state stays finite
+    assert np.isfinite(resource.state.vector).all()
+    resource.safe_stop()
