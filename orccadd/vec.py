@@ -17,11 +17,6 @@ import numpy as np
 import numpy.typing as npt
 
 
-def any_true(mask: npt.NDArray[np.bool_]) -> bool:
-    """`mask.any()` for a small boolean vector."""
-    return True in mask.tolist()
-
-
 def max_of(a: npt.NDArray[np.float64]) -> float:
     """`a.max()` for a small vector."""
     return max(a.tolist())  # type: ignore[no-any-return]
@@ -40,16 +35,6 @@ def max_abs(a: list[float]) -> float:
 def max_abs_diff(a: list[float], b: list[float]) -> float:
     """max |a_i − b_i|."""
     return max(map(abs, map(sub, a, b)))  # type: ignore[no-any-return]
-
-
-def any_below(a: list[float], lo: list[float]) -> bool:
-    """Some a_i < lo_i (False for NaN, as the comparison is)."""
-    return any(map(lt, a, lo))
-
-
-def any_above(a: list[float], hi: list[float]) -> bool:
-    """Some a_i > hi_i (False for NaN)."""
-    return any(map(gt, a, hi))
 
 
 def outside(a: list[float], lo: list[float], hi: list[float]) -> bool:

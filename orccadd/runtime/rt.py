@@ -2,7 +2,7 @@
 and a PM QoS request that keeps the CPUs out of deep idle states.
 
 The last one matters as much as the priority: a CPU (or a virtual CPU) that halts between two
-ticks takes tens of microseconds to milliseconds to wake up, and wakes with cold caches. As
+ticks takes tens of microseconds to milliseconds to wake up (a virtual one: up to several ms). As
 `cyclictest` does, we write 0 to `/dev/cpu_dma_latency` and hold it open for as long as the
 loop runs (the kernel drops the request when the file is closed). Measured on this project's
 2-core VM, an empty 1 kHz loop: wake-up p99 2.3 ms without it, 65 µs with it.
