@@ -108,3 +108,25 @@ def test_tune_is_checked_then_applied_at_tick_boundary() -> None:
     loop.active = task
     loop.run_for(0.01)
     assert (ct.kp.value == 500.0).all()
+
+
+def test_a_law_that_outputs_nan_is_a_type_3_and_nothing_is_sent() -> None:
+    s, task, loop = open_task()
+    ct = next(m for m in task.modules if m.name == "ct")
+    next(m for m in task.modules if m.name == "traj").configure({"target_rad": FAR})
+    task.activate()
+    loop.active = task
+    loop.run_for(0.3)
+    law = ct.update
+
+    def broken_law(t_s: float) -> None:  # a module bug: a NaN in the torque it outputs
+        law(t_s)
+        ct.tau.value[2] = np.nan
+
+    task.schedule = tuple(broken_law if u == law else u for u in task.schedule)
+    loop.run_for(0.01)
+    assert task.phase is Phase.FAULT
+    assert "MoveJoints.T3.LimitViolation" in s.event_names()
+    assert s.resource.rejected_count == 1  # the first one: then the safe stop ignores commands
+    check_stopped_safely(s, loop, category_torque_off=True)
+    assert np.isfinite(s.resource.state.vector).all()
