@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import can
+import numpy as np
 
 from orccadd.config import load_robot_config
 from orccadd.config.robot import RobotConfig, read_toml
@@ -34,7 +35,7 @@ from orccadd.drivesim.simulator import AxisSpec, DriveSimulator
 from orccadd.drivesim.socketcand import QueuedSocketcandBus
 from orccadd.errors import OrccaddError
 from orccadd.physres.sim import SimSettings, load_sim_settings
-from orccadd.runtime import enter_realtime
+from orccadd.runtime import Summary, enter_realtime
 
 
 def plant_config(cfg: RobotConfig, plant_file: str) -> RobotConfig:
@@ -87,12 +88,8 @@ def _client(sim: DriveSimulator, conn: socket.socket) -> None:
 def _figures_ms(values_s: list[float]) -> dict[str, float]:
     if not values_s:
         return {}
-    v = sorted(values_s)
-    return {
-        "median": v[len(v) // 2] * 1e3,
-        "p99": v[min(len(v) - 1, int(len(v) * 0.99))] * 1e3,
-        "max": v[-1] * 1e3,
-    }
+    fig = Summary.of(np.asarray(values_s) * 1e9)
+    return {"median": fig.median_us / 1e3, "p99": fig.p99_us / 1e3, "max": fig.max_us / 1e3}
 
 
 def main(argv: list[str] | None = None) -> int:
