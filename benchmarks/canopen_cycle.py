@@ -27,11 +27,11 @@ import canopen
 import numpy as np
 from harness import figures
 
-from orccadd.config import load_robot_config
 from orccadd.errors import ConfigError
-from orccadd.physres import CommandMode, create_resource
 from orccadd.physres.canopen402 import Canopen402Arm
+from orccadd.robot import create_resource, load_robot_config
 from orccadd.runtime import WallClock, enter_realtime, leave_realtime
+from orccadd.types import CommandMode
 from tests.canopen_rig import canopen_rig
 
 

@@ -29,7 +29,8 @@ import numpy as np
 from harness import ROOT, cyclictest, figures, running_daemon
 
 from orccadd.ctl.client import Client
-from orccadd.daemon.telemetry import H, RingReader, TelemetryBlock
+from orccadd.wire.schema import H
+from orccadd.wire.telemetry import RingReader, TelemetryBlock
 
 MISSION = ROOT / "benchmarks/missions/isolation.mission"
 MONITORS = 10

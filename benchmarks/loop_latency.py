@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 from harness import cyclictest
 
-from orccadd.config import load_robot_config, with_backend
+from orccadd.robot import load_robot_config, with_backend
 from orccadd.runtime import Summary, WallClock, enter_realtime, leave_realtime
 from orccadd.session import Session
-from orccadd.task import Phase
+from orccadd.types import Phase
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGETS = [

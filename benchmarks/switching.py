@@ -26,7 +26,7 @@ import numpy as np
 from harness import ROOT, figures, running_daemon
 
 from orccadd.ctl.client import Client
-from orccadd.task.task import Phase
+from orccadd.types import Phase
 
 MISSION = ROOT / "benchmarks/missions/switching.mission"
 SIGNALS = ["task", "phase", "wrote", "wake_us", "compute_us"]

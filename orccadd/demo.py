@@ -19,8 +19,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from orccadd.cmdd.views import format_trace
 from orccadd.ctl.client import Client, ClientError
+from orccadd.ctl.format import format_trace
 from orccadd.ctl.online import format_status
 from orccadd.ctl.plot import plot_csv
 

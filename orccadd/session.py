@@ -7,11 +7,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from orccadd.config.robot import RobotConfig, load_robot_config
-from orccadd.physres import CommandMode, PhysicalResource, create_resource
+from orccadd.config.robot import RobotConfig
+from orccadd.physres import PhysicalResource
+from orccadd.robot import create_resource, load_robot_config
 from orccadd.runtime.clock import Clock
-from orccadd.runtime.control import ControlLoop
 from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
+from orccadd.task.loop import ControlLoop
+from orccadd.types import CommandMode
 
 
 @dataclass

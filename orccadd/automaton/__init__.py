@@ -15,6 +15,7 @@ from orccadd.automaton.elaborate import elaborate
 from orccadd.automaton.parser import load_mission_file, parse_mission
 from orccadd.automaton.program import Program
 from orccadd.automaton.verify import Report, verify
+from orccadd.types import TaskFileReader
 
 __all__ = [
     "Automaton",
@@ -30,10 +31,18 @@ __all__ = [
 ]
 
 
-def compile_text(text: str, file: str = "<mission>", max_states: int = DEFAULT_MAX_STATES) -> Automaton:
-    """Parse, check and compile a mission; `MissionError` on any problem. Not for a tick."""
-    return compile_program(elaborate(parse_mission(text, file)), max_states)
+def compile_text(
+    text: str,
+    file: str = "<mission>",
+    max_states: int = DEFAULT_MAX_STATES,
+    task_files: TaskFileReader | None = None,
+) -> Automaton:
+    """Parse, check and compile a mission; `MissionError` on any problem. `task_files` reads
+    the interface of tasks declared `from "file"` (see `elaborate`). Not for a tick."""
+    return compile_program(elaborate(parse_mission(text, file), task_files), max_states)
 
 
-def compile_file(path: str | Path, max_states: int = DEFAULT_MAX_STATES) -> Automaton:
-    return compile_program(elaborate(load_mission_file(path)), max_states)
+def compile_file(
+    path: str | Path, max_states: int = DEFAULT_MAX_STATES, task_files: TaskFileReader | None = None
+) -> Automaton:
+    return compile_program(elaborate(load_mission_file(path), task_files), max_states)

@@ -24,6 +24,7 @@ from orccadd.automaton.program import (
     event_full_name,
 )
 from orccadd.errors import MissionError, OrccaddError
+from orccadd.types import TaskFileReader
 
 # Words that would be read as a keyword where a name can stand (statements, signal expressions).
 _RESERVED = (
@@ -35,13 +36,17 @@ PROPERTY_FNS = ("active", "start", "stop")
 _TRAP_TOP = 500_000
 
 
-def elaborate(m: A.MissionAst) -> Program:
-    return _Elaborator(m).run()
+def elaborate(m: A.MissionAst, task_files: TaskFileReader | None = None) -> Program:
+    """Check a parsed mission and build its program. `task_files` reads the interface of a task
+    declared `from "file.toml"` (the task package's `read_task_interface`); without it, such a
+    declaration is refused."""
+    return _Elaborator(m, task_files).run()
 
 
 class _Elaborator:
-    def __init__(self, m: A.MissionAst) -> None:
+    def __init__(self, m: A.MissionAst, task_files: TaskFileReader | None) -> None:
         self.m = m
+        self.task_files = task_files
         self.inputs: list[str] = []
         self.input_task: list[int] = []
         self.input_kind: list[str] = []
@@ -176,21 +181,21 @@ class _Elaborator:
 
     def check_against_file(self, t: A.TaskDecl, declared: list[tuple[str, str, A.Loc]]) -> tuple[str, ...]:
         """The task file is the truth: the mission's declaration must agree with its signature."""
-        from orccadd.task.spec import load_task_file
-
         path = Path(t.source)
         if not path.is_absolute():
             path = Path(t.loc.file).parent / path
+        if self.task_files is None:
+            raise self.err(t.loc, f"task {t.name}: no task-file reader was given to read {path}")
         try:
-            spec = load_task_file(path)
+            spec = self.task_files(path)
         except OrccaddError as e:
             raise self.err(t.loc, f"task {t.name}: cannot read its task file: {e}") from None
         has: dict[str, set[str]] = {
-            "post": {""} if spec.events.post else set(),
-            "pre": {""} if spec.preconditions else set(),
-            "T2": {e.name for e in spec.events.T2},
-            "T3": {e.name for e in spec.events.T3},
-            "sync": {e.name for e in spec.events.sync},
+            "post": {""} if spec.has_post else set(),
+            "pre": {""} if spec.has_pre else set(),
+            "T2": set(spec.t2),
+            "T3": set(spec.t3),
+            "sync": set(spec.sync),
         }
         for kind, name, loc in declared:
             if name not in has[kind]:
@@ -198,28 +203,28 @@ class _Elaborator:
                 offered = ", ".join(f"{k} {n}".strip() for k in EVENT_KINDS for n in sorted(has[k])) or "none"
                 msg = f"signature mismatch: {path} declares no {what} for {t.name} (it has: {offered})"
                 raise self.err(loc, msg)
-        modules = {m.name for m in spec.modules}
+        modules = set(spec.modules)
         for ps in t.params:
             if ps.module not in modules:
                 known = ", ".join(sorted(modules))
                 raise self.err(
                     ps.loc, f"task {t.name}: {path} has no module {ps.module!r} (modules: {known})"
                 )
-        if spec.task.resource != t.resource:
+        if spec.resource != t.resource:
             raise self.err(
                 t.resource_loc,
-                f"signature mismatch: {path} runs on resource `{spec.task.resource}`, not `{t.resource}`",
+                f"signature mismatch: {path} runs on resource `{spec.resource}`, not `{t.resource}`",
             )
         for kind, names in has.items():
             for n in sorted(names):
                 if (kind, n) not in {(k, nm) for k, nm, _ in declared}:
                     declared.append((kind, n, t.loc))
-        if t.joints and spec.task.joints and set(t.joints) != set(spec.task.joints):
+        if t.joints and spec.joints and set(t.joints) != set(spec.joints):
             raise self.err(
                 t.loc,
-                f"signature mismatch: {path} claims joints {list(spec.task.joints)}, not {list(t.joints)}",
+                f"signature mismatch: {path} claims joints {list(spec.joints)}, not {list(t.joints)}",
             )
-        return t.joints or spec.task.joints
+        return t.joints or spec.joints
 
     def spellings(self) -> dict[str, tuple[str, ...]]:
         out = {name: tuple(dict.fromkeys(full)) for name, full in self.short.items()}

@@ -26,9 +26,21 @@ from pathlib import Path
 from typing import Any
 
 from orccadd.cmdd import views
-from orccadd.cmdd.protocol import COMMANDS, CONTROL, MAX_LINE, ProtocolError, encode, parse_request
-from orccadd.config.robot import DaemonConfig, load_robot_config
-from orccadd.daemon.telemetry import H, RingReader, S, TelemetryBlock, read_status
+from orccadd.config.robot import DaemonConfig, read_robot_config
+from orccadd.wire.commands import (
+    COMMANDS,
+    MAX_LINE,
+    Dispatcher,
+    ProtocolError,
+    Role,
+    encode,
+    error_reply,
+    handles,
+    parse_request,
+    with_defaults,
+)
+from orccadd.wire.schema import PROTOCOL_VERSION, H, S
+from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 
 MAX_CLIENTS = 32
 RT_TIMEOUT_S = 5.0
@@ -60,9 +72,9 @@ class Roles:
                 names.add(grp.getgrgid(g).gr_name)
         return names
 
-    def role(self, uid: int, gid: int) -> str | None:
+    def role(self, uid: int, gid: int) -> Role | None:
         if uid in (0, os.getuid()):
-            return CONTROL
+            return Role.CONTROL
         try:
             user = pwd.getpwuid(uid).pw_name
         except KeyError:
@@ -70,9 +82,9 @@ class Roles:
         groups = self._groups(uid, gid)
         c = self.cfg
         if user in c.control_users or groups & set(c.control_groups):
-            return CONTROL
+            return Role.CONTROL
         if user in c.read_users or groups & set(c.read_groups):
-            return "read"
+            return Role.READ
         return None
 
 
@@ -130,6 +142,7 @@ class CommandDaemon:
         self.server: asyncio.AbstractServer | None = None
         self.done = asyncio.Event()
         self.sock_ino = 0
+        self.dispatch = Dispatcher(self, "cmdd")
 
     async def refresh(self) -> None:
         st = read_status(self.tel)
@@ -229,59 +242,63 @@ class CommandDaemon:
             with contextlib.suppress(Exception):
                 writer.close()
 
-    async def _request(self, line: bytes, role: str | None, uid: int, writer: asyncio.StreamWriter) -> None:
+    async def _request(self, line: bytes, role: Role | None, uid: int, writer: asyncio.StreamWriter) -> None:
         rid: Any = None
         try:
             rid, cmd, args = parse_request(line)
         except ProtocolError as e:
-            writer.write(encode({"id": rid, "ok": False, "error": str(e)}))
+            writer.write(encode(error_reply(rid, str(e))))
             await writer.drain()
             return
         spec = COMMANDS[cmd]
-        if role is None or (spec.role == CONTROL and role != CONTROL):
-            who = _user(uid)
-            need = "the control role" if spec.role == CONTROL else "the read-only role"
+        if role is None or (spec.role is Role.CONTROL and role is not Role.CONTROL):
+            need = "the control role" if spec.role is Role.CONTROL else "the read-only role"
             writer.write(
-                encode(
-                    {"id": rid, "ok": False, "error": f"not authorised: user {who} lacks {need} for {cmd!r}"}
-                )
+                encode(error_reply(rid, f"not authorised: user {_user(uid)} lacks {need} for {cmd!r}"))
             )
             await writer.drain()
             return
-        if spec.forward:
+        if spec.where == "rt":
             timeout = LOAD_TIMEOUT_S if cmd == "load" else RT_TIMEOUT_S
             reply = await self.rt.call(cmd, args, timeout)
             reply["id"] = rid
-            if cmd in ("load",) and reply.get("ok"):
+            if cmd == "load" and reply.get("ok"):
                 await self.refresh()
             writer.write(encode(reply))
         else:
-            handler = getattr(self, f"do_{cmd}")
             try:
-                result = await handler(writer, rid, **args)
+                result = await self.dispatch.handler(cmd)(writer, rid, **with_defaults(spec, args))
                 writer.write(encode({"id": rid, "ok": True, "result": result}))
             except ValueError as e:
-                writer.write(encode({"id": rid, "ok": False, "error": str(e)}))
+                writer.write(encode(error_reply(rid, str(e))))
+            except (ConnectionError, asyncio.CancelledError):
+                raise
+            except Exception as e:  # a bug must not take the command daemon down
+                print(f"orccadd-cmdd: {cmd} failed: {type(e).__name__}: {e}", file=sys.stderr)
+                writer.write(encode(error_reply(rid, f"internal error: {type(e).__name__}: {e}")))
         await writer.drain()
 
     # ---- local commands -------------------------------------------------------------------
+    @handles("ping")
     async def do_ping(self, writer: asyncio.StreamWriter, rid: Any) -> dict[str, Any]:
-        return {"pong": True, "pid": os.getpid()}
+        return {"pong": True, "pid": os.getpid(), "protocol_version": PROTOCOL_VERSION}
 
+    @handles("status")
     async def do_status(self, writer: asyncio.StreamWriter, rid: Any) -> dict[str, Any]:
         await self.refresh()
         log = self.csv.describe() if self.csv else self.last_log
         out = views.status(self.tel, self.desc, log)
         return out
 
+    @handles("monitor")
     async def do_monitor(
         self,
         writer: asyncio.StreamWriter,
         rid: Any,
-        signals: list[Any] | None = None,
-        rate_hz: float = 10.0,
-        count: int = 0,
-        duration_s: float = 0.0,
+        signals: list[Any] | None,
+        rate_hz: float,
+        count: int,
+        duration_s: float,
     ) -> dict[str, Any]:
         await self.refresh()
         if not all(isinstance(s, str) for s in signals or []):
@@ -309,13 +326,14 @@ class CommandDaemon:
             await asyncio.sleep(max(0.0, nxt - time.monotonic()))
         return {"samples": sent}
 
+    @handles("events")
     async def do_events(
         self,
         writer: asyncio.StreamWriter,
         rid: Any,
-        last: int = 50,
-        follow: bool = False,
-        duration_s: float = 0.0,
+        last: int,
+        follow: bool,
+        duration_s: float,
     ) -> dict[str, Any]:
         await self.refresh()
         if not 0 <= last <= 100_000:
@@ -338,13 +356,14 @@ class CommandDaemon:
             await writer.drain()
         return {"lost": r.lost}
 
+    @handles("log")
     async def do_log(
         self,
         writer: asyncio.StreamWriter,
         rid: Any,
         action: str,
-        signals: list[Any] | None = None,
-        path: str = "",
+        signals: list[Any] | None,
+        path: str,
     ) -> dict[str, Any]:
         if action == "start":
             if self.csv is not None:
@@ -394,7 +413,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rt-socket", required=True)
     ap.add_argument("--telemetry", required=True, help="the real-time process's shared-memory block")
     args = ap.parse_args(argv)
-    cfg = load_robot_config(args.config, check_model=False)
+    cfg = read_robot_config(args.config)
     try:
         d = CommandDaemon(cfg.daemon, args.socket, args.rt_socket, args.telemetry)
     except (OSError, ValueError) as e:

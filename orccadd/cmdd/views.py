@@ -14,20 +14,22 @@ from typing import IO, Any
 
 import numpy as np
 
-from orccadd.daemon.machine import Command, MachineState, MissionResult
-from orccadd.daemon.telemetry import (
+from orccadd.wire.schema import (
     TICK_FIELDS,
     TICK_VECTORS,
     TRACE_IDX,
     H,
-    RingReader,
+    MachineState,
+    MissionResult,
+    OperatorAction,
+    Phase,
+    R,
     S,
-    TelemetryBlock,
+    T,
     Trace,
-    read_status,
+    status_names,
 )
-from orccadd.physres.base import Status
-from orccadd.task.task import Phase
+from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 
 NF = len(TICK_FIELDS)
 
@@ -90,7 +92,7 @@ def timing(tel: TelemetryBlock, window_s: float = 5.0) -> dict[str, float]:
         return {}
     idx = np.arange(head - n, head) % tel.tick_len
     rec = tel.ticks[idx]
-    wake, comp = rec[:, 2], rec[:, 3]
+    wake, comp = rec[:, T.WAKE_US], rec[:, T.COMPUTE_US]
     out: dict[str, float] = {"window_ticks": float(n)}
     for name, arr in (("wake", wake), ("compute", comp)):
         q = np.percentile(arr, [50, 99])
@@ -116,7 +118,7 @@ def status(tel: TelemetryBlock, desc: dict[str, Any], log: dict[str, Any] | None
         "result": MissionResult(int(st[S.RESULT])).name.lower(),
         "faulted": bool(st[S.FAULTED]),
         "fault": desc.get("fault") or None if st[S.FAULTED] else None,  # why, in words
-        "plant_pid": int(st[S.PLANT_PID]),
+        "helper_pid": int(st[S.HELPER_PID]),
         "ticks": int(hdr[H.TICKS]),
         "overruns": int(hdr[H.OVERRUNS]),
         "switches": int(hdr[H.SWITCHES]),
@@ -125,10 +127,10 @@ def status(tel: TelemetryBlock, desc: dict[str, Any], log: dict[str, Any] | None
         "log": log,
     }
     if rec is not None:
-        tid = int(rec[4])
+        tid = int(rec[T.TASK])
         out["active_task"] = tasks[tid] if 0 <= tid < len(tasks) else None
-        out["task_phase"] = Phase(int(rec[5])).name.lower()
-        out["resource_status"] = [f.name.lower() for f in Status if f and int(rec[7]) & f]  # type: ignore[union-attr]
+        out["task_phase"] = Phase(int(rec[T.PHASE])).name.lower()
+        out["resource_status"] = status_names(int(rec[T.STATUS]))
         out["joints"] = [
             {
                 "name": joints[j],
@@ -143,42 +145,37 @@ def status(tel: TelemetryBlock, desc: dict[str, Any], log: dict[str, Any] | None
 
 
 def decode_trace(rec: np.ndarray, desc: dict[str, Any]) -> dict[str, Any]:
-    kind = Trace(int(rec[1]))
+    kind = Trace(int(rec[R.KIND]))
     mission = desc.get("mission") or {}
     inputs: list[str] = mission.get("inputs", [])
     actions: list[str] = mission.get("actions", [])
     events: list[str] = desc.get("events", [])
     out: dict[str, Any] = {
-        "seq": int(rec[0]),
+        "seq": int(rec[R.SEQ]),
         "kind": kind.name.lower(),
-        "t_s": round(float(rec[2]), 6),
-        "time": time.strftime("%H:%M:%S", time.localtime(rec[3])) + f".{int(rec[3] % 1 * 1000):03d}",
+        "t_s": round(float(rec[R.T_S]), 6),
+        "time": _clock(float(rec[R.WALL_S])),
     }
-    code = int(rec[6])
+    code = int(rec[R.CODE])
     if kind is Trace.INSTANT:
-        n_in, n_act = int(rec[7]), int(rec[8])
-        ins = [int(i) for i in rec[9 : 9 + n_in]]
-        acts = [int(i) for i in rec[9 + TRACE_IDX : 9 + TRACE_IDX + n_act]]
-        out["from"] = int(rec[4])
-        out["to"] = int(rec[5])
+        n_in, n_act = int(rec[R.N_IN]), int(rec[R.N_ACT])
+        base = len(R)
+        ins = [int(i) for i in rec[base : base + n_in]]
+        acts = [int(i) for i in rec[base + TRACE_IDX : base + TRACE_IDX + n_act]]
+        out["from"] = int(rec[R.STATE_FROM])
+        out["to"] = int(rec[R.STATE_TO])
         out["inputs"] = [inputs[i] if i < len(inputs) else f"#{i}" for i in ins]
         out["actions"] = [actions[i] if i < len(actions) else f"#{i}" for i in acts]
     elif kind is Trace.EVENT:
         out["event"] = events[code] if 0 <= code < len(events) else f"#{code}"
     else:
-        out["command"] = Command(code).name.lower() if code in Command._value2member_map_ else code
+        known = code in OperatorAction._value2member_map_
+        out["command"] = OperatorAction(code).name.lower() if known else code
     return out
 
 
-def format_trace(e: dict[str, Any]) -> str:
-    head = f"{e['time']} t={e['t_s']:.3f}"
-    if e["kind"] == "instant":
-        ins = ", ".join(e["inputs"]) or "-"
-        acts = ", ".join(e["actions"]) or "-"
-        return f"{head}  instant {e['from']}->{e['to']}  inputs {{{ins}}}  actions {{{acts}}}"
-    if e["kind"] == "event":
-        return f"{head}  event   {e['event']}"
-    return f"{head}  command {e['command']}"
+def _clock(wall_s: float) -> str:
+    return time.strftime("%H:%M:%S", time.localtime(wall_s)) + f".{int(wall_s % 1 * 1000):03d}"
 
 
 class CsvLog:
@@ -198,7 +195,7 @@ class CsvLog:
         recs = self.reader.poll()
         cols = self.sel.cols
         for rec in recs:
-            self.writer.writerow([f"{rec[1]:.6f}", *(f"{rec[c]:.9g}" for c in cols)])
+            self.writer.writerow([f"{rec[T.T_S]:.6f}", *(f"{rec[c]:.9g}" for c in cols)])
         self.rows += len(recs)
 
     def close(self) -> dict[str, Any]:

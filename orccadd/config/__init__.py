@@ -1,4 +1,4 @@
-"""Typed, strict configuration files (robots, tasks)."""
+"""Typed, strict configuration files (robots, tasks): pure data and validation, no backend."""
 
 from orccadd.config.robot import (
     JointConfig,
@@ -7,9 +7,8 @@ from orccadd.config.robot import (
     ResourceConfig,
     RobotConfig,
     SafeStopConfig,
-    load_robot_config,
+    read_robot_config,
     read_toml,
-    with_backend,
 )
 from orccadd.config.schema import field, load_dataclass
 
@@ -22,7 +21,6 @@ __all__ = [
     "SafeStopConfig",
     "field",
     "load_dataclass",
-    "load_robot_config",
+    "read_robot_config",
     "read_toml",
-    "with_backend",
 ]

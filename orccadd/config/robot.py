@@ -147,40 +147,20 @@ def read_toml(path: Path) -> dict[str, Any]:
         raise ConfigError(str(path), "", f"is not valid TOML: {e}") from None
 
 
-def load_robot_config(path: str | Path, *, check_model: bool = True) -> RobotConfig:
-    """Load and check a robot config. Not for a tick: reads files, loads the URDF."""
-    p = Path(path)
+def read_robot_config(path: str | Path) -> RobotConfig:
+    """Read and check a robot config's form: keys, types, bounds, joints (no backend, no URDF).
+
+    `orccadd.robot.load_robot_config` adds the backend's settings and the model checks; this is
+    all the command daemon needs (its `[daemon]` table). Not for a tick: reads a file.
+    """
     file = str(path)
-    raw = read_toml(p)
-    raw_fields = {k: v for k, v in raw.items()}
-    cfg = load_dataclass(RobotConfig, {k: v for k, v in raw_fields.items()}, file)
-    if "source" in raw or "backend_settings" in raw:
-        key = "source" if "source" in raw else "backend_settings"
-        raise ConfigError(file, key, "is not a known key")
-    cfg = replace(cfg, source=file)
+    raw = read_toml(Path(path))
+    for key in ("source", "backend_settings"):
+        if key in raw:
+            raise ConfigError(file, key, "is not a known key")
+    cfg = replace(load_dataclass(RobotConfig, raw, file), source=file)
     _check_joints(cfg, file)
-    from orccadd.physres import backend_class  # local: backends import numpy/pinocchio
-
-    backend = backend_class(cfg.resource.backend, file)
-    settings = backend.load_settings(cfg.resource.settings or {}, cfg, file)
-    cfg = replace(cfg, backend_settings=settings)
-    if check_model:
-        from orccadd.model import RobotModel
-
-        RobotModel.from_config(cfg)  # raises ConfigError/ModelError on mismatch
     return cfg
-
-
-def with_backend(cfg: RobotConfig, backend: str, **settings: Any) -> RobotConfig:
-    """The same robot on another resource backend (e.g. `sim_process`), settings re-checked."""
-    from orccadd.physres import backend_class
-
-    raw = {**(cfg.resource.settings or {}), **settings}
-    resource = replace(cfg.resource, backend=backend, settings=raw)
-    cfg = replace(cfg, resource=resource)
-    return replace(
-        cfg, backend_settings=backend_class(backend, cfg.source).load_settings(raw, cfg, cfg.source)
-    )
 
 
 def _check_joints(cfg: RobotConfig, file: str) -> None:

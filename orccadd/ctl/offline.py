@@ -44,9 +44,10 @@ def add_parsers(sub: Any) -> None:
 def cmd_check(args: argparse.Namespace) -> int:
     from orccadd.automaton import compile_file, verify
     from orccadd.automaton.verify import format_trace
+    from orccadd.task.spec import read_task_interface
 
     try:
-        a = compile_file(args.file, args.max_states)
+        a = compile_file(args.file, args.max_states, read_task_interface)
     except MissionError as e:
         if args.json:
             print(
@@ -82,8 +83,9 @@ def cmd_check(args: argparse.Namespace) -> int:
 def cmd_graph(args: argparse.Namespace) -> int:
     from orccadd.automaton import compile_file
     from orccadd.automaton.views import full_view, minimize, project, render, to_dot
+    from orccadd.task.spec import read_task_interface
 
-    a = compile_file(args.file)
+    a = compile_file(args.file, task_files=read_task_interface)
     names = [n for n in args.abstract.split(",") if n.strip()]
     lts = minimize(project(a, names, faults=args.faults)) if names else full_view(a, faults=args.faults)
     render(to_dot(lts, a.program.name), Path(args.output))
@@ -94,11 +96,12 @@ def cmd_graph(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     from orccadd.automaton import compile_file
     from orccadd.automaton.promela import PROPERTIES, export_promela
+    from orccadd.task.spec import read_task_interface
 
     unknown = sorted(set(args.property or ()) - set(PROPERTIES))
     if unknown:
         raise OrccaddError(f"--property {', '.join(unknown)}: unknown (properties: {', '.join(PROPERTIES)})")
-    a = compile_file(args.file)
+    a = compile_file(args.file, task_files=read_task_interface)
     model = export_promela(a, tuple(args.property) if args.property else PROPERTIES)
     if args.output == "-":
         sys.stdout.write(model)

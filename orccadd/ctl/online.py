@@ -10,54 +10,57 @@ from pathlib import Path
 from typing import Any
 
 from orccadd.ctl.client import Client, ClientError, default_socket
+from orccadd.wire.commands import COMMANDS
 
 EXIT_OK, EXIT_REFUSED, EXIT_ERROR = 0, 1, 2
 
 
 def add_parsers(sub: Any) -> None:
-    def add(name: str, help_: str) -> argparse.ArgumentParser:
-        p: argparse.ArgumentParser = sub.add_parser(name, help=help_)
+    def add(name: str, help_: str = "") -> argparse.ArgumentParser:
+        """A subcommand; its help is the command table's unless given (composite commands)."""
+        text = help_ or COMMANDS[name].help.replace("`", "")
+        p: argparse.ArgumentParser = sub.add_parser(name, help=text, description=text)
         p.add_argument("--socket", default=None, help=f"the daemon's socket (default {default_socket()})")
         p.add_argument("--json", action="store_true", help="print the daemon's JSON reply")
         p.set_defaults(func=run_online, online=name)
         return p
 
-    add("status", "state, mission, active task, joints, timing")
-    add("describe", "robot, tasks, the mission's signals and actions")
-    p = add("load", "load a mission (refused with the failing check's counterexample)")
+    add("status")
+    add("describe")
+    p = add("load")
     p.add_argument("mission")
-    p = add("start", "start the loaded mission")
+    p = add("start")
     p.add_argument("procedure", nargs="?", default="")
-    add("stop", "graceful stop (the mission's Stop input)")
-    add("abort", "immediate safe stop")
-    add("hold", "suspend the mission and hold position")
-    add("resume", "resume the held mission")
-    add("reset", "clear a safe stop once the arm is at rest")
-    p = add("send", "send an operator input of the mission")
+    add("stop")
+    add("abort")
+    add("hold")
+    add("resume")
+    add("reset")
+    p = add("send")
     p.add_argument("input")
-    p = add("params", "tunable parameters (value, bounds, unit)")
+    p = add("params")
     p.add_argument("task", nargs="?", default="")
-    p = add("tune", "set TASK.MODULE.PARAM to VALUE at the next tick boundary")
+    p = add("tune")
     p.add_argument("path")
     p.add_argument("value", help="a number or a JSON list")
-    p = add("monitor", "live signals (q, dq, tau, cmd, wake_us, compute_us, q.<joint>...)")
+    p = add("monitor")
     p.add_argument("signals", nargs="*")
     p.add_argument("--rate", type=float, default=10.0, help="samples per second")
     p.add_argument("--count", type=int, default=0, help="stop after N samples")
     p.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
-    p = add("events", "the reactive trace: each instant's inputs and actions")
+    p = add("events")
     p.add_argument("--last", type=int, default=50)
     p.add_argument("--follow", action="store_true")
     p.add_argument("--duration", type=float, default=0.0)
     p = add("top", "a live terminal view (state, tasks, joints, timing, last events)")
     p.add_argument("--rate", type=float, default=4.0)
     p.add_argument("--count", type=int, default=0, help="refreshes before exiting (0: until Ctrl-C)")
-    p = add("log", "start or stop a full-rate CSV log (PlotJuggler opens it)")
-    p.add_argument("action", choices=("start", "stop"))
+    p = add("log")
+    p.add_argument("action", choices=COMMANDS["log"].arg("action").choices)
     p.add_argument("signals", nargs="*")
     p.add_argument("-o", "--output", default="", help="CSV file (default ./orccadd-DATE.csv)")
-    p = add("inject", "inject a fault (daemon started with --allow-fault-injection)")
-    p.add_argument("fault", choices=("resource", "overrun"))
+    p = add("inject")
+    p.add_argument("fault", choices=COMMANDS["inject"].arg("fault").choices)
     p.add_argument("--ticks", type=int, default=20)
     p.add_argument("--extra-ms", type=float, default=0.0)
     p = sub.add_parser("plot", help="plot a CSV log to a PNG (no daemon needed)")
@@ -126,7 +129,7 @@ def _print(cmd: str, res: Any) -> None:
     if cmd == "status":
         print(format_status(res))
     elif cmd == "events":
-        from orccadd.cmdd.views import format_trace
+        from orccadd.ctl.format import format_trace
 
         for e in res["events"]:
             print(format_trace(e))
@@ -188,7 +191,7 @@ def _monitor(c: Client, a: argparse.Namespace) -> int:
 
 
 def _follow(c: Client, a: argparse.Namespace) -> int:
-    from orccadd.cmdd.views import format_trace
+    from orccadd.ctl.format import format_trace
 
     args: dict[str, Any] = {"last": a.last, "follow": True}
     if a.duration:
@@ -202,7 +205,7 @@ def _follow(c: Client, a: argparse.Namespace) -> int:
 
 
 def _top(c: Client, a: argparse.Namespace) -> int:
-    from orccadd.cmdd.views import format_trace
+    from orccadd.ctl.format import format_trace
 
     n = 0
     try:

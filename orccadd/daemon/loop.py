@@ -1,30 +1,36 @@
 """The daemon's control thread: tick the active Robot-Task, switch at tick boundaries, publish.
 
-The automaton thread never touches a task the control thread is ticking: it posts a switch
-request (a sequence number and the task) and the control thread applies it at the start of
-its next tick. The new task initialises from the measured state and continues the outgoing
-task's command (`RobotTask.continue_from`), so the arm is never left without a fresh command.
+The automaton thread never touches a task the control thread is ticking. It posts:
+
+- a switch request (a sequence number and the task), applied at the start of the next tick; the
+  new task initialises from the measured state and continues the outgoing task's command
+  (`RobotTask.continue_from`), so the arm is never left without a fresh command;
+- parameter changes, through a single-producer/single-consumer mailbox: applied at the start of
+  the next tick, in order, each acknowledged with that tick's number (its telemetry record);
+- a wish for slack: after the next tick ends, the control thread writes a byte to `slack_fd`,
+  so the automaton thread's work (commands) starts when a whole period lies ahead.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
-import select
 import time
 
-from orccadd.daemon.telemetry import TICK_FIELDS, H, TelemetryBlock
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
-from orccadd.runtime.control import ControlLoop
+from orccadd.runtime.mailbox import Mailbox
 from orccadd.task.events import EventQueue
-from orccadd.task.task import RobotTask
+from orccadd.task.loop import ControlLoop
+from orccadd.task.task import ParameterChange, RobotTask
+from orccadd.wire.schema import H, T
+from orccadd.wire.telemetry import TelemetryBlock
 
-NF = len(TICK_FIELDS)
+NF = len(T)
 
 
 class SwitchingLoop(ControlLoop):
-    """`ControlLoop` plus the switch mailbox, per-tick telemetry and event notification."""
+    """`ControlLoop` plus the switch and tune mailboxes, per-tick telemetry and notifications."""
 
     def __init__(
         self,
@@ -44,13 +50,14 @@ class SwitchingLoop(ControlLoop):
         self.tel = telemetry
         self.wake_fd = wake_fd
         self.blend_ticks = blend_ticks
-        self.task_ids: dict[int, int] = {id(hold): 0}  # id(task) -> telemetry task id
+        self.tunes: Mailbox[ParameterChange] = Mailbox(64)
+        self._task_ids: dict[int, int] = {id(hold): 0}  # id(task) -> telemetry task id
         self._request: tuple[int, RobotTask] = (0, hold)
         self._applied = -1
         self._notified = 0
         self.switches = 0
-        self.busy_ns = 0  # fault injection: extra compute per tick (real overruns)
-        self.busy_ticks = 0
+        self._busy_ns = 0  # fault injection: extra compute per tick (real overruns)
+        self._busy_ticks = 0
         self._slack_r, self._slack_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self._slack_wanted = False
 
@@ -64,20 +71,35 @@ class SwitchingLoop(ControlLoop):
         """Make `task` the active one at the next tick (restarted if it already is)."""
         self._request = (self._request[0] + 1, task)
 
-    def wait_for_slack(self, timeout_s: float) -> bool:
-        """Block until the control thread has just finished a tick (False after `timeout_s`:
-        the loop is stopped or late, so there is nothing to keep out of the way of)."""
+    def set_mission_tasks(self, tasks: tuple[RobotTask, ...]) -> None:
+        """Telemetry task ids: 0 the Hold task, k the mission's task k-1."""
+        ids = {id(self.hold): 0}
+        ids.update({id(t): i for i, t in enumerate(tasks, start=1)})
+        self._task_ids = ids  # one store: the control thread sees the old or the new dict
+
+    def inject_overrun(self, ticks: int, extra_ns: int) -> None:
+        """Fault injection: spin `extra_ns` more in each of the next `ticks` ticks."""
+        self._busy_ns = extra_ns
+        self._busy_ticks = ticks
+
+    @property
+    def slack_fd(self) -> int:
+        """Readable once a tick has ended after the last `want_slack()`."""
+        return self._slack_r
+
+    def want_slack(self) -> None:
         with contextlib.suppress(BlockingIOError):
             os.read(self._slack_r, 64)
         self._slack_wanted = True
-        ready, _, _ = select.select([self._slack_r], [], [], timeout_s)
-        self._slack_wanted = False
-        with contextlib.suppress(BlockingIOError):
-            os.read(self._slack_r, 64)
-        return bool(ready)
+
+    def close(self) -> None:
+        os.close(self._slack_r)
+        os.close(self._slack_w)
 
     # ---- the control thread ---------------------------------------------------------------
     def step(self, t_s: float) -> None:
+        if self.tunes.waiting:
+            self.tunes.drain(RobotTask.apply_change, int(self.tel.header[H.TICK_HEAD]) + 1)
         req = self._request
         if req[0] != self._applied:
             self._applied = req[0]
@@ -85,9 +107,9 @@ class SwitchingLoop(ControlLoop):
         task = self.active
         assert task is not None
         task.tick(t_s)
-        if self.busy_ticks:
-            self.busy_ticks -= 1
-            end = time.perf_counter_ns() + self.busy_ns
+        if self._busy_ticks:
+            self._busy_ticks -= 1
+            end = time.perf_counter_ns() + self._busy_ns
             while time.perf_counter_ns() < end:
                 pass
         self._publish(t_s, task)
@@ -119,13 +141,13 @@ class SwitchingLoop(ControlLoop):
     def _publish(self, t_s: float, task: RobotTask) -> None:
         tel, st, stats = self.tel, self.resource.state, self.stats
         rec = tel.begin_tick()
-        rec[1] = t_s
-        rec[2] = stats.last_latency_ns * 1e-3
-        rec[3] = stats.last_compute_ns * 1e-3
-        rec[4] = self.task_ids.get(id(task), -1)
-        rec[5] = task.phase
-        rec[6] = task.wrote
-        rec[7] = st.status
+        rec[T.T_S] = t_s
+        rec[T.WAKE_US] = stats.last_latency_ns * 1e-3
+        rec[T.COMPUTE_US] = stats.last_compute_ns * 1e-3
+        rec[T.TASK] = self._task_ids.get(id(task), -1)
+        rec[T.PHASE] = task.phase
+        rec[T.WROTE] = task.wrote
+        rec[T.STATUS] = st.status
         n = st.q_rad.shape[0]
         rec[NF : NF + n] = st.q_rad
         rec[NF + n : NF + 2 * n] = st.dq_rad_s

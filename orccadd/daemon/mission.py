@@ -15,6 +15,7 @@ from orccadd.automaton import ast as A
 from orccadd.errors import MissionError, OrccaddError, ParameterError, VerificationError
 from orccadd.physres.base import PhysicalResource
 from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
+from orccadd.task.spec import read_task_interface
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,7 @@ def load_mission(
 ) -> LoadedMission:
     """Compile, verify, check against this robot, build the tasks. Raises `OrccaddError`
     (MissionError with file:line:col, or VerificationError with the counterexamples)."""
-    automaton = compile_file(path)
+    automaton = compile_file(path, task_files=read_task_interface)
     report = verify(automaton)
     if not report.ok:
         raise VerificationError(f"{path}: the mission fails its checks:\n{report.format()}")

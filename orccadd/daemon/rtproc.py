@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import logging
 import os
 import select
 import signal
@@ -26,40 +27,29 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections import deque
 from pathlib import Path
 from typing import Any
 
-from orccadd.config.robot import RobotConfig, load_robot_config, with_backend
-from orccadd.daemon.machine import Command, CommandError, Machine, MachineState, MissionResult
+from orccadd.config.robot import RobotConfig
+from orccadd.daemon.machine import Machine
 from orccadd.daemon.notify import Notifier
-from orccadd.daemon.telemetry import H, Layout, TelemetryBlock, Trace
+from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.errors import OrccaddError
-from orccadd.physres import CommandMode, create_resource
-from orccadd.physres.base import Status
+from orccadd.robot import create_resource, load_robot_config, with_backend
 from orccadd.runtime import WallClock, enter_realtime, leave_realtime
 from orccadd.task import load_task_file
+from orccadd.types import CommandMode, Status
+from orccadd.wire.commands import COMMANDS, ProtocolError, check_args
+from orccadd.wire.schema import H, Layout, MachineState, MissionResult, OperatorAction, Trace
+from orccadd.wire.telemetry import TelemetryBlock
 
-MAX_MESSAGE = 65536
+log = logging.getLogger("orccadd")
+
+RT_MAX = 1 << 20  # largest message on the link to the command daemon (it refuses larger)
 TICK_RING_S = 16.0  # seconds of ticks the telemetry ring keeps
 RESPAWN_DELAY_S = 1.0
 GIL_SWITCH_INTERVAL_S = 0.0002
-
-
-@contextlib.contextmanager
-def background_priority() -> Iterator[None]:
-    """Run the calling thread at normal priority for a while (mission loading), then restore it."""
-    try:
-        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-    except OSError:
-        yield
-        return
-    try:
-        yield
-    finally:
-        with contextlib.suppress(OSError):
-            os.sched_setscheduler(0, policy, param)
 
 
 def rt_socket_path(public: str) -> str:
@@ -84,6 +74,9 @@ class RealtimeProcess:
         self.control_error = ""
         self.stop_requested = ""
         self.thread: threading.Thread | None = None
+        self.inbox: deque[bytes] = deque()  # requests waiting for the loop's slack
+        self.inbox_since_ns = 0
+        self.pending: list[tuple[Any, Pending]] = []  # (request id, reply to complete)
 
     # ---- startup --------------------------------------------------------------------------
     def start(self) -> None:
@@ -103,7 +96,7 @@ class RealtimeProcess:
             allow_fault_injection=self.args.allow_fault_injection,
         )
         if self.args.mission:
-            self.machine.cmd_load(self.args.mission)
+            self.machine.command("load", {"path": str(Path(self.args.mission).resolve())})
         self._open_socket()
         self.thread = threading.Thread(target=self._control_main, name="control", daemon=True)
         self.thread.start()
@@ -177,13 +170,16 @@ class RealtimeProcess:
                     fds.add(self.conn.fileno())
                 if self.cmdd_pidfd >= 0:
                     fds.add(self.cmdd_pidfd)
+                if self.inbox:
+                    fds.add(self.machine.loop.slack_fd)
                 fds.discard(-1)
                 for fd in registered - fds:
                     poller.unregister(fd)
                 for fd in fds - registered:
                     poller.register(fd, select.POLLIN)
                 registered = fds
-                ready = poller.poll(100)
+                busy = bool(self.inbox or self.pending)
+                ready = poller.poll(max(1, int(self.cfg.control_period_s * 1e3)) if busy else 100)
                 for fd, _ in ready:
                     if fd == self.wake_r:
                         with contextlib.suppress(BlockingIOError):
@@ -195,9 +191,11 @@ class RealtimeProcess:
                     elif self.listener is not None and fd == self.listener.fileno():
                         self._accept()
                     elif self.conn is not None and fd == self.conn.fileno():
-                        self._serve()
+                        self._receive()
                     elif fd == self.cmdd_pidfd:
                         self._cmdd_exited()
+                self._serve_inbox()
+                self._complete_pending()
                 if self.cmdd is None and self.respawn_at and time.monotonic() >= self.respawn_at:
                     self.respawn_at = 0.0
                     self._spawn_cmdd()
@@ -238,50 +236,111 @@ class RealtimeProcess:
         if self.conn is not None:  # a new command daemon attaches: it replaces the old link
             self.conn.close()
         self.conn = conn
+        self.inbox.clear()  # requests of the old link: their client has gone
+        self.pending.clear()
         self.machine.note("command daemon attached")
 
-    def _serve(self) -> None:
+    def _receive(self) -> None:
+        """Queue what the command daemon sent; it is served in the loop's slack (`_serve_inbox`)."""
         conn = self.conn
         assert conn is not None
         for _ in range(16):  # bounded work per wake-up
             try:
-                data = conn.recv(MAX_MESSAGE)
+                data, _, flags, _ = conn.recvmsg(RT_MAX)
             except BlockingIOError:
                 return
             except OSError:
-                data = b""
+                data, flags = b"", 0
             if not data:
                 conn.close()
                 self.conn = None
-                self._link_lost("command daemon disconnected")
+                self.machine.supervisor.link_lost("command daemon disconnected")
+                self.machine.publish()
                 return
-            self.machine.loop.wait_for_slack(2 * self.cfg.control_period_s)
-            reply = self._handle(data)
-            # if the command daemon is not reading, it times out; the loop carries on
-            with contextlib.suppress(BlockingIOError, OSError):
-                conn.send(json.dumps(reply, default=str).encode())
+            if flags & socket.MSG_TRUNC:
+                self._send({"id": None, "ok": False, "error": f"request longer than {RT_MAX} bytes"})
+                continue
+            if not self.inbox:
+                self.inbox_since_ns = time.monotonic_ns()
+                self.machine.loop.want_slack()
+            self.inbox.append(data)
 
-    def _handle(self, data: bytes) -> dict[str, Any]:
+    def _serve_inbox(self) -> None:
+        """Handle queued requests right after a tick ended (or, if the loop is stopped or late,
+        after two periods: there is nothing to keep out of the way of)."""
+        if not self.inbox:
+            return
+        loop = self.machine.loop
+        waited_ns = time.monotonic_ns() - self.inbox_since_ns
+        slack = False
+        with contextlib.suppress(BlockingIOError):
+            slack = bool(os.read(loop.slack_fd, 64))
+        if not slack and waited_ns < 2 * self.cfg.control_period_s * 1e9:
+            return
+        while self.inbox:
+            data = self.inbox.popleft()
+            rid, reply = self._handle(data)
+            if isinstance(reply, Pending):
+                self.pending.append((rid, reply))
+            else:
+                self._send(reply)
+
+    def _complete_pending(self) -> None:
+        if not self.pending:
+            return
+        now = time.monotonic_ns()
+        still: list[tuple[Any, Pending]] = []
+        for rid, p in self.pending:
+            try:
+                result = p.poll()
+                if result is None and now >= p.deadline_ns:
+                    result = p.expire()
+            except CommandError as e:
+                self._send({"id": rid, "ok": False, "error": str(e)})
+                continue
+            except Exception as e:  # a bug must not take the automaton thread down
+                log.exception("pending reply to request %s failed", rid)
+                self._send({"id": rid, "ok": False, "error": f"internal error: {type(e).__name__}: {e}"})
+                continue
+            if result is None:
+                still.append((rid, p))
+            else:
+                self._send({"id": rid, "ok": True, "result": result})
+        self.pending = still
+        self.machine.publish()
+
+    def _send(self, reply: dict[str, Any]) -> None:
+        # if the command daemon is not reading, it times out; the loop carries on
+        if self.conn is not None:
+            with contextlib.suppress(BlockingIOError, OSError):
+                self.conn.send(json.dumps(reply, default=str).encode())
+
+    def _handle(self, data: bytes) -> tuple[Any, dict[str, Any] | Pending]:
+        """(request id, reply or Pending). Any failure becomes an error reply with the id."""
+        rid = None
         try:
             msg = json.loads(data)
             rid = msg.get("id") if isinstance(msg, dict) else None
             if not isinstance(msg, dict) or not isinstance(msg.get("cmd"), str):
-                return {"id": rid, "ok": False, "error": "a request is an object with a string 'cmd'"}
-            args = msg.get("args", {})
-            if not isinstance(args, dict):
-                return {"id": rid, "ok": False, "error": "'args' must be an object"}
-            if msg["cmd"] == "load":  # long and not real-time: below the control thread, GIL shared
-                with background_priority():
-                    result = self.machine.command("load", args)
-            else:
-                result = self.machine.command(msg["cmd"], args)
-            return {"id": rid, "ok": True, "result": result}
-        except CommandError as e:
-            return {"id": rid, "ok": False, "error": str(e)}
-        except TypeError as e:
-            return {"id": rid, "ok": False, "error": f"bad arguments: {e}"}
-        except ValueError as e:
-            return {"id": None, "ok": False, "error": f"not JSON: {e}"}
+                return rid, {"id": rid, "ok": False, "error": "a request is an object with a string 'cmd'"}
+            cmd, args = msg["cmd"], msg.get("args", {})
+            spec = COMMANDS.get(cmd)
+            if spec is None or spec.where != "rt" or not isinstance(args, dict):
+                return rid, {
+                    "id": rid,
+                    "ok": False,
+                    "error": f"not a command of the real-time process: {cmd!r}",
+                }
+            check_args(spec, args)
+            result: Result | Pending = self.machine.command(cmd, args)
+            return rid, result if isinstance(result, Pending) else {"id": rid, "ok": True, "result": result}
+        except (CommandError, ProtocolError) as e:
+            return rid, {"id": rid, "ok": False, "error": str(e)}
+        except (ValueError, RecursionError) as e:
+            return rid, {"id": rid, "ok": False, "error": f"not JSON: {type(e).__name__}"}
+        except Exception as e:  # a bug must not take the automaton thread down
+            log.exception("command failed: %r", data[:200])
+            return rid, {"id": rid, "ok": False, "error": f"internal error: {type(e).__name__}: {e}"}
 
     def _cmdd_exited(self) -> None:
         if self.cmdd is not None:
@@ -292,16 +351,9 @@ class RealtimeProcess:
         if self.cmdd_pidfd >= 0:
             os.close(self.cmdd_pidfd)
             self.cmdd_pidfd = -1
-        self._link_lost(f"command daemon exited (code {code})")
+        self.machine.supervisor.link_lost(f"command daemon exited (code {code})")
+        self.machine.publish()
         self.respawn_at = time.monotonic() + RESPAWN_DELAY_S
-
-    def _link_lost(self, why: str) -> None:
-        m = self.machine
-        m.note(why)
-        policy = self.cfg.daemon.on_command_daemon_loss
-        if policy == "safe_stop" and m.state in (MachineState.RUNNING, MachineState.HOLDING):
-            m.abort(f"{why} (on_command_daemon_loss = safe_stop)")
-            m.publish()
 
     # ---- shutdown -------------------------------------------------------------------------
     def abandon(self) -> None:
@@ -323,9 +375,9 @@ class RealtimeProcess:
         why = self.stop_requested or self.control_error
         print(f"orccadd: stopping ({why}): safe stop first", file=sys.stderr, flush=True)
         self.notifier.send("STOPPING=1", f"STATUS=stopping ({why})")
-        if m.state in (MachineState.RUNNING, MachineState.HOLDING):
-            m.result = MissionResult.STOPPED
-        m.trace(Trace.COMMAND, m.now_s(), Command.SHUTDOWN)
+        if m.mission.running:
+            m.mission.result = MissionResult.STOPPED
+        m.pub.trace(Trace.COMMAND, m.now_s(), OperatorAction.SHUTDOWN)
         res.safe_stop()
         deadline = time.monotonic() + self.cfg.safe_stop.timeout_s + 1.0
         stopped = False
@@ -337,8 +389,9 @@ class RealtimeProcess:
         m.loop.executor.stop()
         if self.thread is not None:
             self.thread.join(timeout=2.0)
-        m.state = MachineState.IDLE
+        m.mission.state = MachineState.IDLE
         m.publish()
+        m.loop.close()
         if self.cmdd is not None:
             self.cmdd.terminate()
             try:

@@ -27,7 +27,6 @@ from typing import Any
 import can
 import numpy as np
 
-from orccadd.config import load_robot_config
 from orccadd.config.robot import RobotConfig, read_toml
 from orccadd.drivers.canopen.settings import CanopenSettings
 from orccadd.drivesim.axis import AxisUnits
@@ -35,6 +34,7 @@ from orccadd.drivesim.simulator import AxisSpec, DriveSimulator
 from orccadd.drivesim.socketcand import QueuedSocketcandBus
 from orccadd.errors import OrccaddError
 from orccadd.physres.sim import SimSettings, load_sim_settings
+from orccadd.robot import load_robot_config
 from orccadd.runtime import Summary, enter_realtime
 
 

@@ -15,8 +15,8 @@ import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
 from orccadd.model import RobotModel
-from orccadd.physres.base import CommandMode
 from orccadd.physres.sim import SimulatedArm
+from orccadd.types import CommandMode
 
 
 class Drive(IntEnum):

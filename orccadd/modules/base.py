@@ -22,7 +22,7 @@ import numpy.typing as npt
 
 from orccadd.errors import ParameterError
 from orccadd.model import RobotModel
-from orccadd.physres.base import JointState
+from orccadd.state import JointState
 
 FloatArray = npt.NDArray[np.float64]
 

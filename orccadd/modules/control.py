@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 
 from orccadd.modules.base import Module, ModuleContext, register
-from orccadd.physres.base import JointState
+from orccadd.state import JointState
 from orccadd.vec import clamped
 
 

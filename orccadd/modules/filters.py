@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from orccadd.modules.base import Module, ModuleContext, register
-from orccadd.physres.base import JointState
+from orccadd.state import JointState
 
 
 @register("low_pass")

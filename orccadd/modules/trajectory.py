@@ -6,7 +6,7 @@ import numpy as np
 from ruckig import InputParameter, OutputParameter, Result, Ruckig
 
 from orccadd.modules.base import Module, ModuleContext, register
-from orccadd.physres.base import JointState
+from orccadd.state import JointState
 
 
 @register("ruckig_trajectory")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from orccadd.modules.base import Module, ModuleContext, register
-from orccadd.physres.base import JointState
+from orccadd.state import JointState
 from orccadd.vec import max_abs, max_abs_diff, outside
 
 

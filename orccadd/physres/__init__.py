@@ -1,7 +1,7 @@
 """Physical Resources: backends registered by name, imported only when chosen.
 
 Built-in backends are listed in `BACKENDS`; third-party ones register under the
-`orccadd.physres` entry-point group.
+`orccadd.physres` entry-point group. `orccadd.robot` builds a resource from a config.
 """
 
 from __future__ import annotations
@@ -10,14 +10,9 @@ import importlib
 from importlib.metadata import entry_points
 
 from orccadd.errors import ConfigError
-from orccadd.physres.base import (
-    T3_MASK,
-    CommandMode,
-    JointState,
-    Lifecycle,
-    PhysicalResource,
-    Status,
-)
+from orccadd.physres.base import PhysicalResource
+from orccadd.state import JointState
+from orccadd.types import T3_MASK, CommandMode, Lifecycle, Status
 
 BACKENDS: dict[str, tuple[str, str]] = {
     "sim": ("orccadd.physres.sim", "SimulatedArm"),
@@ -49,16 +44,6 @@ def backend_class(name: str, file: str = "") -> type[PhysicalResource]:
     return cls
 
 
-def create_resource(config: object) -> PhysicalResource:
-    """Build (not configure) the resource a robot config names."""
-    from orccadd.config.robot import RobotConfig
-    from orccadd.model import RobotModel
-
-    assert isinstance(config, RobotConfig)
-    cls = backend_class(config.resource.backend, config.source)
-    return cls(config, RobotModel.from_config(config))
-
-
 __all__ = [
     "BACKENDS",
     "T3_MASK",
@@ -69,5 +54,4 @@ __all__ = [
     "Status",
     "backend_class",
     "backend_names",
-    "create_resource",
 ]

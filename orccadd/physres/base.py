@@ -13,56 +13,20 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
-from enum import IntEnum, IntFlag
+from dataclasses import dataclass
 from math import isfinite
 from operator import add, sub
 from typing import Any, ClassVar
 
 import numpy as np
-import numpy.typing as npt
 
 from orccadd.config.robot import RobotConfig
 from orccadd.errors import LifecycleError, ResourceError
 from orccadd.model import RobotModel
+from orccadd.physres.description import ResourceDescription
+from orccadd.state import FloatArray, JointState
+from orccadd.types import CMD_CLAMPED, LIMIT_VIOLATION, CommandMode, Lifecycle, Status
 from orccadd.vec import clamped, outside
-
-FloatArray = npt.NDArray[np.float64]
-
-
-class CommandMode(IntEnum):
-    """What `write()` commands. CiA 402: CSP / CSV / CST; UR: servoJ / speedJ / torque."""
-
-    POSITION = 1
-    VELOCITY = 2
-    TORQUE = 3
-
-
-class Lifecycle(IntEnum):
-    """Resource lifecycle (after ros2_control): unconfigured → inactive → active → finalized."""
-
-    UNCONFIGURED = 0
-    INACTIVE = 1
-    ACTIVE = 2
-    FINALIZED = 3
-
-
-class Status(IntFlag):
-    """Status flags of the last read/write. `T3_MASK` flags are type 3 exceptions."""
-
-    OK = 0
-    CMD_CLAMPED = 1  # a command beyond a limit was clamped (torque saturation is only this)
-    LIMIT_VIOLATION = 2  # measured state or a position/velocity command outside the limits
-    FAULT = 4  # the device reports a fault (drive fault, protective stop, hardware error)
-    COMM_LOST = 8  # a communication watchdog expired
-    STOPPING = 16  # a safe stop is in progress: commands are ignored
-    STOPPED = 32  # at rest after a safe stop (brakes engaged, or holding)
-    TORQUE_OFF = 64  # no torque on the motors
-
-
-# as plain ints: IntFlag arithmetic costs ~1 µs a call
-LIMIT_VIOLATION = int(Status.LIMIT_VIOLATION)
-CMD_CLAMPED = int(Status.CMD_CLAMPED)
-T3_MASK = int(Status.LIMIT_VIOLATION | Status.FAULT | Status.COMM_LOST)
 
 # Lifecycle transitions allowed: (from, method) -> to.
 TRANSITIONS: dict[tuple[Lifecycle, str], Lifecycle] = {
@@ -75,35 +39,30 @@ TRANSITIONS: dict[tuple[Lifecycle, str], Lifecycle] = {
 }
 
 
-class JointState:
-    """Measured state, preallocated once and updated in place by `read()`.
+@dataclass(frozen=True)
+class Diagnostics:
+    """A snapshot of a resource for `status` and `describe` (not for a tick)."""
 
-    `q_rad`, `dq_rad_s` and `tau_nm` are consecutive views of one array, `vector` (and `q_dq`
-    is its first two): a backend fills them in one copy, the limit check reads them in one call.
-    """
-
-    __slots__ = ("dq_rad_s", "fault_code", "q_dq", "q_rad", "status", "t_s", "tau_nm", "vector")
-
-    def __init__(self, dof: int) -> None:
-        self.t_s = 0.0
-        self.vector: FloatArray = np.zeros(3 * dof)
-        self.q_dq: FloatArray = self.vector[: 2 * dof]
-        self.q_rad: FloatArray = self.vector[:dof]
-        self.dq_rad_s: FloatArray = self.vector[dof : 2 * dof]
-        self.tau_nm: FloatArray = self.vector[2 * dof :]
-        self.status = 0
-        self.fault_code = 0  # backend-specific (EMCY code, UR safety mode, Dynamixel error bits)
+    backend: str
+    lifecycle: str
+    mode: str
+    status: tuple[str, ...]
+    fault_message: str
+    fault_code: int
+    helper_pid: int  # a process the resource runs (the simulated plant), 0 if none
+    details: dict[str, float | int | str]  # backend counters and names (frames lost, channel, ...)
 
 
 class PhysicalResource(ABC):
-    """Base of every backend. Subclasses set `supported_modes` and `Settings`."""
+    """Base of every backend. Subclasses implement `describe` and the hooks, and set `Settings`."""
 
-    supported_modes: ClassVar[frozenset[CommandMode]] = frozenset(CommandMode)
     Settings: ClassVar[type[Any]]
 
     def __init__(self, config: RobotConfig, model: RobotModel) -> None:
         self.config = config
         self.model = model
+        self.description = type(self).describe(config)
+        self.supported_modes = self.description.modes
         self.name = config.resource.name
         self.dof = model.dof
         self.lifecycle = Lifecycle.UNCONFIGURED
@@ -126,7 +85,13 @@ class PhysicalResource(ABC):
         self.clamp_count = 0
         self.rejected_count = 0  # commands with a NaN or an infinity, never sent
 
-    # ---- settings -------------------------------------------------------------------------
+    # ---- declaration and settings ---------------------------------------------------------
+    @classmethod
+    @abstractmethod
+    def describe(cls, config: RobotConfig) -> ResourceDescription:
+        """What this backend can do with `config` (checked settings in `config.backend_settings`),
+        before anything is opened: see `orccadd.physres.description`."""
+
     @classmethod
     def load_settings(cls, raw: Mapping[str, Any], cfg: RobotConfig, file: str) -> Any:
         """Check `[resource.settings]` strictly into `cls.Settings`. Override to cross-check."""
@@ -199,6 +164,41 @@ class PhysicalResource(ABC):
         self._last_pos_cmd[:] = self.state.q_rad
         self._stop_flags = 0
 
+    # ---- optional interfaces (declared in the description; not for a tick) ------------------
+    def reset_fault(self) -> None:
+        """Ask the device to leave its fault state (CiA 402 fault reset, servo reboot, ...); the
+        following reads show whether it did. `ResourceError` if the backend declares none."""
+        if not self.description.fault_reset:
+            raise ResourceError(f"resource {self.name!r} ({self.description.backend}) cannot reset a fault")
+        self._on_reset_fault()
+
+    def inject_fault(self, kind: str, message: str) -> None:
+        """Make the device report a fault of `kind` (tests, commissioning). `ResourceError` if the
+        backend does not declare that kind."""
+        kinds = self.description.fault_injection
+        if kind not in kinds:
+            offered = ", ".join(kinds) or "none"
+            raise ResourceError(f"resource {self.name!r} cannot inject a {kind!r} fault (kinds: {offered})")
+        self._on_inject_fault(kind, message)
+
+    def diagnostics(self) -> Diagnostics:
+        """A typed snapshot of the resource's state, fault and counters."""
+        return Diagnostics(
+            backend=self.description.backend,
+            lifecycle=self.lifecycle.name.lower(),
+            mode=self.mode.name.lower(),
+            status=tuple(f.name.lower() for f in Status if f and self.state.status & f and f.name),
+            fault_message=self.fault_message,
+            fault_code=self.state.fault_code,
+            helper_pid=self._helper_pid(),
+            details=self._details(),
+        )
+
+    def wait_for_cycle(self, timeout_s: float) -> int:
+        """Device-paced resources: block until the device's next cycle; its arrival time
+        (CLOCK_MONOTONIC ns), or -1 after `timeout_s`. Loop-paced resources never get asked."""
+        raise ResourceError(f"resource {self.name!r} is paced by the loop, not by its device")
+
     # ---- tick methods ---------------------------------------------------------------------
     def read(self, t_s: float) -> JointState:
         """Measure the state at time `t_s` (tick). Sets LIMIT_VIOLATION if outside limits."""
@@ -220,6 +220,7 @@ class PhysicalResource(ABC):
         ignored.
         """
         if self._stop_flags:
+            self._on_keep_alive(t_s)
             return self._stop_flags | self.state.status
         wanted = command.tolist()
         if not all(map(isfinite, wanted)):
@@ -245,6 +246,12 @@ class PhysicalResource(ABC):
         if mode is CommandMode.POSITION:
             self._last_pos_cmd[:] = cmd
         return flags | self._write_command(t_s, mode, cmd)
+
+    def keep_alive(self, t_s: float) -> None:
+        """A tick without a new command (the task waits for its preconditions, is stopped, or
+        none is active): keep the device fed with its holding command, as its watchdogs expect
+        (tick-safe). The control loop calls either `write` or this once per tick, after `read`."""
+        self._on_keep_alive(t_s)
 
     def safe_stop(self) -> None:
         """Bring the arm to rest by the configured stop category (tick-safe, idempotent)."""
@@ -281,6 +288,23 @@ class PhysicalResource(ABC):
 
     def _on_clear_stop(self) -> None:
         """Re-enable after a safe stop; default: nothing to do."""
+
+    def _on_keep_alive(self, t_s: float) -> None:
+        """Send what keeps the device content without a new command; default: nothing."""
+
+    def _on_reset_fault(self) -> None:
+        """Backends that declare `fault_reset` implement this."""
+        raise NotImplementedError
+
+    def _on_inject_fault(self, kind: str, message: str) -> None:
+        """Backends that declare `fault_injection` kinds implement this."""
+        raise NotImplementedError
+
+    def _helper_pid(self) -> int:
+        return 0
+
+    def _details(self) -> dict[str, float | int | str]:
+        return {"clamped_commands": self.clamp_count, "rejected_commands": self.rejected_count}
 
     @abstractmethod
     def _read_into(self, t_s: float, state: JointState) -> int:

@@ -14,8 +14,9 @@ The resource maps the Physical Resource contract onto the drives (`drivers.canop
 - reset_fault / clear_stop: fault reset (rising edge of bit 7), then back to OPERATION ENABLED;
 - switch_mode: 0x6060 by non-blocking SDO writes, answered within `sdo_timeout_s`.
 
-While the base class ignores commands (stopping, stopped, re-enabling), `read` keeps sending
-the RPDOs, so the drives always get their controlword and a target that holds the position.
+On a tick without a command (the base class ignores commands while stopping, stopped or
+re-enabling; a task waiting or faulted sends none) `keep_alive` sends the RPDOs, so the drives
+always get their controlword and a target that holds the position.
 """
 
 from __future__ import annotations
@@ -30,11 +31,14 @@ import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
 from orccadd.drivers.canopen import cia402
-from orccadd.drivers.canopen.master import MODE_CODES, CanopenMaster
+from orccadd.drivers.canopen.master import MODE_CODES, POWERED, CanopenMaster
 from orccadd.drivers.canopen.settings import CanopenSettings, load_canopen_settings
 from orccadd.errors import ResourceError
 from orccadd.model import RobotModel
-from orccadd.physres.base import CommandMode, FloatArray, JointState, PhysicalResource, Status
+from orccadd.physres.base import PhysicalResource
+from orccadd.physres.description import MEASURED, Quantity, ResourceDescription, Source
+from orccadd.state import FloatArray, JointState
+from orccadd.types import CommandMode, Status
 
 MODE_OF = {
     CommandMode.POSITION: cia402.MODE_CSP,
@@ -42,12 +46,36 @@ MODE_OF = {
     CommandMode.TORQUE: cia402.MODE_CST,
 }
 COMMAND_OF = {v: k for k, v in MODE_OF.items()}
-POWERED = (cia402.State.OPERATION_ENABLED, cia402.State.QUICK_STOP_ACTIVE, cia402.State.FAULT_REACTION_ACTIVE)
 VELOCITY_FILTER = 0.5  # first-order filter weight of the newest position difference
 
 
 class Canopen402Arm(PhysicalResource):
     Settings = CanopenSettings
+
+    @classmethod
+    def describe(cls, config: RobotConfig) -> ResourceDescription:
+        """The configured mode and its partner (CSP with CST): the RPDO carries both targets,
+        so the drives switch between them while enabled. The set narrows at configure, to what
+        every drive's description and mapping allow."""
+        s: CanopenSettings = config.backend_settings
+        first = COMMAND_OF[MODE_CODES[s.mode]]
+        partner = CommandMode.POSITION if first is CommandMode.TORQUE else CommandMode.TORQUE
+        return ResourceDescription(
+            backend="canopen402",
+            joints=config.joint_names,
+            modes=frozenset({first, partner}),
+            mode_switch_needs_disable=False,
+            position=MEASURED,
+            velocity=Quantity(Source.ESTIMATED, "position differences over the drives' SYNC times"),
+            torque=Quantity(Source.ESTIMATED, "the drive's torque actual value 0x6077, from motor current"),
+            brakes=True,
+            stop_categories=frozenset({0, 1, 2}),
+            # reads drain what arrived and writes queue frames, neither waits on the bus; whether
+            # the bus carries a cycle's frames in a period is the settings' bus-load check
+            read_time_s=0.0,
+            write_time_s=0.0,
+            fault_reset=True,
+        )
 
     @classmethod
     def load_settings(cls, raw: Mapping[str, Any], cfg: RobotConfig, file: str) -> CanopenSettings:
@@ -58,9 +86,6 @@ class Canopen402Arm(PhysicalResource):
         s: CanopenSettings = config.backend_settings
         self.settings = s
         self.master = CanopenMaster(s, list(config.joint_names), config.control_period_s)
-        first = COMMAND_OF[MODE_CODES[s.mode]]
-        partner = CommandMode.POSITION if first is CommandMode.TORQUE else CommandMode.TORQUE
-        self.supported_modes = frozenset({first, partner})  # type: ignore[misc]  # narrowed at configure
         n = self.dof
         self._pos = np.zeros(n)
         self._vel = np.zeros(n)
@@ -68,6 +93,7 @@ class Canopen402Arm(PhysicalResource):
         self._enabling = False
         self._fault_reset = False
         self._stop_t0 = 0.0
+        self._comm_lost = False
         self._data = model.new_data()
 
     # ---- lifecycle ------------------------------------------------------------------------
@@ -75,7 +101,7 @@ class Canopen402Arm(PhysicalResource):
         for w in self.master.start():
             print(f"orccadd: warning: {self.name}: {w}", file=sys.stderr)
         modes = frozenset.intersection(*(a.modes for a in self.master.axes))
-        self.supported_modes = frozenset(COMMAND_OF[m] for m in modes)  # type: ignore[misc]
+        self.supported_modes = frozenset(COMMAND_OF[m] for m in modes)
         self._wait(lambda: all(a.tpdo_seen_s for a in self.master.axes), "a first TPDO from every drive")
 
     def _on_activate(self, mode: CommandMode) -> None:
@@ -86,8 +112,7 @@ class Canopen402Arm(PhysicalResource):
         self.master.write_mode(MODE_OF[mode])
 
     def _on_deactivate(self) -> None:
-        for a in self.master.axes:
-            a.controlword = cia402.CW_SHUTDOWN  # power stage off, still ready
+        self.master.set_controlword(cia402.CW_SHUTDOWN)  # power stage off, still ready
         self._pump(0.1)
 
     def _on_shutdown(self) -> None:
@@ -96,12 +121,9 @@ class Canopen402Arm(PhysicalResource):
     def _on_clear_stop(self) -> None:
         self._enable_blocking()
 
-    def reset_fault(self) -> None:
-        """Fault reset on every faulted drive (not for a tick): the control thread's reads send it."""
-        for a in self.master.axes:
-            a.sdo_error = ""
-            a.emcy_code = 0
-            a.emcy_text = ""
+    def _on_reset_fault(self) -> None:
+        """Fault reset on every faulted drive: the next cycles send the rising edges."""
+        self.master.clear_faults()
         self._fault_reset = True
         self.fault_message = ""
 
@@ -118,7 +140,9 @@ class Canopen402Arm(PhysicalResource):
             self._cycle_without_loop()
 
     def _cycle_without_loop(self) -> None:
-        self._read_into(time.monotonic(), self.state)
+        now = time.monotonic()
+        self._read_into(now, self.state)
+        self._on_keep_alive(now)
         time.sleep(self.config.control_period_s)
 
     def _wait(self, done: Any, what: str) -> None:
@@ -157,8 +181,7 @@ class Canopen402Arm(PhysicalResource):
             )
         finally:
             self._enabling = False
-        for a in self.master.axes:
-            a.controlword = cia402.CW_ENABLE_OPERATION
+        self.master.set_controlword(cia402.CW_ENABLE_OPERATION)
         self._hold_here()
 
     def _hold_here(self) -> None:
@@ -171,7 +194,7 @@ class Canopen402Arm(PhysicalResource):
     # ---- tick hooks -------------------------------------------------------------------------
     def _read_into(self, t_s: float, state: JointState) -> int:
         m = self.master
-        rep = m.receive(time.monotonic())
+        rep = m.receive(t_s)
         flags = 0
         powered = True
         for j, a in enumerate(m.axes):
@@ -195,43 +218,23 @@ class Canopen402Arm(PhysicalResource):
             state.fault_code = rep.fault_code
         if not powered:
             flags |= Status.TORQUE_OFF
-        if self._stop_flags or self._enabling or self._fault_reset:
-            self._sequence(rep.comm_lost != "")
-            m.transmit(time.monotonic(), self._pos, self._vel, self._tau)
+        self._comm_lost = bool(rep.comm_lost)
         return flags
 
-    def _sequence(self, comm_lost: bool) -> None:
-        """Controlwords while commands are ignored: quick stop, fault reset, or enabling."""
+    def _on_keep_alive(self, t_s: float) -> None:
+        """No command this tick: the controlwords of the sequence under way (quick stop, fault
+        reset, enabling) and targets that hold, so every drive still gets its RPDO."""
         m = self.master
         if self._fault_reset:
-            done = True
-            for a in m.axes:
-                if a.state is cia402.State.FAULT:
-                    a.controlword = (
-                        cia402.CW_FAULT_RESET
-                        if a.controlword != cia402.CW_FAULT_RESET
-                        else cia402.CW_DISABLE_VOLTAGE
-                    )
-                    done = False
-            self._fault_reset = not done
-            return
-        if self._enabling:
-            for a in m.axes:
-                cw = cia402.command_towards(a.state)
-                if cw == cia402.CW_FAULT_RESET and a.controlword == cia402.CW_FAULT_RESET:
-                    cw = cia402.CW_DISABLE_VOLTAGE  # for a rising edge next time
-                if cw is not None:
-                    a.controlword = cw
-            return
-        if self._stop_flags & Status.STOPPING:
-            off = True
-            for a in m.axes:
-                if a.state is cia402.State.OPERATION_ENABLED:
-                    a.controlword = cia402.CW_QUICK_STOP
-                off = off and a.state not in POWERED
-            timed_out = time.monotonic() - self._stop_t0 > self.config.safe_stop.timeout_s
-            if off or (comm_lost and timed_out):  # unreachable drives stop on their own watchdogs
+            self._fault_reset = not m.step_fault_reset()
+        elif self._enabling:
+            m.step_enable()
+        elif self._stop_flags & Status.STOPPING:
+            off = m.step_quick_stop()
+            timed_out = t_s - self._stop_t0 > self.config.safe_stop.timeout_s
+            if off or (self._comm_lost and timed_out):  # unreachable drives stop on their own watchdogs
                 self._mark_stopped(torque_off=True)
+        m.transmit(t_s, self._pos, self._vel, self._tau)
 
     def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
         st = self.state
@@ -247,14 +250,13 @@ class Canopen402Arm(PhysicalResource):
             self._tau[:] = command
             self._pos[:] = st.q_rad
             self._vel[:] = 0.0
-        self.master.transmit(time.monotonic(), self._pos, self._vel, self._tau)
+        self.master.transmit(t_s, self._pos, self._vel, self._tau)
         return 0
 
     def _begin_safe_stop(self) -> None:
-        self._stop_t0 = time.monotonic()
+        t_s = self.state.t_s  # the tick's time (safe_stop runs inside a tick, after read)
+        self._stop_t0 = t_s
         self._pos[:] = self.state.q_rad
         self._vel[:] = 0.0
-        for a in self.master.axes:
-            if a.state is cia402.State.OPERATION_ENABLED:
-                a.controlword = cia402.CW_QUICK_STOP
-        self.master.transmit(time.monotonic(), self._pos, self._vel, self._tau)
+        self.master.step_quick_stop()
+        self.master.transmit(t_s, self._pos, self._vel, self._tau)

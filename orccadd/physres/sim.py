@@ -29,11 +29,35 @@ from orccadd.config.robot import RobotConfig
 from orccadd.config.schema import field, load_dataclass
 from orccadd.errors import ConfigError
 from orccadd.model import RobotModel
-from orccadd.physres.base import CommandMode, FloatArray, JointState, PhysicalResource, Status
+from orccadd.physres.base import PhysicalResource
+from orccadd.physres.description import MEASURED, ResourceDescription
+from orccadd.state import FloatArray, JointState
+from orccadd.types import CommandMode, Status
 from orccadd.vec import clamp
 
 INF = math.inf
 REST_SPEED_RAD_S = 0.005
+INJECTED_FAULT_CODE = 0x1000  # "generic error" in CiA 301's EMCY table
+
+
+def simulated_description(backend: str, config: RobotConfig) -> ResourceDescription:
+    """What the simulated arm can do: every mode, everything measured (simulated sensors),
+    brakes, every stop category; its plant computes inside or beside the control process."""
+    return ResourceDescription(
+        backend=backend,
+        joints=config.joint_names,
+        modes=frozenset(CommandMode),
+        mode_switch_needs_disable=False,
+        position=MEASURED,
+        velocity=MEASURED,
+        torque=MEASURED,
+        brakes=True,
+        stop_categories=frozenset({0, 1, 2}),
+        read_time_s=0.0,
+        write_time_s=0.0,
+        fault_reset=True,
+        fault_injection=("device",),
+    )
 
 
 @dataclass(frozen=True)
@@ -96,6 +120,10 @@ class SimulatedArm(PhysicalResource):
     """A Physical Resource whose joints move by the robot's rigid-body dynamics."""
 
     Settings: ClassVar[type[Any]] = SimSettings
+
+    @classmethod
+    def describe(cls, config: RobotConfig) -> ResourceDescription:
+        return simulated_description("sim", config)
 
     @classmethod
     def load_settings(cls, raw: Mapping[str, Any], cfg: RobotConfig, file: str) -> SimSettings:
@@ -198,13 +226,13 @@ class SimulatedArm(PhysicalResource):
         self.torque_on = True
 
     # ---- fault injection (tests, demos) ---------------------------------------------------
-    def inject_fault(self, message: str, code: int = 0x1000) -> None:
+    def _on_inject_fault(self, kind: str, message: str) -> None:
         """Make the next read report a device fault (like a drive's EMCY)."""
         self._fault = int(Status.FAULT)
         self.fault_message = message
-        self.state.fault_code = code
+        self.state.fault_code = INJECTED_FAULT_CODE
 
-    def reset_fault(self) -> None:
+    def _on_reset_fault(self) -> None:
         """Acknowledge a device fault (like CiA 402 fault reset). Not for a tick."""
         self._fault = 0
         self.fault_message = ""

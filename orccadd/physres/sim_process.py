@@ -1,4 +1,4 @@
-"""`sim_process` backend: the simulated arm runs in its own process (see `plant_server`).
+"""`sim_process` backend: the simulated arm runs in its own process (see `orccadd.plantsim`).
 
 The control process then pays only for a shared-memory copy in `read()`/`write()`, as with a
 real arm behind a fieldbus. Watchdogs on both sides: the plant stops the arm when commands stop
@@ -21,9 +21,12 @@ from orccadd.config.robot import RobotConfig
 from orccadd.config.schema import field
 from orccadd.errors import ResourceError
 from orccadd.model import RobotModel
-from orccadd.physres.base import CommandMode, FloatArray, JointState, Lifecycle, PhysicalResource, Status
+from orccadd.physres.base import PhysicalResource
+from orccadd.physres.description import ResourceDescription
 from orccadd.physres.shm_channel import Ctl, PlantChannel, Request
-from orccadd.physres.sim import SimSettings, load_sim_settings
+from orccadd.physres.sim import INJECTED_FAULT_CODE, SimSettings, load_sim_settings, simulated_description
+from orccadd.state import FloatArray, JointState
+from orccadd.types import CommandMode, Lifecycle, Status
 
 SELF_STOPPED = int(Status.STOPPING | Status.STOPPED)
 KEEPALIVE = 0  # a command "mode" the plant counts as fresh but does not apply
@@ -44,6 +47,10 @@ class SimProcessArm(PhysicalResource):
     """A Physical Resource whose plant is a separate process on the same machine."""
 
     Settings: ClassVar[type[Any]] = SimProcessSettings
+
+    @classmethod
+    def describe(cls, config: RobotConfig) -> ResourceDescription:
+        return simulated_description("sim_process", config)
 
     @classmethod
     def load_settings(cls, raw: Any, cfg: RobotConfig, file: str) -> SimProcessSettings:
@@ -80,7 +87,7 @@ class SimProcessArm(PhysicalResource):
         cmd = [
             sys.executable,
             "-m",
-            "orccadd.physres.plant_server",
+            "orccadd.plantsim",
             "--shm",
             self.channel.name,
             "--watchdog-periods",
@@ -148,14 +155,21 @@ class SimProcessArm(PhysicalResource):
         # last published still says "stopped", which must not read as a stop of its own
         self._settled_heartbeat = int(self._ch().ctl[Ctl.HEARTBEAT]) + 1
 
-    def inject_fault(self, message: str, code: int = 0x1000) -> None:
+    def _on_inject_fault(self, kind: str, message: str) -> None:
         """Make the plant report a device fault (tests). Not for a tick."""
         self.fault_message = message
-        self._request(Request.INJECT_FAULT, code)
+        self._request(Request.INJECT_FAULT, INJECTED_FAULT_CODE)
 
-    def reset_fault(self) -> None:
+    def _on_reset_fault(self) -> None:
         self.fault_message = ""
         self._request(Request.RESET_FAULT)
+
+    def _helper_pid(self) -> int:
+        return int(self.process.pid) if self.plant_alive() else 0
+
+    def _details(self) -> dict[str, float | int | str]:
+        ch = self.channel
+        return {**super()._details(), "plant_channel": ch.name if ch is not None else ""}
 
     def plant_alive(self) -> bool:
         return self.process is not None and self.process.poll() is None

@@ -10,7 +10,8 @@ from orccadd.task.events import (
     event_name,
 )
 from orccadd.task.spec import TaskSpec, load_task_file, parse_task
-from orccadd.task.task import Phase, RobotTask, TaskSignature
+from orccadd.task.task import RobotTask, TaskSignature
+from orccadd.types import Phase
 
 __all__ = [
     "BUILTIN_T3",

@@ -14,7 +14,7 @@ import numpy as np
 from orccadd.errors import ConfigError, ParameterError, WiringError
 from orccadd.modules import MODULES, Module, ModuleContext, Port, module_class
 from orccadd.modules.base import Parameter
-from orccadd.physres.base import CommandMode, PhysicalResource
+from orccadd.physres.base import PhysicalResource
 from orccadd.task.events import (
     BUILTIN_T3,
     PRECONDITION_TIMEOUT,
@@ -24,6 +24,7 @@ from orccadd.task.events import (
 )
 from orccadd.task.spec import EventSpec, TaskSpec
 from orccadd.task.task import Precondition, RobotTask, ShellEvent, TaskSignature
+from orccadd.types import CommandMode
 
 WIRE_RE = re.compile(r"^\s*(\w+)\.(\w+)\s*->\s*(\w+)\.(\w+)\s*$")
 COMMAND_PORTS = {

@@ -43,6 +43,7 @@ from typing import Any, Literal
 from orccadd.config.robot import read_toml
 from orccadd.config.schema import field, load_dataclass
 from orccadd.errors import ConfigError
+from orccadd.types import CommandMode, TaskInterface
 
 INF = float("inf")
 
@@ -173,3 +174,25 @@ def parse_task(raw: dict[str, Any], source: str) -> TaskSpec:
 def load_task_file(path: str | Path) -> TaskSpec:
     """Read a task file. Not for a tick."""
     return parse_task(read_toml(Path(path)), str(path))
+
+
+def interface_of(spec: TaskSpec) -> TaskInterface:
+    """What the procedure compiler sees of a task file (built-in events excluded)."""
+    t = spec.task
+    return TaskInterface(
+        source=spec.source,
+        resource=t.resource,
+        command=CommandMode[t.command.upper()],
+        joints=t.joints,
+        modules=tuple(m.name for m in spec.modules),
+        has_post=bool(spec.events.post),
+        has_pre=bool(spec.preconditions),
+        t2=tuple(e.name for e in spec.events.T2),
+        t3=tuple(e.name for e in spec.events.T3),
+        sync=tuple(e.name for e in spec.events.sync),
+    )
+
+
+def read_task_interface(path: Path) -> TaskInterface:
+    """The `TaskFileReader` the procedure compiler takes: read, check and summarise a task file."""
+    return interface_of(load_task_file(path))

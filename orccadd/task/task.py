@@ -9,32 +9,27 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from enum import IntEnum
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
 from orccadd.errors import ParameterError
 from orccadd.modules.base import Module, Parameter
-from orccadd.physres.base import T3_MASK, CommandMode, PhysicalResource, Status
+from orccadd.physres.base import PhysicalResource
 from orccadd.task.events import EventKind, EventQueue
+from orccadd.types import T3_MASK, CommandMode, Phase, Status
 from orccadd.vec import max_of, min_of
 
-
-class Phase(IntEnum):
-    """Where a task is. DONE and ABORTED keep running the law until the task is switched."""
-
-    IDLE = 0
-    PRE = 1  # waiting for preconditions (the resource holds its last command)
-    RUN = 2
-    DONE = 3  # postcondition emitted
-    ABORTED = 4  # type 2 exception emitted
-    FAULT = 5  # type 3 exception: safe stop under way, no command is sent
-    PRE_FAILED = 6  # preconditions not met in time (type 2): the law never started
-
-
 RUNNING = (Phase.RUN, Phase.DONE, Phase.ABORTED)
+
+
+class ParameterChange(NamedTuple):
+    """A checked parameter value, ready to be written in place at a tick boundary."""
+
+    module: Module
+    param: Parameter
+    value: npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -137,7 +132,6 @@ class RobotTask:
         self.last_write_flags = 0
         self.fault_reason = ""
         self._pre_started = False
-        self._pending: list[tuple[Module, Parameter, npt.NDArray[np.float64]]] = []
         self._tunable = {f"{m.name}.{p.name}": (m, p) for m in modules for p in m.parameters.values()}
         # bumpless transfer: the first command continues the previous task's last one
         self.sent = np.zeros_like(command)  # the last command sent (after blending)
@@ -172,9 +166,9 @@ class RobotTask:
         self.phase = Phase.IDLE
         self.wrote = False
 
-    def tune(self, path: str, value: Any, *, now: bool = False) -> None:
-        """Check `MODULE.PARAM = value` now; apply it in place at the next tick boundary
-        (`now=True`: at once, only for a task no thread is ticking)."""
+    def prepare_tune(self, path: str, value: Any) -> ParameterChange:
+        """Check `MODULE.PARAM = value` (name, tunable, bounds, shape) without applying it.
+        `ParameterError` says what is wrong. Not for a tick."""
         if path not in self._tunable:
             raise ParameterError(
                 f"task {self.name} has no parameter {path!r} (parameters: {', '.join(sorted(self._tunable))})"
@@ -182,11 +176,18 @@ class RobotTask:
         module, param = self._tunable[path]
         if not param.tunable:
             raise ParameterError(f"{self.name}.{path} is not tunable at run time")
-        arr = param.check(value)
-        if now:
-            self._apply([(module, param, arr)])
-        else:
-            self._pending = [*self._pending, (module, param, arr)]
+        return ParameterChange(module, param, param.check(value))
+
+    def tune(self, path: str, value: Any) -> None:
+        """Check and apply at once: only for a task no thread is ticking (the daemon hands a
+        running task's changes to its control thread, which applies them at a tick boundary)."""
+        self.apply_change(self.prepare_tune(path, value))
+
+    @staticmethod
+    def apply_change(change: ParameterChange) -> None:
+        """Write a checked change into its parameter (tick-safe: an in-place copy)."""
+        change.param.value[...] = change.value
+        change.module.on_parameter_change(change.param.name)
 
     def parameters(self) -> list[dict[str, Any]]:
         return [p.describe() for _, p in self._tunable.values()]
@@ -202,7 +203,12 @@ class RobotTask:
 
     # ---- the hot path ---------------------------------------------------------------------
     def tick(self, t_s: float) -> None:
-        """One period: read → preconditions or law → shell events → write."""
+        """One period: read → preconditions or law → shell events → write (or keep_alive)."""
+        self._tick(t_s)
+        if not self.wrote:
+            self.resource.keep_alive(t_s)
+
+    def _tick(self, t_s: float) -> None:
         res = self.resource
         self.wrote = False
         st = res.read(t_s)
@@ -231,9 +237,6 @@ class RobotTask:
             if self._holding_previous:
                 self._send(t_s, self.sent)
             return
-        if self._pending:
-            self._apply(self._pending)
-            self._pending = []
         for update in self.schedule:
             update(t_s)
         for ev in self.events:

@@ -8,6 +8,7 @@ import pytest
 
 from orccadd.automaton import compile_text
 from orccadd.errors import MissionError
+from orccadd.task.spec import read_task_interface
 from tests.conftest import MOVE_TASK
 
 DECLS = """mission M
@@ -94,7 +95,7 @@ def test_at_least_fifteen_distinct_cases() -> None:
 def test_task_signature_must_agree_with_the_task_file(tmp_path: Path) -> None:
     text = f'mission M\nresource arm\ntask Move on arm from "{MOVE_TASK}"\n  T2 Collision\nend\n'
     with pytest.raises(MissionError) as info:
-        compile_text(text, "sig.mission")
+        compile_text(text, "sig.mission", task_files=read_task_interface)
     assert "signature mismatch" in str(info.value)
     assert "declares no T2 event Collision for Move" in str(info.value)
     assert "T2 TrackingLost" in str(info.value)  # what the file does offer
@@ -107,7 +108,7 @@ def test_task_file_gives_its_events_to_the_mission() -> None:
         "safe procedure S\n nothing\nend\n"
         "main procedure P\n handle do Move until TrackingLost on fatal do safe end\nend\n"
     )
-    a = compile_text(text, "ok.mission")
+    a = compile_text(text, "ok.mission", task_files=read_task_interface)
     assert "Move.T2.TrackingLost" in a.program.inputs
     assert "Move.T3.NearJointLimit" in a.program.inputs
     assert "Move.T2.PreconditionTimeout" in a.program.inputs  # the file has preconditions
@@ -116,7 +117,7 @@ def test_task_file_gives_its_events_to_the_mission() -> None:
 def test_task_on_the_wrong_resource_for_its_file() -> None:
     text = f'mission M\nresource Vehicle\ntask Move on Vehicle from "{MOVE_TASK}"\nend\n'
     with pytest.raises(MissionError, match="runs on resource `arm`, not `Vehicle`"):
-        compile_text(text, "res.mission")
+        compile_text(text, "res.mission", task_files=read_task_interface)
 
 
 def test_state_explosion_is_refused_clearly() -> None:

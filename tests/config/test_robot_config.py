@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from orccadd.config import load_robot_config
 from orccadd.errors import ConfigError
+from orccadd.robot import load_robot_config
 from tests.conftest import PANDA, UR5E
 
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from orccadd.physres.base import Status
 from orccadd.physres.shm_channel import Ctl, PlantChannel
+from orccadd.types import Status
 from tests.daemon.conftest import ROOT, Daemon, start_daemon
 
 DEMO = str(ROOT / "configs/missions/demo.mission")
@@ -98,8 +98,8 @@ def test_realtime_process_killed_the_arm_stops(daemon: Daemon) -> None:
     daemon.call("load", path=DEMO)
     daemon.call("start")
     daemon.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
-    plant_pid = int(daemon.status()["plant_pid"])  # type: ignore[arg-type]
-    shm = daemon.call("describe")["plant_channel"]  # type: ignore[index]
+    plant_pid = int(daemon.status()["helper_pid"])  # type: ignore[arg-type]
+    shm = daemon.call("describe")["resource"]["diagnostics"]["details"]["plant_channel"]  # type: ignore[index]
     ch = PlantChannel(6, name=str(shm))
     daemon.proc.kill()  # SIGKILL: no safe stop from the controller
     daemon.proc.wait()

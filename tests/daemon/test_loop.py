@@ -1,19 +1,24 @@
-"""The control thread's slack handshake: client work waits for the end of a tick."""
+"""The control thread's side of the daemon: the slack handshake, the tune mailbox, a reset that
+does not sleep in the automaton thread."""
 
 from __future__ import annotations
 
 import os
+import select
 import threading
+import time
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
 
-from orccadd.config import load_robot_config, with_backend
 from orccadd.daemon.machine import Machine
-from orccadd.daemon.telemetry import H, Layout, TelemetryBlock
-from orccadd.physres import create_resource
-from orccadd.physres.base import CommandMode
+from orccadd.daemon.replies import Pending
+from orccadd.robot import create_resource, load_robot_config, with_backend
 from orccadd.runtime import WallClock
+from orccadd.types import CommandMode, Status
+from orccadd.wire.schema import H, Layout
+from orccadd.wire.telemetry import TelemetryBlock
 from tests.daemon.conftest import ROBOT
 
 
@@ -35,19 +40,54 @@ def machine() -> Iterator[Machine]:
         os.close(w)
 
 
-def test_wait_for_slack_returns_after_a_tick_ends(machine: Machine) -> None:
+def test_slack_fd_becomes_readable_only_after_a_tick_ends(machine: Machine) -> None:
     loop = machine.loop
     control = threading.Thread(target=loop.executor.run, kwargs={"max_ticks": 2000})
     control.start()
     try:
         for _ in range(20):
+            loop.want_slack()
             before = int(machine.tel.header[H.TICK_HEAD])
-            assert loop.wait_for_slack(timeout_s=1.0)
+            ready, _, _ = select.select([loop.slack_fd], [], [], 1.0)
+            assert ready
             assert int(machine.tel.header[H.TICK_HEAD]) > before  # a tick ended meanwhile
+            os.read(loop.slack_fd, 64)
     finally:
         loop.executor.stop()
         control.join()
 
 
-def test_wait_for_slack_times_out_when_the_loop_is_stopped(machine: Machine) -> None:
-    assert not machine.loop.wait_for_slack(timeout_s=0.05)
+def test_slack_fd_stays_quiet_when_the_loop_is_stopped(machine: Machine) -> None:
+    machine.loop.want_slack()
+    ready, _, _ = select.select([machine.loop.slack_fd], [], [], 0.05)
+    assert not ready
+
+
+def test_a_tune_is_applied_at_one_tick_boundary_and_acknowledged_with_its_tick(machine: Machine) -> None:
+    loop = machine.loop
+    hold = loop.hold
+    name, (_, param) = next((k, v) for k, v in hold._tunable.items() if v[1].tunable)
+    new_value = param.value.copy() * 0.5 + 1.0
+    seq = loop.tunes.post(hold.prepare_tune(name, new_value.tolist()))
+    assert loop.tunes.acked(seq) is None
+    assert not np.array_equal(param.value, new_value)  # waiting for the control thread
+    loop.executor.run(max_ticks=1)
+    tick = loop.tunes.acked(seq)
+    assert tick == int(machine.tel.header[H.TICK_HEAD])  # the tick record of the tick it applied in
+    assert np.array_equal(param.value, new_value)
+
+
+def test_reset_is_a_pending_reply_and_never_sleeps(machine: Machine) -> None:
+    loop = machine.loop
+    loop.executor.run(max_ticks=5)
+    machine.resource.inject_fault("device", "test fault")
+    loop.executor.run(max_ticks=5)  # the fault → type 3 → safe stop from the control thread
+    machine.on_events()
+    assert machine.supervisor.fault
+    loop.executor.run(max_ticks=2000, until=lambda: bool(machine.resource.state.status & Status.STOPPED))
+    t0 = time.monotonic()
+    reply = machine.command("reset", {})
+    assert time.monotonic() - t0 < 0.5  # no wait inside the command (order of magnitude only)
+    if isinstance(reply, Pending):
+        loop.executor.run(max_ticks=200, until=lambda: reply.poll() is not None)
+    assert not machine.supervisor.fault

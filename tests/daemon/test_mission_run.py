@@ -6,7 +6,8 @@ import time
 
 import numpy as np
 
-from orccadd.daemon.telemetry import TICK_FIELDS, H, RingReader, TelemetryBlock
+from orccadd.wire.schema import TICK_FIELDS, H
+from orccadd.wire.telemetry import RingReader, TelemetryBlock
 from tests.daemon.conftest import ROOT, Daemon
 
 DEMO = str(ROOT / "configs/missions/demo.mission")

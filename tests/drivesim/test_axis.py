@@ -7,12 +7,12 @@ import struct
 import can
 import pytest
 
-from orccadd.config import load_robot_config, with_backend
 from orccadd.drivers.canopen.cia402 import State
 from orccadd.drivesim.axis import MODE_CSP, Axis, AxisUnits
 from orccadd.drivesim.plant import DriveTrainArm
 from orccadd.drivesim.slave import SlaveNode
 from orccadd.model import RobotModel
+from orccadd.robot import load_robot_config, with_backend
 from tests.conftest import UR5E, eds
 
 UNITS = AxisUnits(counts_per_rev=4096, gear_ratio=100.0, rated_torque_nm=0.5)

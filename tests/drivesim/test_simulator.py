@@ -10,9 +10,9 @@ import can
 import canopen
 import pytest
 
-from orccadd.config import load_robot_config, with_backend
 from orccadd.drivesim.axis import AxisUnits
 from orccadd.drivesim.simulator import AxisSpec, DriveSimulator
+from orccadd.robot import load_robot_config, with_backend
 from tests.conftest import UR5E, eds
 
 UNITS = AxisUnits(counts_per_rev=4096, gear_ratio=100.0, rated_torque_nm=0.5)

@@ -6,6 +6,7 @@ import numpy as np
 
 from orccadd.runtime import SimClock
 from orccadd.session import Session
+from orccadd.types import Phase
 from tests.conftest import UR5E
 
 
@@ -22,8 +23,25 @@ def test_low_pass_example_in_a_task(task_variant) -> None:  # type: ignore[no-un
     task.activate()
     loop = s.loop(SimClock())
     loop.active = task
+    tick = loop.executor.step
+    xs, ys, running = [], [], []
+
+    def step(t_s: float) -> None:
+        tick(t_s)
+        xs.append(s.resource.state.dq_rad_s.copy())  # what lp.x read this tick (arm.dq)
+        ys.append(lp.y.value.copy())
+        running.append(task.phase is Phase.RUN)
+
+    loop.executor.step = step
     loop.run_for(0.4)
-    dq = s.resource.state.dq_rad_s
-    assert np.abs(lp.y.value).max() > 0.0  # follows the motion...
-    assert np.abs(lp.y.value).max() < np.abs(dq).max() + 1.0  # ...smoothed, bounded
-    assert lp._a == 2.0 * np.pi * 2.0 * 0.002  # the tune reached on_parameter_change
+    a = 2.0 * np.pi * 2.0 * 0.002  # the tuned cutoff, 2 Hz, at the 2 ms period
+    assert lp._a == a  # the tune reached on_parameter_change
+    # every tick of the run, y moved toward the measured speed by the first-order filter's step
+    pairs = [k for k in range(1, len(ys)) if running[k - 1] and running[k]]
+    assert len(pairs) > 100
+    for k in pairs:
+        np.testing.assert_allclose(ys[k], ys[k - 1] + a * (xs[k] - ys[k - 1]), rtol=0, atol=1e-12)
+    # it follows the motion, smoothed: lagging behind the arm as it speeds up
+    k = pairs[-1]
+    assert np.abs(ys[k]).max() > 0.05
+    assert np.abs(ys[k]).max() < np.abs(xs[k]).max()

@@ -7,11 +7,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from orccadd.config import load_robot_config
 from orccadd.model import RobotModel
+from orccadd.robot import load_robot_config
 from orccadd.runtime import SimClock
 from orccadd.session import Session
-from orccadd.task import Phase
+from orccadd.types import Phase
 from tests.conftest import MOVE_TASK, PANDA, UR5E
 
 

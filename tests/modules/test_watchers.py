@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from orccadd.config import load_robot_config
 from orccadd.model import RobotModel
 from orccadd.modules import ModuleContext
 from orccadd.modules.watchers import (
@@ -13,7 +12,8 @@ from orccadd.modules.watchers import (
     TimeoutWatch,
     TrackingErrorWatch,
 )
-from orccadd.physres import JointState
+from orccadd.robot import load_robot_config
+from orccadd.state import JointState
 from tests.conftest import UR5E
 
 PERIOD_S = 0.002

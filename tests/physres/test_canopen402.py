@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orccadd.config import load_robot_config
 from orccadd.drivers.canopen.cia402 import State
-from orccadd.physres import CommandMode, Status, create_resource
 from orccadd.physres.canopen402 import Canopen402Arm
+from orccadd.robot import create_resource, load_robot_config
+from orccadd.types import CommandMode, Status
 from tests.canopen_rig import Rig, canopen_rig
 
 
@@ -37,8 +37,8 @@ def arm(rig: Rig) -> Iterator[Canopen402Arm]:
 
 
 def run(arm: Canopen402Arm, seconds: float, command: Callable[[float], np.ndarray] | None = None) -> int:
-    """Tick the resource on the wall clock (missed periods skipped, like the executor); the OR
-    of the status flags seen."""
+    """Tick the resource on the wall clock (missed periods skipped, like the executor): read, then
+    the command or `keep_alive`; the OR of the status flags seen."""
     period = arm.config.control_period_s
     t0 = nxt = time.monotonic()
     seen = 0
@@ -47,6 +47,8 @@ def run(arm: Canopen402Arm, seconds: float, command: Callable[[float], np.ndarra
         seen |= st.status
         if command is not None:
             seen |= arm.write(nxt, command(nxt - t0))
+        else:
+            arm.keep_alive(nxt)
         nxt += period
         while nxt < time.monotonic():
             nxt += period
@@ -58,7 +60,10 @@ def wait_for(arm: Canopen402Arm, flag: int, timeout_s: float) -> float:
     """Seconds until a read shows `flag` (AssertionError after `timeout_s`)."""
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout_s:
-        if arm.read(time.monotonic()).status & flag:
+        now = time.monotonic()
+        status = arm.read(now).status
+        arm.keep_alive(now)  # one tick: read, then a command or this
+        if status & flag:
             return time.monotonic() - t0
         time.sleep(arm.config.control_period_s)
     raise AssertionError(f"no {Status(flag)!r} within {timeout_s} s: {arm.fault_message}")

@@ -9,8 +9,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from orccadd.config import load_robot_config, with_backend
-from orccadd.physres import CommandMode, Lifecycle, PhysicalResource, Status, create_resource
+from orccadd.physres import PhysicalResource
+from orccadd.robot import create_resource, load_robot_config, with_backend
+from orccadd.types import CommandMode, Lifecycle, Status
 from tests.conftest import UR5E
 
 BACKENDS = ["sim", "sim_process"]
@@ -76,17 +77,21 @@ def test_safe_stop_brings_the_arm_to_rest(resource: PhysicalResource) -> None:
     resource.activate(CommandMode.TORQUE)
     drive(resource, 0.3, extra_nm=3.0)
     assert np.abs(resource.state.dq_rad_s).max() > 0.2
+    assert resource.config.safe_stop.category == 1  # sim-ur5e's: decelerate, then torque off
     resource.safe_stop()
+    st = resource.read(time.monotonic())
+    assert st.status & Status.STOPPING and not st.status & Status.TORQUE_OFF, Status(st.status)
     drive(resource, 2.0)
     st = resource.state
-    assert st.status & Status.STOPPED, Status(st.status)
+    stopped_torque_off = Status.STOPPED | Status.TORQUE_OFF
+    assert st.status & stopped_torque_off == stopped_torque_off, Status(st.status)
     assert np.abs(st.dq_rad_s).max() < 0.01
 
 
 def test_device_fault_is_reported(resource: PhysicalResource) -> None:
     resource.activate(CommandMode.TORQUE)
     drive(resource, 0.05)
-    resource.inject_fault("over-current")  # type: ignore[attr-defined]
+    resource.inject_fault("device", "over-current")
     drive(resource, 0.05)
     assert resource.state.status & Status.FAULT
 

@@ -6,10 +6,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from orccadd.config import load_robot_config
 from orccadd.errors import LifecycleError, ResourceError
-from orccadd.physres import CommandMode, Lifecycle, Status, create_resource
 from orccadd.physres.sim import SimulatedArm
+from orccadd.robot import create_resource, load_robot_config
+from orccadd.types import CommandMode, Lifecycle, Status
 from tests.conftest import PANDA, UR5E
 
 DT = 0.002
@@ -54,11 +54,15 @@ def test_gravity_compensation_holds_the_arm() -> None:
 
 def test_without_torque_the_arm_falls_and_brakes_hold_it() -> None:
     res = make()
+    model, data = res.model.model, res.model.new_data()
+    pe0 = pin.computePotentialEnergy(model, data, res.state.q_rad)
     for k in range(200):
         res.read(k * DT)
         res.write(k * DT, np.zeros(res.dof))
-    assert np.abs(res.state.q_rad - res.q).max() < 1e-9
     assert np.abs(res.state.dq_rad_s).max() > 0.1  # falling under gravity (friction is not enough)
+    # downhill: it lost potential energy (25 J measured in these 0.4 s)
+    fell_j = pe0 - pin.computePotentialEnergy(model, data, res.state.q_rad)
+    assert fell_j > 5.0, fell_j
     res.deactivate()  # brakes
     for k in range(200, 600):
         res.read(k * DT)
@@ -91,34 +95,71 @@ def test_measured_position_beyond_limit_is_flagged() -> None:
 
 def test_unsupported_mode_is_refused_clearly() -> None:
     res = make(mode=None)
-    type(res).supported_modes = frozenset({CommandMode.TORQUE})
-    try:
-        with pytest.raises(ResourceError, match="cannot command position"):
-            res.activate(CommandMode.POSITION)
-    finally:
-        del type(res).supported_modes
+    res.supported_modes = frozenset({CommandMode.TORQUE})  # as a device's configure may narrow it
+    with pytest.raises(ResourceError, match="cannot command position"):
+        res.activate(CommandMode.POSITION)
 
 
-@pytest.mark.parametrize(
-    ("category", "torque_off", "brakes"), [(0, True, True), (1, True, True), (2, False, False)]
-)
-def test_safe_stop_categories(robot_variant, category, torque_off, brakes) -> None:  # type: ignore[no-untyped-def]
+STOPPED_TORQUE_OFF = Status.STOPPED | Status.TORQUE_OFF
+
+
+@pytest.mark.parametrize("category", [0, 1, 2])
+def test_safe_stop_categories(robot_variant, category: int) -> None:  # type: ignore[no-untyped-def]
     res = make(robot_variant(("category = 1", f"category = {category}")))
     hold_gravity(res, 150, extra=4.0)  # push: the arm moves
-    assert np.abs(res.state.dq_rad_s).max() > 0.3
+    t0, v0 = res.state.t_s, res.state.dq_rad_s.copy()
+    assert np.abs(v0).max() > 0.3
     res.safe_stop()
-    assert res.write(0.3, np.full(res.dof, 50.0)) & Status.STOPPING or category == 0  # ignored
-    hold_gravity(res, 1500, t0=0.302)
-    st = res.state
-    assert np.abs(st.dq_rad_s).max() < 0.01
-    assert st.status & Status.STOPPED
-    assert bool(st.status & Status.TORQUE_OFF) is torque_off
-    assert res.brakes_engaged is brakes
+    flags = res.write(t0 + DT, np.full(res.dof, 50.0))
+    t = t0 + DT * np.arange(1, 1001)  # 2 s
+    dq, status, tau, q, brakes, torque_on = [], [], [], [], [], []
+    for k, tk in enumerate(t):
+        st = res.read(tk)
+        dq.append(np.abs(st.dq_rad_s))
+        status.append(st.status)
+        tau.append(st.tau_nm.copy())
+        q.append(st.q_rad.copy())
+        brakes.append(res.brakes_engaged)
+        torque_on.append(res.torque_on)
+        res.write(tk, np.full(res.dof, 50.0 if k % 2 else -50.0))  # must be ignored
+    speed = np.array(dq)
+    if category == 0:  # torque off and brakes at once, no controlled deceleration
+        assert flags & STOPPED_TORQUE_OFF == STOPPED_TORQUE_OFF and not flags & Status.STOPPING
+        assert all(s & STOPPED_TORQUE_OFF == STOPPED_TORQUE_OFF for s in status)
+        assert all(brakes) and not any(torque_on)
+        assert not np.array(tau).any()  # not one period of the commands
+        assert speed[5:].max() == 0.0  # the brakes (2 × max torque) hold it: 4 periods measured
+        return
+    a = res.config.safe_stop.deceleration_rad_s2
+    ramp = np.maximum(np.abs(v0) - a * (t - t0)[:, None], 0.0)
+    t_ramp = float(np.abs(v0).max() / a)  # ~1.16 s here
+    assert flags & Status.STOPPING and not flags & STOPPED_TORQUE_OFF
+    # every joint follows the configured deceleration ramp (measured within 0.036 rad/s), the
+    # commands ignored, with torque on and brakes off
+    np.testing.assert_allclose(speed, ramp, rtol=0, atol=0.1)
+    ramping = np.flatnonzero(t - t0 < t_ramp)
+    assert all(status[k] & Status.STOPPING and not status[k] & STOPPED_TORQUE_OFF for k in ramping)
+    assert not any(brakes[k] for k in ramping) and all(torque_on[k] for k in ramping)
+    # then at rest, stopped as soon as the ramp ends
+    first = next(k for k, s in enumerate(status) if s & Status.STOPPED)
+    assert t_ramp <= t[first] - t0 < t_ramp + 0.05, (t[first] - t0, t_ramp)
+    assert speed[first:].max() < 0.01
+    if category == 1:  # torque off and brakes
+        assert all(s & STOPPED_TORQUE_OFF == STOPPED_TORQUE_OFF for s in status[first:])
+        assert all(brakes[first:]) and not any(torque_on[first:])
+        assert not np.array(tau[first:]).any()
+    else:  # holds the position with torque on, against gravity
+        assert all(s & STOPPED_TORQUE_OFF == Status.STOPPED for s in status[first:])
+        assert not any(brakes[first:]) and all(torque_on[first:])
+        np.testing.assert_allclose(q[-1], q[first], rtol=0, atol=1e-6)
+        gravity = pin.computeGeneralizedGravity(res.model.model, res.model.new_data(), q[-1])
+        assert np.abs(gravity).max() > 10.0
+        np.testing.assert_allclose(tau[-1], gravity, rtol=0, atol=1e-6)
 
 
 def test_clear_stop_refused_while_faulted_then_allowed() -> None:
     res = make()
-    res.inject_fault("following error")
+    res.inject_fault("device", "following error")
     res.read(0.0)
     res.safe_stop()
     with pytest.raises(ResourceError, match="following error"):

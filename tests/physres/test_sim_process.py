@@ -10,12 +10,11 @@ from collections.abc import Iterator
 
 import pytest
 
-from orccadd.config import load_robot_config, with_backend
-from orccadd.physres import Status
 from orccadd.physres.sim_process import SimProcessArm
+from orccadd.robot import load_robot_config, with_backend
 from orccadd.runtime import WallClock
 from orccadd.session import Session
-from orccadd.task import Phase
+from orccadd.types import Phase, Status
 from tests.conftest import MOVE_TASK, ROOT, UR5E
 
 
@@ -73,7 +72,7 @@ def test_controller_process_killed_plant_stops_and_exits(tmp_path) -> None:  # t
     script.write_text(f"""
 import os, sys
 sys.path.insert(0, {str(ROOT)!r})
-from orccadd.config import load_robot_config, with_backend
+from orccadd.robot import load_robot_config, with_backend
 from orccadd.runtime import WallClock
 from orccadd.session import Session
 s = Session.from_config(with_backend(load_robot_config({str(UR5E)!r}), "sim_process"))
@@ -82,7 +81,7 @@ loop = s.loop(WallClock(), overrun_limit=10**6)
 loop.active = task
 task.activate()
 loop.run_for(0.3)
-print(s.resource.process.pid, flush=True)
+print(s.resource.diagnostics().helper_pid, flush=True)
 os._exit(9)  # the controller dies mid-motion
 """)
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)

@@ -8,7 +8,7 @@ import pytest
 from orccadd.runtime import PeriodicExecutor, SimClock, TimingStats, WallClock
 from orccadd.runtime.stats import Summary
 from orccadd.session import Session
-from orccadd.task import Phase
+from orccadd.types import Phase
 from tests.conftest import MOVE_TASK, UR5E
 
 

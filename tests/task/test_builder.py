@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from orccadd.errors import ConfigError, WiringError
-from orccadd.physres import CommandMode
 from orccadd.session import Session
 from orccadd.task import load_task_file
 from orccadd.task.builder import build_task
+from orccadd.types import CommandMode
 from tests.conftest import MOVE_TASK, UR5E
 
 

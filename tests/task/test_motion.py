@@ -8,7 +8,7 @@ import pytest
 
 from orccadd.runtime import SimClock
 from orccadd.session import Session
-from orccadd.task import Phase
+from orccadd.types import Phase
 from tests.conftest import MOVE_TASK, PANDA, UR5E
 
 TARGETS = {

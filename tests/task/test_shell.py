@@ -6,10 +6,9 @@ import numpy as np
 import pytest
 
 from orccadd.errors import ParameterError
-from orccadd.physres import Status
 from orccadd.runtime import SimClock
 from orccadd.session import Session
-from orccadd.task import Phase
+from orccadd.types import Phase, Status
 from tests.conftest import MOVE_TASK, UR5E
 
 FAR = [0.8, -1.2, 1.2, -1.6, -1.2, 0.4]
@@ -86,27 +85,25 @@ def test_resource_fault_is_a_type_3() -> None:
     task.activate()
     loop.active = task
     loop.run_for(0.3)
-    s.resource.inject_fault("over-current on axis 2")  # type: ignore[attr-defined]
+    s.resource.inject_fault("device", "over-current on axis 2")
     loop.run_for(0.01)
     assert task.phase is Phase.FAULT
     assert "MoveJoints.T3.ResourceFault" in s.event_names()
     check_stopped_safely(s, loop, category_torque_off=True)
 
 
-def test_tune_is_checked_then_applied_at_tick_boundary() -> None:
-    _, task, loop = open_task()
+def test_tune_is_checked_before_anything_changes() -> None:
+    _, task, _ = open_task()
     ct = next(m for m in task.modules if m.name == "ct")
     with pytest.raises(ParameterError, match=r"ct.kp \(=-3\) must be in \[0, 100000\]"):
-        task.tune("ct.kp", -3)
+        task.prepare_tune("ct.kp", -3)
     with pytest.raises(ParameterError, match="has no parameter 'ct.gain'"):
-        task.tune("ct.gain", 1.0)
+        task.prepare_tune("ct.gain", 1.0)
     with pytest.raises(ParameterError, match="must be 6 numbers"):
-        task.tune("ct.kp", [1.0, 2.0])
-    task.tune("ct.kp", 500.0)
-    assert float(ct.kp.value[0]) == 900.0  # not yet: applied at the next tick
-    task.activate()
-    loop.active = task
-    loop.run_for(0.01)
+        task.prepare_tune("ct.kp", [1.0, 2.0])
+    change = task.prepare_tune("ct.kp", 500.0)
+    assert float(ct.kp.value[0]) == 900.0  # checked, not applied
+    task.apply_change(change)
     assert (ct.kp.value == 500.0).all()
 
 

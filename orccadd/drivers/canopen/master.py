@@ -41,6 +41,7 @@ from orccadd.errors import ResourceError
 
 CONTROLLER_NODE_ID = 0x7F  # our heartbeat's producer id (drives consume it)
 MODE_CODES = {"csp": cia402.MODE_CSP, "csv": cia402.MODE_CSV, "cst": cia402.MODE_CST}
+POWERED = (cia402.State.OPERATION_ENABLED, cia402.State.QUICK_STOP_ACTIVE, cia402.State.FAULT_REACTION_ACTIVE)
 _TARGET_OF = {cia402.MODE_CSP: 0x607A, cia402.MODE_CSV: 0x60FF, cia402.MODE_CST: 0x6071}
 _TARGET_FMT = {0x607A: "i", 0x60FF: "i", 0x6071: "h"}
 
@@ -413,6 +414,56 @@ class CanopenMaster:
                 )
         except (can.CanError, OSError) as e:
             self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
+
+    # ---- controlwords (the CiA 402 state machine, driven one step per cycle) ---------------------
+    def set_controlword(self, cw: int) -> None:
+        """The same controlword for every axis from the next RPDO on."""
+        for a in self.axes:
+            a.controlword = cw
+
+    def clear_faults(self) -> None:
+        """Forget the drives' last EMCY and SDO errors (before a fault reset)."""
+        for a in self.axes:
+            a.sdo_error = ""
+            a.emcy_code = 0
+            a.emcy_text = ""
+
+    def step_fault_reset(self) -> bool:
+        """One cycle of fault reset: a rising edge of bit 7 on every faulted axis (reset, then
+        disable voltage, then reset again). True once no axis is in FAULT."""
+        done = True
+        for a in self.axes:
+            if a.state is cia402.State.FAULT:
+                a.controlword = (
+                    cia402.CW_FAULT_RESET
+                    if a.controlword != cia402.CW_FAULT_RESET
+                    else cia402.CW_DISABLE_VOLTAGE
+                )
+                done = False
+        return done
+
+    def step_enable(self) -> bool:
+        """One cycle towards OPERATION ENABLED on every axis (CiA 402 transitions 2, 3, 4, and 15
+        out of a fault). True once every axis is there."""
+        enabled = True
+        for a in self.axes:
+            cw = cia402.command_towards(a.state)
+            if cw == cia402.CW_FAULT_RESET and a.controlword == cia402.CW_FAULT_RESET:
+                cw = cia402.CW_DISABLE_VOLTAGE  # for a rising edge next time
+            if cw is not None:
+                a.controlword = cw
+            enabled = enabled and a.state is cia402.State.OPERATION_ENABLED
+        return enabled
+
+    def step_quick_stop(self) -> bool:
+        """One cycle of quick stop (transition 11) on every enabled axis. True once every axis has
+        its power stage off."""
+        off = True
+        for a in self.axes:
+            if a.state is cia402.State.OPERATION_ENABLED:
+                a.controlword = cia402.CW_QUICK_STOP
+            off = off and a.state not in POWERED
+        return off
 
     def write_mode(self, code: int) -> None:
         """Ask every drive for mode `code` (0x6060) by a non-blocking SDO write; answers are

@@ -8,9 +8,9 @@ from typing import Any
 
 import pytest
 
-from orccadd.config import load_robot_config
 from orccadd.drivers.canopen.settings import load_canopen_settings
 from orccadd.errors import ConfigError
+from orccadd.robot import load_robot_config
 from tests.conftest import UR5E, eds
 
 FILE = "robot.toml"

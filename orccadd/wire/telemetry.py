@@ -1,12 +1,7 @@
 """Telemetry from the real-time process to the command daemon: one shared-memory block.
 
-The real-time process writes, never waits and never learns whether anyone reads. Layout
-(float64 throughout, so one numpy view per area):
-
-- header: sizes, the writer's pid, a heartbeat (monotonic ns of the last tick);
-- status: the machine's state and timing figures, under a sequence lock (odd while writing);
-- tick ring: one record per control tick (time, timing, active task, q, dq, tau, command);
-- trace ring: one record per automaton instant or operator action (inputs, actions, states).
+The real-time process writes, never waits and never learns whether anyone reads. The layout and
+every index are in `orccadd.wire.schema`.
 
 Ring protocol: the writer marks a slot invalid (`seq = -1`), fills it, then stores its sequence
 number and advances the head. A reader copies a slot and keeps it only if its sequence number is
@@ -18,85 +13,14 @@ from __future__ import annotations
 
 import contextlib
 import os
-from dataclasses import dataclass
-from enum import IntEnum
 from multiprocessing import resource_tracker, shared_memory
 
 import numpy as np
 import numpy.typing as npt
 
+from orccadd.wire.schema import HEADER_LEN, MAGIC, STATUS_LEN, TRACE_WIDTH, H, Layout, S, tick_width
+
 FloatArray = npt.NDArray[np.float64]
-
-MAGIC = 0x0CCADD01
-HEADER_LEN = 16
-STATUS_LEN = 48
-TRACE_IDX = 16  # input / action indices kept per trace record
-
-
-class H(IntEnum):
-    """Header slots."""
-
-    MAGIC = 0
-    DOF = 1
-    TICK_LEN = 2
-    TICK_WIDTH = 3
-    TICK_HEAD = 4
-    TRACE_LEN = 5
-    TRACE_WIDTH = 6
-    TRACE_HEAD = 7
-    PID = 8
-    HEARTBEAT_NS = 9
-    PERIOD_S = 10
-    TICKS = 11  # written by the control thread every tick
-    OVERRUNS = 12
-    CONSECUTIVE_OVERRUNS = 13
-    SWITCHES = 14
-
-
-class S(IntEnum):
-    """Status slots (under the sequence lock in slot 0)."""
-
-    SEQ = 0
-    MACHINE = 1  # MachineState
-    AUTOMATON_STATE = 2
-    MISSION_GEN = 3  # changes each time a mission is loaded (names may change)
-    INSTANTS = 4
-    RESULT = 5  # MissionResult of the last run
-    FAULTED = 6  # 1: the resource was safe-stopped; `reset` is needed before motion
-    PLANT_PID = 7
-
-
-class Trace(IntEnum):
-    """What a trace record is."""
-
-    INSTANT = 0  # an automaton reaction: inputs -> actions
-    EVENT = 1  # a task event the automaton does not see (T1, the Hold task's events)
-    COMMAND = 2  # an operator action (start, stop, abort, hold, resume, reset, tune)
-
-
-# trace record: seq, kind, t_s, wall_s, state_from, state_to, code, n_in, n_act, in[16], act[16]
-TRACE_WIDTH = 9 + 2 * TRACE_IDX
-
-
-TICK_FIELDS = ("seq", "t_s", "wake_us", "compute_us", "task", "phase", "wrote", "status")
-TICK_VECTORS = ("q", "dq", "tau", "cmd")
-
-
-def tick_width(dof: int) -> int:
-    """The scalar fields, then q, dq, tau and the command sent, one value per joint each."""
-    return len(TICK_FIELDS) + len(TICK_VECTORS) * dof
-
-
-@dataclass(frozen=True)
-class Layout:
-    dof: int
-    tick_len: int
-    trace_len: int
-
-    @property
-    def size_bytes(self) -> int:
-        n = HEADER_LEN + STATUS_LEN + self.tick_len * tick_width(self.dof) + self.trace_len * TRACE_WIDTH
-        return 8 * n
 
 
 class TelemetryBlock:

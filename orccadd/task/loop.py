@@ -6,7 +6,8 @@ from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
 from orccadd.runtime.executor import PeriodicExecutor
 from orccadd.runtime.stats import TimingStats
-from orccadd.task.task import Phase, RobotTask
+from orccadd.task.task import RobotTask
+from orccadd.types import Phase
 
 SETTLED = (Phase.DONE, Phase.ABORTED, Phase.FAULT, Phase.PRE_FAILED)
 
@@ -36,6 +37,7 @@ class ControlLoop:
         task = self.active
         if task is None:
             self.resource.read(t_s)  # idle: the resource holds; keep measuring
+            self.resource.keep_alive(t_s)
         else:
             task.tick(t_s)
 

@@ -14,12 +14,12 @@ import numpy as np
 
 from orccadd.config.robot import RobotConfig
 from orccadd.model import RobotModel
-from orccadd.physres.base import CommandMode, Lifecycle
 from orccadd.physres.shm_channel import Ctl, PlantChannel, Request
 from orccadd.physres.sim import SimulatedArm
 from orccadd.runtime.clock import WallClock
 from orccadd.runtime.executor import PeriodicExecutor
 from orccadd.runtime.rt import enter_realtime
+from orccadd.types import CommandMode, Lifecycle
 
 
 class PlantServer:
@@ -59,7 +59,8 @@ class PlantServer:
                 arm.clear_stop()
                 self.last_seq, self.stale, self.streaming = int(ctl[Ctl.CMD_SEQ]), 0, False
             elif code == Request.INJECT_FAULT:
-                arm.inject_fault("injected fault", code=arg)
+                arm.inject_fault("device", "injected fault")
+                arm.state.fault_code = arg
             elif code == Request.RESET_FAULT:
                 arm.reset_fault()
             elif code == Request.SHUTDOWN:
@@ -112,7 +113,7 @@ def plant_main(cfg: RobotConfig, shm_name: str, watchdog_periods: int, priority:
 
 
 def main() -> int:
-    """`python -m orccadd.physres.plant_server --shm NAME ...`, the RobotConfig pickled on stdin
+    """`python -m orccadd.plantsim --shm NAME ...`, the RobotConfig pickled on stdin
     by the `sim_process` resource that starts it (its own parent: trusted input)."""
     import argparse
     import pickle
@@ -126,11 +127,7 @@ def main() -> int:
     args = ap.parse_args()
     cfg = pickle.load(sys.stdin.buffer)
     if not isinstance(cfg, RobotConfig):
-        print("plant_server: stdin is not a RobotConfig", file=sys.stderr)
+        print("orccadd.plantsim: stdin is not a RobotConfig", file=sys.stderr)
         return 2
     plant_main(cfg, args.shm, args.watchdog_periods, args.priority, args.cpu)
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,0 +1,216 @@
+"""The real-time process's command handlers, bound to `orccadd.wire.commands.COMMANDS` by name.
+
+Each handler runs in the automaton thread, gets its arguments already checked against the table
+(defaults filled in), and returns a result, a `Pending` result, or raises `CommandError` having
+changed nothing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+from typing import Any, Protocol
+
+from orccadd.config.robot import RobotConfig
+from orccadd.daemon.loop import SwitchingLoop
+from orccadd.daemon.mission import load_mission
+from orccadd.daemon.procedure import MissionControl
+from orccadd.daemon.publisher import Publisher
+from orccadd.daemon.replies import CommandError, Pending, Result
+from orccadd.daemon.supervision import Supervisor
+from orccadd.errors import OrccaddError, ParameterError
+from orccadd.physres.base import PhysicalResource
+from orccadd.runtime.mailbox import MailboxFullError
+from orccadd.runtime.rt import background_priority
+from orccadd.task import RobotTask
+from orccadd.task.events import EventQueue, EventRegistry
+from orccadd.wire.commands import handles
+from orccadd.wire.schema import PROTOCOL_VERSION, MachineState, OperatorAction, Trace
+
+MAX_INJECTED_MS = 5000.0  # longest injected tick: a stall, not a hang
+TUNE_WAIT_S = 1.0  # a tune not applied within this (or 100 periods) is reported as such
+
+
+class Machine(Protocol):
+    """What the handlers use of the execution machine (`orccadd.daemon.machine.Machine`)."""
+
+    cfg: RobotConfig
+    resource: PhysicalResource
+    registry: EventRegistry
+    queue: EventQueue
+    loop: SwitchingLoop
+    pub: Publisher
+    mission: MissionControl
+    supervisor: Supervisor
+    allow_fault_injection: bool
+
+    def now_s(self) -> float: ...
+    def note(self, msg: str) -> None: ...
+    def describe(self) -> dict[str, Any]: ...
+
+
+class RtCommands:
+    """The `rt` side of the command table (see `Dispatcher`)."""
+
+    def __init__(self, machine: Machine) -> None:
+        self.m = machine
+
+    def _trace(self, action: OperatorAction) -> float:
+        t = self.m.now_s()
+        self.m.pub.trace(Trace.COMMAND, t, action)
+        return t
+
+    @handles("describe")
+    def describe(self) -> Result:
+        return self.m.describe()
+
+    @handles("params")
+    def params(self, task: str) -> Result:
+        tasks = [self._task(task)] if task else self.m.mission.tasks()
+        return {"params": {t.name: t.parameters() for t in tasks}}
+
+    @handles("load")
+    def load(self, path: str) -> Result:
+        mc = self.m.mission
+        mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
+        if not Path(path).is_file():
+            raise CommandError(f"{path}: no such mission file")
+        try:
+            with background_priority():  # long, not real-time: below the control thread
+                loaded = load_mission(path, self.m.resource, self.m.registry, self.m.queue)
+        except OrccaddError as e:
+            raise CommandError(str(e)) from None
+        mc.install(loaded)
+        self._trace(OperatorAction.LOAD)
+        self.m.note(f"loaded mission {loaded.name} ({loaded.automaton.n_states} states, all checks passed)")
+        return {"mission": loaded.describe(), "report": loaded.report.format()}
+
+    @handles("start")
+    def start(self, procedure: str) -> Result:
+        mc = self.m.mission
+        mc.need(MachineState.READY, what="start")
+        if self.m.supervisor.fault:
+            raise CommandError(f"the arm was safe-stopped ({self.m.supervisor.fault}): `reset` first")
+        t = self._trace(OperatorAction.START)
+        return {"started": mc.start(t, procedure)}
+
+    @handles("send")
+    def send(self, input: str) -> Result:
+        mc = self.m.mission
+        mc.need(MachineState.RUNNING, MachineState.HOLDING, what="send an input")
+        bit = mc.operator_input(input)
+        mc.react(self._trace(OperatorAction.SEND), bit)
+        return {"sent": input}
+
+    @handles("stop")
+    def stop(self) -> Result:
+        """Graceful: the mission's own `Stop` operator input (the procedure's defined stop)."""
+        mc = self.m.mission
+        mc.need(MachineState.RUNNING, MachineState.HOLDING, what="stop")
+        try:
+            bit = mc.operator_input("Stop")
+        except CommandError as e:
+            raise CommandError(f"{e}; the mission defines no graceful stop: use `abort`") from None
+        if mc.state is MachineState.HOLDING:
+            mc.resume()
+        mc.react(self._trace(OperatorAction.STOP), bit)
+        return {"stopped": mc.state is not MachineState.RUNNING, "state": mc.state.name.lower()}
+
+    @handles("abort")
+    def abort(self) -> Result:
+        self._trace(OperatorAction.ABORT)
+        self.m.supervisor.abort("aborted by the operator")
+        return {"aborted": True}
+
+    @handles("hold")
+    def hold(self) -> Result:
+        self.m.mission.hold_mission()
+        self._trace(OperatorAction.HOLD)
+        return {"holding": True}
+
+    @handles("resume")
+    def resume(self) -> Result:
+        resumed = self.m.mission.resume()
+        self._trace(OperatorAction.RESUME)
+        return {"resumed": resumed}
+
+    @handles("reset")
+    def reset(self) -> Result | Pending:
+        def traced() -> None:
+            self._trace(OperatorAction.RESET)
+
+        return self.m.supervisor.begin_reset(traced)
+
+    def _task(self, name: str) -> RobotTask:
+        tasks = self.m.mission.tasks()
+        for t in tasks:
+            if t.name == name:
+                return t
+        raise CommandError(f"no task {name!r} (tasks: {', '.join(t.name for t in tasks)})")
+
+    @handles("tune")
+    def tune(self, path: str, value: Any) -> Result | Pending:
+        """Checked here; applied by the control thread at the next tick boundary, whichever task
+        it ticks, and acknowledged with that tick's number."""
+        parts = path.split(".")
+        if len(parts) != 3:
+            raise CommandError(f"{path!r}: a parameter is named TASK.MODULE.PARAM (see `params`)")
+        task = self._task(parts[0])
+        rest = f"{parts[1]}.{parts[2]}"
+        old = next((p["value"] for p in task.parameters() if p["name"] == rest), None)
+        try:
+            change = task.prepare_tune(rest, value)
+        except ParameterError as e:
+            raise CommandError(str(e)) from None
+        loop = self.m.loop
+        try:
+            seq = loop.tunes.post(change)
+        except MailboxFullError as e:
+            raise CommandError(f"tune {path}: not accepted: {e}") from None
+        self._trace(OperatorAction.TUNE)
+        self.m.note(f"tune {path} = {value}")
+
+        def poll() -> Result | None:
+            tick = loop.tunes.acked(seq)
+            if tick is None:
+                return None
+            return {"tuned": path, "value": value, "previous": old, "applied_at_tick": tick}
+
+        def expire() -> Result:
+            raise CommandError(
+                f"tune {path}: accepted, but the control loop has not applied it (not running?)"
+            )
+
+        wait_s = max(100 * self.m.cfg.control_period_s, TUNE_WAIT_S)
+        return Pending(poll, time.monotonic_ns() + int(wait_s * 1e9), expire)
+
+    @handles("inject")
+    def inject(self, fault: str, ticks: int, extra_ms: float) -> Result:
+        """Fault injection for commissioning and tests (only with --allow-fault-injection)."""
+        if not self.m.allow_fault_injection:
+            raise CommandError("fault injection is disabled (start orccadd with --allow-fault-injection)")
+        if fault == "resource":
+            try:
+                self.m.resource.inject_fault("device", "injected fault")
+            except OrccaddError as e:
+                raise CommandError(str(e)) from None
+        else:
+            if not 0.0 <= extra_ms <= MAX_INJECTED_MS:
+                raise CommandError(f"inject: extra_ms (={extra_ms:g}) must be in [0, {MAX_INJECTED_MS:g}]")
+            if not 1 <= ticks <= 10_000:
+                raise CommandError(f"inject: ticks (={ticks}) must be in [1, 10000]")
+            period_ms = self.m.cfg.control_period_s * 1e3
+            self.m.loop.inject_overrun(ticks, int((extra_ms or 1.5 * period_ms) * 1e6))
+        self._trace(OperatorAction.INJECT)
+        self.m.note(f"injected fault: {fault}")
+        return {"injected": fault}
+
+
+def describe_resource(machine: Machine) -> dict[str, Any]:
+    res = machine.resource
+    return {
+        **res.description.as_dict(),
+        "diagnostics": dataclasses.asdict(res.diagnostics()),
+        "protocol_version": PROTOCOL_VERSION,
+    }

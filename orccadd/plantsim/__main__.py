@@ -1,0 +1,3 @@
+from orccadd.plantsim.server import main
+
+raise SystemExit(main())

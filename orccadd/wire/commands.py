@@ -1,0 +1,326 @@
+"""The command table: every operator command declared once, and the request format.
+
+Each `CommandSpec` names the command, the role it needs, its arguments (types, default, help),
+which process executes it (`rt`: the real-time process, `cmdd`: the command daemon) and its help
+text. From this one table derive: request validation (`parse_request`), dispatch (`Dispatcher`:
+each side's handlers are bound by name with `@handles` and checked complete against the table),
+`orccadctl`'s help, and the command list of docs/protocol.md (`markdown_table`, checked by a test).
+
+Wire format: newline-delimited JSON over the daemon's Unix socket.
+
+Request:  {"id": <any>, "cmd": "<command>", "args": {...}}            (one line, ≤ 64 KiB)
+Reply:    {"id": <same>, "ok": true, "result": {...}}
+          {"id": <same>, "ok": false, "error": "<what and why>"}
+Streams (`monitor`, `events` with follow): several `{"id", "ok": true, "stream": {...}}` lines,
+then a final reply; the client may close the connection at any time.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any, Literal, TypeVar
+
+MAX_LINE = 65536
+MAX_INT = 2**53  # integers a JSON peer can represent exactly; beyond: refused
+NUMBER = (int, float)
+
+
+class Role(StrEnum):
+    """`control` ⊃ `read`: a control client may do everything a read-only one may."""
+
+    READ = "read"
+    CONTROL = "control"
+
+
+Where = Literal["rt", "cmdd"]
+
+
+@dataclass(frozen=True)
+class Arg:
+    """One argument: its JSON types (`bool` only if listed), default, help."""
+
+    name: str
+    types: tuple[type, ...]
+    help: str
+    required: bool = False
+    default: Any = None
+    choices: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class CommandSpec:
+    name: str
+    role: Role
+    where: Where
+    help: str
+    args: tuple[Arg, ...] = ()
+    stream: bool = False  # replies with stream lines before the final reply
+
+    def arg(self, name: str) -> Arg:
+        return next(a for a in self.args if a.name == name)
+
+
+R, C = Role.READ, Role.CONTROL
+
+COMMANDS: dict[str, CommandSpec] = {
+    s.name: s
+    for s in (
+        CommandSpec("ping", R, "cmdd", "the command daemon answers (its pid and the protocol version)"),
+        CommandSpec(
+            "status",
+            R,
+            "cmdd",
+            "state, mission, automaton state, active task and phase, joints, loop timing (last 5 s), log",
+        ),
+        CommandSpec("describe", R, "rt", "robot, joints, resource, tasks, the mission's inputs and actions"),
+        CommandSpec(
+            "params",
+            R,
+            "rt",
+            "tunable parameters: value, bounds, unit, tunable",
+            (Arg("task", (str,), "one task's parameters (default: every task)", default=""),),
+        ),
+        CommandSpec(
+            "events",
+            R,
+            "cmdd",
+            "the reactive trace: instants (inputs → actions, states), task events, commands, time-stamped",
+            (
+                Arg("last", (int,), "how many past records", default=50),
+                Arg("follow", (bool,), "keep streaming new records", default=False),
+                Arg("duration_s", NUMBER, "stop following after this long (0: never)", default=0.0),
+            ),
+            stream=True,
+        ),
+        CommandSpec(
+            "monitor",
+            R,
+            "cmdd",
+            "stream of `{t_s, values}`: `q`, `dq`, `tau`, `cmd` (or `q.3`, `q.<joint>`), `wake_us`, "
+            "`compute_us`, `task`, `phase`, `status`",
+            (
+                Arg("signals", (list,), "signal names (default: q)", default=None),
+                Arg("rate_hz", NUMBER, "samples per second, at most the control rate", default=10.0),
+                Arg("count", (int,), "stop after this many samples (0: never)", default=0),
+                Arg("duration_s", NUMBER, "stop after this long (0: never)", default=0.0),
+            ),
+            stream=True,
+        ),
+        CommandSpec(
+            "load",
+            C,
+            "rt",
+            "compile, verify, prepare the tasks; refused with the failing checks' counterexamples",
+            (Arg("path", (str,), "the mission file (absolute)", required=True),),
+        ),
+        CommandSpec(
+            "start",
+            C,
+            "rt",
+            "run the loaded mission's main procedure",
+            (Arg("procedure", (str,), "the main procedure's name (checked if given)", default=""),),
+        ),
+        CommandSpec("stop", C, "rt", "graceful: the mission's `Stop` operator input"),
+        CommandSpec("abort", C, "rt", "immediate safe stop; the mission ends `aborted`"),
+        CommandSpec("hold", C, "rt", "suspend the mission on the Hold task"),
+        CommandSpec("resume", C, "rt", "restart the suspended task from the measured state"),
+        CommandSpec("reset", C, "rt", "clear a safe stop (and a device fault) once the arm is at rest"),
+        CommandSpec(
+            "send",
+            C,
+            "rt",
+            "any operator input of the mission",
+            (Arg("input", (str,), "the input's name", required=True),),
+        ),
+        CommandSpec(
+            "tune",
+            C,
+            "rt",
+            "`TASK.MODULE.PARAM`: bounds and shape checked, applied at one tick boundary (its number in "
+            "the reply), traced",
+            (
+                Arg("path", (str,), "TASK.MODULE.PARAM", required=True),
+                Arg("value", (*NUMBER, list), "a number or a list of numbers", required=True),
+            ),
+        ),
+        CommandSpec(
+            "log",
+            C,
+            "cmdd",
+            "start/stop a full-rate CSV log written by the command daemon",
+            (
+                Arg("action", (str,), "start or stop", required=True, choices=("start", "stop")),
+                Arg("signals", (list,), "signal names (default: q dq tau cmd)", default=None),
+                Arg("path", (str,), "the CSV file (absolute)", default=""),
+            ),
+        ),
+        CommandSpec(
+            "inject",
+            C,
+            "rt",
+            "inject a fault for tests and commissioning (only with `orccadd --allow-fault-injection`)",
+            (
+                Arg("fault", (str,), "resource or overrun", required=True, choices=("resource", "overrun")),
+                Arg("ticks", (int,), "overrun: how many ticks", default=20),
+                Arg("extra_ms", NUMBER, "overrun: extra compute per tick (0: 1.5 periods)", default=0.0),
+            ),
+        ),
+    )
+}
+
+
+class ProtocolError(Exception):
+    """A request that is not well formed; the message says why, in the client's terms."""
+
+
+def parse_request(line: bytes) -> tuple[Any, str, dict[str, Any]]:
+    """(id, cmd, args) of a well-formed request; `ProtocolError` (with the id if known) otherwise.
+
+    Checks the fields, the command, each argument's name and type (numbers finite, integers
+    within ±2^53, list items scalars), choices and required arguments. Defaults are not filled in.
+    """
+    try:
+        msg = json.loads(line)
+    except (ValueError, UnicodeDecodeError, RecursionError) as e:
+        raise ProtocolError(f"not JSON: {type(e).__name__}: {str(e)[:200]}") from None
+    if not isinstance(msg, dict):
+        raise ProtocolError('a request is a JSON object {"cmd": ..., "args": {...}}')
+    unknown = set(msg) - {"id", "cmd", "args"}
+    if unknown:
+        raise ProtocolError(
+            f"unknown request fields: {', '.join(sorted(map(str, unknown)))[:200]} (fields: id, cmd, args)"
+        )
+    rid = msg.get("id")
+    if not isinstance(rid, str | int | float | None) or isinstance(rid, bool):
+        raise ProtocolError("'id' must be a number, a string or null")
+    cmd = msg.get("cmd")
+    if not isinstance(cmd, str):
+        raise ProtocolError("'cmd' must be a string")
+    spec = COMMANDS.get(cmd)
+    if spec is None:
+        raise ProtocolError(f"unknown command {cmd[:64]!r} (commands: {', '.join(sorted(COMMANDS))})")
+    args = msg.get("args", {})
+    if not isinstance(args, dict):
+        raise ProtocolError("'args' must be an object")
+    check_args(spec, args)
+    return rid, cmd, args
+
+
+def check_args(spec: CommandSpec, args: dict[str, Any]) -> None:
+    names = {a.name for a in spec.args}
+    for k, v in args.items():
+        if k not in names:
+            allowed = ", ".join(a.name for a in spec.args) or "none"
+            raise ProtocolError(f"{spec.name}: unknown argument {str(k)[:64]!r} (arguments: {allowed})")
+        a = spec.arg(k)
+        if isinstance(v, bool) and bool not in a.types:
+            raise ProtocolError(f"{spec.name}: argument {k!r} must be {_types(a.types)}, not a boolean")
+        if not isinstance(v, a.types):
+            raise ProtocolError(f"{spec.name}: argument {k!r} must be {_types(a.types)}, not {_json_type(v)}")
+        for item in v if isinstance(v, list) else [v]:
+            problem = _scalar_problem(item)
+            if problem:
+                raise ProtocolError(f"{spec.name}: argument {k!r}: {problem}")
+        if a.choices and v not in a.choices:
+            raise ProtocolError(f"{spec.name}: argument {k!r} (={v!r}) must be one of {', '.join(a.choices)}")
+    for a in spec.args:
+        if a.required and a.name not in args:
+            raise ProtocolError(f"{spec.name}: argument {a.name!r} is required")
+
+
+def _scalar_problem(v: Any) -> str:
+    if isinstance(v, bool) or v is None:
+        return ""
+    if isinstance(v, int) and not -MAX_INT <= v <= MAX_INT:
+        return f"integer out of range (±2^53): {str(v)[:20]}…"
+    if isinstance(v, float) and not math.isfinite(v):
+        return f"{v} is not a finite number"
+    if isinstance(v, list | dict):
+        return "nested lists or objects are not accepted"
+    return ""
+
+
+def with_defaults(spec: CommandSpec, args: dict[str, Any]) -> dict[str, Any]:
+    """Every argument of `spec`, the client's value or the table's default."""
+    return {a.name: args.get(a.name, a.default) for a in spec.args}
+
+
+def _types(types: tuple[type, ...]) -> str:
+    names = {int: "a number", float: "a number", str: "a string", list: "a list", bool: "a boolean"}
+    return " or ".join(dict.fromkeys(names.get(t, t.__name__) for t in types))
+
+
+def _json_type(v: Any) -> str:
+    names = {dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number"}
+    return "null" if v is None else names.get(type(v), type(v).__name__)
+
+
+def encode(obj: dict[str, Any]) -> bytes:
+    return (json.dumps(obj, default=str) + "\n").encode()
+
+
+def error_reply(rid: Any, message: str) -> dict[str, Any]:
+    return {"id": rid, "ok": False, "error": message}
+
+
+# ---- dispatch -------------------------------------------------------------------------------
+F = TypeVar("F", bound=Callable[..., Any])
+_MARK = "__orccadd_command__"
+
+
+def handles(name: str) -> Callable[[F], F]:
+    """Mark a method as the handler of command `name` (which must be in `COMMANDS`)."""
+    if name not in COMMANDS:
+        raise KeyError(f"@handles({name!r}): no such command in orccadd.wire.commands.COMMANDS")
+
+    def mark(fn: F) -> F:
+        setattr(fn, _MARK, name)
+        return fn
+
+    return mark
+
+
+class Dispatcher:
+    """The handlers of one side (`rt` or `cmdd`), bound from `owner`'s `@handles` methods.
+
+    Refuses to build unless every command the table gives that side has exactly one handler and
+    no handler serves a command of the other side.
+    """
+
+    def __init__(self, owner: object, where: Where) -> None:
+        self.where = where
+        self.handlers: dict[str, Callable[..., Any]] = {}
+        for attr in dir(type(owner)):
+            name = getattr(getattr(type(owner), attr), _MARK, None)
+            if name is None:
+                continue
+            if name in self.handlers:
+                raise TypeError(f"{type(owner).__name__}: two handlers for {name!r}")
+            self.handlers[name] = getattr(owner, attr)
+        wanted = {n for n, s in COMMANDS.items() if s.where == where}
+        missing, extra = wanted - set(self.handlers), set(self.handlers) - wanted
+        if missing or extra:
+            raise TypeError(
+                f"{type(owner).__name__} ({where}): no handler for {sorted(missing)}; "
+                f"handlers of commands that are not this side's: {sorted(extra)}"
+            )
+
+    def handler(self, cmd: str) -> Callable[..., Any]:
+        return self.handlers[cmd]
+
+
+def markdown_table() -> str:
+    """The command list of docs/protocol.md."""
+    rows = ["| command | role | runs in | arguments | what |", "|---|---|---|---|---|"]
+    where = {"rt": "real-time process", "cmdd": "command daemon"}
+    for s in COMMANDS.values():
+        args = ", ".join(
+            f"`{a.name}`" + ("" if a.required else "?") + (f" ({'/'.join(a.choices)})" if a.choices else "")
+            for a in s.args
+        )
+        rows.append(f"| `{s.name}` | {s.role.value} | {where[s.where]} | {args} | {s.help} |")
+    return "\n".join(rows) + "\n"

@@ -1,0 +1,181 @@
+"""The telemetry block's layout and the enums decoded from it, and the protocol version.
+
+The real-time process writes the block (`orccadd.wire.telemetry`), the command daemon reads it;
+both take every index and enum from here. Values are float64 throughout (one numpy view per area):
+
+- header: sizes, the writer's pid, a heartbeat (monotonic ns of the last tick), loop counters;
+- status: the machine's state, under a sequence lock (odd while writing);
+- tick ring: one record per control tick (`TICK_FIELDS`, then `TICK_VECTORS` one value per joint);
+- trace ring: one record per automaton instant, task event or operator action.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+from orccadd.types import CommandMode, Phase, Status
+
+PROTOCOL_VERSION = 2  # bumped when a request, reply, record layout or enum changes meaning
+
+MAGIC = 0x0CCADD02
+HEADER_LEN = 16
+STATUS_LEN = 48
+TRACE_IDX = 16  # input / action indices kept per trace record
+
+
+class MachineState(IntEnum):
+    IDLE = 0  # no mission loaded: the Hold task holds the arm
+    READY = 1  # a verified mission is loaded, not running
+    RUNNING = 2
+    HOLDING = 3  # the mission is suspended; the Hold task holds the arm
+
+
+class MissionResult(IntEnum):
+    NONE = 0
+    SUCCESS = 1
+    SAFE = 2  # the safe procedure ran to its end
+    FAILED = 3  # a type 3 exception inside the safe procedure
+    ABORTED = 4  # the operator aborted
+    STOPPED = 5  # shut down (SIGTERM) while running
+
+
+class OperatorAction(IntEnum):
+    """Operator actions, as recorded in the trace (the `code` of a COMMAND record)."""
+
+    LOAD = 1
+    START = 2
+    STOP = 3
+    ABORT = 4
+    HOLD = 5
+    RESUME = 6
+    RESET = 7
+    TUNE = 8
+    SEND = 9
+    INJECT = 10
+    SHUTDOWN = 11
+
+
+class Trace(IntEnum):
+    """What a trace record is."""
+
+    INSTANT = 0  # an automaton reaction: inputs -> actions
+    EVENT = 1  # a task event the automaton does not see (T1, the Hold task's events)
+    COMMAND = 2  # an operator action (start, stop, abort, hold, resume, reset, tune)
+
+
+class H(IntEnum):
+    """Header slots."""
+
+    MAGIC = 0
+    DOF = 1
+    TICK_LEN = 2
+    TICK_WIDTH = 3
+    TICK_HEAD = 4
+    TRACE_LEN = 5
+    TRACE_WIDTH = 6
+    TRACE_HEAD = 7
+    PID = 8
+    HEARTBEAT_NS = 9
+    PERIOD_S = 10
+    TICKS = 11  # written by the control thread every tick
+    OVERRUNS = 12
+    CONSECUTIVE_OVERRUNS = 13
+    SWITCHES = 14
+
+
+class S(IntEnum):
+    """Status slots (under the sequence lock in slot 0)."""
+
+    SEQ = 0
+    MACHINE = 1  # MachineState
+    AUTOMATON_STATE = 2
+    MISSION_GEN = 3  # changes each time a mission is loaded (names may change)
+    INSTANTS = 4
+    RESULT = 5  # MissionResult of the last run
+    FAULTED = 6  # 1: the resource was safe-stopped; `reset` is needed before motion
+    HELPER_PID = 7  # a process the resource runs (the simulated plant), 0 if none
+
+
+class T(IntEnum):
+    """Scalar fields of a tick record, in order; `TICK_VECTORS` follow, one value per joint."""
+
+    SEQ = 0
+    T_S = 1  # release time of the tick (s, the loop's clock)
+    WAKE_US = 2  # wake-up latency
+    COMPUTE_US = 3
+    TASK = 4  # telemetry task id: 0 the Hold task, k the mission's task k-1
+    PHASE = 5  # Phase
+    WROTE = 6  # 1 if a command was sent
+    STATUS = 7  # Status flags of the resource
+
+
+TICK_FIELDS = tuple(f.name.lower() for f in T)
+TICK_VECTORS = ("q", "dq", "tau", "cmd")
+
+
+class R(IntEnum):
+    """Fields of a trace record, in order; then `TRACE_IDX` input and `TRACE_IDX` action indices."""
+
+    SEQ = 0
+    KIND = 1  # Trace
+    T_S = 2
+    WALL_S = 3
+    STATE_FROM = 4
+    STATE_TO = 5
+    CODE = 6  # event id (EVENT) or OperatorAction (COMMAND)
+    N_IN = 7
+    N_ACT = 8
+
+
+TRACE_WIDTH = len(R) + 2 * TRACE_IDX
+
+
+def tick_width(dof: int) -> int:
+    """The scalar fields, then q, dq, tau and the command sent, one value per joint each."""
+    return len(T) + len(TICK_VECTORS) * dof
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Sizes of one telemetry block."""
+
+    dof: int
+    tick_len: int
+    trace_len: int
+
+    @property
+    def size_bytes(self) -> int:
+        n = HEADER_LEN + STATUS_LEN + self.tick_len * tick_width(self.dof) + self.trace_len * TRACE_WIDTH
+        return 8 * n
+
+
+def status_names(flags: int) -> list[str]:
+    """The `Status` flags set in `flags`, lower case (`["stopped", "torque_off"]`)."""
+    return [f.name.lower() for f in Status if f and int(flags) & f and f.name]
+
+
+__all__ = [
+    "HEADER_LEN",
+    "MAGIC",
+    "PROTOCOL_VERSION",
+    "STATUS_LEN",
+    "TICK_FIELDS",
+    "TICK_VECTORS",
+    "TRACE_IDX",
+    "TRACE_WIDTH",
+    "CommandMode",
+    "H",
+    "Layout",
+    "MachineState",
+    "MissionResult",
+    "OperatorAction",
+    "Phase",
+    "R",
+    "S",
+    "Status",
+    "T",
+    "Trace",
+    "status_names",
+    "tick_width",
+]
