@@ -9,7 +9,7 @@ from pathlib import Path
 import grimp
 
 ROOT = Path(__file__).resolve().parents[1]
-HEAVY = ("pinocchio", "canopen", "can", "ruckig", "lark", "matplotlib", "serial", "dynamixel_sdk", "rtde_receive")
+HEAVY = ("pinocchio", "canopen", "can", "ruckig", "lark", "matplotlib", "serial", "dynamixel_sdk")
 OURS_HEAVY = ("orccadd.daemon", "orccadd.physres", "orccadd.task", "orccadd.modules", "orccadd.model")
 
 

@@ -1,7 +1,7 @@
 """Rewrite the command list of docs/protocol.md from the command table (orccadd/wire/commands.py).
 
-    python tools/protocol_doc.py          # rewrite in place
-    python tools/protocol_doc.py --check  # exit 1 if the document is out of date
+python tools/protocol_doc.py          # rewrite in place
+python tools/protocol_doc.py --check  # exit 1 if the document is out of date
 """
 
 from __future__ import annotations
