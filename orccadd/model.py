@@ -61,6 +61,25 @@ class RobotModel:
     def dof(self) -> int:
         return len(self.joint_names)
 
+    def gravity_loaded(self, threshold_nm: float = 1e-3) -> bool:
+        """Whether some joint must hold a load against gravity somewhere in its range (checked at
+        home, at zero and at the range's corners of each joint): a stop without brakes drops it."""
+        data = self.new_data()
+        poses = [self.home_rad, np.clip(np.zeros(self.dof), self.q_min_rad, self.q_max_rad)]
+        for j in range(self.dof):
+            for bound in (
+                self.q_min_rad[j],
+                self.q_max_rad[j],
+                0.5 * (self.q_min_rad[j] + self.q_max_rad[j]),
+            ):
+                q = self.home_rad.copy()
+                q[j] = bound
+                poses.append(q)
+        return any(
+            float(np.abs(pin.computeGeneralizedGravity(self.model, data, q)).max()) > threshold_nm
+            for q in poses
+        )
+
     def new_data(self) -> pin.Data:
         """A fresh Pinocchio workspace for this model (allocate once, outside ticks)."""
         return self.model.createData()

@@ -14,6 +14,7 @@ from typing import Any
 from orccadd.config.robot import RobotConfig, read_robot_config
 from orccadd.model import RobotModel
 from orccadd.physres import PhysicalResource, backend_class
+from orccadd.physres.description import check_description
 
 
 @dataclass(frozen=True)
@@ -26,16 +27,22 @@ class Robot:
 
 
 def load_robot_config(path: str | Path, *, check_model: bool = True) -> RobotConfig:
-    """Read a robot config, check its backend's settings and (by default) its URDF.
+    """Read a robot config, check its backend's settings, what the backend's description rules
+    out, and (by default) its URDF.
 
     Raises `ConfigError` naming the file, key, value and what was allowed. Not for a tick.
     """
     cfg = read_robot_config(path)
     backend = backend_class(cfg.resource.backend, cfg.source)
     settings = backend.load_settings(cfg.resource.settings or {}, cfg, cfg.source)
-    cfg = replace(cfg, backend_settings=settings)
-    if check_model:
-        RobotModel.from_config(cfg)  # raises ConfigError/ModelError on mismatch
+    return _checked(replace(cfg, backend_settings=settings), backend, check_model)
+
+
+def _checked(cfg: RobotConfig, backend: type[PhysicalResource], check_model: bool) -> RobotConfig:
+    description = backend.describe(cfg)
+    model = RobotModel.from_config(cfg) if check_model else None  # ConfigError/ModelError on mismatch
+    # without the model, an arm is taken as loaded by gravity (the safe assumption)
+    check_description(cfg, description, gravity_loaded=model.gravity_loaded() if model else True)
     return cfg
 
 
@@ -43,9 +50,8 @@ def with_backend(cfg: RobotConfig, backend: str, **settings: Any) -> RobotConfig
     """The same robot on another resource backend (e.g. `sim_process`), settings re-checked."""
     raw = {**(cfg.resource.settings or {}), **settings}
     cfg = replace(cfg, resource=replace(cfg.resource, backend=backend, settings=raw))
-    return replace(
-        cfg, backend_settings=backend_class(backend, cfg.source).load_settings(raw, cfg, cfg.source)
-    )
+    cls = backend_class(backend, cfg.source)
+    return _checked(replace(cfg, backend_settings=cls.load_settings(raw, cfg, cfg.source)), cls, False)
 
 
 def create_resource(cfg: RobotConfig, model: RobotModel | None = None) -> PhysicalResource:

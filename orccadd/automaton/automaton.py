@@ -7,8 +7,11 @@ stops before starts (the switching order of seed §5.1: the old law stops, the n
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
 
 from orccadd.automaton.program import Program
 
@@ -39,6 +42,13 @@ class Automaton:
     @property
     def n_states(self) -> int:
         return len(self.table)
+
+    def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
+        """Pickled with plain dict rows (the daemon compiles in a child process), read-only again
+        once unpickled."""
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        fields["table"] = tuple(dict(row) for row in self.table)
+        return (_unpickle, (fields,))
 
     @property
     def n_transitions(self) -> int:
@@ -99,3 +109,8 @@ class Runner:
             hit = self.table[s][self.automaton.normalize(s, inputs)]
         self.state = hit[0]
         return hit[1]
+
+
+def _unpickle(fields: dict[str, Any]) -> Automaton:
+    fields["table"] = tuple(MappingProxyType(row) for row in fields["table"])
+    return Automaton(**fields)

@@ -14,19 +14,20 @@ import asyncio
 import contextlib
 import grp
 import json
+import logging
 import os
 import pwd
 import signal
 import socket
 import stat
 import struct
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from orccadd.cmdd import views
 from orccadd.config.robot import DaemonConfig, read_robot_config
+from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.wire.commands import (
     COMMANDS,
     MAX_LINE,
@@ -41,6 +42,8 @@ from orccadd.wire.commands import (
 )
 from orccadd.wire.schema import PROTOCOL_VERSION, H, S
 from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
+
+log = logging.getLogger("orccadd.cmdd")
 
 MAX_CLIENTS = 32
 RT_TIMEOUT_S = 5.0
@@ -207,7 +210,7 @@ class CommandDaemon:
             if self.csv is not None:
                 self.csv.pump()
             if self.rt.closed or not _alive(int(self.tel.header[H.PID])):
-                print("orccadd-cmdd: the real-time process is gone; exiting", file=sys.stderr)
+                log.info("the real-time process is gone; exiting")
                 self.done.set()
                 return
 
@@ -274,7 +277,7 @@ class CommandDaemon:
             except (ConnectionError, asyncio.CancelledError):
                 raise
             except Exception as e:  # a bug must not take the command daemon down
-                print(f"orccadd-cmdd: {cmd} failed: {type(e).__name__}: {e}", file=sys.stderr)
+                log.exception("%s failed: %s: %s", cmd, type(e).__name__, e)
                 writer.write(encode(error_reply(rid, f"internal error: {type(e).__name__}: {e}")))
         await writer.drain()
 
@@ -413,11 +416,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rt-socket", required=True)
     ap.add_argument("--telemetry", required=True, help="the real-time process's shared-memory block")
     args = ap.parse_args(argv)
+    try:
+        setup_logging("orccadd.cmdd")
+    except LogSetupError as e:
+        ap.exit(2, f"{ap.prog}: error: {e}\n")
     cfg = read_robot_config(args.config)
     try:
         d = CommandDaemon(cfg.daemon, args.socket, args.rt_socket, args.telemetry)
     except (OSError, ValueError) as e:
-        print(f"orccadd-cmdd: cannot attach to the real-time process: {e}", file=sys.stderr)
+        log.error("cannot attach to the real-time process: %s", e)
         return 2
     asyncio.run(d.serve())
     return 0

@@ -8,13 +8,19 @@ changed nothing.
 from __future__ import annotations
 
 import dataclasses
+import pickle
+import shutil
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any, Protocol
 
+from orccadd.automaton import Automaton, Report
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.loop import SwitchingLoop
-from orccadd.daemon.mission import load_mission
+from orccadd.daemon.mission import prepare_mission
 from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError, Pending, Result
@@ -22,13 +28,13 @@ from orccadd.daemon.supervision import Supervisor
 from orccadd.errors import OrccaddError, ParameterError
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.mailbox import MailboxFullError
-from orccadd.runtime.rt import background_priority
 from orccadd.task import RobotTask
 from orccadd.task.events import EventQueue, EventRegistry
 from orccadd.wire.commands import handles
 from orccadd.wire.schema import PROTOCOL_VERSION, MachineState, OperatorAction, Trace
 
 MAX_INJECTED_MS = 5000.0  # longest injected tick: a stall, not a hang
+LOAD_TIMEOUT_S = 600.0  # compiling and verifying a large mission takes minutes (README, benchmarks)
 TUNE_WAIT_S = 1.0  # a tune not applied within this (or 100 periods) is reported as such
 
 
@@ -55,6 +61,7 @@ class RtCommands:
 
     def __init__(self, machine: Machine) -> None:
         self.m = machine
+        self._loading: subprocess.Popen[bytes] | None = None  # the compiler process of a load
 
     def _trace(self, action: OperatorAction) -> float:
         t = self.m.now_s()
@@ -71,14 +78,51 @@ class RtCommands:
         return {"params": {t.name: t.parameters() for t in tasks}}
 
     @handles("load")
-    def load(self, path: str) -> Result:
+    def load(self, path: str) -> Result | Pending:
+        """Compile and verify in a child process (never in this one: see `compile_worker`),
+        then build the tasks here when it is done: a pending reply meanwhile."""
         mc = self.m.mission
         mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
+        if self._loading is not None:
+            raise CommandError("a mission is being loaded: wait for its answer")
         if not Path(path).is_file():
             raise CommandError(f"{path}: no such mission file")
+        work = Path(tempfile.mkdtemp(prefix="orccadd-load-"))
+        out = work / "result.pickle"
+        cmd = [sys.executable, "-m", "orccadd.daemon.compile_worker", path, str(out)]
+        child = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+        self._loading = child
+
+        def done() -> None:
+            self._loading = None
+            shutil.rmtree(work, ignore_errors=True)
+
+        def poll() -> Result | None:
+            if child.poll() is None:
+                return None
+            try:
+                result = pickle.loads(out.read_bytes()) if out.exists() else None
+            finally:
+                done()
+            if isinstance(result, str):
+                raise CommandError(result)
+            if not isinstance(result, tuple):
+                raise CommandError(f"{path}: the compiler process failed (exit code {child.returncode})")
+            return self._install(path, *result)
+
+        def expire() -> Result:
+            child.kill()
+            child.wait()
+            done()
+            raise CommandError(f"{path}: not compiled and verified within {LOAD_TIMEOUT_S:g} s")
+
+        return Pending(poll, time.monotonic_ns() + int(LOAD_TIMEOUT_S * 1e9), expire)
+
+    def _install(self, path: str, automaton: Automaton, report: Report) -> Result:
+        mc = self.m.mission
+        mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
         try:
-            with background_priority():  # long, not real-time: below the control thread
-                loaded = load_mission(path, self.m.resource, self.m.registry, self.m.queue)
+            loaded = prepare_mission(path, automaton, report, self.m.resource, self.m.registry, self.m.queue)
         except OrccaddError as e:
             raise CommandError(str(e)) from None
         mc.install(loaded)

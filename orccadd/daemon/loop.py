@@ -112,16 +112,11 @@ class SwitchingLoop(ControlLoop):
             end = time.perf_counter_ns() + self._busy_ns
             while time.perf_counter_ns() < end:
                 pass
-        self._publish(t_s, task)
         pushed = self.queue.pushed
         if pushed != self._notified:
             self._notified = pushed
             with contextlib.suppress(BlockingIOError):  # wake-ups already pending
                 os.write(self.wake_fd, b"e")
-        if self._slack_wanted:
-            self._slack_wanted = False
-            with contextlib.suppress(BlockingIOError):
-                os.write(self._slack_w, b"s")
 
     def _switch(self, new: RobotTask) -> None:
         old = self.active
@@ -138,8 +133,10 @@ class SwitchingLoop(ControlLoop):
         self.active = new
         self.switches += 1
 
-    def _publish(self, t_s: float, task: RobotTask) -> None:
-        tel, st, stats = self.tel, self.resource.state, self.stats
+    def after_step(self, t_s: float) -> None:
+        """The tick's telemetry record, with this tick's own wake-up and compute time."""
+        tel, st, stats, task = self.tel, self.resource.state, self.stats, self.active
+        assert task is not None
         rec = tel.begin_tick()
         rec[T.T_S] = t_s
         rec[T.WAKE_US] = stats.last_latency_ns * 1e-3
@@ -159,3 +156,7 @@ class SwitchingLoop(ControlLoop):
         hdr[H.CONSECUTIVE_OVERRUNS] = stats.consecutive_overruns
         hdr[H.SWITCHES] = self.switches
         tel.commit_tick(rec, time.monotonic_ns())
+        if self._slack_wanted:  # the tick is over and published: a period lies ahead
+            self._slack_wanted = False
+            with contextlib.suppress(BlockingIOError):
+                os.write(self._slack_w, b"s")

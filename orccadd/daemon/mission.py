@@ -57,10 +57,30 @@ def load_mission(
 ) -> LoadedMission:
     """Compile, verify, check against this robot, build the tasks. Raises `OrccaddError`
     (MissionError with file:line:col, or VerificationError with the counterexamples)."""
+    automaton, report = compile_and_verify(path)
+    return prepare_mission(path, automaton, report, resource, registry, queue)
+
+
+def compile_and_verify(path: str | Path) -> tuple[Automaton, Report]:
+    """The long, pure part of a load (parse, compile, verify): the real-time process runs it in
+    a child process (`orccadd.daemon.compile_worker`), so that it never holds the control
+    thread's interpreter lock. `VerificationError` with the counterexamples if a check fails."""
     automaton = compile_file(path, task_files=read_task_interface)
     report = verify(automaton)
     if not report.ok:
         raise VerificationError(f"{path}: the mission fails its checks:\n{report.format()}")
+    return automaton, report
+
+
+def prepare_mission(
+    path: str | Path,
+    automaton: Automaton,
+    report: Report,
+    resource: PhysicalResource,
+    registry: EventRegistry,
+    queue: EventQueue,
+) -> LoadedMission:
+    """Check a verified mission against this robot and build its tasks (milliseconds)."""
     p = automaton.program
     text = p.text
     for decl in p.ast.tasks:

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import socket
+
+log = logging.getLogger("orccadd")
 
 
 class Notifier:
@@ -13,6 +16,7 @@ class Notifier:
         addr = address if address is not None else os.environ.get("NOTIFY_SOCKET", "")
         self.address = "\0" + addr[1:] if addr.startswith("@") else addr
         self.sock: socket.socket | None = None
+        self.failed = False  # a send failed (logged once: the watchdog pings several times a second)
         if self.address:
             self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC)
         usec = os.environ.get("WATCHDOG_USEC", "")
@@ -30,7 +34,14 @@ class Notifier:
         try:
             self.sock.sendto("\n".join(fields).encode(), self.address)
             return True
-        except OSError:
+        except OSError as e:
+            if not self.failed:
+                self.failed = True
+                log.warning(
+                    "sd_notify to %s failed: %s (later failures not logged)",
+                    self.address.replace("\0", "@"),
+                    e,
+                )
             return False
 
     def close(self) -> None:

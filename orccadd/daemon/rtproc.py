@@ -36,9 +36,11 @@ from orccadd.daemon.machine import Machine
 from orccadd.daemon.notify import Notifier
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.errors import OrccaddError
+from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.robot import create_resource, load_robot_config, with_backend
-from orccadd.runtime import WallClock, enter_realtime, leave_realtime
+from orccadd.runtime import enter_realtime, leave_realtime
 from orccadd.task import load_task_file
+from orccadd.task.loop import resource_clock
 from orccadd.types import CommandMode, Status
 from orccadd.wire.commands import COMMANDS, ProtocolError, check_args
 from orccadd.wire.schema import H, Layout, MachineState, MissionResult, OperatorAction, Trace
@@ -63,8 +65,8 @@ class RealtimeProcess:
         self.socket_path = socket_path
         self.rt_path = rt_socket_path(socket_path)
         self.notifier = Notifier()
-        self.clock = WallClock(spin_margin_s=args.spin_us * 1e-6)
         self.resource = create_resource(cfg)
+        self.clock = resource_clock(self.resource, spin_margin_s=args.spin_us * 1e-6)
         self.tel: TelemetryBlock | None = None
         self.listener: socket.socket | None = None
         self.conn: socket.socket | None = None
@@ -96,7 +98,10 @@ class RealtimeProcess:
             allow_fault_injection=self.args.allow_fault_injection,
         )
         if self.args.mission:
-            self.machine.command("load", {"path": str(Path(self.args.mission).resolve())})
+            reply = self.machine.command("load", {"path": str(Path(self.args.mission).resolve())})
+            while isinstance(reply, Pending):  # before the loop starts: waiting is fine here
+                reply = reply.poll() or (reply.expire() if time.monotonic_ns() > reply.deadline_ns else reply)
+                time.sleep(0.01)
         self._open_socket()
         self.thread = threading.Thread(target=self._control_main, name="control", daemon=True)
         self.thread.start()
@@ -133,12 +138,13 @@ class RealtimeProcess:
     def _control_main(self) -> None:
         rt = enter_realtime(self.cfg.daemon.control_priority)
         for w in rt.warnings:
-            print(f"orccadd: warning: control thread: {w}", file=sys.stderr)
+            log.warning("control thread: %s", w)
         try:
             self.machine.loop.executor.run()
         except BaseException as e:
             self.control_error = f"control thread failed: {type(e).__name__}: {e}"
             self.resource.safe_stop()
+            log.exception("control thread failed")
             with contextlib.suppress(OSError):
                 os.write(self.wake_w, b"x")
         finally:
@@ -148,16 +154,19 @@ class RealtimeProcess:
     def run(self) -> int:
         rt = enter_realtime(self.cfg.daemon.automaton_priority)
         for w in rt.warnings:
-            print(f"orccadd: warning: automaton thread: {w}", file=sys.stderr)
+            log.warning("automaton thread: %s", w)
         sig_r, sig_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         signal.set_wakeup_fd(sig_w, warn_on_full_buffer=False)
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, self._on_signal)
-        print(
-            f"orccadd: {self.cfg.name} ({self.cfg.dof} joints, {self.cfg.resource.backend}), period "
-            f"{self.cfg.control_period_s * 1e3:g} ms, socket {self.socket_path}, {rt.describe()}",
-            file=sys.stderr,
-            flush=True,
+        log.info(
+            "%s (%d joints, %s), period %g ms, socket %s, %s",
+            self.cfg.name,
+            self.cfg.dof,
+            self.cfg.resource.backend,
+            self.cfg.control_period_s * 1e3,
+            self.socket_path,
+            rt.describe(),
         )
         self.notifier.send("READY=1", f"STATUS=idle on {self.socket_path}")
         next_ping = 0.0
@@ -373,7 +382,7 @@ class RealtimeProcess:
     def shutdown(self) -> int:
         m, res = self.machine, self.resource
         why = self.stop_requested or self.control_error
-        print(f"orccadd: stopping ({why}): safe stop first", file=sys.stderr, flush=True)
+        log.log(logging.ERROR if self.control_error else logging.INFO, "stopping (%s): safe stop first", why)
         self.notifier.send("STOPPING=1", f"STATUS=stopping ({why})")
         if m.mission.running:
             m.mission.result = MissionResult.STOPPED
@@ -407,11 +416,10 @@ class RealtimeProcess:
         res.shutdown()
         if self.tel is not None:
             self.tel.close()
-        print(
-            f"orccadd: {'arm at rest' if stopped else 'safe stop not confirmed'}, hardware released",
-            file=sys.stderr,
-            flush=True,
-        )
+        if stopped:
+            log.info("arm at rest, hardware released")
+        else:
+            log.error("safe stop not confirmed, hardware released")
         return 1 if self.control_error or not stopped else 0
 
 
@@ -425,6 +433,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--in-process-sim", action="store_true", help="simulate the arm inside this process")
     ap.add_argument("--spin-us", type=float, default=0.0, help="wake early and spin (µs)")
     args = ap.parse_args(argv)
+    try:
+        setup_logging("orccadd")
+    except LogSetupError as e:
+        ap.exit(2, f"{ap.prog}: error: {e}\n")
     # Only real-time threads live here, but a long Python computation (loading a mission) must
     # hand the GIL to the control thread within a fraction of a period, not the default 5 ms.
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
@@ -435,12 +447,12 @@ def main(argv: list[str] | None = None) -> int:
             cfg = with_backend(cfg, "sim_process")
         proc = RealtimeProcess(cfg, args.socket or cfg.daemon.socket, args)
     except OrccaddError as e:
-        print(f"orccadd: {e}", file=sys.stderr)
+        log.error("%s", e)
         return 2
     try:
         proc.start()
     except (OrccaddError, CommandError) as e:
-        print(f"orccadd: {e}", file=sys.stderr)
+        log.error("%s", e)
         proc.abandon()
         return 2
     return proc.run()

@@ -15,10 +15,10 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import logging
 import os
 import signal
 import socket
-import sys
 import threading
 from dataclasses import replace
 from pathlib import Path
@@ -33,9 +33,12 @@ from orccadd.drivesim.axis import AxisUnits
 from orccadd.drivesim.simulator import AxisSpec, DriveSimulator
 from orccadd.drivesim.socketcand import QueuedSocketcandBus
 from orccadd.errors import OrccaddError
+from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.physres.sim import SimSettings, load_sim_settings
 from orccadd.robot import load_robot_config
 from orccadd.runtime import Summary, enter_realtime
+
+log = logging.getLogger("orccadd.drivesim")
 
 
 def plant_config(cfg: RobotConfig, plant_file: str) -> RobotConfig:
@@ -109,6 +112,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--nice", type=int, default=0, help="scheduling weight at normal priority (-20..19)")
     args = ap.parse_args(argv)
     try:
+        setup_logging("orccadd.drivesim")
+    except LogSetupError as e:
+        ap.exit(2, f"{ap.prog}: error: {e}\n")
+    try:
         cfg = load_robot_config(args.config)
         s = cfg.backend_settings
         if not isinstance(s, CanopenSettings):
@@ -124,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         sim = DriveSimulator(plant_config(cfg, args.plant), specs, bus)
     except (OrccaddError, can.CanError, OSError) as e:
-        print(f"drivesim: {e}", file=sys.stderr)
+        log.error("%s", e)
         return 1
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -135,10 +142,10 @@ def main(argv: list[str] | None = None) -> int:
         try:
             os.nice(args.nice)
         except OSError as e:
-            print(f"drivesim: warning: nice {args.nice} refused ({e.strerror})", file=sys.stderr)
+            log.warning("nice %d refused (%s)", args.nice, e.strerror)
     if args.priority:
         for w in enter_realtime(args.priority, lock_memory=False, freeze_gc=False).warnings:
-            print(f"drivesim: warning: {w}", file=sys.stderr)
+            log.warning("%s", w)
     # six object dictionaries and a Pinocchio model are many long-lived objects: frozen, the
     # collector's full passes skip them (they stalled this loop for up to ~0.1 s)
     gc.collect()
@@ -153,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     runner.join(5)
     srv.close()
     bus.shutdown()
+    log.info("stopped after %d SYNCs", sim.syncs)
     return 0
 
 

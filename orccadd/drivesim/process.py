@@ -8,6 +8,7 @@ import select
 import socket
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -17,16 +18,17 @@ class DriveSimProcess:
         self, config: str | Path, *extra: str, env: dict[str, str] | None = None, timeout_s: float = 60.0
     ) -> None:
         cmd = [sys.executable, "-m", "orccadd.drivesim", "--config", str(config), *extra]
+        # its log goes to a file: a pipe nobody reads while it runs would block it once full
+        self.log = tempfile.TemporaryFile("w+")  # noqa: SIM115 - lives as long as the process
         self.proc = subprocess.Popen(
-            cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})}
+            cmd, stdout=subprocess.PIPE, stderr=self.log, text=True, env={**os.environ, **(env or {})}
         )
         assert self.proc.stdout is not None
         ready, _, _ = select.select([self.proc.stdout], [], [], timeout_s)
         line = self.proc.stdout.readline() if ready else ""
         if "ready" not in line:
             self.stop()
-            err = self.proc.stderr.read() if self.proc.stderr else ""
-            raise RuntimeError(f"drive simulator did not start: {line!r} {err}")
+            raise RuntimeError(f"drive simulator did not start: {line!r} {self.log_text()}")
         self.control_port = int(line.rsplit(":", 1)[1])
 
     def request(self, req: dict[str, Any]) -> dict[str, Any]:
@@ -46,6 +48,11 @@ class DriveSimProcess:
 
     def status(self) -> dict[str, Any]:
         return self.request({"status": True})
+
+    def log_text(self) -> str:
+        """What the simulator logged so far."""
+        self.log.seek(0)
+        return self.log.read()
 
     def stop(self) -> int:
         if self.proc.poll() is None:

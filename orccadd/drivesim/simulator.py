@@ -8,6 +8,7 @@ keeps moving (or falls, braked) whatever the bus does. Faults are injected with 
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections import deque
@@ -21,6 +22,8 @@ from orccadd.drivesim.axis import EMCY_FOLLOWING_ERROR, EMCY_OVERCURRENT, ERR_RE
 from orccadd.drivesim.plant import DriveTrainArm
 from orccadd.drivesim.slave import COB_SYNC, SlaveNode
 from orccadd.model import RobotModel
+
+log = logging.getLogger("orccadd.drivesim")
 
 FAULTS = ("overcurrent", "following_error", "heartbeat_silence", "node_silence", "clear")
 
@@ -48,6 +51,7 @@ class DriveSimulator:
         self.syncs = 0
         self.period_s = cfg.control_period_s  # the drives' cycle when their dictionary has none
         self.bus_error = ""
+        self._errors_logged: set[str] = set()
         # how long frames waited between the bus and this loop (the hub stamps each frame with
         # the wall clock as it forwards it): a drive on a real bus reads its frames within µs
         self.frame_age_s: deque[float] = deque(maxlen=10_000)
@@ -59,7 +63,7 @@ class DriveSimulator:
         try:
             self.bus.send(msg)
         except (can.CanError, OSError) as e:  # the bus is gone: the drives' own watchdogs act
-            self.bus_error = str(e)
+            self._bus_failed(e)
 
     def _send_queued(self) -> None:
         """Hand frames queued by a batching bus (`QueuedSocketcandBus`) to the bus, in order."""
@@ -68,7 +72,14 @@ class DriveSimulator:
             try:
                 send_queued()
             except (can.CanError, OSError) as e:
-                self.bus_error = str(e)
+                self._bus_failed(e)
+
+    def _bus_failed(self, e: Exception) -> None:
+        """Record a bus error; each distinct message logged once (a dead bus fails every call)."""
+        self.bus_error = str(e)
+        if self.bus_error not in self._errors_logged and len(self._errors_logged) < 16:
+            self._errors_logged.add(self.bus_error)
+            log.warning("bus error: %s", e)
 
     def boot(self) -> None:
         now = time.monotonic()
@@ -99,7 +110,7 @@ class DriveSimulator:
                     batch.append(msg)
                     msg = self.bus.recv(0.0)
             except (can.CanError, OSError) as e:
-                self.bus_error = str(e)
+                self._bus_failed(e)
                 time.sleep(poll_s)
             now = time.monotonic()
             wall = time.time()
@@ -160,3 +171,4 @@ class DriveSimulator:
             else:
                 raise ValueError(f"unknown fault {fault!r} (faults: {', '.join(FAULTS)})")
             self._send_queued()
+        log.info("node %d: %s injected", node_id, fault)

@@ -21,7 +21,7 @@ always get their controlword and a target that holds the position.
 
 from __future__ import annotations
 
-import sys
+import logging
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -99,7 +99,7 @@ class Canopen402Arm(PhysicalResource):
     # ---- lifecycle ------------------------------------------------------------------------
     def _on_configure(self) -> None:
         for w in self.master.start():
-            print(f"orccadd: warning: {self.name}: {w}", file=sys.stderr)
+            logging.getLogger("orccadd.canopen").warning("%s: %s", self.name, w)
         modes = frozenset.intersection(*(a.modes for a in self.master.axes))
         self.supported_modes = frozenset(COMMAND_OF[m] for m in modes)
         self._wait(lambda: all(a.tpdo_seen_s for a in self.master.axes), "a first TPDO from every drive")

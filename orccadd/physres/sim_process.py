@@ -8,11 +8,13 @@ coming; the controller reports COMM_LOST (type 3) when the plant's heartbeat sto
 from __future__ import annotations
 
 import contextlib
+import os
 import pickle
+import select
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -22,7 +24,7 @@ from orccadd.config.schema import field
 from orccadd.errors import ResourceError
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
-from orccadd.physres.description import ResourceDescription
+from orccadd.physres.description import ClockSource, ResourceDescription
 from orccadd.physres.shm_channel import Ctl, PlantChannel, Request
 from orccadd.physres.sim import INJECTED_FAULT_CODE, SimSettings, load_sim_settings, simulated_description
 from orccadd.state import FloatArray, JointState
@@ -41,6 +43,8 @@ class SimProcessSettings(SimSettings):
     startup_timeout_s: float = field(default=30.0, bounds=(0.1, 600.0))
     plant_priority: int = field(default=70, bounds=(0, 99))
     plant_cpu: int = field(default=-1, bounds=(-1, 1023))  # -1: let the scheduler choose
+    # the plant's own cycle paces the control loop, as a UR controller's RTDE stream does
+    paced_by_plant: bool = field(default=False)
 
 
 class SimProcessArm(PhysicalResource):
@@ -50,7 +54,11 @@ class SimProcessArm(PhysicalResource):
 
     @classmethod
     def describe(cls, config: RobotConfig) -> ResourceDescription:
-        return simulated_description("sim_process", config)
+        d = simulated_description("sim_process", config)
+        s = config.backend_settings
+        if s is not None and s.paced_by_plant:
+            d = replace(d, clock=ClockSource.DEVICE, device_period_s=config.control_period_s)
+        return d
 
     @classmethod
     def load_settings(cls, raw: Any, cfg: RobotConfig, file: str) -> SimProcessSettings:
@@ -68,8 +76,9 @@ class SimProcessArm(PhysicalResource):
         self._buf = np.zeros(1 + 3 * self.dof)
         self._last_heartbeat = -1
         self._silent_reads = 0
-        self._wrote = False
         self._last_cmd: FloatArray = np.zeros(self.dof)
+        self._cycle_r = -1  # the plant's cycle pipe (paced_by_plant)
+        self.cycles_dropped = 0
         self._settled_heartbeat = 0
 
     # ---- lifecycle ------------------------------------------------------------------------
@@ -95,7 +104,16 @@ class SimProcessArm(PhysicalResource):
             "--priority",
             str(s.plant_priority),
         ]
-        self.process = subprocess.Popen(cmd, stdin=subprocess.PIPE)
+        pass_fds: tuple[int, ...] = ()
+        if s.paced_by_plant:
+            self._cycle_r, cycle_w = os.pipe2(os.O_CLOEXEC | os.O_NONBLOCK)
+            cmd += ["--cycle-fd", str(cycle_w)]
+            pass_fds = (cycle_w,)
+        try:
+            self.process = subprocess.Popen(cmd, stdin=subprocess.PIPE, pass_fds=pass_fds)
+        finally:
+            for fd in pass_fds:
+                os.close(fd)
         assert self.process.stdin is not None
         self.process.stdin.write(pickle.dumps(self.config))
         self.process.stdin.close()
@@ -169,7 +187,11 @@ class SimProcessArm(PhysicalResource):
 
     def _details(self) -> dict[str, float | int | str]:
         ch = self.channel
-        return {**super()._details(), "plant_channel": ch.name if ch is not None else ""}
+        return {
+            **super()._details(),
+            "plant_channel": ch.name if ch is not None else "",
+            "cycles_dropped": self.cycles_dropped,
+        }
 
     def plant_alive(self) -> bool:
         return self.process is not None and self.process.poll() is None
@@ -186,6 +208,9 @@ class SimProcessArm(PhysicalResource):
         self._release()
 
     def _release(self) -> None:
+        if self._cycle_r >= 0:
+            os.close(self._cycle_r)
+            self._cycle_r = -1
         if self.channel is not None:
             self.channel.close(unlink=True)
             self.channel = None
@@ -216,10 +241,24 @@ class SimProcessArm(PhysicalResource):
                 self.fault_message = "the arm stopped on its own (command watchdog)"
             elif status & Status.STOPPED:
                 self._mark_stopped(bool(status & Status.TORQUE_OFF))
-        elif self.lifecycle is Lifecycle.ACTIVE and not self._wrote and not self._stop_flags:
-            ch.send_command(KEEPALIVE, self._last_cmd)  # no new command: the plant holds its last
-        self._wrote = False
         return flags
+
+    def _on_keep_alive(self, t_s: float) -> None:
+        ch = self.channel
+        if ch is not None and self.lifecycle is Lifecycle.ACTIVE and not self._stop_flags:
+            ch.send_command(KEEPALIVE, self._last_cmd)  # no new command: the plant holds its last
+
+    def wait_for_cycle(self, timeout_s: float) -> int:
+        """The plant's next step (paced_by_plant): its arrival time, or -1 after `timeout_s`."""
+        if self._cycle_r < 0:
+            return super().wait_for_cycle(timeout_s)
+        ready, _, _ = select.select([self._cycle_r], [], [], max(0.0, timeout_s))
+        if not ready:
+            return -1
+        arrived = time.monotonic_ns()
+        with contextlib.suppress(BlockingIOError):
+            self.cycles_dropped += max(0, len(os.read(self._cycle_r, 4096)) - 1)
+        return arrived
 
     def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
         ch = self.channel
@@ -227,7 +266,6 @@ class SimProcessArm(PhysicalResource):
             return int(Status.COMM_LOST)
         ch.send_command(int(mode), command)
         self._last_cmd[:] = command
-        self._wrote = True
         return 0
 
     def _begin_safe_stop(self) -> None:

@@ -8,6 +8,7 @@ died) → safe stop; the controller process gone → safe stop, then exit once a
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 import numpy as np
@@ -25,7 +26,9 @@ from orccadd.types import CommandMode, Lifecycle
 class PlantServer:
     """One plant step per control period: requests → integrate → publish → command."""
 
-    def __init__(self, cfg: RobotConfig, channel: PlantChannel, watchdog_periods: int) -> None:
+    def __init__(
+        self, cfg: RobotConfig, channel: PlantChannel, watchdog_periods: int, cycle_fd: int = -1
+    ) -> None:
         self.arm = SimulatedArm(cfg, RobotModel.from_config(cfg))
         self.arm.configure()
         self.ch = channel
@@ -37,6 +40,7 @@ class PlantServer:
         self.parent = os.getppid()
         self.done = False
         self.watchdog_trips = 0
+        self.cycle_fd = cycle_fd  # one byte per step: the controller's loop is paced by it
 
     def _handle_request(self) -> None:
         ctl, arm = self.ch.ctl, self.arm
@@ -78,6 +82,9 @@ class PlantServer:
         self.ch.publish_state(t_s, st.q_rad, st.dq_rad_s, st.tau_nm, st.status)
         ctl[Ctl.FAULT_CODE] = st.fault_code
         ctl[Ctl.HEARTBEAT] += 1
+        if self.cycle_fd >= 0:
+            with contextlib.suppress(BlockingIOError, BrokenPipeError):  # a full pipe: a late reader
+                os.write(self.cycle_fd, b"c")
         if arm.lifecycle is not Lifecycle.ACTIVE:
             return
         if ctl[Ctl.STOP]:
@@ -100,10 +107,14 @@ class PlantServer:
                 self.done = True
 
 
-def plant_main(cfg: RobotConfig, shm_name: str, watchdog_periods: int, priority: int, cpu: int = -1) -> None:
+def plant_main(
+    cfg: RobotConfig, shm_name: str, watchdog_periods: int, priority: int, cpu: int = -1, cycle_fd: int = -1
+) -> None:
     """Run the plant until shut down (or its controller is gone and the arm is at rest)."""
     channel = PlantChannel(cfg.dof, shm_name)
-    server = PlantServer(cfg, channel, watchdog_periods)
+    if cycle_fd >= 0:
+        os.set_blocking(cycle_fd, False)
+    server = PlantServer(cfg, channel, watchdog_periods, cycle_fd)
     enter_realtime(priority, lock_memory=False, cpus={cpu} if cpu >= 0 else None)
     ex = PeriodicExecutor(WallClock(), cfg.control_period_s, server.step)
     try:
@@ -116,18 +127,26 @@ def main() -> int:
     """`python -m orccadd.plantsim --shm NAME ...`, the RobotConfig pickled on stdin
     by the `sim_process` resource that starts it (its own parent: trusted input)."""
     import argparse
+    import logging
     import pickle
     import sys
+
+    from orccadd.logsetup import LogSetupError, setup_logging
 
     ap = argparse.ArgumentParser(description=main.__doc__)
     ap.add_argument("--shm", required=True)
     ap.add_argument("--watchdog-periods", type=int, required=True)
     ap.add_argument("--priority", type=int, default=0)
     ap.add_argument("--cpu", type=int, default=-1)
+    ap.add_argument("--cycle-fd", type=int, default=-1, help="write one byte per step to this fd")
     args = ap.parse_args()
+    try:
+        setup_logging("orccadd.plantsim")
+    except LogSetupError as e:
+        ap.exit(2, f"{ap.prog}: error: {e}\n")
     cfg = pickle.load(sys.stdin.buffer)
     if not isinstance(cfg, RobotConfig):
-        print("orccadd.plantsim: stdin is not a RobotConfig", file=sys.stderr)
+        logging.getLogger("orccadd.plantsim").error("stdin is not a RobotConfig")
         return 2
-    plant_main(cfg, args.shm, args.watchdog_periods, args.priority, args.cpu)
+    plant_main(cfg, args.shm, args.watchdog_periods, args.priority, args.cpu, args.cycle_fd)
     return 0

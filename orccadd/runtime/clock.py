@@ -12,6 +12,7 @@ import ctypes
 import ctypes.util
 import time
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 
 CLOCK_MONOTONIC = 1
 TIMER_ABSTIME = 1
@@ -34,6 +35,12 @@ class Clock(ABC):
 
     def now_s(self) -> float:
         return self.now_ns() * 1e-9
+
+    def wait_release_ns(self, deadline_ns: int) -> int:
+        """Block until the next tick is released; its release time. Our own clocks release at
+        the deadline; a device-paced clock when the device's cycle arrives."""
+        self.sleep_until_ns(deadline_ns)
+        return deadline_ns
 
 
 class WallClock(Clock):
@@ -67,6 +74,34 @@ class WallClock(Clock):
             now = time.monotonic_ns
             while now() < deadline_ns:
                 pass
+
+
+class DevicePacedClock(Clock):
+    """The device's cycle releases each tick: `wait_for_cycle(timeout_s)` blocks until the
+    device's next packet and returns its arrival time (CLOCK_MONOTONIC ns), or -1 on timeout.
+
+    A cycle that has not come `stall_periods` periods after it was due releases the tick anyway
+    (at the timeout), so the loop runs and the resource reports the stalled stream itself.
+    """
+
+    def __init__(
+        self, wait_for_cycle: Callable[[float], int], period_s: float, stall_periods: float = 3.0
+    ) -> None:
+        self.wait_for_cycle = wait_for_cycle
+        self.period_ns = int(round(period_s * 1e9))
+        self.stall_ns = int(stall_periods * self.period_ns)
+
+    def now_ns(self) -> int:
+        return time.monotonic_ns()
+
+    def sleep_until_ns(self, deadline_ns: int) -> None:
+        while time.monotonic_ns() < deadline_ns:
+            time.sleep(max(0.0, (deadline_ns - time.monotonic_ns()) * 1e-9))
+
+    def wait_release_ns(self, deadline_ns: int) -> int:
+        timeout_ns = max(0, deadline_ns + self.stall_ns - time.monotonic_ns())
+        arrived = self.wait_for_cycle(timeout_ns * 1e-9)
+        return arrived if arrived >= 0 else time.monotonic_ns()
 
 
 class SimClock(Clock):

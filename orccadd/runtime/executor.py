@@ -1,8 +1,12 @@
 """Periodic execution on absolute deadlines with an injected clock.
 
-Deadline k is `t0 + k·period`: sleeping never accumulates drift. A tick that ends after the
-next deadline is an overrun; missed periods are skipped (never run in a burst) and counted.
-`on_overrun(consecutive)` lets the owner raise a type 3 exception after N overruns in a row.
+Each tick is released by the clock: on our own clocks at the deadline (`t0 + k·period`, so
+sleeping never accumulates drift), on a device-paced clock when the device's cycle arrives (the
+next deadline then follows that release). A tick that ends after the next deadline is an
+overrun; missed periods are skipped (never run in a burst) and counted. Wake-up latency (from
+release to the step's start), compute time and the period between releases are measured the
+same way for both. `on_overrun(consecutive)` lets the owner raise a type 3 exception after N
+overruns in a row.
 """
 
 from __future__ import annotations
@@ -25,13 +29,16 @@ class PeriodicExecutor:
         *,
         on_overrun: Callable[[float, int], None] | None = None,
         stats: TimingStats | None = None,
+        after_step: Callable[[float], None] | None = None,
     ) -> None:
         self.clock = clock
         self.period_ns = int(round(period_s * 1e9))
         self.step = step
         self.on_overrun = on_overrun
+        self.after_step = after_step  # once the tick's timing is recorded (e.g. to publish it)
         self.stats = stats if stats is not None else TimingStats(period_s)
         self._next_ns: int | None = None
+        self._last_release_ns = 0
         self._stop = False
 
     def stop(self) -> None:
@@ -49,25 +56,29 @@ class PeriodicExecutor:
             self._next_ns = clock.now_ns() + period
         self._stop = False
         n = 0
+        last_release = self._last_release_ns
         while not self._stop and (max_ticks is None or n < max_ticks):
-            deadline = self._next_ns
-            clock.sleep_until_ns(deadline)
+            release = clock.wait_release_ns(self._next_ns)
             woke = clock.now_ns()
             c0 = perf()
-            step(deadline * 1e-9)
+            step(release * 1e-9)
             c1 = perf()
             end = clock.now_ns()  # on a SimClock only `advance()` inside a step makes time pass
-            nxt = deadline + period
+            nxt = release + period
             missed = 0
             if end > nxt:
                 missed = (end - nxt) // period + 1
                 nxt += missed * period
             overrun = missed > 0
-            stats.record(woke - deadline, c1 - c0, overrun, int(missed))
+            since = release - last_release if last_release else 0
+            stats.record(woke - release, c1 - c0, overrun, int(missed), since)
+            last_release = self._last_release_ns = release
             self._next_ns = nxt
+            if self.after_step is not None:
+                self.after_step(release * 1e-9)
             n += 1
             if overrun and self.on_overrun is not None:
-                self.on_overrun(deadline * 1e-9, stats.consecutive_overruns)
+                self.on_overrun(release * 1e-9, stats.consecutive_overruns)
             if until is not None and until():
                 break
         return n

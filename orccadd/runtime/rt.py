@@ -19,7 +19,6 @@ import ctypes.util
 import gc
 import os
 import struct
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 MCL_CURRENT = 1
@@ -129,20 +128,3 @@ def leave_realtime(report: RealtimeReport) -> None:
     if report.gc_frozen:
         gc.enable()
         gc.unfreeze()
-
-
-@contextlib.contextmanager
-def background_priority() -> Iterator[None]:
-    """Run the calling thread at normal priority for a while (long work such as loading a
-    mission, below the control thread), then restore its real-time policy."""
-    try:
-        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-    except OSError:
-        yield
-        return
-    try:
-        yield
-    finally:
-        with contextlib.suppress(OSError):
-            os.sched_setscheduler(0, policy, param)

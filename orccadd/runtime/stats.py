@@ -32,7 +32,10 @@ class Summary:
 
 
 class TimingStats:
-    """Wake-up latency, compute time and overruns of a periodic task.
+    """Wake-up latency, compute time, release period and overruns of a periodic task.
+
+    The release period is the time between two ticks' releases: exactly the period (times the
+    periods skipped) on our own deadlines, the device's cycle as we saw it on a device-paced loop.
 
     `record` is tick-safe (writes into preallocated arrays; keeps the last `capacity` ticks).
     """
@@ -41,6 +44,7 @@ class TimingStats:
         self.period_s = period_s
         self._lat = np.zeros(capacity, dtype=np.int64)
         self._cmp = np.zeros(capacity, dtype=np.int64)
+        self._per = np.zeros(capacity, dtype=np.int64)
         self._over = np.zeros(capacity, dtype=np.bool_)
         self._cap = capacity
         self.ticks = 0
@@ -51,12 +55,15 @@ class TimingStats:
         self.last_latency_ns = 0
         self.last_compute_ns = 0
 
-    def record(self, latency_ns: int, compute_ns: int, overrun: bool, missed: int) -> None:
+    def record(
+        self, latency_ns: int, compute_ns: int, overrun: bool, missed: int, period_ns: int = 0
+    ) -> None:
         self.last_latency_ns = latency_ns
         self.last_compute_ns = compute_ns
         i = self.ticks % self._cap
         self._lat[i] = latency_ns
         self._cmp[i] = compute_ns
+        self._per[i] = period_ns
         self._over[i] = overrun
         self.ticks += 1
         self.missed_ticks += missed
@@ -78,6 +85,11 @@ class TimingStats:
     @property
     def compute(self) -> Summary:
         return Summary.of(self._window(self._cmp))
+
+    @property
+    def release_period(self) -> Summary:
+        """Between successive releases (the first tick has none: 0)."""
+        return Summary.of(self._window(self._per)[1:])
 
     def overrun_runs(self) -> dict[int, int]:
         """How many runs of consecutive overruns of each length (in the recorded window)."""
@@ -102,5 +114,6 @@ class TimingStats:
                 f"{self.missed_ticks} missed periods",
                 f"  wake-up latency  {self.latency.line()}",
                 f"  compute time     {self.compute.line()}",
+                f"  release period   {self.release_period.line()}",
             ]
         )

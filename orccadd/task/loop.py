@@ -3,13 +3,22 @@
 from __future__ import annotations
 
 from orccadd.physres.base import PhysicalResource
-from orccadd.runtime.clock import Clock
+from orccadd.physres.description import ClockSource
+from orccadd.runtime.clock import Clock, DevicePacedClock, WallClock
 from orccadd.runtime.executor import PeriodicExecutor
 from orccadd.runtime.stats import TimingStats
 from orccadd.task.task import RobotTask
 from orccadd.types import Phase
 
 SETTLED = (Phase.DONE, Phase.ABORTED, Phase.FAULT, Phase.PRE_FAILED)
+
+
+def resource_clock(resource: PhysicalResource, spin_margin_s: float = 0.0) -> Clock:
+    """The clock that releases `resource`'s ticks, from its description: our own deadlines on
+    CLOCK_MONOTONIC, or the device's cycle (`wait_for_cycle`) for a device-paced resource."""
+    if resource.description.clock is ClockSource.DEVICE:
+        return DevicePacedClock(resource.wait_for_cycle, resource.config.control_period_s)
+    return WallClock(spin_margin_s=spin_margin_s)
 
 
 class ControlLoop:
@@ -25,7 +34,12 @@ class ControlLoop:
         self.overrun_limit = overrun_limit
         period = resource.config.control_period_s
         self.executor = PeriodicExecutor(
-            clock, period, self.step, on_overrun=self._on_overrun, stats=TimingStats(period)
+            clock,
+            period,
+            self.step,
+            on_overrun=self._on_overrun,
+            stats=TimingStats(period),
+            after_step=self.after_step,
         )
 
     @property
@@ -40,6 +54,9 @@ class ControlLoop:
             self.resource.keep_alive(t_s)
         else:
             task.tick(t_s)
+
+    def after_step(self, t_s: float) -> None:
+        """After each tick, its timing recorded (`stats.last_*` are this tick's); default: nothing."""
 
     def _on_overrun(self, t_s: float, consecutive: int) -> None:
         if consecutive >= self.overrun_limit and self.active is not None:

@@ -129,3 +129,20 @@ def test_runner_keeps_the_most_severe_event_of_a_task() -> None:
     stray = p.input_bit("KeepStableCam.T2.UnStableCam")  # KeepStableCam is not running: ignored
     actions = r.react(both | stray)
     assert a.describe_actions(actions) == ["stop KeepStableUS", "safe"]
+
+
+def test_a_pickled_automaton_reacts_as_the_original() -> None:
+    """The daemon compiles in a child process and unpickles the result: same table, read-only."""
+    import pickle
+    from types import MappingProxyType
+
+    a = compile_file(KEEPSTABLE)
+    b = pickle.loads(pickle.dumps(a))
+    assert all(isinstance(row, MappingProxyType) for row in b.table)
+    assert b.table == a.table and b.action_names == a.action_names and b.active == a.active
+    rng = random.Random(1)
+    sa = sb = 0
+    for _ in range(2000):
+        inputs = rng.choice(sorted(a.table[sa]))  # an input combination the state reacts to
+        (sa, acts_a), (sb, acts_b) = a.react(sa, inputs), b.react(sb, inputs)
+        assert (sa, acts_a) == (sb, acts_b)

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import pytest
 
 from orccadd.automaton import Automaton, compile_file, compile_text, verify
+from orccadd.automaton.automaton import END
 from orccadd.automaton.verify import Report
 from tests.automaton.conftest import UNHANDLED_T3
 
@@ -152,10 +155,38 @@ def test_observers(prop: str, ok: bool) -> None:
     a, report = check(body)
     r = next(r for r in report.results if r.name == "property X")
     assert r.ok is ok, report.format()
-    if not ok and r.counterexample:
-        s = 0
-        for step in r.counterexample:
-            s, _ = a.react(s, step.inputs)
+    if ok:
+        return
+    # The counterexample replays on the automaton from the initial state, reaction for reaction,
+    # and its last instant really violates the property.
+    assert r.counterexample, report.format()
+    s, trace = 0, []
+    for step in r.counterexample:
+        s, actions = a.react(s, step.inputs)
+        assert actions == step.actions, report.format()
+        trace.append((step.inputs, a.describe_actions(actions)))
+    if prop.startswith("never"):  # the forbidden situation: both tasks active at the end
+        assert {"Move", "Grip"} <= {a.program.tasks[t].name for t in a.active[s]}, trace
+    elif prop.startswith("Go ->"):  # Go, then no start of Swing, and none can follow any more
+        first_go = next(i for i, (ins, _) in enumerate(trace) if ins & a.program.input_bit("Go"))
+        assert not any("start Swing" in acts for _, acts in trace[first_go:]), trace
+        assert a.phase[s] == END or not _can_reach(a, s, lambda acts: "start Swing" in acts), trace
+    else:  # stop(Move) and start(Move) alternate: Move started before it was ever stopped
+        assert "start Move" in trace[-1][1], trace
+        assert not any("stop Move" in acts for _, acts in trace), trace
+
+
+def _can_reach(a: Automaton, s: int, hit: Callable[[list[str]], bool]) -> bool:
+    """Some reaction reachable from state `s` has actions satisfying `hit`."""
+    seen, todo = {s}, [s]
+    while todo:
+        for n, actions in a.table[todo.pop()].values():
+            if hit(a.describe_actions(actions)):
+                return True
+            if n not in seen:
+                seen.add(n)
+                todo.append(n)
+    return False
 
 
 def test_t3_inside_the_safe_procedure_ends_the_mission_failed() -> None:

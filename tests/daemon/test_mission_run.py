@@ -37,18 +37,30 @@ def test_demo_mission_recovers_and_every_switch_is_seamless(daemon: Daemon) -> N
     # From the trace: at every switch the outgoing and the incoming law both sent a command in
     # consecutive ticks, and the first command of the new law continues the old one.
     rec = ticks_of(daemon)
+    overruns = int(daemon.status()["overruns"])  # read after the records: counts each of theirs
     task, wrote, t = rec[:, 4], rec[:, 6], rec[:, 1]
     nf, n = len(TICK_FIELDS), 6
     cmd = rec[:, nf + 3 * n : nf + 4 * n]
     switches = np.where(np.diff(task) != 0)[0] + 1
     assert len(switches) >= 6, f"only {len(switches)} switches seen"
     period = 0.002
+    # No tick lost: the records are consecutive, released on the deadline grid, and a release
+    # more than one period after the previous one follows an overrun the loop counted.
+    assert (np.diff(rec[:, 0]) == 1).all(), "a tick record is missing"
+    gaps = np.diff(t) / period
+    whole = np.round(gaps)
+    np.testing.assert_allclose(gaps, whole, atol=1e-6)
+    assert whole.min() >= 1
+    late = set(np.flatnonzero(whole > 1).tolist())  # gap i: from record i to i + 1
+    assert len(late) <= overruns, f"{len(late)} skips, only {overruns} overruns counted"
+    # A switch is applied at the start of tick k: an overrun next to one may be the machine's
+    # noise, but switching must not make the loop skip periods as a rule.
+    lost = [int(k) for k in switches if {k - 1, k} & late]
+    assert len(lost) <= len(switches) // 2, f"ticks skipped around the switches at {lost}"
     steps = np.abs(np.diff(cmd, axis=0)).max(axis=1)
     typical = float(np.percentile(steps[wrote[1:] > 0], 99.9))
     for k in switches:
         assert wrote[k - 1] and wrote[k], f"tick {k}: a switch left a tick without a command"
-        gap = t[k] - t[k - 1]
-        assert gap < 1.5 * period or gap == period * round(gap / period), gap
         jump = float(np.abs(cmd[k] - cmd[k - 1]).max())
         assert jump <= max(typical, 1.0), (
             f"switch at tick {k}: command jumped {jump:.2f} N.m (typical {typical:.2f})"

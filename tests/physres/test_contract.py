@@ -3,27 +3,51 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
+from orccadd.errors import ResourceError
 from orccadd.physres import PhysicalResource
+from orccadd.physres.description import ClockSource, Source
 from orccadd.robot import create_resource, load_robot_config, with_backend
 from orccadd.types import CommandMode, Lifecycle, Status
+from tests.canopen_rig import Rig, canopen_rig
 from tests.conftest import UR5E
 
-BACKENDS = ["sim", "sim_process"]
+BACKENDS = ["sim", "sim_process", "canopen402"]
+
+
+@pytest.fixture(scope="module")
+def can_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Rig]:
+    """One bus and six simulated CiA 402 drives (separate processes) for the module's tests."""
+    with canopen_rig(tmp_path_factory.mktemp("contract-rig")) as rig:
+        yield rig
 
 
 @pytest.fixture(params=BACKENDS)
 def resource(request: pytest.FixtureRequest) -> Iterator[PhysicalResource]:
-    res = create_resource(with_backend(load_robot_config(UR5E), request.param))
+    if request.param == "canopen402":
+        cfg = load_robot_config(request.getfixturevalue("can_rig").config)
+    else:
+        cfg = with_backend(load_robot_config(UR5E), request.param)
+    res = create_resource(cfg)
     res.configure()
     yield res
     if res.lifecycle is not Lifecycle.FINALIZED:
         res.shutdown()
+
+
+@pytest.fixture
+def inject_device_fault(request: pytest.FixtureRequest, resource: PhysicalResource) -> Callable[[], None]:
+    """Make the device report a fault: through the resource where it declares injection, at
+    the device otherwise (a simulated drive's over-current)."""
+    if "device" in resource.description.fault_injection:
+        return lambda: resource.inject_fault("device", "over-current")
+    rig: Rig = request.getfixturevalue("can_rig")
+    return lambda: rig.drives.inject(3, "overcurrent")
 
 
 def drive(res: PhysicalResource, seconds: float, extra_nm: float = 0.0) -> None:
@@ -88,12 +112,25 @@ def test_safe_stop_brings_the_arm_to_rest(resource: PhysicalResource) -> None:
     assert np.abs(st.dq_rad_s).max() < 0.01
 
 
-def test_device_fault_is_reported(resource: PhysicalResource) -> None:
+def test_device_fault_is_reported_and_reset(
+    resource: PhysicalResource, inject_device_fault: Callable[[], None]
+) -> None:
     resource.activate(CommandMode.TORQUE)
     drive(resource, 0.05)
-    resource.inject_fault("device", "over-current")
-    drive(resource, 0.05)
+    inject_device_fault()
+    drive(resource, 0.3)
     assert resource.state.status & Status.FAULT
+    assert resource.fault_message
+    resource.safe_stop()
+    drive(resource, 2.0)
+    assert resource.state.status & Status.STOPPED
+    assert resource.description.fault_reset
+    resource.reset_fault()
+    drive(resource, 0.5)
+    assert not resource.state.status & Status.FAULT, resource.fault_message
+    resource.clear_stop()
+    drive(resource, 0.2)
+    assert not resource.state.status & (Status.FAULT | Status.STOPPED | Status.STOPPING)
 
 
 @pytest.mark.parametrize("mode", [CommandMode.TORQUE, CommandMode.POSITION])
@@ -111,3 +148,48 @@ def test_a_command_with_nan_or_inf_is_not_sent(resource: PhysicalResource, mode:
     drive(resource, 0.05)  # the device never saw them: the arm's state stays finite
     assert np.isfinite(resource.state.vector).all()
     resource.safe_stop()
+
+
+def test_the_description_matches_the_config_and_the_device(resource: PhysicalResource) -> None:
+    d = resource.description
+    cfg = resource.config
+    assert d.backend == cfg.resource.backend
+    assert d.joints == cfg.joint_names
+    assert resource.supported_modes and resource.supported_modes <= d.modes
+    assert cfg.safe_stop.category in d.stop_categories
+    assert d.read_time_s + d.write_time_s <= cfg.control_period_s
+    assert d.position.source is not Source.ABSENT  # every backend measures where the arm is
+
+
+def test_diagnostics_are_a_typed_snapshot(resource: PhysicalResource) -> None:
+    resource.activate(CommandMode.TORQUE)
+    drive(resource, 0.05)
+    diag = resource.diagnostics()
+    assert diag.backend == resource.description.backend
+    assert diag.lifecycle == "active" and diag.mode == "torque"
+    assert diag.fault_message == "" and "fault" not in diag.status
+    assert all(isinstance(v, int | float | str) for v in diag.details.values())
+
+
+def test_ticks_without_a_command_keep_the_arm_held(resource: PhysicalResource) -> None:
+    """read + keep_alive (a task waiting for its preconditions): the device keeps its holding
+    command and none of its watchdogs trips."""
+    resource.activate(CommandMode.POSITION)
+    q0 = resource.read(time.monotonic()).q_rad.copy()
+    t_end = time.monotonic() + 0.3  # longer than the plant's command watchdog (20 periods)
+    seen = 0
+    while time.monotonic() < t_end:
+        now = time.monotonic()
+        seen |= resource.read(now).status
+        resource.keep_alive(now)
+        time.sleep(resource.config.control_period_s)
+    assert not seen & (Status.FAULT | Status.COMM_LOST | Status.LIMIT_VIOLATION), resource.fault_message
+    assert np.abs(resource.state.q_rad - q0).max() < 0.01
+
+
+def test_undeclared_optional_interfaces_are_refused(resource: PhysicalResource) -> None:
+    with pytest.raises(ResourceError, match="cannot inject a 'meteor' fault"):
+        resource.inject_fault("meteor", "x")
+    if resource.description.clock is ClockSource.LOOP:
+        with pytest.raises(ResourceError, match="paced by the loop"):
+            resource.wait_for_cycle(0.01)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -10,10 +11,13 @@ from collections.abc import Iterator
 
 import pytest
 
+from orccadd.physres.description import ClockSource
 from orccadd.physres.sim_process import SimProcessArm
 from orccadd.robot import load_robot_config, with_backend
 from orccadd.runtime import WallClock
+from orccadd.runtime.clock import DevicePacedClock
 from orccadd.session import Session
+from orccadd.task.loop import resource_clock
 from orccadd.types import Phase, Status
 from tests.conftest import MOVE_TASK, ROOT, UR5E
 
@@ -74,7 +78,9 @@ import os, sys
 sys.path.insert(0, {str(ROOT)!r})
 from orccadd.robot import load_robot_config, with_backend
 from orccadd.runtime import WallClock
+from orccadd.runtime.clock import DevicePacedClock
 from orccadd.session import Session
+from orccadd.task.loop import resource_clock
 s = Session.from_config(with_backend(load_robot_config({str(UR5E)!r}), "sim_process"))
 task = s.task({str(MOVE_TASK)!r})
 loop = s.loop(WallClock(), overrun_limit=10**6)
@@ -96,3 +102,47 @@ os._exit(9)  # the controller dies mid-motion
     else:
         os.kill(plant_pid, 9)
         pytest.fail("the plant kept running after its controller died")
+
+
+@pytest.fixture
+def paced() -> Iterator[Session]:
+    """The plant's own cycle paces the loop, as a UR controller's RTDE stream does."""
+    s = Session.from_config(with_backend(load_robot_config(UR5E), "sim_process", paced_by_plant=True))
+    yield s
+    s.close()
+
+
+def test_a_device_paced_loop_ticks_on_the_plants_cycle(paced: Session) -> None:
+    res = paced.resource
+    assert res.description.clock is ClockSource.DEVICE
+    clock = resource_clock(res)
+    assert isinstance(clock, DevicePacedClock)
+    task = paced.task(MOVE_TASK)
+    loop = paced.loop(clock, overrun_limit=10**6)
+    assert loop.run_task(task, timeout_s=6.0) is Phase.DONE
+    stats = loop.stats
+    period_us = res.config.control_period_s * 1e6
+    # the releases follow the plant's steps, not a deadline of ours (an order of magnitude)
+    assert period_us / 3 < stats.release_period.median_us < 3 * period_us
+    assert stats.latency.median_us < period_us  # the tick starts when the cycle arrives
+
+
+def test_a_stalled_device_still_releases_the_loop_which_reports_comm_lost(paced: Session) -> None:
+    res = paced.resource
+    assert isinstance(res, SimProcessArm)
+    task = paced.task(MOVE_TASK)
+    loop = paced.loop(resource_clock(res), overrun_limit=10**6)
+    loop.active = task
+    task.activate()
+    loop.run_for(0.1)
+    ticks = loop.stats.ticks
+    os.kill(res.process.pid, signal.SIGSTOP)  # the stream stalls: no cycle arrives
+    try:
+        t0 = time.monotonic()
+        loop.executor.run(max_ticks=30)  # released by the clock's stall timeout, not by the plant
+        assert time.monotonic() - t0 < 30 * 3 * res.config.control_period_s * 10
+        assert loop.stats.ticks == ticks + 30
+        assert task.phase is Phase.FAULT
+        assert [n for n in paced.event_names() if ".T3." in n] == ["MoveJoints.T3.CommLost"]
+    finally:
+        os.kill(res.process.pid, signal.SIGCONT)

@@ -53,14 +53,22 @@ def test_precondition_timeout_is_a_type_2(task_variant) -> None:  # type: ignore
 
 def check_stopped_safely(s: Session, loop, category_torque_off: bool) -> None:  # type: ignore[no-untyped-def]
     res = s.resource
-    speeds = []
+    period, a = s.config.control_period_s, s.config.safe_stop.deceleration_rad_s2
+    speeds = [res.state.dq_rad_s.copy()]
     for _ in range(1500):  # 3 s
         loop.executor.run(max_ticks=1)
         speeds.append(res.state.dq_rad_s.copy())
     speeds_arr = np.array(speeds)
     assert np.abs(speeds_arr[-50:]).max() < 0.01
-    decel = np.abs(np.diff(speeds_arr, axis=0)).max() / s.config.control_period_s
-    assert decel < 3 * s.config.safe_stop.deceleration_rad_s2 + 5.0, decel
+    # The stop follows a velocity ramp at the configured deceleration `a` (the drive's servo adds
+    # a short transient at its start, ~1.5 a here): never twice as hard ...
+    decel = np.abs(np.diff(speeds_arr, axis=0)).max() / period
+    assert decel < 2 * a, decel
+    # ... nor twice as gentle: each joint still moving comes to rest in about |v| / a.
+    v0 = speeds_arr[0]
+    for j in np.flatnonzero(np.abs(v0) > 0.1):
+        rest_s = (np.flatnonzero(np.abs(speeds_arr[:, j]) >= 1e-3)[-1] + 1) * period
+        assert 0.67 < rest_s * a / abs(v0[j]) < 1.5, (j, v0[j], rest_s)
     q = res.state.q_rad
     assert ((q >= res.model.q_min_rad) & (q <= res.model.q_max_rad)).all()
     assert res.state.status & Status.STOPPED

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import re
 import socket
 import threading
 import time
@@ -112,13 +113,19 @@ def test_bad_input_is_ignored_and_the_hub_serves_on(hub: HubProcess) -> None:
         raw.sendall(b"< send 12 >< send 1234 1 0 >< send 123 9 1 2 3 4 5 6 7 8 9 >< bogus >garbage")
         a, b = buses = connect(hub, 2)
         try:
-            a.send(can.Message(arbitration_id=0x123, data=b"\x42"))
-            assert [bytes(m.data) for m in drain(b, 1)] == [b"\x42"]
+            a.send(can.Message(arbitration_id=0x123, data=b"\x42", is_extended_id=False))
+            assert [(m.arbitration_id, bytes(m.data)) for m in drain(b, 1)] == [(0x123, b"\x42")]
+            raw.sendall(b"x" * 300)  # a "line" with no end: that client is dropped, nobody else
+            raw.settimeout(5)
+            received = b""
+            while chunk := raw.recv(4096):  # b"": the hub closed the connection (a timeout fails)
+                received += chunk
+            # the raw client got a's frame, unchanged, and nothing else (no echo of its own sends)
+            assert re.fullmatch(rb"< frame 123 \d+\.\d{6} 42 >", received), received
+            a.send(can.Message(arbitration_id=0x124, data=b"\x43", is_extended_id=False))
+            assert [(m.arbitration_id, bytes(m.data)) for m in drain(b, 1)] == [(0x124, b"\x43")]
         finally:
             shutdown(buses)
-        raw.sendall(b"x" * 300)  # a "line" with no end: that client is dropped, nobody else
-        raw.settimeout(5)
-        assert raw.recv(4096, socket.MSG_PEEK) is not None
     finally:
         raw.close()
     assert hub.proc.poll() is None

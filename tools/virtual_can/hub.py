@@ -25,12 +25,16 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import logging
 import os
 import signal
 import socket
-import sys
 import time
 from dataclasses import dataclass, field
+
+from orccadd.logsetup import LogSetupError, setup_logging
+
+log = logging.getLogger("orccadd.vcan")
 
 HOST = "127.0.0.1"
 MAX_LINE = 256  # a socketcand command is short; more without a '>' is garbage
@@ -159,7 +163,7 @@ class Hub:
 
     @staticmethod
     def _say(msg: str) -> None:
-        print(f"virtual_can: {msg}", file=sys.stderr, flush=True)
+        log.warning("%s", msg)
 
 
 async def run(port: int, port_file: str, max_backlog: int) -> None:
@@ -178,7 +182,7 @@ async def run(port: int, port_file: str, max_backlog: int) -> None:
     print(f"virtual_can: listening on {HOST}:{bound}", flush=True)
     async with server:
         await stop.wait()
-    print(f"virtual_can: stopped after {hub.frames} frames", file=sys.stderr, flush=True)
+    log.info("stopped after %d frames", hub.frames)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -190,18 +194,19 @@ def main(argv: list[str] | None = None) -> int:
         "--priority", type=int, default=0, help="SCHED_FIFO priority (a bus has no load); 0: normal"
     )
     args = ap.parse_args(argv)
+    try:
+        setup_logging("orccadd.vcan")
+    except LogSetupError as e:
+        ap.exit(2, f"{ap.prog}: error: {e}\n")
     if args.priority:
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.priority))
         except OSError as e:
-            print(
-                f"virtual_can: SCHED_FIFO {args.priority} refused ({e.strerror}): normal priority",
-                file=sys.stderr,
-            )
+            log.warning("SCHED_FIFO %d refused (%s): normal priority", args.priority, e.strerror)
     try:
         asyncio.run(run(args.port, args.port_file, args.max_backlog_bytes))
     except OSError as e:
-        print(f"virtual_can: cannot listen on {HOST}:{args.port}: {e.strerror or e}", file=sys.stderr)
+        log.error("cannot listen on %s:%d: %s", HOST, args.port, e.strerror or e)
         return 1
     return 0
 

@@ -8,6 +8,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,9 @@ class HubProcess:
 
     def __init__(self, *extra: str, startup_timeout_s: float = 30.0) -> None:
         cmd = [sys.executable, "-m", "tools.virtual_can.hub", "--port", "0", *extra]
-        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # its log goes to a file: a pipe nobody reads while it runs would block it once full
+        self.log = tempfile.TemporaryFile("w+")  # noqa: SIM115 - lives as long as the process
+        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=self.log, text=True)
         assert self.proc.stdout is not None
         ready, _, _ = select.select([self.proc.stdout], [], [], startup_timeout_s)
         line = self.proc.stdout.readline() if ready else ""
@@ -61,9 +64,9 @@ class HubProcess:
         return int(self.proc.returncode)
 
     def stderr_text(self) -> str:
-        if self.proc.poll() is None or self.proc.stderr is None:
-            return ""
-        return self.proc.stderr.read()
+        """What the hub logged so far."""
+        self.log.seek(0)
+        return self.log.read()
 
     def __enter__(self) -> HubProcess:
         return self

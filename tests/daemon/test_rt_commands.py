@@ -1,0 +1,56 @@
+"""The real-time process's request handling: whatever a handler does, the reply carries the id."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from orccadd.daemon.replies import CommandError
+from orccadd.daemon.rtproc import RealtimeProcess
+
+
+class Broken:
+    """A machine whose commands fail in every way a handler can."""
+
+    def command(self, cmd: str, args: dict[str, Any]) -> dict[str, Any]:
+        if cmd == "hold":
+            raise CommandError("cannot hold while idle")
+        if cmd == "abort":
+            raise ZeroDivisionError("a bug")
+        if cmd == "resume":
+            raise RecursionError("maximum recursion depth exceeded")
+        return {"done": cmd}
+
+
+def handle(msg: object) -> tuple[Any, dict[str, Any]]:
+    proc = RealtimeProcess.__new__(RealtimeProcess)
+    proc.machine = Broken()  # type: ignore[assignment]
+    rid, reply = proc._handle(json.dumps(msg).encode())
+    assert isinstance(reply, dict)
+    return rid, reply
+
+
+def test_a_refusal_and_a_bug_both_answer_with_the_request_id() -> None:
+    assert handle({"id": 3, "cmd": "hold", "args": {}})[1] == {
+        "id": 3,
+        "ok": False,
+        "error": "cannot hold while idle",
+    }
+    _, reply = handle({"id": "x", "cmd": "abort", "args": {}})
+    assert reply["id"] == "x" and not reply["ok"] and "internal error: ZeroDivisionError" in reply["error"]
+    _, reply = handle({"id": 5, "cmd": "resume", "args": {}})
+    assert reply["id"] == 5 and not reply["ok"]
+    assert handle({"id": 9, "cmd": "start", "args": {}})[1] == {
+        "id": 9,
+        "ok": True,
+        "result": {"done": "start"},
+    }
+
+
+def test_requests_the_table_refuses_never_reach_the_machine() -> None:
+    _, reply = handle({"id": 1, "cmd": "status", "args": {}})  # the command daemon's, not ours
+    assert not reply["ok"] and "not a command of the real-time process" in reply["error"]
+    _, reply = handle({"id": 2, "cmd": "tune", "args": {"path": "A.b.c", "value": 1e308 * 10}})
+    assert not reply["ok"] and "finite" in reply["error"]
+    _, reply = handle({"id": 4, "cmd": "inject", "args": {"fault": "meteor"}})
+    assert not reply["ok"] and "must be one of" in reply["error"]
