@@ -98,7 +98,7 @@ class Machine:
                 S.INSTANTS: float(mc.instants),
                 S.RESULT: float(mc.result),
                 S.FAULTED: 1.0 if self.supervisor.fault else 0.0,
-                S.HELPER_PID: float(self.resource.diagnostics().helper_pid),
+                S.HELPER_PID: float(self.resource.helper_pid()),
             }
         )
 

@@ -97,14 +97,14 @@ class RealtimeProcess:
             self.wake_w,
             allow_fault_injection=self.args.allow_fault_injection,
         )
-        if self.args.mission:
-            reply = self.machine.command("load", {"path": str(Path(self.args.mission).resolve())})
-            while isinstance(reply, Pending):  # before the loop starts: waiting is fine here
-                reply = reply.poll() or (reply.expire() if time.monotonic_ns() > reply.deadline_ns else reply)
-                time.sleep(0.01)
         self._open_socket()
         self.thread = threading.Thread(target=self._control_main, name="control", daemon=True)
-        self.thread.start()
+        self.thread.start()  # the arm is held (the Hold task) while the startup mission loads
+        if self.args.mission:
+            reply = self.machine.command("load", {"path": str(Path(self.args.mission).resolve())})
+            while isinstance(reply, Pending):  # the automaton thread has not started serving yet
+                reply = reply.poll() or (reply.expire() if time.monotonic_ns() > reply.deadline_ns else reply)
+                time.sleep(0.01)
         if not self.args.no_command_daemon:
             self._spawn_cmdd()
 
@@ -315,8 +315,9 @@ class RealtimeProcess:
                 still.append((rid, p))
             else:
                 self._send({"id": rid, "ok": True, "result": result})
+        if len(still) != len(self.pending):
+            self.machine.publish()  # a reply went out: the state it changed
         self.pending = still
-        self.machine.publish()
 
     def _send(self, reply: dict[str, Any]) -> None:
         # if the command daemon is not reading, it times out; the loop carries on
@@ -367,6 +368,9 @@ class RealtimeProcess:
     # ---- shutdown -------------------------------------------------------------------------
     def abandon(self) -> None:
         """Undo a failed `start` (nothing moved yet): release what was acquired."""
+        if self.thread is not None:
+            self.machine.loop.executor.stop()
+            self.thread.join(timeout=2.0)
         if self.cmdd is not None:
             self.cmdd.terminate()
             self.cmdd.wait()

@@ -190,7 +190,7 @@ class PhysicalResource(ABC):
             status=tuple(f.name.lower() for f in Status if f and self.state.status & f and f.name),
             fault_message=self.fault_message,
             fault_code=self.state.fault_code,
-            helper_pid=self._helper_pid(),
+            helper_pid=self.helper_pid(),
             details=self._details(),
         )
 
@@ -300,7 +300,8 @@ class PhysicalResource(ABC):
         """Backends that declare `fault_injection` kinds implement this."""
         raise NotImplementedError
 
-    def _helper_pid(self) -> int:
+    def helper_pid(self) -> int:
+        """A process this resource runs (the simulated plant), 0 if none (not for a tick)."""
         return 0
 
     def _details(self) -> dict[str, float | int | str]:

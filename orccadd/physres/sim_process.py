@@ -182,7 +182,7 @@ class SimProcessArm(PhysicalResource):
         self.fault_message = ""
         self._request(Request.RESET_FAULT)
 
-    def _helper_pid(self) -> int:
+    def helper_pid(self) -> int:
         return int(self.process.pid) if self.plant_alive() else 0
 
     def _details(self) -> dict[str, float | int | str]:
