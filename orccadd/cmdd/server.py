@@ -41,6 +41,7 @@ from orccadd.wire.commands import (
     with_defaults,
 )
 from orccadd.wire.schema import PROTOCOL_VERSION, H, S
+from orccadd.wire.socketdir import SocketPathError, prepare_socket_dir
 from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 
 log = logging.getLogger("orccadd.cmdd")
@@ -159,19 +160,10 @@ class CommandDaemon:
     # ---- socket ---------------------------------------------------------------------------
     def _prepare_socket(self) -> socket.socket:
         path = Path(self.socket_path)
-        d = path.parent
-        d.mkdir(parents=True, exist_ok=True)
-        gid = -1
-        if self.cfg.socket_group:
-            try:
-                gid = grp.getgrnam(self.cfg.socket_group).gr_gid
-            except KeyError:
-                raise SystemExit(
-                    f"orccadd-cmdd: socket_group {self.cfg.socket_group!r} does not exist"
-                ) from None
-        os.chmod(d, 0o750)
-        if gid >= 0:
-            os.chown(d, -1, gid)
+        try:
+            gid = prepare_socket_dir(path.parent, self.cfg.socket_group)  # checked, never changed
+        except SocketPathError as e:
+            raise SystemExit(f"orccadd-cmdd: {e}") from None
         with contextlib.suppress(FileNotFoundError):
             if stat.S_ISSOCK(os.lstat(path).st_mode):
                 os.unlink(path)

@@ -90,7 +90,9 @@ class RtCommands:
         work = Path(tempfile.mkdtemp(prefix="orccadd-load-"))
         out = work / "result.pickle"
         cmd = [sys.executable, "-m", "orccadd.daemon.compile_worker", path, str(out)]
-        child = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+        child = subprocess.Popen(
+            cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, start_new_session=True
+        )
         self._loading = child
 
         def done() -> None:

@@ -44,6 +44,7 @@ from orccadd.task.loop import resource_clock
 from orccadd.types import CommandMode, Status
 from orccadd.wire.commands import COMMANDS, ProtocolError, check_args
 from orccadd.wire.schema import H, Layout, MachineState, MissionResult, OperatorAction, Trace
+from orccadd.wire.socketdir import check_socket_path, prepare_socket_dir
 from orccadd.wire.telemetry import TelemetryBlock
 
 log = logging.getLogger("orccadd")
@@ -51,6 +52,8 @@ log = logging.getLogger("orccadd")
 RT_MAX = 1 << 20  # largest message on the link to the command daemon (it refuses larger)
 TICK_RING_S = 16.0  # seconds of ticks the telemetry ring keeps
 RESPAWN_DELAY_S = 1.0
+RESPAWN_MAX_S = 60.0
+RESPAWN_STABLE_S = 10.0  # a command daemon that lived this long had started fine
 GIL_SWITCH_INTERVAL_S = 0.0002
 
 
@@ -73,6 +76,8 @@ class RealtimeProcess:
         self.cmdd: subprocess.Popen[bytes] | None = None
         self.cmdd_pidfd = -1
         self.respawn_at = 0.0
+        self.respawn_delay_s = RESPAWN_DELAY_S / 2  # doubled before the first respawn
+        self.cmdd_started = 0.0
         self.control_error = ""
         self.stop_requested = ""
         self.thread: threading.Thread | None = None
@@ -83,6 +88,9 @@ class RealtimeProcess:
     # ---- startup --------------------------------------------------------------------------
     def start(self) -> None:
         cfg = self.cfg
+        # the socket's place first: nothing is started for a daemon that could not be reached
+        prepare_socket_dir(Path(self.socket_path).parent, cfg.daemon.socket_group)
+        check_socket_path(Path(self.socket_path))
         hold = load_task_file(cfg.resolve(cfg.daemon.hold_task))  # checked before anything moves
         self.resource.configure()
         self.resource.activate(CommandMode[hold.task.command.upper()])  # the Hold task's mode
@@ -109,8 +117,6 @@ class RealtimeProcess:
             self._spawn_cmdd()
 
     def _open_socket(self) -> None:
-        d = Path(self.socket_path).parent
-        d.mkdir(parents=True, exist_ok=True)
         with contextlib.suppress(FileNotFoundError):
             os.unlink(self.rt_path)
         s = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET | socket.SOCK_CLOEXEC | socket.SOCK_NONBLOCK)
@@ -128,7 +134,10 @@ class RealtimeProcess:
             sys.executable, "-m", "orccadd.cmdd", "--config", self.cfg.source, "--socket", self.socket_path,
             "--rt-socket", self.rt_path, "--telemetry", self.tel.name,
         ]  # fmt: skip
-        self.cmdd = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+        # its own process group: a group-wide SIGTERM/SIGINT reaches this process alone, which
+        # safe-stops the arm first and then ends its children (systemd: KillMode=mixed)
+        self.cmdd = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, start_new_session=True)
+        self.cmdd_started = time.monotonic()
         try:
             self.cmdd_pidfd = os.pidfd_open(self.cmdd.pid)
         except OSError:
@@ -363,7 +372,13 @@ class RealtimeProcess:
             self.cmdd_pidfd = -1
         self.machine.supervisor.link_lost(f"command daemon exited (code {code})")
         self.machine.publish()
-        self.respawn_at = time.monotonic() + RESPAWN_DELAY_S
+        # one that dies at once (its socket unusable) is retried ever more slowly, not in a loop
+        short_lived = time.monotonic() - self.cmdd_started < RESPAWN_STABLE_S
+        self.respawn_delay_s = (
+            min(RESPAWN_MAX_S, 2 * self.respawn_delay_s) if short_lived else RESPAWN_DELAY_S
+        )
+        log.warning("command daemon exited (code %s): restarting it in %g s", code, self.respawn_delay_s)
+        self.respawn_at = time.monotonic() + self.respawn_delay_s
 
     # ---- shutdown -------------------------------------------------------------------------
     def abandon(self) -> None:

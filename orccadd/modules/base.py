@@ -68,7 +68,7 @@ class Port:
 class Parameter:
     """A declared parameter. `value` is a numpy array updated in place (never rebound)."""
 
-    __slots__ = ("bounds", "default", "module", "name", "shape", "tunable", "unit", "value")
+    __slots__ = ("bounds", "default", "integer", "module", "name", "shape", "tunable", "unit", "value")
 
     def __init__(
         self,
@@ -79,6 +79,7 @@ class Parameter:
         unit: str,
         tunable: bool,
         shape: tuple[int, ...],
+        integer: bool = False,
     ) -> None:
         self.module = module
         self.name = name
@@ -86,6 +87,7 @@ class Parameter:
         self.unit = unit
         self.tunable = tunable
         self.shape = shape
+        self.integer = integer  # whole numbers only (a count of ticks): 2.5 is refused, not truncated
         self.value: FloatArray = np.zeros(shape)
         self.value[...] = self.check(default)
         self.default = self.value.copy()
@@ -96,16 +98,17 @@ class Parameter:
 
     def check(self, value: Any) -> FloatArray:
         """The value as an array of this parameter's shape, or ParameterError saying why."""
-        try:
-            arr = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise self._error(f"(={value!r}) must be a number or a list of numbers") from None
+        if not _numbers(value):  # numpy would take True as 1 and "3" as 3.0
+            raise self._error(f"(={value!r}) must be a number or a list of numbers")
+        arr = np.asarray(value, dtype=np.float64)
         if arr.shape != self.shape:
             if arr.shape == () and self.shape != ():
                 arr = np.full(self.shape, float(arr))
             else:
                 want = "a number" if self.shape == () else f"{self.shape[0]} numbers (or one)"
                 raise self._error(f"(={value!r}) must be {want}")
+        if self.integer and not (np.isfinite(arr).all() and (arr == np.round(arr)).all()):
+            raise self._error(f"(={value!r}) must be a whole number")
         lo, hi = self.bounds
         bad = ~((arr >= lo) & (arr <= hi))
         if bad.any():
@@ -128,6 +131,16 @@ class Parameter:
             "unit": self.unit,
             "tunable": self.tunable,
         }
+
+
+def _numbers(value: Any) -> bool:
+    """A number, or a flat list/tuple/array of numbers (booleans and strings are not numbers)."""
+    if isinstance(value, np.ndarray):
+        return value.dtype.kind in "iuf"
+    items = value if isinstance(value, list | tuple) else (value,)
+    return all(
+        isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool) for v in items
+    )
 
 
 class Module(ABC):
@@ -162,8 +175,9 @@ class Module(ABC):
         unit: str = "",
         tunable: bool = False,
         shape: tuple[int, ...] = (),
+        integer: bool = False,
     ) -> Parameter:
-        param = Parameter(self.name, name, default, bounds, unit, tunable, shape)
+        param = Parameter(self.name, name, default, bounds, unit, tunable, shape, integer)
         self.parameters[name] = param
         return param
 

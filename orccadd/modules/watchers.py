@@ -19,7 +19,9 @@ class Watcher(Module):
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
         self.fired = self.add_output("fired", (), "bool", dtype=np.bool_)
-        self.ticks = self.add_parameter("ticks", 1, bounds=(1, 100000), unit="ticks", tunable=True)
+        self.ticks = self.add_parameter(
+            "ticks", 1, bounds=(1, 100000), unit="ticks", tunable=True, integer=True
+        )
         self._count = 0
         self._ticks_needed = 1
 

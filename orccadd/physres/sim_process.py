@@ -110,7 +110,11 @@ class SimProcessArm(PhysicalResource):
             cmd += ["--cycle-fd", str(cycle_w)]
             pass_fds = (cycle_w,)
         try:
-            self.process = subprocess.Popen(cmd, stdin=subprocess.PIPE, pass_fds=pass_fds)
+            # its own process group: a signal to the controller's group (Ctrl-C, `kill %1`, systemd)
+            # must reach the controller alone, which stops the arm before it ends the plant
+            self.process = subprocess.Popen(
+                cmd, stdin=subprocess.PIPE, pass_fds=pass_fds, start_new_session=True
+            )
         finally:
             for fd in pass_fds:
                 os.close(fd)

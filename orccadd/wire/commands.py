@@ -49,6 +49,7 @@ class Arg:
     required: bool = False
     default: Any = None
     choices: tuple[str, ...] = ()
+    items: tuple[type, ...] = (str,)  # a list argument's item types
 
 
 @dataclass(frozen=True)
@@ -144,7 +145,7 @@ COMMANDS: dict[str, CommandSpec] = {
             "the reply), traced",
             (
                 Arg("path", (str,), "TASK.MODULE.PARAM", required=True),
-                Arg("value", (*NUMBER, list), "a number or a list of numbers", required=True),
+                Arg("value", (*NUMBER, list), "a number or a list of numbers", required=True, items=NUMBER),
             ),
         ),
         CommandSpec(
@@ -223,6 +224,12 @@ def check_args(spec: CommandSpec, args: dict[str, Any]) -> None:
             raise ProtocolError(f"{spec.name}: argument {k!r} must be {_types(a.types)}, not {_json_type(v)}")
         for item in v if isinstance(v, list) else [v]:
             problem = _scalar_problem(item)
+            if (
+                not problem
+                and isinstance(v, list)
+                and (isinstance(item, bool) or not isinstance(item, a.items))
+            ):
+                problem = f"list items must be {_types(a.items)}, not {_json_type(item)}"
             if problem:
                 raise ProtocolError(f"{spec.name}: argument {k!r}: {problem}")
         if a.choices and v not in a.choices:

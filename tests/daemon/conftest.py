@@ -89,15 +89,16 @@ def start_daemon(tmp: Path, *extra: str, daemon_cfg: str = "") -> Daemon:
     return start_daemon_with(tmp, robot_config(tmp, daemon_cfg), *extra)
 
 
-def start_daemon_with(tmp: Path, config: Path, *extra: str) -> Daemon:
-    """orccadd on `config`, a socket in `tmp`, fault injection allowed; up and answering."""
+def start_daemon_with(tmp: Path, config: Path, *extra: str, own_group: bool = False) -> Daemon:
+    """orccadd on `config`, a socket in `tmp`, fault injection allowed; up and answering.
+    `own_group`: in a process group of its own, as a shell job or a systemd service is."""
     sock = str(tmp / "run" / "orccadd.sock")
     log = tmp / "orccadd.log"
     cmd = [
         sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(config),
         "--socket", sock, "--allow-fault-injection", *extra,
     ]  # fmt: skip
-    proc = subprocess.Popen(cmd, stdout=log.open("w"), stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(cmd, stdout=log.open("w"), stderr=subprocess.STDOUT, start_new_session=own_group)
     d = Daemon(proc, sock, log)
     end = time.monotonic() + 60
     while True:

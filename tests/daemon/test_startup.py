@@ -33,3 +33,16 @@ def test_a_bad_startup_mission_stops_the_daemon_with_the_reason(tmp_path: Path) 
     assert out.returncode == 2, out.stderr
     assert "bad.mission:" in out.stderr
     assert not (tmp_path / "run/orccadd.sock").exists()
+
+
+def test_a_squatted_socket_path_stops_the_daemon_before_anything_starts(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    run.mkdir(mode=0o750)
+    (run / "orccadd.sock").write_text("not a socket")
+    cmd = [
+        sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(robot_config(tmp_path)),
+        "--socket", str(run / "orccadd.sock"),
+    ]  # fmt: skip
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "is not a socket" in out.stderr, out.stderr
+    assert (run / "orccadd.sock").read_text() == "not a socket"  # left as it was
