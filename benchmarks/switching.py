@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import argparse
 import csv
+import os
+import shutil
 import time
 from pathlib import Path
 
@@ -37,7 +39,7 @@ def record(switches: int) -> tuple[Path, dict[str, object], list[str], float]:
         c.call("load", path=str(MISSION))
         desc = c.call("describe")
         log = d.tmp / "switching.csv"
-        c.call("log", action="start", signals=SIGNALS, path=str(log))
+        c.call("log", action="start", signals=SIGNALS, name=f"switching-{os.getpid()}.csv")
         s0 = c.call("status")["switches"]
         c.call("start")
         t0 = time.monotonic()
@@ -54,6 +56,7 @@ def record(switches: int) -> tuple[Path, dict[str, object], list[str], float]:
             time.sleep(0.05)
         time.sleep(0.1)
         info = c.call("log", action="stop")
+        shutil.copyfile(info["file"], log)  # written in the daemon's log directory
         final = c.call("status")
         if info["lost"]:
             raise SystemExit(f"the log lost {info['lost']} tick records: figures would be wrong")

@@ -11,6 +11,7 @@ loop) is reported, reset and run once more, as an operator would.
 from __future__ import annotations
 
 import argparse
+import shutil
 import signal
 import subprocess
 import sys
@@ -99,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
                 "log",
                 action="start",
                 signals=["q", "dq", "tau", "cmd", "wake_us", "compute_us"],
-                path=str(csv),
+                name=f"demo-{time.strftime('%Y%m%d-%H%M%S')}.csv",
             )
             print(f"$ orccadctl log start -o {csv}")
             tuned = [False]
@@ -117,7 +118,8 @@ def main(argv: list[str] | None = None) -> int:
                 seen, s = run_mission(c, seen, tuned)
             time.sleep(0.3)
             info = c.call("log", action="stop")
-            print(f"log: {info['file']}: {info['rows']} rows at full rate, {info['lost']} lost")
+            shutil.copyfile(info["file"], csv)  # the daemon writes into its own log directory
+            print(f"log: {csv}: {info['rows']} rows at full rate, {info['lost']} lost")
             print(format_status(c.call("status")))
             png = out / "demo.png"
             print(plot_csv(csv, png, ["q", "tau", "wake_us"]))

@@ -39,7 +39,8 @@ def rig_config(tmp: Path, eds_file: str, port: int | None, extra: str = "") -> P
     # answers nothing for ~0.1-0.15 s while the controller keeps sending SYNCs (measured with its
     # `longest_loop_gap_ms`): a node is silent after 150 SYNCs (0.3 s) here
     text = text.replace("missed_tpdo_periods = 50", "missed_tpdo_periods = 150")
-    text = text.replace("[daemon]\n", f"[daemon]\n{extra}\n")
+    dirs = ", ".join(f'"{d}"' for d in (ROOT / "configs/missions", ROOT / "tests/daemon/missions", tmp))
+    text = text.replace("[daemon]\n", f"[daemon]\nmission_dirs = [{dirs}]\n{extra}\n")
     path = tmp / "canopen-robot.toml"
     path.write_text(text)
     return path

@@ -17,13 +17,14 @@ import json
 import logging
 import os
 import pwd
+import re
 import signal
 import socket
 import stat
 import struct
 import time
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from orccadd.cmdd import views
 from orccadd.config.robot import DaemonConfig, read_robot_config
@@ -47,6 +48,7 @@ from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 log = logging.getLogger("orccadd.cmdd")
 
 MAX_CLIENTS = 32
+LOG_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}\.csv")
 RT_TIMEOUT_S = 5.0
 LOAD_TIMEOUT_S = 600.0
 RT_MAX = 1 << 20
@@ -133,9 +135,13 @@ class RtLink:
 
 
 class CommandDaemon:
-    def __init__(self, cfg: DaemonConfig, socket_path: str, rt_path: str, telemetry: str) -> None:
+    def __init__(
+        self, cfg: DaemonConfig, socket_path: str, rt_path: str, telemetry: str, log_dir: Path | None = None
+    ) -> None:
         self.cfg = cfg
         self.socket_path = socket_path
+        self.log_dir = log_dir or Path(socket_path).parent / "logs"
+        self.log_dest = ""
         self.rt = RtLink(rt_path)
         self.tel = TelemetryBlock.attach(telemetry)
         self.roles = Roles(cfg)
@@ -358,7 +364,8 @@ class CommandDaemon:
         rid: Any,
         action: str,
         signals: list[Any] | None,
-        path: str,
+        name: str,
+        dest: str,
     ) -> dict[str, Any]:
         if action == "start":
             if self.csv is not None:
@@ -367,21 +374,41 @@ class CommandDaemon:
             sel = views.SignalSelection(
                 [str(s) for s in signals or ["q", "dq", "tau", "cmd"]], self.desc["joints"]
             )
-            target = Path(path or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv")
-            if not target.is_absolute():
-                raise ValueError(f"log: path {path!r} must be absolute (orccadctl makes it so)")
+            fh, path = self._create_log(name or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv")
+            self.csv = views.CsvLog(self.tel, fh, path, sel)
+            self.log_dest = dest
+            return {**self.csv.describe(), "dest": dest}
+        if self.csv is None:
+            raise ValueError("log: not logging")
+        self.last_log = {**self.csv.close(), "dest": self.log_dest}
+        self.csv = None
+        return self.last_log
+
+    def _create_log(self, name: str) -> tuple[IO[str], Path]:
+        """A new file `name` in the log directory: created, never opened if it exists, never
+        through a symbolic link (O_EXCL | O_NOFOLLOW relative to the directory's descriptor)."""
+        if not LOG_NAME.fullmatch(name):
+            raise ValueError(
+                f"log: name {name[:120]!r} must be letters, digits, '.', '_' or '-', end in .csv, "
+                "and not start with '.' (a file name, not a path)"
+            )
+        try:
+            gid = prepare_socket_dir(self.log_dir, self.cfg.socket_group)
+            dir_fd = os.open(self.log_dir, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
             try:
-                self.csv = views.CsvLog(self.tel, target, sel)
-            except OSError as e:
-                raise ValueError(f"log: cannot write {target}: {e.strerror}") from None
-            return self.csv.describe()
-        if action == "stop":
-            if self.csv is None:
-                raise ValueError("log: not logging")
-            self.last_log = self.csv.close()
-            self.csv = None
-            return self.last_log
-        raise ValueError(f"log: action {action!r} must be start or stop")
+                flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC
+                fd = os.open(name, flags, 0o640, dir_fd=dir_fd)
+            finally:
+                os.close(dir_fd)
+        except SocketPathError as e:
+            raise ValueError(f"log: {e}") from None
+        except FileExistsError:
+            raise ValueError(f"log: {name} already exists in {self.log_dir}: choose another name") from None
+        except OSError as e:
+            raise ValueError(f"log: cannot create {name} in {self.log_dir}: {e.strerror}") from None
+        if gid >= 0:
+            os.fchown(fd, -1, gid)
+        return os.fdopen(fd, "w", newline=""), self.log_dir / name
 
 
 def _alive(pid: int) -> bool:
@@ -413,8 +440,9 @@ def main(argv: list[str] | None = None) -> int:
     except LogSetupError as e:
         ap.exit(2, f"{ap.prog}: error: {e}\n")
     cfg = read_robot_config(args.config)
+    log_dir = cfg.resolve(cfg.daemon.log_dir) if cfg.daemon.log_dir else None
     try:
-        d = CommandDaemon(cfg.daemon, args.socket, args.rt_socket, args.telemetry)
+        d = CommandDaemon(cfg.daemon, args.socket, args.rt_socket, args.telemetry, log_dir)
     except (OSError, ValueError) as e:
         log.error("cannot attach to the real-time process: %s", e)
         return 2

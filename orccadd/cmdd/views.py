@@ -181,11 +181,11 @@ def _clock(wall_s: float) -> str:
 class CsvLog:
     """Chosen signals at full rate into a CSV file (PlotJuggler: File > Load Data, time column `time_s`)."""
 
-    def __init__(self, tel: TelemetryBlock, path: Path, selection: SignalSelection) -> None:
+    def __init__(self, tel: TelemetryBlock, fh: IO[str], path: Path, selection: SignalSelection) -> None:
         self.path = path
         self.sel = selection
         self.reader = RingReader(tel.ticks, tel.header, H.TICK_HEAD, from_now=True)
-        self.fh: IO[str] = path.open("w", newline="")
+        self.fh = fh
         self.writer = csv.writer(self.fh)
         self.writer.writerow(["time_s", *selection.labels])
         self.rows = 0

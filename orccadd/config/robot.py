@@ -91,6 +91,12 @@ class DaemonConfig:
     read_users: tuple[str, ...] = field(default=())
     read_groups: tuple[str, ...] = field(default=("orccadd-ro",))
     hold_task: str = field(default="../tasks/hold.toml")
+    # `load` reads missions from these directories only (relative to this file): a client may not
+    # make the root daemon read, or echo a line of, any other file
+    mission_dirs: tuple[str, ...] = field(default=("../missions",))
+    # full-rate CSV logs go here, created by the command daemon (never a path a client names);
+    # "": `logs/` in the socket's directory
+    log_dir: str = field(default="")
     control_priority: int = field(default=80, bounds=(0, 98))
     automaton_priority: int = field(default=90, bounds=(0, 99))
     overrun_limit: int = field(default=5, bounds=(1, 1000))

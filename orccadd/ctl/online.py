@@ -58,7 +58,7 @@ def add_parsers(sub: Any) -> None:
     p = add("log")
     p.add_argument("action", choices=COMMANDS["log"].arg("action").choices)
     p.add_argument("signals", nargs="*")
-    p.add_argument("-o", "--output", default="", help="CSV file (default ./orccadd-DATE.csv)")
+    p.add_argument("-o", "--output", default="", help="start: also copy the CSV here at `log stop`")
     p = add("inject")
     p.add_argument("fault", choices=COMMANDS["inject"].arg("fault").choices)
     p.add_argument("--ticks", type=int, default=20)
@@ -90,8 +90,9 @@ def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
         args: dict[str, Any] = {"action": a.action}
         if a.action == "start":
             args["signals"] = a.signals or ["q", "dq", "tau", "cmd"]
-            out = a.output or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv"
-            args["path"] = str(Path(out).resolve())
+            if a.output:  # the daemon writes into its own log directory; we copy it at `log stop`
+                args["name"] = Path(a.output).name
+                args["dest"] = str(Path(a.output).resolve())
         return cmd, args
     if cmd == "inject":
         return cmd, {"fault": a.fault, "ticks": a.ticks, "extra_ms": a.extra_ms}
@@ -115,13 +116,33 @@ def run_online(a: argparse.Namespace) -> int:
     except ClientError as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_ERROR
+    fetched = EXIT_OK
+    if r.get("ok") and a.online == "log" and a.action == "stop" and r["result"].get("dest"):
+        fetched = _fetch_log(r["result"], quiet=a.json)
     if a.json:
         print(json.dumps(r, indent=1))
-        return EXIT_OK if r.get("ok") else EXIT_REFUSED
+        return (EXIT_OK if r.get("ok") else EXIT_REFUSED) or fetched
     if not r.get("ok"):
         print(f"refused: {r.get('error')}", file=sys.stderr)
         return EXIT_REFUSED
-    _print(a.online, r["result"])
+    if a.online != "log" or not r["result"].get("dest"):
+        _print(a.online, r["result"])
+    return fetched
+
+
+def _fetch_log(info: dict[str, Any], quiet: bool) -> int:
+    """Copy the daemon's log file to where `log start -o` asked, with this user's rights."""
+    import shutil
+
+    try:
+        shutil.copyfile(info["file"], info["dest"])
+    except OSError as e:
+        print(
+            f"log: {info['rows']} rows in {info['file']}; not copied to {info['dest']}: {e}", file=sys.stderr
+        )
+        return EXIT_ERROR
+    if not quiet:
+        print(f"log: {info['rows']} rows ({info['lost']} lost) in {info['dest']} (kept in {info['file']})")
     return EXIT_OK
 
 

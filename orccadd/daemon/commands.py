@@ -85,8 +85,7 @@ class RtCommands:
         mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
         if self._loading is not None:
             raise CommandError("a mission is being loaded: wait for its answer")
-        if not Path(path).is_file():
-            raise CommandError(f"{path}: no such mission file")
+        path = self._mission_path(path)
         work = Path(tempfile.mkdtemp(prefix="orccadd-load-"))
         out = work / "result.pickle"
         cmd = [sys.executable, "-m", "orccadd.daemon.compile_worker", path, str(out)]
@@ -119,6 +118,23 @@ class RtCommands:
             raise CommandError(f"{path}: not compiled and verified within {LOAD_TIMEOUT_S:g} s")
 
         return Pending(poll, time.monotonic_ns() + int(LOAD_TIMEOUT_S * 1e9), expire)
+
+    def _mission_path(self, path: str) -> str:
+        """`path` resolved, if it names a mission file inside one of the configured mission
+        directories; `CommandError` otherwise (saying where missions may be, never what is there)."""
+        cfg = self.m.cfg
+        dirs = [cfg.resolve(d) for d in cfg.daemon.mission_dirs]
+        allowed = ", ".join(str(d) for d in dirs) or "none configured"
+        try:
+            real = Path(path).resolve(strict=True)
+            inside = any(real.is_relative_to(d) for d in dirs)
+            if inside and real.is_file():
+                return str(real)
+        except (OSError, RuntimeError):  # absent, a name too long, a symlink loop
+            inside = False
+        if not inside:
+            raise CommandError(f"{path[:300]}: missions are loaded from {allowed} only (daemon.mission_dirs)")
+        raise CommandError(f"{path[:300]}: no such mission file")
 
     def _install(self, path: str, automaton: Automaton, report: Report) -> Result:
         mc = self.m.mission

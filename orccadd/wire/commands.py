@@ -116,7 +116,14 @@ COMMANDS: dict[str, CommandSpec] = {
             C,
             "rt",
             "compile, verify, prepare the tasks; refused with the failing checks' counterexamples",
-            (Arg("path", (str,), "the mission file (absolute)", required=True),),
+            (
+                Arg(
+                    "path",
+                    (str,),
+                    "the mission file (absolute), in one of daemon.mission_dirs",
+                    required=True,
+                ),
+            ),
         ),
         CommandSpec(
             "start",
@@ -152,11 +159,13 @@ COMMANDS: dict[str, CommandSpec] = {
             "log",
             C,
             "cmdd",
-            "start/stop a full-rate CSV log written by the command daemon",
+            "start/stop a full-rate CSV log, written by the command daemon into its own log directory "
+            "(daemon.log_dir); the reply names the file",
             (
                 Arg("action", (str,), "start or stop", required=True, choices=("start", "stop")),
                 Arg("signals", (list,), "signal names (default: q dq tau cmd)", default=None),
-                Arg("path", (str,), "the CSV file (absolute)", default=""),
+                Arg("name", (str,), "start: the file's name in the daemon's log directory", default=""),
+                Arg("dest", (str,), "start: where the client will copy it; echoed back at stop", default=""),
             ),
         ),
         CommandSpec(

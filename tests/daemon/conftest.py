@@ -19,6 +19,12 @@ ROBOT = ROOT / "configs/robots/sim-ur5e.toml"
 MISSIONS = Path(__file__).resolve().parent / "missions"
 
 
+def mission_dirs(tmp: Path) -> str:
+    """The mission directories a test daemon may load from (TOML list items)."""
+    dirs = [ROOT / "configs/missions", ROOT / "tests/daemon/missions", ROOT / "tests/automaton/missions", tmp]
+    return ", ".join(f'"{d}"' for d in dirs)
+
+
 def robot_config(tmp: Path, daemon: str = "") -> Path:
     """sim-ur5e with a [daemon] section, written next to the test (paths made absolute)."""
     text = ROBOT.read_text().replace(
@@ -27,6 +33,7 @@ def robot_config(tmp: Path, daemon: str = "") -> Path:
     text = text.replace(
         "\n[daemon]\n", f'\n[daemon]\nhold_task = "{ROOT / "configs/tasks/hold.toml"}"\n{daemon}\n'
     )
+    text = text.replace("mission_dirs = [", f"mission_dirs = [{mission_dirs(tmp)}, ")
     path = tmp / "robot.toml"
     path.write_text(text)
     return path

@@ -213,3 +213,41 @@ def test_too_many_clients(daemon: Daemon) -> None:
             s.close()
     # served again once they leave, by the same command daemon (not a respawned one)
     assert daemon.call("ping") == first
+
+
+def test_load_reads_only_the_configured_mission_directories(daemon: Daemon, tmp_path: Path) -> None:
+    secret = tmp_path.parent / "secret.mission"  # outside every mission directory
+    secret.write_text("root-only line\n")
+    link = tmp_path / "link.mission"  # inside one, pointing outside
+    link.symlink_to(secret)
+    for path in (str(secret), str(link), "/etc/shadow", "/" + "x" * 300):
+        r = daemon.reply("load", path=path)
+        assert not r["ok"] and "missions are loaded from" in r["error"], r
+        assert "root-only" not in r["error"]
+    assert daemon.call("load", path=DEMO)["mission"]["name"] == "PickDemo"  # type: ignore[index]
+
+
+def test_a_log_goes_only_into_the_daemons_log_directory(daemon: Daemon, tmp_path: Path) -> None:
+    for name, why in [
+        ("../escape.csv", "a file name, not a path"),
+        ("/etc/passwd", "a file name, not a path"),
+        (".hidden.csv", "a file name, not a path"),
+        ("x" * 300 + ".csv", "a file name, not a path"),
+        ("run.txt", "end in .csv"),
+    ]:
+        r = daemon.reply("log", action="start", name=name)
+        assert not r["ok"] and why in r["error"], (name, r)
+    logs = Path(daemon.socket).parent / "logs"
+    logs.mkdir(mode=0o750, exist_ok=True)
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    (logs / "planted.csv").symlink_to(victim)  # a link planted where a log would be created
+    r = daemon.reply("log", action="start", name="planted.csv")
+    assert not r["ok"] and "already exists" in r["error"], r
+    assert victim.read_text() == "keep me"
+    info = daemon.call("log", action="start", name="ok.csv")
+    assert Path(info["file"]) == logs / "ok.csv"  # type: ignore[index]
+    assert not daemon.reply("log", action="start", name="ok.csv")["ok"]  # one log at a time
+    daemon.call("log", action="stop")
+    r = daemon.reply("log", action="start", name="ok.csv")  # never overwritten
+    assert not r["ok"] and "already exists" in r["error"], r

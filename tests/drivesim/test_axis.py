@@ -71,3 +71,16 @@ def test_without_0x60c2_the_communication_cycle_period_counts() -> None:
     target(csp_axis, q0 + 0.004)
     csp_axis.cycle(0.0001, 0.0001)
     assert csp_axis.arm.velocity_ref[0] == pytest.approx(1.0, rel=1e-3)
+
+
+@pytest.mark.parametrize(("window", "faults"), [(100, True), (0xFFFFFFFF, False)])
+def test_following_error_supervision(csp_axis: Axis, window: int, faults: bool) -> None:
+    """0x6065 window (increments) held longer than 0x6066 (ms): EMCY 0x8611 and FAULT; the
+    window 0xFFFFFFFF switches the supervision off (CiA 402)."""
+    sdo_write(csp_axis.node, 0x6065, 0, window, 4)
+    sdo_write(csp_axis.node, 0x6066, 0, 10, 2)
+    target(csp_axis, float(csp_axis.arm.q[0]) + 0.5)  # far ahead; the plant is not stepped here
+    for k in range(20):  # 20 ms of SYNCs
+        csp_axis.cycle(k * 0.001, 0.001)
+    assert (csp_axis.sm.state is State.FAULT) is faults
+    assert (csp_axis.fault_code == 0x8611) is faults
