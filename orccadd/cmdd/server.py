@@ -47,7 +47,9 @@ from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 
 log = logging.getLogger("orccadd.cmdd")
 
-MAX_CLIENTS = 32
+STALL_S = 10.0  # a client that does not read its replies for this long is dropped
+ROLELESS_MAX = 8  # peers without a role waited for at once (each gets one refusal)
+ROLELESS_WAIT_S = 2.0
 LOG_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}\.csv")
 RT_TIMEOUT_S = 5.0
 LOAD_TIMEOUT_S = 600.0
@@ -146,7 +148,8 @@ class CommandDaemon:
         self.tel = TelemetryBlock.attach(telemetry)
         self.roles = Roles(cfg)
         self.desc: dict[str, Any] = {}
-        self.clients = 0
+        self.slots = {Role.CONTROL: 0, Role.READ: 0}  # connections served, per role
+        self.roleless = 0
         self.csv: views.CsvLog | None = None
         self.last_log: dict[str, Any] | None = None
         self.server: asyncio.AbstractServer | None = None
@@ -216,32 +219,70 @@ class CommandDaemon:
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         sock = writer.get_extra_info("socket")
         _, uid, gid = peer_credentials(sock)
-        self.clients += 1
+        role = self.roles.role(uid, gid)
         try:
-            if self.clients > MAX_CLIENTS:
-                writer.write(
-                    encode({"id": None, "ok": False, "error": f"too many clients (max {MAX_CLIENTS})"})
-                )
+            if role is None:
+                await self._refuse_roleless(reader, writer, uid)
                 return
-            role = self.roles.role(uid, gid)
-            while True:
-                try:
-                    line = await reader.readuntil(b"\n")
-                except asyncio.IncompleteReadError:
-                    return
-                except asyncio.LimitOverrunError:
-                    writer.write(
-                        encode({"id": None, "ok": False, "error": f"request longer than {MAX_LINE} bytes"})
-                    )
-                    await writer.drain()
-                    return  # the stream cannot be resynchronised: close
-                await self._request(line, role, uid, writer)
-        except (ConnectionError, BrokenPipeError):
+            limit = self.cfg.control_clients if role is Role.CONTROL else self.cfg.read_clients
+            if self.slots[role] >= limit:
+                writer.write(
+                    encode(error_reply(None, f"too many clients with the {role} role (max {limit})"))
+                )
+                await asyncio.wait_for(writer.drain(), STALL_S)
+                return
+            self.slots[role] += 1
+            try:
+                await self._serve_client(reader, writer, role, uid)
+            finally:
+                self.slots[role] -= 1
+        except (ConnectionError, BrokenPipeError, TimeoutError):
             return
         finally:
-            self.clients -= 1
             with contextlib.suppress(Exception):
                 writer.close()
+
+    async def _serve_client(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, role: Role, uid: int
+    ) -> None:
+        idle = self.cfg.idle_timeout_s
+        while True:
+            try:
+                line = await asyncio.wait_for(reader.readuntil(b"\n"), idle)
+            except asyncio.IncompleteReadError:
+                return
+            except TimeoutError:
+                writer.write(
+                    encode(error_reply(None, f"no request for {idle:g} s: closing (idle_timeout_s)"))
+                )
+                await asyncio.wait_for(writer.drain(), STALL_S)
+                return
+            except asyncio.LimitOverrunError:
+                writer.write(encode(error_reply(None, f"request longer than {MAX_LINE} bytes")))
+                await asyncio.wait_for(writer.drain(), STALL_S)
+                return  # the stream cannot be resynchronised: close
+            await self._request(line, role, uid, writer)
+
+    async def _refuse_roleless(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, uid: int
+    ) -> None:
+        """A peer without any role gets one refusal (to its first request, if it sends one soon)
+        and the connection is closed; at most a few such peers are waited for at once."""
+        rid: Any = None
+        if self.roleless < ROLELESS_MAX:
+            self.roleless += 1
+            try:
+                line = await asyncio.wait_for(reader.readuntil(b"\n"), ROLELESS_WAIT_S)
+                with contextlib.suppress(ProtocolError):
+                    rid = parse_request(line)[0]
+            except (asyncio.IncompleteReadError, asyncio.LimitOverrunError, TimeoutError):
+                pass
+            finally:
+                self.roleless -= 1
+        writer.write(
+            encode(error_reply(rid, f"not authorised: user {_user(uid)} holds no role on this daemon"))
+        )
+        await asyncio.wait_for(writer.drain(), STALL_S)
 
     async def _request(self, line: bytes, role: Role | None, uid: int, writer: asyncio.StreamWriter) -> None:
         rid: Any = None
@@ -249,7 +290,7 @@ class CommandDaemon:
             rid, cmd, args = parse_request(line)
         except ProtocolError as e:
             writer.write(encode(error_reply(rid, str(e))))
-            await writer.drain()
+            await asyncio.wait_for(writer.drain(), STALL_S)
             return
         spec = COMMANDS[cmd]
         if role is None or (spec.role is Role.CONTROL and role is not Role.CONTROL):
@@ -257,7 +298,7 @@ class CommandDaemon:
             writer.write(
                 encode(error_reply(rid, f"not authorised: user {_user(uid)} lacks {need} for {cmd!r}"))
             )
-            await writer.drain()
+            await asyncio.wait_for(writer.drain(), STALL_S)
             return
         if spec.where == "rt":
             timeout = LOAD_TIMEOUT_S if cmd == "load" else RT_TIMEOUT_S
@@ -272,12 +313,12 @@ class CommandDaemon:
                 writer.write(encode({"id": rid, "ok": True, "result": result}))
             except ValueError as e:
                 writer.write(encode(error_reply(rid, str(e))))
-            except (ConnectionError, asyncio.CancelledError):
+            except (ConnectionError, TimeoutError, asyncio.CancelledError):
                 raise
             except Exception as e:  # a bug must not take the command daemon down
                 log.exception("%s failed: %s: %s", cmd, type(e).__name__, e)
                 writer.write(encode(error_reply(rid, f"internal error: {type(e).__name__}: {e}")))
-        await writer.drain()
+        await asyncio.wait_for(writer.drain(), STALL_S)
 
     # ---- local commands -------------------------------------------------------------------
     @handles("ping")
@@ -321,7 +362,7 @@ class CommandDaemon:
                 writer.write(
                     encode({"id": rid, "ok": True, "stream": {"t_s": rec[1], "values": sel.values(rec)}})
                 )
-                await writer.drain()
+                await asyncio.wait_for(writer.drain(), STALL_S)
                 sent += 1
             nxt += period
             await asyncio.sleep(max(0.0, nxt - time.monotonic()))
@@ -354,7 +395,7 @@ class CommandDaemon:
                 await self.refresh()
             for rec in new:
                 writer.write(encode({"id": rid, "ok": True, "stream": views.decode_trace(rec, self.desc)}))
-            await writer.drain()
+            await asyncio.wait_for(writer.drain(), STALL_S)
         return {"lost": r.lost}
 
     @handles("log")

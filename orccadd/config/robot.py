@@ -97,6 +97,11 @@ class DaemonConfig:
     # full-rate CSV logs go here, created by the command daemon (never a path a client names);
     # "": `logs/` in the socket's directory
     log_dir: str = field(default="")
+    # connections the command daemon serves at once, per role: read-only clients cannot take
+    # the control clients' places; clients without a role are answered once and closed
+    control_clients: int = field(default=16, bounds=(1, 1024))
+    read_clients: int = field(default=32, bounds=(0, 1024))
+    idle_timeout_s: float = field(default=600.0, bounds=(1.0, 86400.0))
     control_priority: int = field(default=80, bounds=(0, 98))
     automaton_priority: int = field(default=90, bounds=(0, 99))
     overrun_limit: int = field(default=5, bounds=(1, 1000))

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import pwd
 import socket
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -251,3 +253,71 @@ def test_a_log_goes_only_into_the_daemons_log_directory(daemon: Daemon, tmp_path
     daemon.call("log", action="stop")
     r = daemon.reply("log", action="start", name="ok.csv")  # never overwritten
     assert not r["ok"] and "already exists" in r["error"], r
+
+
+def test_an_idle_connection_is_closed_and_its_slot_freed(tmp_path: Path) -> None:
+    d = start_daemon(tmp_path, daemon_cfg="idle_timeout_s = 1.0")
+    try:
+        s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        s.settimeout(10)
+        s.connect(d.socket)
+        reply = json.loads(s.makefile("rb").readline())  # nothing sent: the daemon speaks first
+        assert not reply["ok"] and "idle_timeout_s" in reply["error"]
+        assert s.recv(1) == b""  # closed
+        s.close()
+        assert d.status()["state"] == "idle"
+    finally:
+        d.stop()
+
+
+def _as_nobody_many(sock: str, n: int) -> list[dict[str, object]]:
+    """`n` connections held open at once by user nobody, one `status` on each."""
+    nobody = pwd.getpwnam("nobody")
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            os.setgroups([])
+            os.setgid(nobody.pw_gid)
+            os.setuid(nobody.pw_uid)
+            conns = []
+            for _ in range(n):
+                c = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+                c.settimeout(10)
+                c.connect(sock)
+                conns.append(c)
+                time.sleep(0.05)  # accepted in order
+            out = []
+            for c in conns:
+                with contextlib.suppress(OSError):  # refused at once: the daemon wrote why and closed
+                    c.sendall(b'{"cmd": "status"}\n')
+                out.append(json.loads(c.makefile("rb").readline()))
+            os.write(w, json.dumps(out).encode())
+        except BaseException as e:
+            os.write(w, json.dumps([{"child_error": repr(e)}]).encode())
+        finally:
+            os._exit(0)
+    os.close(w)
+    with os.fdopen(r, "rb") as fh:
+        data = fh.read()
+    os.waitpid(pid, 0)
+    replies: list[dict[str, object]] = json.loads(data)
+    return replies
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root to run a client as another user")
+def test_read_only_clients_cannot_take_the_control_clients_places(tmp_path: Path) -> None:
+    tmp_path.chmod(0o755)
+    for p in tmp_path.parents:
+        if str(p).startswith("/tmp/") and p != Path("/tmp"):
+            p.chmod(p.stat().st_mode | 0o005)
+    cfg = 'socket_group = "nogroup"\nread_groups = ["nogroup"]\nread_clients = 2'
+    d = start_daemon(tmp_path, daemon_cfg=cfg)
+    try:
+        replies = _as_nobody_many(d.socket, 4)
+        assert "child_error" not in replies[0], replies
+        assert [r["ok"] for r in replies] == [True, True, False, False], replies
+        assert all("too many clients with the read role (max 2)" in str(r["error"]) for r in replies[2:])
+        assert d.status()["state"] == "idle"  # control clients are served meanwhile
+    finally:
+        d.stop()
