@@ -140,38 +140,22 @@ def test_monitor_and_log_through_orccadctl(daemon: Daemon, tmp_path: Path) -> No
 
 def _as_nobody(sock: str, cmd: str) -> dict[str, object]:
     """One request from a forked child running as user nobody (its peer credentials)."""
-    nobody = pwd.getpwnam("nobody")
-    r, w = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # child: drop to nobody, ask, report through the pipe, exit
-        try:
-            os.setgroups([])
-            os.setgid(nobody.pw_gid)
-            os.setuid(nobody.pw_uid)
-            s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-            s.settimeout(10)
-            s.connect(sock)
-            s.sendall(json.dumps({"cmd": cmd}).encode() + b"\n")
-            os.write(w, s.makefile("rb").readline())
-        except BaseException as e:
-            os.write(w, json.dumps({"child_error": repr(e)}).encode())
-        finally:
-            os._exit(0)
-    os.close(w)
-    with os.fdopen(r, "rb") as fh:
-        data = fh.read()
-    os.waitpid(pid, 0)
-    out: dict[str, object] = json.loads(data)
-    assert "child_error" not in out, out
-    return out
+    reply = _as_nobody_many(sock, 1, cmd)[0]
+    assert "child_error" not in reply, reply
+    return reply
 
 
-@pytest.mark.skipif(os.geteuid() != 0, reason="needs root to run a client as another user")
-def test_unauthorised_peer_is_refused(tmp_path: Path) -> None:
+def _reachable_by_nobody(tmp_path: Path) -> None:
+    """Let user nobody walk to a socket under `tmp_path` (pytest's directories are 0700)."""
     tmp_path.chmod(0o755)
     for p in tmp_path.parents:
         if str(p).startswith("/tmp/") and p != Path("/tmp"):
             p.chmod(p.stat().st_mode | 0o005)
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root to run a client as another user")
+def test_unauthorised_peer_is_refused(tmp_path: Path) -> None:
+    _reachable_by_nobody(tmp_path)
     # nobody may reach the socket (group nogroup) but holds no role at first
     nogroup = "nogroup"
     d = start_daemon(tmp_path, daemon_cfg=f'socket_group = "{nogroup}"')
@@ -270,8 +254,9 @@ def test_an_idle_connection_is_closed_and_its_slot_freed(tmp_path: Path) -> None
         d.stop()
 
 
-def _as_nobody_many(sock: str, n: int) -> list[dict[str, object]]:
-    """`n` connections held open at once by user nobody, one `status` on each."""
+def _as_nobody_many(sock: str, n: int, cmd: str = "status") -> list[dict[str, object]]:
+    """`n` connections held open at once by a forked child running as user nobody (its peer
+    credentials), one request `cmd` on each; their replies."""
     nobody = pwd.getpwnam("nobody")
     r, w = os.pipe()
     pid = os.fork()
@@ -290,7 +275,7 @@ def _as_nobody_many(sock: str, n: int) -> list[dict[str, object]]:
             out = []
             for c in conns:
                 with contextlib.suppress(OSError):  # refused at once: the daemon wrote why and closed
-                    c.sendall(b'{"cmd": "status"}\n')
+                    c.sendall(json.dumps({"cmd": cmd}).encode() + b"\n")
                 out.append(json.loads(c.makefile("rb").readline()))
             os.write(w, json.dumps(out).encode())
         except BaseException as e:
@@ -307,10 +292,7 @@ def _as_nobody_many(sock: str, n: int) -> list[dict[str, object]]:
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root to run a client as another user")
 def test_read_only_clients_cannot_take_the_control_clients_places(tmp_path: Path) -> None:
-    tmp_path.chmod(0o755)
-    for p in tmp_path.parents:
-        if str(p).startswith("/tmp/") and p != Path("/tmp"):
-            p.chmod(p.stat().st_mode | 0o005)
+    _reachable_by_nobody(tmp_path)
     cfg = 'socket_group = "nogroup"\nread_groups = ["nogroup"]\nread_clients = 2'
     d = start_daemon(tmp_path, daemon_cfg=cfg)
     try:
