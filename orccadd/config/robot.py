@@ -154,8 +154,14 @@ def read_toml(path: Path) -> dict[str, Any]:
             return tomllib.load(fh)
     except FileNotFoundError:
         raise ConfigError(str(path), "", "file not found") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(
+            str(path), "", f"is not UTF-8 text, so not TOML ({e.reason} at byte {e.start})"
+        ) from None
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(str(path), "", f"is not valid TOML: {e}") from None
+    except OSError as e:
+        raise ConfigError(str(path), "", f"cannot be read: {e.strerror}") from None
 
 
 def read_robot_config(path: str | Path) -> RobotConfig:

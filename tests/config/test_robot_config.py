@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
+from orccadd.config.robot import read_robot_config
 from orccadd.errors import ConfigError
 from orccadd.robot import load_robot_config
 from tests.conftest import PANDA, UR5E
@@ -119,3 +122,24 @@ def test_unlisted_urdf_joint_must_be_locked(robot_variant) -> None:  # type: ign
     )
     with pytest.raises(ConfigError, match="does not list panda_finger_joint1, panda_finger_joint2"):
         load_robot_config(path)
+
+
+@pytest.mark.parametrize(
+    ("content", "why"),
+    [
+        (b"\xff\xfe\x00binary\x80", "is not UTF-8 text, so not TOML"),
+        (b"name = [unclosed", "is not valid TOML"),
+        (None, "cannot be read"),  # a directory
+    ],
+)
+def test_an_unreadable_config_is_a_config_error_naming_the_file(
+    tmp_path: Path, content: bytes | None, why: str
+) -> None:
+    path = tmp_path / "robot.toml"
+    if content is None:
+        path.mkdir()
+    else:
+        path.write_bytes(content)
+    with pytest.raises(ConfigError, match=why) as info:
+        read_robot_config(path)
+    assert str(path) in str(info.value)
