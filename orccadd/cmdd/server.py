@@ -97,43 +97,62 @@ class Roles:
 
 
 class RtLink:
-    """The SEQPACKET link to the real-time process: one request at a time, answers matched by id."""
+    """The SEQPACKET link to the real-time process. Requests go out as they come, each with its
+    own id; one reader task hands each reply to the request it answers. So a long request (a
+    `load` compiling for seconds) never holds up an `abort` sent after it."""
 
     def __init__(self, path: str) -> None:
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET | socket.SOCK_CLOEXEC)
         self.sock.connect(path)
         self.sock.setblocking(False)
-        self.lock = asyncio.Lock()
+        self.send_lock = asyncio.Lock()
+        self.waiting: dict[int, asyncio.Future[dict[str, Any]]] = {}
+        self.reader: asyncio.Task[None] | None = None
         self.next_id = 0
         self.closed = False
 
-    async def call(self, cmd: str, args: dict[str, Any], timeout_s: float = RT_TIMEOUT_S) -> dict[str, Any]:
+    async def _read_replies(self) -> None:
         loop = asyncio.get_running_loop()
-        async with self.lock:
-            self.next_id += 1
-            rid = self.next_id
-            try:
+        with contextlib.suppress(OSError):
+            while True:
+                data = await loop.sock_recv(self.sock, RT_MAX)
+                if not data:
+                    break
+                try:
+                    reply = json.loads(data)
+                except ValueError:
+                    continue
+                rid = reply.get("id") if isinstance(reply, dict) else None
+                fut = self.waiting.pop(rid, None) if isinstance(rid, int) else None
+                if fut is not None and not fut.done():
+                    fut.set_result(reply)
+        self.closed = True
+        for fut in self.waiting.values():
+            if not fut.done():
+                fut.set_result({"ok": False, "error": "the real-time process is gone"})
+        self.waiting.clear()
+
+    async def call(self, cmd: str, args: dict[str, Any], timeout_s: float = RT_TIMEOUT_S) -> dict[str, Any]:
+        if self.closed:
+            return {"ok": False, "error": "the real-time process is gone"}
+        loop = asyncio.get_running_loop()
+        if self.reader is None:
+            self.reader = loop.create_task(self._read_replies())
+        self.next_id += 1
+        rid = self.next_id
+        fut: asyncio.Future[dict[str, Any]] = loop.create_future()
+        self.waiting[rid] = fut
+        try:
+            async with self.send_lock:  # one message at a time on the socket
                 await loop.sock_sendall(self.sock, json.dumps({"id": rid, "cmd": cmd, "args": args}).encode())
-                deadline = time.monotonic() + timeout_s
-                while True:
-                    left = deadline - time.monotonic()
-                    if left <= 0:
-                        return {
-                            "ok": False,
-                            "error": f"the real-time process did not answer within {timeout_s:g} s",
-                        }
-                    data = await asyncio.wait_for(loop.sock_recv(self.sock, RT_MAX), left)
-                    if not data:
-                        self.closed = True
-                        return {"ok": False, "error": "the real-time process is gone"}
-                    reply: dict[str, Any] = json.loads(data)
-                    if reply.get("id") == rid:
-                        return reply
-            except TimeoutError:
-                return {"ok": False, "error": f"the real-time process did not answer within {timeout_s:g} s"}
-            except OSError as e:
-                self.closed = True
-                return {"ok": False, "error": f"link to the real-time process lost: {e}"}
+            return await asyncio.wait_for(fut, timeout_s)
+        except TimeoutError:
+            return {"ok": False, "error": f"the real-time process did not answer within {timeout_s:g} s"}
+        except OSError as e:
+            self.closed = True
+            return {"ok": False, "error": f"link to the real-time process lost: {e}"}
+        finally:
+            self.waiting.pop(rid, None)
 
 
 class CommandDaemon:

@@ -303,3 +303,25 @@ def test_read_only_clients_cannot_take_the_control_clients_places(tmp_path: Path
         assert d.status()["state"] == "idle"  # control clients are served meanwhile
     finally:
         d.stop()
+
+
+def test_abort_is_not_held_up_by_a_load_under_way(daemon: Daemon) -> None:
+    """A load compiles for a while (a child process); an abort sent meanwhile is answered at once,
+    not after the load (the link to the real-time process carries both at the same time)."""
+    times: dict[str, float] = {}
+
+    def load() -> None:
+        times["load_sent"] = time.monotonic()
+        daemon.call("load", path=DEMO)
+        times["load_done"] = time.monotonic()
+
+    t = threading.Thread(target=load)
+    t.start()
+    time.sleep(0.1)  # the load is under way (its compiler process takes about half a second)
+    t0 = time.monotonic()
+    assert daemon.call("abort") == {"aborted": True}
+    abort_s = time.monotonic() - t0
+    t.join(timeout=60)
+    load_s = times["load_done"] - times["load_sent"]
+    # ratios, not timings: held up behind the load, the abort would take most of its time
+    assert abort_s < 0.5 * load_s, (abort_s, load_s)
