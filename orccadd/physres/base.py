@@ -27,6 +27,7 @@ from orccadd.physres.description import ResourceDescription
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CMD_CLAMPED, LIMIT_VIOLATION, CommandMode, Lifecycle, Status
 from orccadd.vec import clamped, outside
+from orccadd.wire.schema import status_names
 
 # Lifecycle transitions allowed: (from, method) -> to.
 TRANSITIONS: dict[tuple[Lifecycle, str], Lifecycle] = {
@@ -187,7 +188,7 @@ class PhysicalResource(ABC):
             backend=self.description.backend,
             lifecycle=self.lifecycle.name.lower(),
             mode=self.mode.name.lower(),
-            status=tuple(f.name.lower() for f in Status if f and self.state.status & f and f.name),
+            status=tuple(status_names(self.state.status)),
             fault_message=self.fault_message,
             fault_code=self.state.fault_code,
             helper_pid=self.helper_pid(),
