@@ -7,14 +7,17 @@ The automaton that passed `verify` is exactly what the execution machine steps (
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
+from orccadd.automaton import ast as A
 from orccadd.automaton.automaton import Automaton, Runner
 from orccadd.automaton.compiler import DEFAULT_MAX_STATES, compile_program
 from orccadd.automaton.elaborate import elaborate
 from orccadd.automaton.parser import load_mission_file, parse_mission
 from orccadd.automaton.program import Program
 from orccadd.automaton.verify import Report, verify
+from orccadd.errors import MissionError
 from orccadd.types import TaskFileReader
 
 __all__ = [
@@ -39,10 +42,21 @@ def compile_text(
 ) -> Automaton:
     """Parse, check and compile a mission; `MissionError` on any problem. `task_files` reads
     the interface of tasks declared `from "file"` (see `elaborate`). Not for a tick."""
-    return compile_program(elaborate(parse_mission(text, file), task_files), max_states)
+    return _compile(lambda: parse_mission(text, file), str(file), max_states, task_files)
 
 
 def compile_file(
     path: str | Path, max_states: int = DEFAULT_MAX_STATES, task_files: TaskFileReader | None = None
 ) -> Automaton:
-    return compile_program(elaborate(load_mission_file(path), task_files), max_states)
+    return _compile(lambda: load_mission_file(path), str(path), max_states, task_files)
+
+
+def _compile(
+    parse: Callable[[], A.MissionAst], file: str, max_states: int, task_files: TaskFileReader | None
+) -> Automaton:
+    """The parser and the elaborator bound nesting and size (`parser.MAX_NESTING`, ...); should a
+    pass still run out of stack, the mission is refused like any other, never with a traceback."""
+    try:
+        return compile_program(elaborate(parse(), task_files), max_states)
+    except RecursionError:
+        raise MissionError(file, 0, 0, "the mission is nested too deeply to compile") from None

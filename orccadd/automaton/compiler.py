@@ -79,8 +79,8 @@ def input_combinations(p: Program, active: tuple[int, ...], relevant: int) -> li
     count = 1
     for c in choices:
         count *= len(c)
-    if count > MAX_INPUT_COMBINATIONS:
-        raise OverflowError(count)
+        if count > MAX_INPUT_COMBINATIONS:
+            raise OverflowError(len(set(active)), len(ops))
     return [sum(combo) for combo in itertools.product(*choices)]
 
 
@@ -292,7 +292,7 @@ def _waits(p: Program, t: K.Term | None, out: list[str]) -> None:
     elif isinstance(t, K.Halt):
         out.append(f"halt at line {t.loc.line}")
     elif isinstance(t, K.Seq):
-        _waits(p, t.first, out)
+        _waits(p, t.items[0], out)
     elif isinstance(t, K.Par):
         for b in t.branches:
             _waits(p, b, out)

@@ -43,6 +43,11 @@ def elaborate(m: A.MissionAst, task_files: TaskFileReader | None = None) -> Prog
     return _Elaborator(m, task_files).run()
 
 
+# Procedures are expanded at each call: bound the result's depth and size (each a MissionError).
+MAX_EXPANDED_NESTING = 200
+MAX_EXPANDED_STATEMENTS = 100_000
+
+
 class _Elaborator:
     def __init__(self, m: A.MissionAst, task_files: TaskFileReader | None) -> None:
         self.m = m
@@ -56,6 +61,8 @@ class _Elaborator:
         self.tasks: dict[str, TaskInfo] = {}
         self.procs: dict[str, A.ProcDecl] = {}
         self.declared: dict[str, A.Loc] = {}
+        self.nesting = 0  # statements open around the one being elaborated, procedures expanded
+        self.expanded = 0  # statements elaborated so far, procedures expanded at each call
 
     def err(self, loc: A.Loc, msg: str) -> MissionError:
         return MissionError(loc.file, loc.line, loc.col, msg, self.m.text)
@@ -270,10 +277,7 @@ class _Elaborator:
             for p in parts:
                 mask |= p[1]
             return K.IN, mask
-        acc = parts[0]
-        for p in parts[1:]:
-            acc = (op, acc, p)
-        return acc
+        return _balanced(op, parts)
 
     def check_prop(self, p: A.PropDecl) -> None:
         for e in (p.a, p.b):
@@ -332,12 +336,28 @@ class _Elaborator:
         return mask
 
     def stmt(self, s: A.Stmt, sc: _Scope) -> K.Term:
+        self.nesting += 1
+        self.expanded += 1
+        try:
+            if self.nesting > MAX_EXPANDED_NESTING:
+                names = sc.stack if len(sc.stack) <= 8 else [*sc.stack[:3], "…", *sc.stack[-3:]]
+                via = " -> ".join(names)
+                msg = (f"statements nested more than {MAX_EXPANDED_NESTING} deep once the procedures "
+                       f"are expanded (through {via})")  # fmt: skip
+                raise self.err(s.loc, msg)
+            if self.expanded > MAX_EXPANDED_STATEMENTS:
+                msg = (
+                    f"the mission expands to more than {MAX_EXPANDED_STATEMENTS} statements (every call "
+                    "of a procedure is a copy of its body): call fewer procedures from procedures"
+                )
+                raise self.err(s.loc, msg)
+            return self._stmt(s, sc)
+        finally:
+            self.nesting -= 1
+
+    def _stmt(self, s: A.Stmt, sc: _Scope) -> K.Term:
         if isinstance(s, A.Seq):
-            terms = [self.stmt(i, sc) for i in s.items]
-            acc = terms[-1]
-            for t in reversed(terms[:-1]):
-                acc = K.Seq(t, acc)
-            return acc
+            return K.seq([self.stmt(i, sc) for i in s.items])
         if isinstance(s, A.Call | A.Run):
             if s.name in self.tasks:
                 return K.Run(self.tasks[s.name].index, s.loc)
@@ -380,7 +400,7 @@ class _Elaborator:
             body = self.stmt(s.body, sc)
             if s.until is not None:
                 body = K.Abort(body, self.cond(s.until), False, False)
-            return K.Seq(wait, body)
+            return K.seq((wait, body))
         if isinstance(s, A.DoUntil):
             return K.Abort(self.stmt(s.body, sc), self.cond(s.cond), s.weak, False)
         if isinstance(s, A.Loop):
@@ -410,8 +430,8 @@ class _Elaborator:
             return K.Exit(sc.traps[s.name][0])
         if isinstance(s, A.Every):
             c = self.cond(s.cond)
-            body = K.Abort(K.Seq(self.stmt(s.body, sc), K.Halt(s.loc)), c, False, False)
-            return K.Seq(K.Await(c, False, s.loc), K.Loop(body, s.loc))
+            body = K.Abort(K.seq((self.stmt(s.body, sc), K.Halt(s.loc))), c, False, False)
+            return K.seq((K.Await(c, False, s.loc), K.Loop(body, s.loc)))
         if isinstance(s, A.Handle):
             return self.handle(self.stmt(s.body, sc), s.handlers, sc)
         raise AssertionError(f"unhandled statement {s!r}")  # pragma: no cover
@@ -429,6 +449,14 @@ class _Scope:
         self.in_safe = in_safe
 
 
+def _balanced(op: int, parts: list[K.Cond]) -> K.Cond:
+    """`a op b op c …` as a balanced tree: a chain of a thousand operands nests ten deep."""
+    while len(parts) > 1:
+        pairs = [(op, parts[i], parts[i + 1]) for i in range(0, len(parts) - 1, 2)]
+        parts = [*pairs, parts[-1]] if len(parts) % 2 else pairs
+    return parts[0]
+
+
 def _tasks_in(t: K.Term | None) -> set[int]:
     """Every Robot-Task a term may run."""
     if t is None:
@@ -443,7 +471,7 @@ def _tasks_in(t: K.Term | None) -> set[int]:
 
 def _children(t: K.Term) -> list[K.Term | None]:
     if isinstance(t, K.Seq):
-        return [t.first, t.then]
+        return list(t.items)
     if isinstance(t, K.Par):
         return list(t.branches)
     if isinstance(t, K.Abort | K.Loop | K.Trap):
@@ -468,8 +496,13 @@ def first_codes(t: K.Term) -> set[int]:
     if isinstance(t, K.Present):
         return first_codes(t.then) | first_codes(t.orelse)
     if isinstance(t, K.Seq):
-        a = first_codes(t.first)
-        return (a - {K.DONE}) | first_codes(t.then) if K.DONE in a else a
+        acc: set[int] = set()
+        for item in t.items:
+            codes = first_codes(item)
+            acc |= codes - {K.DONE}
+            if K.DONE not in codes:
+                return acc
+        return acc | {K.DONE}
     if isinstance(t, K.Par):
         acc = {K.DONE}
         for b in t.branches:

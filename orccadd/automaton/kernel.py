@@ -62,8 +62,10 @@ class Present:
 
 @dataclass(frozen=True, slots=True)
 class Seq:
-    first: Term
-    then: Term
+    """`P1; P2; …; Pn` (n ≥ 2), flat: a sequence of hundreds of tasks is one term, not a chain
+    hundreds deep (every function over terms recurses on nesting only). Build with `seq`."""
+
+    items: tuple[Term, ...]
     _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
@@ -169,6 +171,17 @@ Term = (
 NOTHING = Nothing()
 
 
+def seq(items: tuple[Term, ...] | list[Term]) -> Term:
+    """The sequence of `items`, flattened (a `Seq` item's own items are spliced in)."""
+    flat: list[Term] = []
+    for t in items:
+        if isinstance(t, Seq):
+            flat.extend(t.items)
+        else:
+            flat.append(t)
+    return flat[0] if len(flat) == 1 else Seq(tuple(flat))
+
+
 def _cache_hash(cls: type) -> None:
     """Terms are hashed at every state lookup; each computes its (recursive) hash once."""
     names = tuple(f.name for f in fields(cls) if f.name != "_h")
@@ -252,7 +265,7 @@ class Instant:
         elif isinstance(t, Started):
             self.cancelled.append(t.task)
         elif isinstance(t, Seq):
-            self.kill(t.first)  # `then` has not started yet
+            self.kill(t.items[0])  # the rest has not started yet
         elif isinstance(t, Par):
             for b in t.branches:
                 self.kill(b)
@@ -268,12 +281,14 @@ def step(t: Term, r: Instant) -> tuple[int, Term]:
             return DONE, NOTHING
         return PAUSED, t
     if isinstance(t, Seq):
-        k, first = step(t.first, r)
-        if k == DONE:
-            return step(t.then, r)
-        if k == PAUSED:
-            return PAUSED, Seq(first, t.then)
-        return k, NOTHING
+        items = t.items
+        for i, item in enumerate(items):
+            k, res = step(item, r)
+            if k == PAUSED:
+                return PAUSED, seq((res, *items[i + 1 :]))
+            if k != DONE:
+                return k, NOTHING
+        return DONE, NOTHING
     if isinstance(t, Par):
         codes: list[int] = []
         rest: list[Term | None] = []
@@ -318,7 +333,7 @@ def step(t: Term, r: Instant) -> tuple[int, Term]:
         k, body = step(t.body, r)
         if k == DONE:
             raise InstantaneousLoopError(t.loc)
-        return (PAUSED, Seq(body, t)) if k == PAUSED else (k, NOTHING)
+        return (PAUSED, seq((body, t))) if k == PAUSED else (k, NOTHING)
     if isinstance(t, Trap):
         k, body = step(t.body, r)
         if k == PAUSED:
@@ -346,7 +361,7 @@ def settle(t: Term) -> Term:
     if isinstance(t, Started):
         return Running(t.task, t.loc)
     if isinstance(t, Seq):
-        return Seq(settle(t.first), t.then)
+        return seq((settle(t.items[0]), *t.items[1:]))
     if isinstance(t, Par):
         return Par(tuple(None if b is None else settle(b) for b in t.branches))
     if isinstance(t, Abort):
@@ -363,7 +378,7 @@ def active_tasks(t: Term | None, out: list[int]) -> list[int]:
     if isinstance(t, Running | Started):
         out.append(t.task)
     elif isinstance(t, Seq):
-        active_tasks(t.first, out)
+        active_tasks(t.items[0], out)
     elif isinstance(t, Par):
         for b in t.branches:
             active_tasks(b, out)
@@ -397,7 +412,10 @@ def mentions(t: Term | None, end_masks: tuple[int, ...]) -> tuple[int, int]:
     if isinstance(t, Await):
         return cond_masks(t.cond)
     if isinstance(t, Seq):
-        return _union(mentions(t.first, end_masks), mentions(t.then, end_masks))
+        acc = (0, 0)
+        for item in t.items:
+            acc = _union(acc, mentions(item, end_masks))
+        return acc
     if isinstance(t, Par):
         acc = (0, 0)
         for b in t.branches:

@@ -33,6 +33,16 @@ _WORDS = {
     "LSQB": "`[`",
     "RSQB": "`]`",
 }
+# Limits on what a mission may be (each refused with a MissionError that says which): the checks
+# run before any recursive pass, so no mission can exhaust the interpreter's stack.
+MAX_MISSION_CHARS = 1_000_000
+MAX_NESTING = 64  # statements and signal expressions nested inside one another
+
+_NESTING_NODES = frozenset(
+    "call run nothing pause halt safe emit await_ when_until when_do do_until weak_do_until loop seq par "
+    "present trap exit every handle handler not_ and_expr or_expr".split()
+)
+
 _DECL_TOKENS = ("MISSION", "RESOURCE", "INPUT", "SIGNAL", "TASK", "PROCEDURE", "PROC_ROLE", "PROPERTY")
 
 
@@ -60,6 +70,10 @@ def _expected(names: set[str]) -> str:
 
 def parse_mission(text: str, file: str = "<mission>") -> A.MissionAst:
     """Parse a mission; raise `MissionError` (never anything else) on a syntax error."""
+    if len(text) > MAX_MISSION_CHARS:
+        raise MissionError(
+            file, 1, 1, f"the mission is {len(text)} characters long; the limit is {MAX_MISSION_CHARS}"
+        )
     try:
         tree = _parser().parse(text)
     except lark.exceptions.UnexpectedToken as e:
@@ -91,7 +105,23 @@ def parse_mission(text: str, file: str = "<mission>") -> A.MissionAst:
         raise MissionError(
             file, line, col, f"the file ends too early: expected {_expected(set(e.expected))}", text
         ) from None
+    _check_nesting(tree, file, text)
     return _Builder(file, text).mission(tree)
+
+
+def _check_nesting(tree: lark.Tree[Any], file: str, text: str) -> None:
+    """Refuse nesting deeper than `MAX_NESTING` (iteratively: the tree may be thousands deep)."""
+    stack: list[tuple[lark.Tree[Any], int]] = [(tree, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if node.data in _NESTING_NODES:
+            depth += 1
+            if depth > MAX_NESTING:
+                meta = node.meta
+                line, col = getattr(meta, "line", 0), getattr(meta, "column", 0)
+                msg = f"statements or conditions nested more than {MAX_NESTING} deep here"
+                raise MissionError(file, line, col, msg, text)
+        stack.extend((c, depth) for c in node.children if isinstance(c, lark.Tree))
 
 
 # After these words a name must follow; a keyword there was read as that name.

@@ -76,7 +76,7 @@ def _task_activations(t: object) -> int:
     if isinstance(t, K.Run):
         return 1
     if isinstance(t, K.Seq):
-        return _task_activations(t.first) + _task_activations(t.then)
+        return sum(_task_activations(x) for x in t.items)
     if isinstance(t, K.Par):
         return sum(_task_activations(b) for b in t.branches)
     if isinstance(t, K.Abort | K.Trap | K.Loop):
