@@ -147,11 +147,19 @@ class RobotConfig:
         return (Path(self.source).parent / path).resolve()
 
 
+MAX_TOML_BYTES = 1 << 20
+
+
 def read_toml(path: Path) -> dict[str, Any]:
     """Read a TOML file, turning syntax errors into `ConfigError` naming the file and line."""
     try:
         with path.open("rb") as fh:
-            return tomllib.load(fh)
+            data = fh.read(MAX_TOML_BYTES + 1)
+        if len(data) > MAX_TOML_BYTES:
+            raise ConfigError(str(path), "", f"is larger than {MAX_TOML_BYTES} bytes: not a config")
+        return tomllib.loads(data.decode("utf-8"))
+    except RecursionError:
+        raise ConfigError(str(path), "", "nests arrays or tables too deeply to be read") from None
     except FileNotFoundError:
         raise ConfigError(str(path), "", "file not found") from None
     except UnicodeDecodeError as e:

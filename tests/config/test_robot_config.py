@@ -130,6 +130,8 @@ def test_unlisted_urdf_joint_must_be_locked(robot_variant) -> None:  # type: ign
         (b"\xff\xfe\x00binary\x80", "is not UTF-8 text, so not TOML"),
         (b"name = [unclosed", "is not valid TOML"),
         (None, "cannot be read"),  # a directory
+        (b"a = " + b"[" * 100_000 + b"]" * 100_000, "nests arrays or tables too deeply"),
+        (b"# " + b"x" * (2 << 20), "is larger than 1048576 bytes"),
     ],
 )
 def test_an_unreadable_config_is_a_config_error_naming_the_file(
