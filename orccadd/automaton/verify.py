@@ -108,7 +108,9 @@ class _Graph:
                 yield s, inputs, n, actions
 
 
-def verify(a: Automaton) -> Report:
+def verify(a: Automaton, *, one_task_at_a_time: bool = False) -> Report:
+    """Every check; `one_task_at_a_time` adds the execution machine's own need (the daemon runs
+    one Robot-Task at a time on its robot: `orccadd.mission.check_mission`)."""
     g = _Graph(a)
     results = [
         CheckResult(
@@ -119,6 +121,8 @@ def verify(a: Automaton) -> Report:
         _check_liveness(a, g),
         _check_conflicts(a, g),
     ]
+    if one_task_at_a_time:
+        results.append(_check_one_task(a, g))
     results.extend(_check_property(a, g, prop) for prop in a.program.properties)
     return Report(a, results, _warnings(a, g))
 
@@ -248,6 +252,17 @@ def _check_conflicts(a: Automaton, g: _Graph) -> CheckResult:
                         g.path(s), f"at: {a.where[s]}",
                     )  # fmt: skip
     return CheckResult("conflicts", True, "no two active tasks ever claim the same resource or joints")
+
+
+def _check_one_task(a: Automaton, g: _Graph) -> CheckResult:
+    for s in sorted(g.parent):
+        if len(a.active[s]) > 1:
+            names = " and ".join(a.program.tasks[i].name for i in a.active[s])
+            return CheckResult(
+                "one task", False, f"{names} active at once: the daemon runs one Robot-Task at a time",
+                g.path(s), f"at: {a.where[s]}",
+            )  # fmt: skip
+    return CheckResult("one task", True, "at most one Robot-Task is active in any state (the daemon's need)")
 
 
 def _warnings(a: Automaton, g: _Graph) -> list[str]:

@@ -21,6 +21,11 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("file")
     p.add_argument("--json", action="store_true", help="machine-readable verdicts")
     p.add_argument("--max-states", type=int, default=200_000)
+    p.add_argument(
+        "--language-only",
+        action="store_true",
+        help="the language's checks only, not whether this daemon can load it (another platform's mission)",
+    )
     p.set_defaults(func=cmd_check)
     g = sub.add_parser("graph", help="draw a mission's automaton, or an abstract view of it")
     g.add_argument("file")
@@ -44,10 +49,15 @@ def add_parsers(sub: Any) -> None:
 def cmd_check(args: argparse.Namespace) -> int:
     from orccadd.automaton import compile_file, verify
     from orccadd.automaton.verify import format_trace
+    from orccadd.mission import check_mission
     from orccadd.task.spec import read_task_interface
 
     try:
-        a = compile_file(args.file, args.max_states, read_task_interface)
+        if args.language_only:
+            a = compile_file(args.file, args.max_states, read_task_interface)
+            report = verify(a)
+        else:
+            a, report = check_mission(args.file, args.max_states)
     except MissionError as e:
         if args.json:
             print(
@@ -61,7 +71,6 @@ def cmd_check(args: argparse.Namespace) -> int:
         else:
             print(f"error: {e}", file=sys.stderr)
         return EXIT_FAILED
-    report = verify(a)
     if args.json:
         print(json.dumps({
             "ok": report.ok,

@@ -19,14 +19,11 @@ from orccadd.errors import OrccaddError
 
 def main(argv: list[str] | None = None) -> int:
     mission, out = argv if argv is not None else sys.argv[1:]
-    sys.setrecursionlimit(10_000)
     try:
         result: object = compile_and_verify(mission)
         code = 0
     except OrccaddError as e:
         result, code = str(e), 1
-    except RecursionError:
-        result, code = f"{mission}: the mission is nested too deeply to compile", 1
     Path(out).write_bytes(pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL))
     return code
 

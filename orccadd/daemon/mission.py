@@ -10,12 +10,12 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from orccadd.automaton import Automaton, Report, compile_file, verify
+from orccadd.automaton import Automaton, Report
 from orccadd.automaton import ast as A
 from orccadd.errors import MissionError, OrccaddError, ParameterError, VerificationError
+from orccadd.mission import check_mission
 from orccadd.physres.base import PhysicalResource
 from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
-from orccadd.task.spec import read_task_interface
 
 
 @dataclass(frozen=True)
@@ -64,9 +64,9 @@ def load_mission(
 def compile_and_verify(path: str | Path) -> tuple[Automaton, Report]:
     """The long, pure part of a load (parse, compile, verify): the real-time process runs it in
     a child process (`orccadd.daemon.compile_worker`), so that it never holds the control
-    thread's interpreter lock. `VerificationError` with the counterexamples if a check fails."""
-    automaton = compile_file(path, task_files=read_task_interface)
-    report = verify(automaton)
+    thread's interpreter lock. `VerificationError` with the counterexamples if a check fails.
+    The same checks as `orccadctl check` (`orccadd.mission.check_mission`)."""
+    automaton, report = check_mission(path)
     if not report.ok:
         raise VerificationError(f"{path}: the mission fails its checks:\n{report.format()}")
     return automaton, report
@@ -84,27 +84,11 @@ def prepare_mission(
     p = automaton.program
     text = p.text
     for decl in p.ast.tasks:
-        if not decl.source:
-            raise _err(
-                decl.loc,
-                text,
-                f'task {decl.name} has no task file: the daemon can only run tasks `from "file.toml"`',
-            )
         if decl.resource != resource.name:
             raise _err(
                 decl.loc,
                 text,
                 f"task {decl.name} runs on `{decl.resource}`, but this robot's resource is `{resource.name}`",
-            )
-    for state, active in enumerate(automaton.active):
-        if len(active) > 1:
-            names = " and ".join(p.tasks[i].name for i in active)
-            raise MissionError(
-                p.file,
-                0,
-                0,
-                f"{names} are active at once (state {state}: {automaton.where[state]}); "
-                f"this daemon runs one Robot-Task on resource `{resource.name}` at a time",
             )
     tasks = [_build(decl, p.file, text, resource, registry, queue) for decl in p.ast.tasks]
     bits: dict[int, int] = {}

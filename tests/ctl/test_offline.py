@@ -18,13 +18,13 @@ def ctl(*args: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_check_passes_keepstable() -> None:
-    r = ctl("check", str(KEEPSTABLE))
+    r = ctl("check", "--language-only", str(KEEPSTABLE))
     assert r.returncode == 0, r.stdout + r.stderr
     assert "ok   conflicts" in r.stdout
 
 
 def test_check_refuses_the_mutant_with_its_counterexample_as_json() -> None:
-    r = ctl("check", "--json", str(NO_GUARD))
+    r = ctl("check", "--json", "--language-only", str(NO_GUARD))
     assert r.returncode == 1
     out = json.loads(r.stdout)
     assert out["ok"] is False
@@ -82,3 +82,39 @@ def test_online_commands_do_not_load_the_compiler() -> None:
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert r.stdout.strip() == "False", r.stderr
+
+
+def test_check_refuses_what_load_refuses_and_language_only_does_not(tmp_path: Path) -> None:
+    """One function for both: a mission with two tasks active at once passes the language's checks
+    but not the daemon's, with the shortest trace to the state as the counterexample."""
+    two = tmp_path / "two.mission"
+    two.write_text(
+        TWO_AT_ONCE.replace("TASK", str(ROOT / "configs/tasks/move_joints.toml")), encoding="utf-8"
+    )
+    r = ctl("check", str(two))
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "FAIL one task: Reach and Look active at once" in r.stdout
+    assert "instant 1:" in r.stdout
+    assert ctl("check", "--language-only", str(two)).returncode == 0
+    bare = ctl("check", str(NO_GUARD))
+    assert bare.returncode == 1 and "FAIL task files: no task file for KeepStableUS (line 11)" in bare.stdout
+
+
+TWO_AT_ONCE = """mission Two
+resource arm
+input Stop
+task Reach on arm joints shoulder_pan_joint from "TASK"
+  post
+end
+task Look on arm joints wrist_3_joint from "TASK"
+  post
+end
+main procedure P
+  handle
+    PAR(Reach || Look)
+  on fatal do safe end
+end
+safe procedure S
+  await Stop
+end
+"""
