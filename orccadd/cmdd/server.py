@@ -17,16 +17,16 @@ import json
 import logging
 import os
 import pwd
-import re
 import signal
 import socket
 import stat
 import struct
 import time
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from orccadd.cmdd import views
+from orccadd.cmdd.csvlog import CsvLog, LogDir
 from orccadd.config.robot import DaemonConfig, read_robot_config
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.wire.commands import (
@@ -50,7 +50,6 @@ log = logging.getLogger("orccadd.cmdd")
 STALL_S = 10.0  # a client that does not read its replies for this long is dropped
 ROLELESS_MAX = 8  # peers without a role waited for at once (each gets one refusal)
 ROLELESS_WAIT_S = 2.0
-LOG_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}\.csv")
 RT_TIMEOUT_S = 5.0
 LOAD_TIMEOUT_S = 600.0
 RT_MAX = 1 << 20
@@ -162,6 +161,7 @@ class CommandDaemon:
         self.cfg = cfg
         self.socket_path = socket_path
         self.log_dir = log_dir or Path(socket_path).parent / "logs"
+        self.logs = LogDir(self.log_dir, cfg.socket_group)
         self.log_dest = ""
         self.rt = RtLink(rt_path)
         self.tel = TelemetryBlock.attach(telemetry)
@@ -169,7 +169,7 @@ class CommandDaemon:
         self.desc: dict[str, Any] = {}
         self.slots = {Role.CONTROL: 0, Role.READ: 0}  # connections served, per role
         self.roleless = 0
-        self.csv: views.CsvLog | None = None
+        self.csv: CsvLog | None = None
         self.last_log: dict[str, Any] | None = None
         self.server: asyncio.AbstractServer | None = None
         self.done = asyncio.Event()
@@ -213,12 +213,16 @@ class CommandDaemon:
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, self.done.set)
         await self.refresh()
+        self._resume_log()
         pump = asyncio.create_task(self._pump())
         await self.done.wait()
         pump.cancel()
         self.server.close()
         if self.csv is not None:
-            self.csv.close()
+            with contextlib.suppress(OSError):
+                self.csv.close()
+            if not _alive(int(self.tel.header[H.PID])):
+                self.logs.clear_state()  # the daemon stopped; else a successor carries the log on
         with contextlib.suppress(FileNotFoundError):
             if os.stat(self.socket_path).st_ino == self.sock_ino:
                 os.unlink(self.socket_path)
@@ -228,7 +232,10 @@ class CommandDaemon:
         while True:
             await asyncio.sleep(0.05)
             if self.csv is not None:
-                self.csv.pump()
+                try:
+                    self.csv.pump()
+                except OSError as e:
+                    self._end_log(self.csv.abandon(e))
             if self.rt.closed or not _alive(int(self.tel.header[H.PID])):
                 log.info("the real-time process is gone; exiting")
                 self.done.set()
@@ -434,41 +441,47 @@ class CommandDaemon:
             sel = views.SignalSelection(
                 [str(s) for s in signals or ["q", "dq", "tau", "cmd"]], self.desc["joints"]
             )
-            fh, path = self._create_log(name or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv")
-            self.csv = views.CsvLog(self.tel, fh, path, sel)
+            name = name or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv"
+            self.csv = CsvLog(self.tel, self.logs.create(name), self.log_dir / name, sel)
             self.log_dest = dest
+            state = {"file": name, "signals": sel.labels, "dest": dest, "start_tick": self.csv.start_tick}
+            self.logs.save_state({**state, "rt_pid": int(self.tel.header[H.PID])})
             return {**self.csv.describe(), "dest": dest}
         if self.csv is None:
             raise ValueError("log: not logging")
-        self.last_log = {**self.csv.close(), "dest": self.log_dest}
-        self.csv = None
-        return self.last_log
-
-    def _create_log(self, name: str) -> tuple[IO[str], Path]:
-        """A new file `name` in the log directory: created, never opened if it exists, never
-        through a symbolic link (O_EXCL | O_NOFOLLOW relative to the directory's descriptor)."""
-        if not LOG_NAME.fullmatch(name):
-            raise ValueError(
-                f"log: name {name[:120]!r} must be letters, digits, '.', '_' or '-', end in .csv, "
-                "and not start with '.' (a file name, not a path)"
-            )
         try:
-            gid = prepare_socket_dir(self.log_dir, self.cfg.socket_group)
-            dir_fd = os.open(self.log_dir, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
-            try:
-                flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC
-                fd = os.open(name, flags, 0o640, dir_fd=dir_fd)
-            finally:
-                os.close(dir_fd)
-        except SocketPathError as e:
-            raise ValueError(f"log: {e}") from None
-        except FileExistsError:
-            raise ValueError(f"log: {name} already exists in {self.log_dir}: choose another name") from None
+            self._end_log(self.csv.close())
         except OSError as e:
-            raise ValueError(f"log: cannot create {name} in {self.log_dir}: {e.strerror}") from None
-        if gid >= 0:
-            os.fchown(fd, -1, gid)
-        return os.fdopen(fd, "w", newline=""), self.log_dir / name
+            self._end_log(self.csv.abandon(e))
+        return self.last_log or {}
+
+    def _end_log(self, summary: dict[str, Any]) -> None:
+        if "error" in summary:
+            log.error("%s: %s", summary["file"], summary["error"])
+        self.last_log = {**summary, "dest": self.log_dest}
+        self.csv = None
+        self.logs.clear_state()
+
+    def _resume_log(self) -> None:
+        """Carry on the log a command daemon before this one had open for this real-time process."""
+        state = self.logs.load_state()
+        if state is None:
+            return
+        if state.get("rt_pid") != int(self.tel.header[H.PID]):
+            log.info("log %s was open when the previous daemon stopped; left as it is", state.get("file"))
+            self.logs.clear_state()
+            return
+        try:
+            sel = views.SignalSelection(list(state["signals"]), self.desc["joints"])
+            fh, last_t_s, rows = self.logs.reopen(str(state["file"]))
+            resume = (int(state["start_tick"]), last_t_s, rows)
+            self.csv = CsvLog(self.tel, fh, self.log_dir / str(state["file"]), sel, resume)
+        except (OSError, SocketPathError, ValueError, KeyError, TypeError) as e:
+            log.error("cannot carry on log %s: %s", state.get("file"), e)
+            self.logs.clear_state()
+            return
+        self.log_dest = str(state.get("dest", ""))
+        log.info("carrying on log %s after %d rows", self.csv.path, rows)
 
 
 def _alive(pid: int) -> bool:

@@ -7,10 +7,8 @@ when a new mission was loaded, to learn the names behind the indices).
 
 from __future__ import annotations
 
-import csv
 import time
-from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +27,7 @@ from orccadd.wire.schema import (
     Trace,
     status_names,
 )
-from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
+from orccadd.wire.telemetry import TelemetryBlock, read_status
 
 NF = len(TICK_FIELDS)
 
@@ -176,37 +174,3 @@ def decode_trace(rec: np.ndarray, desc: dict[str, Any]) -> dict[str, Any]:
 
 def _clock(wall_s: float) -> str:
     return time.strftime("%H:%M:%S", time.localtime(wall_s)) + f".{int(wall_s % 1 * 1000):03d}"
-
-
-class CsvLog:
-    """Chosen signals at full rate into a CSV file (PlotJuggler: File > Load Data, time column `time_s`)."""
-
-    def __init__(self, tel: TelemetryBlock, fh: IO[str], path: Path, selection: SignalSelection) -> None:
-        self.path = path
-        self.sel = selection
-        self.reader = RingReader(tel.ticks, tel.header, H.TICK_HEAD, from_now=True)
-        self.fh = fh
-        self.writer = csv.writer(self.fh)
-        self.writer.writerow(["time_s", *selection.labels])
-        self.rows = 0
-        self.started = time.time()
-
-    def pump(self) -> None:
-        recs = self.reader.poll()
-        cols = self.sel.cols
-        for rec in recs:
-            self.writer.writerow([f"{rec[T.T_S]:.6f}", *(f"{rec[c]:.9g}" for c in cols)])
-        self.rows += len(recs)
-
-    def close(self) -> dict[str, Any]:
-        self.pump()
-        self.fh.close()
-        return self.describe()
-
-    def describe(self) -> dict[str, Any]:
-        return {
-            "file": str(self.path),
-            "rows": self.rows,
-            "lost": self.reader.lost,
-            "signals": self.sel.labels,
-        }

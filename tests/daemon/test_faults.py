@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
 import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from orccadd.physres.shm_channel import Ctl, PlantChannel
 from orccadd.types import Status
@@ -124,3 +126,67 @@ def test_realtime_process_killed_the_arm_stops(daemon: Daemon) -> None:
     else:
         os.kill(plant_pid, signal.SIGKILL)
         raise AssertionError("the plant process outlived its controller")
+
+
+def _new_command_daemon(daemon: Daemon, old_pid: int) -> int:
+    end = time.monotonic() + 30
+    while True:
+        try:
+            pid = int(daemon.call("ping")["pid"])  # type: ignore[index]
+            if pid != old_pid:
+                return pid
+        except Exception:
+            pass
+        assert time.monotonic() < end, daemon.log.read_text()
+        time.sleep(0.2)
+
+
+def test_command_daemon_killed_mid_log_the_next_one_carries_the_log_on_without_a_gap(daemon: Daemon) -> None:
+    daemon.call("load", path=DEMO)
+    daemon.call("start")
+    daemon.call("log", action="start", name="run.csv", signals=["q.0"])
+    time.sleep(1.0)
+    pid = int(daemon.call("ping")["pid"])  # type: ignore[index]
+    os.kill(pid, signal.SIGKILL)  # mid-write: rows in its buffer and perhaps half a line
+    _new_command_daemon(daemon, pid)
+    assert daemon.status()["log"]["resumed"]  # type: ignore[index]
+    time.sleep(0.5)
+    info = daemon.call("log", action="stop")
+    assert isinstance(info, dict) and info["lost"] == 0 and "gap" not in info, info
+    text = (Path(daemon.socket).parent / "logs" / "run.csv").read_text()
+    lines = text.splitlines()
+    assert lines[0] == "time_s,q.shoulder_pan_joint" and text.endswith("\n")
+    t = np.array([float(x.split(",")[0]) for x in lines[1:]])
+    period_s = float(np.median(np.diff(t)))
+    assert info["rows"] == len(t)
+    # ~2 s at the control rate, every tick once: none twice, no hole (the dead daemon's downtime
+    # was ≥ 0.5 s, hundreds of periods); a skipped period of an overrun is a few at most
+    assert np.all(np.diff(t) > 0) and np.diff(t).max() < 5 * period_s, np.diff(t).max()
+    assert len(t) > 1.5 / period_s
+
+
+def test_log_disk_full_ends_the_log_with_the_reason_and_nothing_else(tmp_path: Path) -> None:
+    logs = tmp_path / "logs"
+    logs.mkdir(mode=0o750)
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=64k,mode=0750", "tmpfs", str(logs)], capture_output=True
+    )
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs here: {mounted.stderr.decode().strip()}")
+    try:
+        d = start_daemon(tmp_path, daemon_cfg=f'log_dir = "{logs}"')
+        try:
+            d.call("load", path=DEMO)
+            d.call("start")
+            d.call("log", action="start", name="full.csv")  # q, dq, tau, cmd: 64 KiB in < 1 s
+            s = d.wait(lambda s: "error" in (s.get("log") or {}), timeout_s=30)
+            assert "No space left on device" in s["log"]["error"], s["log"]  # type: ignore[index]
+            ticks = int(d.status()["ticks"])  # type: ignore[arg-type]
+            d.wait(lambda s: int(s["ticks"]) > ticks + 100)  # the loop goes on
+            assert not d.status()["faulted"]
+            r = d.reply("log", action="stop")
+            assert not r["ok"] and "not logging" in str(r["error"])
+        finally:
+            d.stop()
+    finally:
+        subprocess.run(["umount", "-l", str(logs)], check=False)
