@@ -58,6 +58,7 @@ class SwitchingLoop(ControlLoop):
         self.switches = 0
         self._busy_ns = 0  # fault injection: extra compute per tick (real overruns)
         self._busy_ticks = 0
+        self._stop_wanted = False
         self._slack_r, self._slack_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self._slack_wanted = False
 
@@ -87,6 +88,11 @@ class SwitchingLoop(ControlLoop):
         """Readable once a tick has ended after the last `want_slack()`."""
         return self._slack_r
 
+    def request_safe_stop(self) -> None:
+        """Safe-stop the resource at the start of the next tick, from the control thread (the
+        thread that talks to the device), whatever the automaton thread is doing then."""
+        self._stop_wanted = True
+
     def want_slack(self) -> None:
         with contextlib.suppress(BlockingIOError):
             os.read(self._slack_r, 64)
@@ -98,6 +104,9 @@ class SwitchingLoop(ControlLoop):
 
     # ---- the control thread ---------------------------------------------------------------
     def step(self, t_s: float) -> None:
+        if self._stop_wanted:
+            self._stop_wanted = False
+            self.resource.safe_stop()
         if self.tunes.waiting:
             self.tunes.drain(RobotTask.apply_change, int(self.tel.header[H.TICK_HEAD]) + 1)
         req = self._request

@@ -55,6 +55,20 @@ RESPAWN_DELAY_S = 1.0
 RESPAWN_MAX_S = 60.0
 RESPAWN_STABLE_S = 10.0  # a command daemon that lived this long had started fine
 GIL_SWITCH_INTERVAL_S = 0.0002
+URGENT = frozenset({"abort", "stop"})  # served on arrival, ahead of any queue, not waiting for slack
+URGENT_MAX_BYTES = 4096  # an abort or a stop is a short message; longer ones are not looked into
+RECEIVE_MAX = 256  # messages read per wake-up (the command daemon has fewer in flight)
+SERVE_BUDGET_PERIODS = 0.3  # other requests served per slack; the rest at the next one
+
+
+def _is_urgent(data: bytes) -> bool:
+    if len(data) > URGENT_MAX_BYTES:
+        return False
+    try:
+        msg = json.loads(data)
+    except (ValueError, RecursionError):
+        return False
+    return isinstance(msg, dict) and msg.get("cmd") in URGENT
 
 
 def rt_socket_path(public: str) -> str:
@@ -259,10 +273,12 @@ class RealtimeProcess:
         self.machine.note("command daemon attached")
 
     def _receive(self) -> None:
-        """Queue what the command daemon sent; it is served in the loop's slack (`_serve_inbox`)."""
+        """Queue what the command daemon sent, served in the loop's slack (`_serve_inbox`); abort
+        and stop are served at once, whatever is queued (each acts at the next tick: the control
+        thread applies the safe stop or the switch itself)."""
         conn = self.conn
         assert conn is not None
-        for _ in range(16):  # bounded work per wake-up
+        for _ in range(RECEIVE_MAX):  # bounded work per wake-up
             try:
                 data, _, flags, _ = conn.recvmsg(RT_MAX)
             except BlockingIOError:
@@ -278,6 +294,9 @@ class RealtimeProcess:
             if flags & socket.MSG_TRUNC:
                 self._send({"id": None, "ok": False, "error": f"request longer than {RT_MAX} bytes"})
                 continue
+            if _is_urgent(data):
+                self._serve(data)
+                continue
             if not self.inbox:
                 self.inbox_since_ns = time.monotonic_ns()
                 self.machine.loop.want_slack()
@@ -289,19 +308,26 @@ class RealtimeProcess:
         if not self.inbox:
             return
         loop = self.machine.loop
-        waited_ns = time.monotonic_ns() - self.inbox_since_ns
+        period_ns = self.cfg.control_period_s * 1e9
+        now = time.monotonic_ns()
         slack = False
         with contextlib.suppress(BlockingIOError):
             slack = bool(os.read(loop.slack_fd, 64))
-        if not slack and waited_ns < 2 * self.cfg.control_period_s * 1e9:
+        if not slack and now - self.inbox_since_ns < 2 * period_ns:
             return
-        while self.inbox:
-            data = self.inbox.popleft()
-            rid, reply = self._handle(data)
-            if isinstance(reply, Pending):
-                self.pending.append((rid, reply))
-            else:
-                self._send(reply)
+        end = now + SERVE_BUDGET_PERIODS * period_ns
+        while self.inbox and time.monotonic_ns() < end:
+            self._serve(self.inbox.popleft())
+        if self.inbox:  # the rest after the next tick
+            self.inbox_since_ns = time.monotonic_ns()
+            loop.want_slack()
+
+    def _serve(self, data: bytes) -> None:
+        rid, reply = self._handle(data)
+        if isinstance(reply, Pending):
+            self.pending.append((rid, reply))
+        else:
+            self._send(reply)
 
     def _complete_pending(self) -> None:
         if not self.pending:

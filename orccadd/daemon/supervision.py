@@ -46,8 +46,8 @@ class Supervisor:
             self.note(f"type 3: {name}: safe stop")
 
     def abort(self, why: str) -> None:
-        """Safe stop now, remember why, end the run (`aborted`)."""
-        self.resource.safe_stop()
+        """Safe stop at the next tick, remember why, end the run (`aborted`)."""
+        self.loop.request_safe_stop()
         self.fault = self.fault or why
         self.note(f"abort: {why}")
         self.mission.end(MissionResult.ABORTED)
