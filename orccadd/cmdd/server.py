@@ -46,6 +46,7 @@ from orccadd.wire.socketdir import SocketPathError, prepare_socket_dir
 from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 
 log = logging.getLogger("orccadd.cmdd")
+NICE = -10
 
 STALL_S = 10.0  # a client that does not read its replies for this long is dropped
 ROLELESS_MAX = 8  # peers without a role waited for at once (each gets one refusal)
@@ -494,6 +495,15 @@ def _alive(pid: int) -> bool:
         return True
 
 
+def _above_clients() -> None:
+    """Run at `NICE` (time-shared, not real time): clients at the default nice 0, however many and
+    however busy, cannot starve the path of an operator's abort through this process."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, NICE)
+    except PermissionError:
+        log.info("running at nice %d (not %d: needs CAP_SYS_NICE)", os.getpriority(os.PRIO_PROCESS, 0), NICE)
+
+
 def _user(uid: int) -> str:
     try:
         return pwd.getpwuid(uid).pw_name
@@ -512,6 +522,7 @@ def main(argv: list[str] | None = None) -> int:
         setup_logging("orccadd.cmdd")
     except LogSetupError as e:
         ap.exit(2, f"{ap.prog}: error: {e}\n")
+    _above_clients()
     cfg = read_robot_config(args.config)
     log_dir = cfg.resolve(cfg.daemon.log_dir) if cfg.daemon.log_dir else None
     try:
