@@ -154,11 +154,12 @@ class SwitchingLoop(ControlLoop):
         rec[T.PHASE] = task.phase
         rec[T.WROTE] = task.wrote
         rec[T.STATUS] = st.status
+        rec[T.MODE] = self.resource.mode
         n = st.q_rad.shape[0]
         rec[NF : NF + n] = st.q_rad
         rec[NF + n : NF + 2 * n] = st.dq_rad_s
         rec[NF + 2 * n : NF + 3 * n] = st.tau_nm
-        rec[NF + 3 * n : NF + 4 * n] = task.sent
+        rec[NF + 3 * n : NF + 4 * n] = self.resource.last_command
         hdr = tel.header
         hdr[H.TICKS] = stats.ticks
         hdr[H.OVERRUNS] = stats.overruns

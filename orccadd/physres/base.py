@@ -266,6 +266,11 @@ class PhysicalResource(ABC):
         self._stop_flags = int(Status.STOPPED | (Status.TORQUE_OFF if torque_off else 0))
 
     @property
+    def last_command(self) -> FloatArray:
+        """The last command sent to the device (after the limits), in `mode`; read-only."""
+        return self._cmd
+
+    @property
     def stopping_or_stopped(self) -> bool:
         return bool(self._stop_flags)
 

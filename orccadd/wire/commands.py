@@ -101,8 +101,9 @@ COMMANDS: dict[str, CommandSpec] = {
             "monitor",
             R,
             "cmdd",
-            "stream of `{t_s, values}`: `q`, `dq`, `tau`, `cmd` (or `q.3`, `q.<joint>`), `wake_us`, "
-            "`compute_us`, `task`, `phase`, `status`",
+            "stream of `{t_s, values}`: `q`, `dq`, `tau`, `cmd` (sent to the device, in `mode`: "
+            "1 position, 2 velocity, 3 torque) (or `q.3`, `q.<joint>`), `wake_us`, `compute_us`, `task`, "
+            "`phase`, `status`, `mode`",
             (
                 Arg("signals", (list,), "signal names (default: q)", default=None),
                 Arg("rate_hz", NUMBER, "samples per second, at most the control rate", default=10.0),

@@ -16,7 +16,7 @@ from enum import IntEnum
 
 from orccadd.types import CommandMode, Phase, Status
 
-PROTOCOL_VERSION = 2  # bumped when a request, reply, record layout or enum changes meaning
+PROTOCOL_VERSION = 3  # bumped when a request, reply, record layout or enum changes meaning
 
 MAGIC = 0x0CCADD02
 HEADER_LEN = 16
@@ -108,6 +108,7 @@ class T(IntEnum):
     PHASE = 5  # Phase
     WROTE = 6  # 1 if a command was sent
     STATUS = 7  # Status flags of the resource
+    MODE = 8  # CommandMode of the command sent (the `cmd` vector: what went to the device)
 
 
 TICK_FIELDS = tuple(f.name.lower() for f in T)

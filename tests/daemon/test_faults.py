@@ -13,9 +13,15 @@ import pytest
 
 from orccadd.physres.shm_channel import Ctl, PlantChannel
 from orccadd.types import Status
-from tests.daemon.conftest import ROOT, Daemon, start_daemon
+from orccadd.wire.schema import T
+from tests.daemon.conftest import ROBOT, ROOT, Daemon, start_daemon
+from tests.daemon.safety import assert_commands_within_limits, assert_safe_stop_in_time, tick_records
 
 DEMO = str(ROOT / "configs/missions/demo.mission")
+
+
+def _telemetry(daemon: Daemon) -> str:
+    return str(daemon.call("describe")["telemetry"])  # type: ignore[index]
 
 
 def _moving(s: dict[str, object]) -> bool:
@@ -38,6 +44,13 @@ def test_consecutive_overruns_raise_type_3_and_the_safe_procedure(daemon: Daemon
     daemon.call("stop")
     s = daemon.wait(lambda s: s["state"] == "ready")
     assert s["result"] == "safe"
+    recs = tick_records(_telemetry(daemon))
+    limit = 25  # sim-ur5e's overrun_limit: the type 3 is raised in the 25th overrun in a row
+    busy = recs[:, T.COMPUTE_US] > 2000.0  # longer than the period: the injected ticks
+    runs = np.convolve(busy, np.ones(limit, dtype=int), mode="valid")
+    t3_seq = recs[int(np.argmax(runs == limit)), T.SEQ] + limit - 1
+    assert_safe_stop_in_time(recs, lambda r: bool(r[T.SEQ] >= t3_seq))
+    assert_commands_within_limits(recs, ROBOT)
 
 
 def test_resource_fault_raises_type_3_then_reset_and_move_again(daemon: Daemon) -> None:
@@ -46,6 +59,9 @@ def test_resource_fault_raises_type_3_then_reset_and_move_again(daemon: Daemon) 
     daemon.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
     daemon.call("inject", fault="resource")
     daemon.wait(lambda s: "stopped" in s.get("resource_status", []))
+    recs = tick_records(_telemetry(daemon))
+    assert_safe_stop_in_time(recs, lambda r: bool(int(r[T.STATUS]) & Status.FAULT))
+    assert_commands_within_limits(recs, ROBOT)
     ev = daemon.call("events", last=30)
     inputs = [i for e in ev["events"] if e["kind"] == "instant" for i in e["inputs"]]  # type: ignore[index]
     assert "Reach.T3.ResourceFault" in inputs
@@ -94,6 +110,7 @@ def test_command_daemon_loss_safe_stops_when_configured(tmp_path: Path) -> None:
         time.sleep(2.0)
         s = d.wait(lambda s: s["faulted"])
         assert s["result"] == "aborted"
+        assert_commands_within_limits(tick_records(_telemetry(d)), ROBOT)
     finally:
         d.stop()
 
@@ -192,3 +209,17 @@ def test_log_disk_full_ends_the_log_with_the_reason_and_nothing_else(tmp_path: P
             d.stop()
     finally:
         subprocess.run(["umount", "-l", str(logs)], check=False)
+
+
+def test_abort_mid_motion_safe_stops_within_two_ticks_of_its_handling(daemon: Daemon) -> None:
+    daemon.call("load", path=DEMO)
+    daemon.call("start")
+    daemon.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
+    daemon.call("abort")
+    s = daemon.wait(lambda s: "stopped" in s.get("resource_status", []))
+    assert s["result"] == "aborted" and s["faulted"]
+    events = daemon.call("events", last=50)["events"]  # type: ignore[index]
+    aborted_t_s = next(e["t_s"] for e in events if e.get("command") == "abort")
+    recs = tick_records(_telemetry(daemon))
+    assert_safe_stop_in_time(recs, lambda r: bool(r[T.T_S] >= aborted_t_s))
+    assert_commands_within_limits(recs, ROBOT)
