@@ -13,9 +13,8 @@ import pytest
 
 from orccadd.physres.shm_channel import Ctl, PlantChannel
 from orccadd.types import Status
-from orccadd.wire.schema import T
 from tests.daemon.conftest import ROBOT, ROOT, Daemon, start_daemon
-from tests.daemon.safety import assert_commands_within_limits, assert_safe_stop_in_time, tick_records
+from tests.safety import assert_commands_within_limits, assert_safe_stop_in_time, from_telemetry, status_shows
 
 DEMO = str(ROOT / "configs/missions/demo.mission")
 
@@ -44,13 +43,13 @@ def test_consecutive_overruns_raise_type_3_and_the_safe_procedure(daemon: Daemon
     daemon.call("stop")
     s = daemon.wait(lambda s: s["state"] == "ready")
     assert s["result"] == "safe"
-    recs = tick_records(_telemetry(daemon))
+    ticks = from_telemetry(_telemetry(daemon))
     limit = 25  # sim-ur5e's overrun_limit: the type 3 is raised in the 25th overrun in a row
-    busy = recs[:, T.COMPUTE_US] > 2000.0  # longer than the period: the injected ticks
+    busy = ticks.compute_us > 2000.0  # longer than the period: the injected ticks
     runs = np.convolve(busy, np.ones(limit, dtype=int), mode="valid")
-    t3_seq = recs[int(np.argmax(runs == limit)), T.SEQ] + limit - 1
-    assert_safe_stop_in_time(recs, lambda r: bool(r[T.SEQ] >= t3_seq))
-    assert_commands_within_limits(recs, ROBOT)
+    t3_seq = ticks.seq[int(np.argmax(runs == limit))] + limit - 1
+    assert_safe_stop_in_time(ticks, lambda i: bool(ticks.seq[i] >= t3_seq))
+    assert_commands_within_limits(ticks, ROBOT)
 
 
 def test_resource_fault_raises_type_3_then_reset_and_move_again(daemon: Daemon) -> None:
@@ -59,9 +58,9 @@ def test_resource_fault_raises_type_3_then_reset_and_move_again(daemon: Daemon) 
     daemon.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
     daemon.call("inject", fault="resource")
     daemon.wait(lambda s: "stopped" in s.get("resource_status", []))
-    recs = tick_records(_telemetry(daemon))
-    assert_safe_stop_in_time(recs, lambda r: bool(int(r[T.STATUS]) & Status.FAULT))
-    assert_commands_within_limits(recs, ROBOT)
+    ticks = from_telemetry(_telemetry(daemon))
+    assert_safe_stop_in_time(ticks, status_shows(ticks, Status.FAULT))
+    assert_commands_within_limits(ticks, ROBOT)
     ev = daemon.call("events", last=30)
     inputs = [i for e in ev["events"] if e["kind"] == "instant" for i in e["inputs"]]  # type: ignore[index]
     assert "Reach.T3.ResourceFault" in inputs
@@ -110,7 +109,7 @@ def test_command_daemon_loss_safe_stops_when_configured(tmp_path: Path) -> None:
         time.sleep(2.0)
         s = d.wait(lambda s: s["faulted"])
         assert s["result"] == "aborted"
-        assert_commands_within_limits(tick_records(_telemetry(d)), ROBOT)
+        assert_commands_within_limits(from_telemetry(_telemetry(d)), ROBOT)
     finally:
         d.stop()
 
@@ -220,6 +219,6 @@ def test_abort_mid_motion_safe_stops_within_two_ticks_of_its_handling(daemon: Da
     assert s["result"] == "aborted" and s["faulted"]
     events = daemon.call("events", last=50)["events"]  # type: ignore[index]
     aborted_t_s = next(e["t_s"] for e in events if e.get("command") == "abort")
-    recs = tick_records(_telemetry(daemon))
-    assert_safe_stop_in_time(recs, lambda r: bool(r[T.T_S] >= aborted_t_s))
-    assert_commands_within_limits(recs, ROBOT)
+    ticks = from_telemetry(_telemetry(daemon))
+    assert_safe_stop_in_time(ticks, lambda i: bool(ticks.t_s[i] >= aborted_t_s))
+    assert_commands_within_limits(ticks, ROBOT)
