@@ -18,6 +18,7 @@ BACKENDS: dict[str, tuple[str, str]] = {
     "sim": ("orccadd.physres.sim", "SimulatedArm"),
     "sim_process": ("orccadd.physres.sim_process", "SimProcessArm"),
     "canopen402": ("orccadd.physres.canopen402", "Canopen402Arm"),
+    "ur_rtde": ("orccadd.physres.ur_rtde", "UrRtdeArm"),
 }
 
 

@@ -1,0 +1,1 @@
+"""Universal Robots controllers: what RTDE and the dashboard server say, in our words."""

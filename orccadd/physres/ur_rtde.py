@@ -1,0 +1,369 @@
+"""`ur_rtde` backend: a Universal Robots arm (e-Series at 500 Hz, CB3 at 125 Hz) over RTDE, through
+the `ur-rtde` package: `RTDEReceiveInterface` (the controller's stream), `RTDEControlInterface` (the
+control script it uploads: servoJ, speedJ, servoStop, speedStop) and `DashboardClient` (power,
+brakes, protective-stop unlock, version and model).
+
+- configure: the dashboard first: controller version and robot model checked against the config,
+  the controller's period against the control period; power on and brake release only if the
+  config says so (`power_on`); then the RTDE stream and the control script;
+- the loop is **device-paced**: `wait_for_cycle` returns when a new RTDE package (a new controller
+  timestamp) has arrived; no package for `stall_periods` periods is CommLost;
+- read: actual q and dq (measured), torque = the controller's target moments (estimated from its
+  model), and every tick robot mode, safety mode, runtime state and status bits: a protective or
+  safeguard stop, an emergency stop, a violation or fault, power off or the control script not
+  running is a device fault naming the condition (type 3);
+- write: POSITION = servoJ(q, time = period, lookahead, gain), VELOCITY = speedJ(qd, a, period);
+- safe stop (category 1 or 2): our own deceleration ramp at the configured rate, sent through the
+  same servoJ/speedJ stream (never a jump), then servoStop/speedStop at rest; category 1 then
+  powers the arm off (brakes);
+- reset: a protective stop is unlocked once the controller allows it (5 s after it began), the
+  safety popup closed and the control script restarted; a lost connection is re-opened (only here,
+  when idle); an emergency stop or a violation is refused with what must be done at the pendant.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from orccadd.config.robot import RobotConfig
+from orccadd.drivers.ur.controller import (
+    ROBOT_PROGRAM_RUNNING,
+    UNLOCK_WAIT_S,
+    RobotMode,
+    SafetyMode,
+    Version,
+    condition,
+    parse_polyscope_version,
+    robot_model_name,
+)
+from orccadd.drivers.ur.settings import UrRtdeSettings
+from orccadd.errors import ConfigError, ResourceError
+from orccadd.model import RobotModel
+from orccadd.physres.base import PhysicalResource
+from orccadd.physres.description import MEASURED, ClockSource, Quantity, ResourceDescription, Source
+from orccadd.state import FloatArray, JointState
+from orccadd.types import CommandMode, Status
+
+log = logging.getLogger("orccadd.ur")
+
+E_SERIES = ("UR3e", "UR5e", "UR10e", "UR16e", "UR20", "UR30")
+AT_REST_RAD_S = 0.01
+POLL_S = 0.0001  # wait_for_cycle: how often the controller's timestamp is looked at
+
+
+def _period_of(model: str) -> float:
+    return 0.002 if model in E_SERIES else 0.008
+
+
+class UrRtdeArm(PhysicalResource):
+    Settings = UrRtdeSettings
+
+    @classmethod
+    def describe(cls, config: RobotConfig) -> ResourceDescription:
+        s: UrRtdeSettings = config.backend_settings
+        return ResourceDescription(
+            backend="ur_rtde",
+            joints=config.joint_names,
+            modes=frozenset({CommandMode.POSITION, CommandMode.VELOCITY}),
+            mode_switch_needs_disable=False,
+            position=MEASURED,
+            velocity=MEASURED,
+            torque=Quantity(Source.ESTIMATED, "the controller's target joint moments (RTDE target_moment)"),
+            brakes=True,
+            stop_categories=frozenset({1, 2}),
+            read_time_s=0.0,  # the latest package, already received by ur_rtde's thread
+            write_time_s=0.0002,  # one RTDE input package
+            clock=ClockSource.DEVICE,
+            device_period_s=_period_of(s.model),
+            fault_reset=True,
+        )
+
+    @classmethod
+    def load_settings(cls, raw: Mapping[str, Any], cfg: RobotConfig, file: str) -> UrRtdeSettings:
+        from orccadd.config.schema import load_dataclass
+
+        s = load_dataclass(UrRtdeSettings, raw, file, "resource.settings")
+        if len(cfg.joints) != 6:
+            raise ConfigError(file, "joints", f"a UR arm has 6 joints, the config lists {len(cfg.joints)}")
+        return s
+
+    def __init__(self, config: RobotConfig, model: RobotModel) -> None:
+        super().__init__(config, model)
+        self.settings: UrRtdeSettings = config.backend_settings
+        self.period_s = config.control_period_s
+        self.receive: Any = None
+        self.control: Any = None
+        self.dashboard: Any = None
+        self.version: Version | None = None
+        self.robot_model = ""
+        self._last_stamp = -1.0
+        self._stale_ticks = 0
+        self._comm_lost = ""
+        self._fault_since = 0.0  # monotonic time a protective stop was first seen
+        self._hold = np.zeros(self.dof)  # the command kept while waiting (position mode)
+        self._ramp_v = np.zeros(self.dof)  # safe stop: current ramp velocity
+        self._ramp_q = np.zeros(self.dof)
+        self._ramp_t = 0.0
+        self.packets_missed = 0
+
+    # ---- lifecycle ------------------------------------------------------------------------
+    def _on_configure(self) -> None:
+        import dashboard_client
+
+        s = self.settings
+        self.dashboard = dashboard_client.DashboardClient(s.host)
+        self._try(self.dashboard.connect, f"the dashboard server at {s.host}:29999")
+        self.version = parse_polyscope_version(self.dashboard.polyscopeVersion())
+        self.robot_model = robot_model_name(self.dashboard.getRobotModel(), self.version)
+        self._check_controller(self.version, self.robot_model)
+        if s.power_on:
+            self._power_on()
+        mode = self._dashboard_robot_mode()
+        if mode is not RobotMode.RUNNING:
+            raise ResourceError(
+                f"{self.name}: the arm is {mode.name} (power it on and release the brakes at the pendant, "
+                "or set power_on = true in [resource.settings])"
+            )
+        self._open_rtde()
+
+    def _check_controller(self, version: Version, model: str) -> None:
+        s = self.settings
+        if model != s.model:
+            raise ResourceError(
+                f"{self.name}: the controller drives a {model}, the config describes a {s.model}"
+            )
+        least = parse_polyscope_version(s.min_version)
+        if (version.major, version.minor) < (least.major, least.minor):
+            raise ResourceError(
+                f"{self.name}: controller software {version} is older than min_version {s.min_version}"
+            )
+        if abs(version.period_s - self.period_s) > 1e-9:
+            raise ResourceError(
+                f"{self.name}: control_period_s = {self.period_s:g} s, but the controller ({version}) "
+                f"runs at {1 / version.period_s:g} Hz: set control_period_s = {version.period_s:g}"
+            )
+
+    def _power_on(self) -> None:
+        d = self.dashboard
+        d.powerOn()
+        self._wait_mode({RobotMode.IDLE, RobotMode.RUNNING}, "power on")
+        d.brakeRelease()
+        self._wait_mode({RobotMode.RUNNING}, "brake release")
+
+    def _wait_mode(self, modes: set[RobotMode], what: str) -> None:
+        end = time.monotonic() + self.settings.connect_timeout_s
+        while (mode := self._dashboard_robot_mode()) not in modes:
+            if time.monotonic() > end:
+                raise ResourceError(f"{self.name}: {what}: the arm stayed {mode.name}")
+            time.sleep(0.1)
+
+    def _dashboard_robot_mode(self) -> RobotMode:
+        reply = str(self.dashboard.robotmode())  # "Robotmode: RUNNING"
+        name = reply.split(":")[-1].strip().upper()
+        return RobotMode[name] if name in RobotMode.__members__ else RobotMode.DISCONNECTED
+
+    def _open_rtde(self) -> None:
+        import rtde_control
+        import rtde_receive
+
+        host, hz = self.settings.host, 1.0 / self.period_s
+        self.receive = self._try(lambda: rtde_receive.RTDEReceiveInterface(host, hz), f"RTDE at {host}:30004")
+        self.control = self._try(lambda: rtde_control.RTDEControlInterface(host, hz), "the control script")
+        self._last_stamp = -1.0
+        self._stale_ticks = 0
+        self._comm_lost = ""
+
+    def _try(self, fn: Any, what: str) -> Any:
+        try:
+            return fn()
+        except RuntimeError as e:
+            raise ResourceError(f"{self.name}: cannot reach {what}: {e}") from None
+
+    def _on_activate(self, mode: CommandMode) -> None:
+        self._read_into(time.monotonic(), self.state)
+        self._hold[:] = self.state.q_rad
+
+    def _on_switch_mode(self, mode: CommandMode) -> None:
+        self._hold[:] = self.state.q_rad
+
+    def _on_deactivate(self) -> None:
+        if self.control is not None:
+            self.control.servoStop(self.config.safe_stop.deceleration_rad_s2)
+
+    def _on_shutdown(self) -> None:
+        for link in (self.control, self.receive):
+            if link is not None:
+                link.disconnect()
+        if self.dashboard is not None:
+            self.dashboard.disconnect()
+
+    def _on_clear_stop(self) -> None:
+        if self.config.safe_stop.category == 1:  # it was powered off at rest
+            if not self.settings.power_on:
+                raise ResourceError(f"{self.name}: powered off by the stop: power it on at the pendant")
+            self._power_on()
+            self.control.reuploadScript()
+        self._hold[:] = self.state.q_rad
+
+    def _on_reset_fault(self) -> None:
+        if self._comm_lost:
+            self._reconnect()
+            return
+        st = self.state
+        cond = condition(
+            int(self.receive.getRobotMode()), int(self.receive.getSafetyMode()),
+            int(self.receive.getRuntimeState()), self._script_running(),
+        )  # fmt: skip
+        if cond is None:
+            return
+        if cond.needs:
+            raise ResourceError(f"{self.name}: {cond.what}: `reset` cannot clear it ({cond.needs})")
+        if cond.unlockable:
+            wait = UNLOCK_WAIT_S - (time.monotonic() - self._fault_since)
+            if wait > 0:
+                raise ResourceError(
+                    f"{self.name}: protective stop: the controller unlocks it 5 s after it began "
+                    f"(in {wait:.1f} s): reset again then"
+                )
+            self.dashboard.unlockProtectiveStop()
+            self.dashboard.closeSafetyPopup()
+        self.control.reuploadScript()  # the script stopped with the stop: restart it
+        self.fault_message = ""
+        st.fault_code = 0
+
+    def _reconnect(self) -> None:
+        for link in (self.control, self.receive):
+            if link is not None:
+                with contextlib.suppress(RuntimeError):
+                    link.disconnect()
+        self._try(self.dashboard.connect, "the dashboard server")
+        self._open_rtde()
+        self.fault_message = ""
+
+    # ---- the device's clock ---------------------------------------------------------------
+    def wait_for_cycle(self, timeout_s: float) -> int:
+        """Until ur_rtde's receive thread has a package with a new controller timestamp."""
+        end = time.monotonic() + timeout_s
+        get = self.receive.getTimestamp
+        last = self._last_stamp
+        while True:
+            try:
+                if get() != last:
+                    return time.monotonic_ns()
+            except RuntimeError:
+                return -1
+            if time.monotonic() >= end:
+                return -1
+            time.sleep(POLL_S)
+
+    # ---- tick -----------------------------------------------------------------------------
+    def _script_running(self) -> bool:
+        return bool(int(self.receive.getRobotStatus()) & ROBOT_PROGRAM_RUNNING)
+
+    def _read_into(self, t_s: float, state: JointState) -> int:
+        r = self.receive
+        try:
+            connected = r.isConnected()
+            stamp = r.getTimestamp()
+        except RuntimeError:
+            connected, stamp = False, self._last_stamp
+        if stamp == self._last_stamp:
+            self._stale_ticks += 1
+        else:
+            self.packets_missed += (
+                max(0, int(round((stamp - self._last_stamp) / self.period_s)) - 1)
+                if self._last_stamp >= 0
+                else 0
+            )
+            self._stale_ticks = 0
+            self._last_stamp = stamp
+        if not connected or self._stale_ticks >= self.settings.stall_periods:
+            self._comm_lost = (
+                "the RTDE connection is closed" if not connected
+                else f"no RTDE package for {self._stale_ticks} periods (the stream stalled)"
+            )  # fmt: skip
+            self.fault_message = f"{self.name}: {self._comm_lost}"
+            return int(Status.COMM_LOST)
+        state.q_rad[:] = r.getActualQ()
+        state.dq_rad_s[:] = r.getActualQd()
+        state.tau_nm[:] = r.getTargetMoment()
+        robot_mode, safety_mode = int(r.getRobotMode()), int(r.getSafetyMode())
+        cond = condition(robot_mode, safety_mode, int(r.getRuntimeState()), self._script_running())
+        if cond is None:
+            self._fault_since = 0.0
+            return 0
+        if not self._fault_since:
+            self._fault_since = time.monotonic()
+        state.fault_code = safety_mode if safety_mode != SafetyMode.NORMAL else 100 + robot_mode
+        self.fault_message = f"{self.name}: {cond.what}"
+        flags = int(Status.FAULT)
+        if robot_mode != RobotMode.RUNNING:
+            flags |= int(Status.TORQUE_OFF)
+        return flags
+
+    def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
+        s = self.settings
+        if mode is CommandMode.POSITION:
+            self._hold[:] = command
+            ok = self.control.servoJ(command.tolist(), 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
+        else:
+            ok = self.control.speedJ(command.tolist(), s.speedj_acceleration_rad_s2, self.period_s)
+        return 0 if ok else int(Status.FAULT)
+
+    def _on_keep_alive(self, t_s: float) -> None:
+        if self._comm_lost or self.control is None:
+            return
+        if self._stop_flags & Status.STOPPING:
+            self._ramp_step(t_s)
+        elif not self._stop_flags:
+            self._write_command(
+                t_s, self.mode, self._hold if self.mode is CommandMode.POSITION else self._ramp_v * 0
+            )
+
+    def _begin_safe_stop(self) -> None:
+        self._ramp_v[:] = self.state.dq_rad_s
+        self._ramp_q[:] = self.state.q_rad
+        self._ramp_t = self.state.t_s
+
+    def _ramp_step(self, t_s: float) -> None:
+        """One period of the stop: every joint's speed down at the configured deceleration,
+        together (the path is kept), through the active mode's stream."""
+        dt = max(0.0, t_s - self._ramp_t) or self.period_s
+        self._ramp_t = t_s
+        peak = float(np.abs(self._ramp_v).max())
+        decel = self.config.safe_stop.deceleration_rad_s2
+        if peak > 0.0:
+            self._ramp_v *= max(0.0, peak - decel * dt) / peak
+        self._ramp_q += self._ramp_v * dt
+        s = self.settings
+        if self.mode is CommandMode.POSITION:
+            self.control.servoJ(self._ramp_q.tolist(), 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
+        else:
+            self.control.speedJ(self._ramp_v.tolist(), decel, self.period_s)
+        if peak == 0.0 and float(np.abs(self.state.dq_rad_s).max()) < AT_REST_RAD_S:
+            self._at_rest()
+
+    def _at_rest(self) -> None:
+        if self.mode is CommandMode.POSITION:
+            self.control.servoStop(self.config.safe_stop.deceleration_rad_s2)
+        else:
+            self.control.speedStop(self.config.safe_stop.deceleration_rad_s2)
+        torque_off = self.config.safe_stop.category == 1
+        if torque_off:
+            self.dashboard.powerOff()
+        self._mark_stopped(torque_off)
+
+    # ---- diagnostics ----------------------------------------------------------------------
+    def _details(self) -> dict[str, float | int | str]:
+        return {
+            **super()._details(),
+            "controller": f"{self.robot_model} {self.version}" if self.version else "",
+            "packets_missed": self.packets_missed,
+            "comm": self._comm_lost or "ok",
+        }
