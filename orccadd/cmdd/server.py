@@ -48,7 +48,6 @@ from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 log = logging.getLogger("orccadd.cmdd")
 NICE = -10
 
-STALL_S = 10.0  # a client that does not read its replies for this long is dropped
 ROLELESS_MAX = 8  # peers without a role waited for at once (each gets one refusal)
 ROLELESS_WAIT_S = 2.0
 RT_TIMEOUT_S = 5.0
@@ -256,7 +255,7 @@ class CommandDaemon:
                 writer.write(
                     encode(error_reply(None, f"too many clients with the {role} role (max {limit})"))
                 )
-                await asyncio.wait_for(writer.drain(), STALL_S)
+                await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
                 return
             self.slots[role] += 1
             try:
@@ -267,7 +266,10 @@ class CommandDaemon:
             return
         finally:
             with contextlib.suppress(Exception):
-                writer.close()
+                if writer.transport.get_write_buffer_size():
+                    writer.transport.abort()  # a client not reading: no waiting for it
+                else:
+                    writer.close()
 
     async def _serve_client(
         self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, role: Role, uid: int
@@ -282,11 +284,11 @@ class CommandDaemon:
                 writer.write(
                     encode(error_reply(None, f"no request for {idle:g} s: closing (idle_timeout_s)"))
                 )
-                await asyncio.wait_for(writer.drain(), STALL_S)
+                await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
                 return
             except asyncio.LimitOverrunError:
                 writer.write(encode(error_reply(None, f"request longer than {MAX_LINE} bytes")))
-                await asyncio.wait_for(writer.drain(), STALL_S)
+                await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
                 return  # the stream cannot be resynchronised: close
             await self._request(line, role, uid, writer)
 
@@ -309,7 +311,7 @@ class CommandDaemon:
         writer.write(
             encode(error_reply(rid, f"not authorised: user {_user(uid)} holds no role on this daemon"))
         )
-        await asyncio.wait_for(writer.drain(), STALL_S)
+        await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
 
     async def _request(self, line: bytes, role: Role | None, uid: int, writer: asyncio.StreamWriter) -> None:
         rid: Any = None
@@ -317,7 +319,7 @@ class CommandDaemon:
             rid, cmd, args = parse_request(line)
         except ProtocolError as e:
             writer.write(encode(error_reply(rid, str(e))))
-            await asyncio.wait_for(writer.drain(), STALL_S)
+            await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
             return
         spec = COMMANDS[cmd]
         if role is None or (spec.role is Role.CONTROL and role is not Role.CONTROL):
@@ -325,7 +327,7 @@ class CommandDaemon:
             writer.write(
                 encode(error_reply(rid, f"not authorised: user {_user(uid)} lacks {need} for {cmd!r}"))
             )
-            await asyncio.wait_for(writer.drain(), STALL_S)
+            await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
             return
         if spec.where == "rt":
             timeout = LOAD_TIMEOUT_S if cmd == "load" else RT_TIMEOUT_S
@@ -345,7 +347,7 @@ class CommandDaemon:
             except Exception as e:  # a bug must not take the command daemon down
                 log.exception("%s failed: %s: %s", cmd, type(e).__name__, e)
                 writer.write(encode(error_reply(rid, f"internal error: {type(e).__name__}: {e}")))
-        await asyncio.wait_for(writer.drain(), STALL_S)
+        await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
 
     # ---- local commands -------------------------------------------------------------------
     @handles("ping")
@@ -389,7 +391,7 @@ class CommandDaemon:
                 writer.write(
                     encode({"id": rid, "ok": True, "stream": {"t_s": rec[1], "values": sel.values(rec)}})
                 )
-                await asyncio.wait_for(writer.drain(), STALL_S)
+                await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
                 sent += 1
             nxt += period
             await asyncio.sleep(max(0.0, nxt - time.monotonic()))
@@ -422,7 +424,7 @@ class CommandDaemon:
                 await self.refresh()
             for rec in new:
                 writer.write(encode({"id": rid, "ok": True, "stream": views.decode_trace(rec, self.desc)}))
-            await asyncio.wait_for(writer.drain(), STALL_S)
+            await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
         return {"lost": r.lost}
 
     @handles("log")

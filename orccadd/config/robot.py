@@ -102,6 +102,9 @@ class DaemonConfig:
     control_clients: int = field(default=16, bounds=(1, 1024))
     read_clients: int = field(default=32, bounds=(0, 1024))
     idle_timeout_s: float = field(default=600.0, bounds=(1.0, 86400.0))
+    # a client that does not read what it is sent (a stream, a reply) for this long is cut off:
+    # its connection aborted, its buffers and slot freed
+    stall_timeout_s: float = field(default=10.0, bounds=(0.5, 600.0))
     control_priority: int = field(default=80, bounds=(0, 98))
     automaton_priority: int = field(default=90, bounds=(0, 99))
     overrun_limit: int = field(default=5, bounds=(1, 1000))

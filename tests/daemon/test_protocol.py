@@ -325,3 +325,39 @@ def test_abort_is_not_held_up_by_a_load_under_way(daemon: Daemon) -> None:
     load_s = times["load_done"] - times["load_sent"]
     # ratios, not timings: held up behind the load, the abort would take most of its time
     assert abort_s < 0.5 * load_s, (abort_s, load_s)
+
+
+def _sockets_of(pid: int) -> int:
+    n = 0
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        with contextlib.suppress(FileNotFoundError):  # closed meanwhile
+            n += "socket" in os.readlink(f"/proc/{pid}/fd/{fd}")
+    return n
+
+
+def test_a_client_that_stops_reading_is_cut_off_and_its_connection_freed(tmp_path: Path) -> None:
+    d = start_daemon(tmp_path, daemon_cfg="stall_timeout_s = 1.0")
+    try:
+        cmdd = int(d.call("ping")["pid"])  # type: ignore[index]
+        time.sleep(0.5)
+        before = _sockets_of(cmdd)
+        stalled = []
+        for _ in range(4):
+            s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            s.connect(d.socket)
+            s.sendall(
+                b'{"id": 1, "cmd": "monitor", "args": {"rate_hz": 500, "signals": ["q", "dq", "tau"]}}\n'
+            )
+            stalled.append(s)  # never read: the daemon's buffer for it fills
+        time.sleep(0.5)
+        assert _sockets_of(cmdd) >= before + 4
+        end = time.monotonic() + 20
+        while _sockets_of(cmdd) > before:
+            assert time.monotonic() < end, f"{_sockets_of(cmdd) - before} stalled connections still held"
+            time.sleep(0.2)
+        for s in stalled:
+            s.close()
+        assert d.status()["state"] == "idle"
+    finally:
+        d.stop()
