@@ -81,3 +81,9 @@ class TaskInterface:
 
 # Reads a task file's interface; raises an `OrccaddError` naming the file when it cannot.
 TaskFileReader = Callable[[Path], TaskInterface]
+
+
+# Type 3 exceptions every Robot-Task has, raised below the mission: by the resource (a limit
+# violated, a device fault, a link lost), the executor (overruns in a row) and the task itself
+# (its law raised an exception: a module's or a backend's bug, never a dead control loop).
+BUILTIN_T3 = ("LimitViolation", "ResourceFault", "CommLost", "Overrun", "LawError")

@@ -17,14 +17,13 @@ from orccadd.automaton import ast as A
 from orccadd.automaton import kernel as K
 from orccadd.automaton.program import (
     BUILTIN_T2,
-    BUILTIN_T3,
     EVENT_KINDS,
     Program,
     TaskInfo,
     event_full_name,
 )
 from orccadd.errors import MissionError, OrccaddError
-from orccadd.types import TaskFileReader
+from orccadd.types import BUILTIN_T3, TaskFileReader
 
 # Words that would be read as a keyword where a name can stand (statements, signal expressions).
 _RESERVED = (

@@ -14,7 +14,6 @@ EVENT_KINDS = ("post", "pre", "T2", "T3", "sync")
 # Runtime priority when one task reports several events in one tick (the environment model of the
 # verifier: one event per task per instant, the most severe kept).
 PRIORITY = {"T3": 0, "T2": 1, "post": 2, "pre": 3, "sync": 4}
-BUILTIN_T3 = ("LimitViolation", "ResourceFault", "CommLost", "Overrun")
 BUILTIN_T2 = ("PreconditionTimeout",)
 
 

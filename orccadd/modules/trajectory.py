@@ -42,6 +42,7 @@ class RuckigTrajectory(Module):
         self._inp = InputParameter(n)
         self._out = OutputParameter(n)
         self.last_result = Result.Working
+        self._settled = False  # at the target, exactly: nothing left to compute
         self._apply_limits()
         self.q_goal.value[:] = self.target.value
 
@@ -64,16 +65,20 @@ class RuckigTrajectory(Module):
         self.ddq_des.value[:] = 0.0
         self.q_goal.value[:] = self.target.value
         self.finished.value[...] = False
+        self._settled = False
 
     def on_parameter_change(self, name: str) -> None:
         if name == "speed_scale":
             self._apply_limits()
         else:
+            self._settled = False
             self._inp.target_position = self.target.value.tolist()
             self.q_goal.value[:] = self.target.value
             self.finished.value[...] = False
 
     def update(self, t_s: float) -> None:
+        if self._settled:  # holds the target; Ruckig is not asked again until it changes
+            return
         result = self._otg.update(self._inp, self._out)
         self.last_result = result
         if result == Result.Working or result == Result.Finished:
@@ -83,6 +88,21 @@ class RuckigTrajectory(Module):
             self.ddq_des.value[:] = out.new_acceleration
             out.pass_to_input(self._inp)
             self.finished.value[...] = result == Result.Finished
+            if result == Result.Finished:
+                self._settle()
         else:  # invalid input or calculation error: hold the last desired position
             self.dq_des.value[:] = 0.0
             self.ddq_des.value[:] = 0.0
+
+    def _settle(self) -> None:
+        """Finished: the state becomes the target exactly. Ruckig's last step leaves velocities and
+        accelerations of 1e-16, and from such a state a new limit (a `speed_scale` tune) made it
+        fail ("error in step 2"): measured by the soak benchmark."""
+        inp, n = self._inp, self.ctx.dof
+        inp.current_position = self.target.value.tolist()
+        inp.current_velocity = [0.0] * n
+        inp.current_acceleration = [0.0] * n
+        self.q_des.value[:] = self.target.value
+        self.dq_des.value[:] = 0.0
+        self.ddq_des.value[:] = 0.0
+        self._settled = True

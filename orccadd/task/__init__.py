@@ -2,7 +2,6 @@
 
 from orccadd.task.builder import build_task
 from orccadd.task.events import (
-    BUILTIN_T3,
     EventInfo,
     EventKind,
     EventQueue,
@@ -11,7 +10,7 @@ from orccadd.task.events import (
 )
 from orccadd.task.spec import TaskSpec, load_task_file, parse_task
 from orccadd.task.task import RobotTask, TaskSignature
-from orccadd.types import Phase
+from orccadd.types import BUILTIN_T3, Phase
 
 __all__ = [
     "BUILTIN_T3",

@@ -16,7 +16,6 @@ from orccadd.modules import MODULES, Module, ModuleContext, Port, module_class
 from orccadd.modules.base import Parameter
 from orccadd.physres.base import PhysicalResource
 from orccadd.task.events import (
-    BUILTIN_T3,
     PRECONDITION_TIMEOUT,
     EventKind,
     EventQueue,
@@ -24,7 +23,7 @@ from orccadd.task.events import (
 )
 from orccadd.task.spec import EventSpec, TaskSpec
 from orccadd.task.task import Precondition, RobotTask, ShellEvent, TaskSignature
-from orccadd.types import CommandMode
+from orccadd.types import BUILTIN_T3, CommandMode
 
 WIRE_RE = re.compile(r"^\s*(\w+)\.(\w+)\s*->\s*(\w+)\.(\w+)\s*$")
 COMMAND_PORTS = {

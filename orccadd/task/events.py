@@ -32,8 +32,6 @@ KIND_PREFIX = {
     EventKind.PRE: "",
 }
 
-# Type 3 exceptions every task has, raised by the resource layer and the executor.
-BUILTIN_T3 = ("LimitViolation", "ResourceFault", "CommLost", "Overrun")
 PRECONDITION_TIMEOUT = "PreconditionTimeout"
 
 

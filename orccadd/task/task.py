@@ -7,6 +7,7 @@ a type 3 exception calls `resource.safe_stop()` right there, before anyone else 
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -20,6 +21,8 @@ from orccadd.physres.base import PhysicalResource
 from orccadd.task.events import EventKind, EventQueue
 from orccadd.types import T3_MASK, CommandMode, Phase, Status
 from orccadd.vec import max_of, min_of
+
+log = logging.getLogger("orccadd.task")
 
 RUNNING = (Phase.RUN, Phase.DONE, Phase.ABORTED)
 
@@ -203,10 +206,28 @@ class RobotTask:
 
     # ---- the hot path ---------------------------------------------------------------------
     def tick(self, t_s: float) -> None:
-        """One period: read → preconditions or law → shell events → write (or keep_alive)."""
-        self._tick(t_s)
+        """One period: read → preconditions or law → shell events → write (or keep_alive).
+        An exception (a module's or a backend's bug) is the type 3 `LawError`: the arm is
+        safe-stopped in this tick, the loop goes on."""
+        try:
+            self._tick(t_s)
+        except Exception as e:
+            self._law_error(t_s, e)
         if not self.wrote:
             self.resource.keep_alive(t_s)
+
+    def _law_error(self, t_s: float, error: Exception) -> None:
+        where = self.name
+        tb = error.__traceback__
+        while tb is not None:  # the innermost module the exception came through
+            obj = tb.tb_frame.f_locals.get("self")
+            if isinstance(obj, Module):
+                where = f"{self.name}.{obj.name}"
+            tb = tb.tb_next
+        self.wrote = False
+        self.raise_t3(t_s, "LawError")
+        self.fault_reason = f"LawError: {where}: {type(error).__name__}: {error}"
+        log.error("%s (at t = %.3f s): the arm is safe-stopped", self.fault_reason, t_s, exc_info=error)
 
     def _tick(self, t_s: float) -> None:
         res = self.resource
