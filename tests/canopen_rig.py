@@ -1,17 +1,27 @@
-"""A CANopen test rig in separate processes: the virtual bus (or vcan0) and simulated drives."""
+"""A CANopen test rig in separate processes: the virtual bus (or vcan0) and simulated drives,
+plus a recorder of every frame on that bus."""
 
 from __future__ import annotations
 
+import bisect
+import re
+import struct
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+import can
+
 from orccadd.drivesim.process import DriveSimProcess
+from orccadd.drivesim.socketcand import QueuedSocketcandBus
 from tests.conftest import ROOT, eds
-from tools.virtual_can.process import HubProcess, vcan_available
+from tools.virtual_can.process import HOST, HubProcess, vcan_available
 
 CANOPEN_6AXIS = ROOT / "configs/robots/canopen-6axis.toml"
+ELMO = "ros_canopen/Elmo.dcf"
+CONSUMING_ELMO = "consuming Elmo"  # `consuming_elmo`: the rig's default drives
 
 
 @dataclass
@@ -21,10 +31,39 @@ class Rig:
     drives: DriveSimProcess
 
 
-def rig_config(tmp: Path, eds_file: str, port: int | None, extra: str = "") -> Path:
-    """canopen-6axis.toml on this rig: the bus, the URDF path, every axis on `eds_file`."""
+def edit_dcf(source: Path, dest: Path, edits: dict[str, dict[str, str]]) -> Path:
+    """`source` with keys of its sections replaced (`{"1016sub0": {"DefaultValue": "0"}}`)."""
+    text = source.read_text(errors="replace")
+    for section, keys in edits.items():
+        head = re.search(rf"^\[{section}\]\s*$", text, re.MULTILINE | re.IGNORECASE)
+        assert head is not None, f"{source.name} has no [{section}]"
+        end = text.find("\n[", head.end())
+        end = len(text) if end < 0 else end
+        body = text[head.end() : end]
+        for key, value in keys.items():
+            body, n = re.subn(rf"^{key}=.*$", f"{key}={value}", body, flags=re.MULTILINE)
+            assert n == 1, f"{source.name} [{section}] has no {key}"
+        text = text[: head.end()] + body + text[end:]
+    dest.write_text(text)
+    return dest
+
+
+def consuming_elmo(tmp: Path) -> Path:
+    """Elmo.dcf whose heartbeat consumer entries (0x1016) take a producer id: the file caps them
+    at 0xFFFF (only a time), a flaw of the file, not of the drive. With it the simulated drives
+    watch the controller's heartbeat, as real Elmo drives do."""
+    caps = {f"1016sub{sub}": {"HighLimit": "0x007FFFFF"} for sub in (1, 2)}
+    return edit_dcf(eds(ELMO), tmp / "Elmo-consuming.dcf", caps)
+
+
+def rig_config(
+    tmp: Path, eds_file: str | Path, port: int | None, extra: str = "", settings_extra: str = ""
+) -> Path:
+    """canopen-6axis.toml on this rig: the bus, the URDF path, every axis on `eds_file` (a path,
+    or a name under testdata/eds/), `settings_extra` lines in [resource.settings]."""
+    path = eds_file if isinstance(eds_file, Path) else eds(eds_file)
     text = CANOPEN_6AXIS.read_text().replace('urdf = "../urdf/', f'urdf = "{ROOT}/configs/urdf/')
-    text = text.replace('eds = "Elmo.dcf"', f'eds = "{eds(eds_file)}"')
+    text = text.replace('eds = "Elmo.dcf"', f'eds = "{path}"')
     if port is None:  # the kernel's virtual CAN
         text = text.replace('interface = "socketcand"', 'interface = "socketcan"').replace(
             'channel = "can0"', 'channel = "vcan0"'
@@ -33,12 +72,15 @@ def rig_config(tmp: Path, eds_file: str, port: int | None, extra: str = "") -> P
         text = text.replace("port = 29536", f"port = {port}")
     text = text.replace('hold_task = "../tasks/', f'hold_task = "{ROOT}/configs/tasks/')
     # this VM stalls processes for up to ~0.3 s now and then: heartbeats every 250 ms (a lost
-    # drive is still reported within 3 × 250 ms)
+    # drive is still reported within 3 × 250 ms), ours every 100 ms (the drives that watch it
+    # fault after 3 × 100 ms of silence)
     text = text.replace("heartbeat_ms = 100", "heartbeat_ms = 250")
+    text = text.replace("controller_heartbeat_ms = 50", "controller_heartbeat_ms = 100")
     # and the drive simulator (a Python process beside the controller on 2 cores) now and then
     # answers nothing for ~0.1-0.15 s while the controller keeps sending SYNCs (measured with its
     # `longest_loop_gap_ms`): a node is silent after 150 SYNCs (0.3 s) here
     text = text.replace("missed_tpdo_periods = 50", "missed_tpdo_periods = 150")
+    text = text.replace("[resource.settings]\n", f"[resource.settings]\n{settings_extra}\n")
     dirs = ", ".join(f'"{d}"' for d in (ROOT / "configs/missions", ROOT / "tests/daemon/missions", tmp))
     text = text.replace("[daemon]\n", f"[daemon]\nmission_dirs = [{dirs}]\n{extra}\n")
     path = tmp / "canopen-robot.toml"
@@ -47,15 +89,25 @@ def rig_config(tmp: Path, eds_file: str, port: int | None, extra: str = "") -> P
 
 
 @contextmanager
-def canopen_rig(tmp: Path, eds_file: str = "ros_canopen/Elmo.dcf", daemon_extra: str = "") -> Iterator[Rig]:
+def canopen_rig(
+    tmp: Path,
+    eds_file: str | Path = CONSUMING_ELMO,
+    daemon_extra: str = "",
+    settings_extra: str = "",
+    drivesim_args: tuple[str, ...] = (),
+) -> Iterator[Rig]:
+    """The bus and six simulated drives (strict, see `orccadd.drivesim.axis.Strictness`; relaxed
+    by `drivesim_args` such as `--lenient heartbeat_consumer`), every one described by
+    `eds_file` (by default Elmo drives that watch our heartbeat)."""
     # The bus and the drives are hardware on a robot: their timing must not depend on the
     # controller's load. The hub (light) runs at real-time priority below the controller's; the
     # drives (a Pinocchio simulation, ~40 % of a core here) at a high weight but normal policy:
     # at SCHED_FIFO they made the kernel throttle real-time tasks on this 2-core machine.
+    description = consuming_elmo(tmp) if eds_file == CONSUMING_ELMO else eds_file
     hub = None if vcan_available() else HubProcess("--priority", "70")
     try:
-        config = rig_config(tmp, eds_file, hub.port if hub else None, daemon_extra)
-        drives = DriveSimProcess(config, "--priority", "70")
+        config = rig_config(tmp, description, hub.port if hub else None, daemon_extra, settings_extra)
+        drives = DriveSimProcess(config, "--priority", "70", *drivesim_args)
         try:
             yield Rig(config, hub, drives)
         finally:
@@ -63,3 +115,86 @@ def canopen_rig(tmp: Path, eds_file: str = "ros_canopen/Elmo.dcf", daemon_extra:
     finally:
         if hub is not None:
             hub.stop()
+
+
+class BusRecorder:
+    """Every frame on the rig's bus, stamped by the bus itself (the hub as it forwards a frame,
+    or the kernel), kept by a thread of the test process from `start` to `stop`."""
+
+    def __init__(self, rig: Rig) -> None:
+        self.bus: can.BusABC = (
+            QueuedSocketcandBus("can0", HOST, rig.hub.port)
+            if rig.hub is not None
+            else can.Bus(interface="socketcan", channel="vcan0")
+        )
+        self.frames: list[can.Message] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._record, name="bus-recorder", daemon=True)
+
+    def _record(self) -> None:
+        while not self._stop.is_set():
+            msg = self.bus.recv(0.05)
+            if msg is not None:
+                self.frames.append(msg)
+
+    def __enter__(self) -> BusRecorder:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.bus.shutdown()
+
+
+# ---- reading a recording -------------------------------------------------------------------------
+COB_SYNC, COB_HEARTBEAT_OURS = 0x080, 0x77F
+
+
+def until(frames: list[can.Message], end_s: float) -> list[can.Message]:
+    """The frames stamped before `end_s` (wall clock, as the bus stamps them)."""
+    return [m for m in frames if m.timestamp < end_s]
+
+
+def enable_to_sync_gaps_s(frames: list[can.Message]) -> list[float]:
+    """For every RPDO that carries Enable Operation (controlword 0x0F, RPDO1 on 0x200 + node id),
+    how long until the next SYNC (those with no SYNC after them in the recording are left out)."""
+    syncs = [m.timestamp for m in frames if m.arbitration_id == COB_SYNC]
+    gaps = []
+    for m in frames:
+        if 0x201 <= m.arbitration_id <= 0x27F and len(m.data) >= 2 and m.data[0] & 0x8F == 0x0F:
+            k = bisect.bisect_right(syncs, m.timestamp)
+            if k < len(syncs):
+                gaps.append(syncs[k] - m.timestamp)
+    return gaps
+
+
+def emcy_errors(frames: list[can.Message]) -> list[tuple[int, int]]:
+    """(node id, error code) of every EMCY that reports an error (not an error reset)."""
+    return [
+        (m.arbitration_id - 0x80, int.from_bytes(m.data[:2], "little"))
+        for m in frames
+        if 0x81 <= m.arbitration_id <= 0xFF and len(m.data) >= 2 and m.data[:2] != b"\0\0"
+    ]
+
+
+def sdo_downloads(frames: list[can.Message]) -> list[tuple[int, int, int, int]]:
+    """(node id, index, sub, value) of every expedited SDO download request, in bus order."""
+    return [
+        (
+            m.arbitration_id - 0x600,
+            *struct.unpack_from("<HB", m.data, 1),
+            int.from_bytes(m.data[4:8], "little"),
+        )
+        for m in frames
+        if 0x601 <= m.arbitration_id <= 0x67F and len(m.data) == 8 and m.data[0] & 0xE2 == 0x22
+    ]
+
+
+def nodes_enabled(frames: list[can.Message]) -> set[int]:
+    """The nodes whose TPDO1 (statusword first, on 0x180 + node id) reported OPERATION ENABLED."""
+    return {
+        m.arbitration_id - 0x180
+        for m in frames
+        if 0x181 <= m.arbitration_id <= 0x1FF and len(m.data) >= 2 and m.data[0] & 0x6F == 0x27
+    }

@@ -8,6 +8,10 @@ would. A control port on 127.0.0.1 takes one JSON object per line, for tests:
     {"status": true}   -> positions (rad), CiA 402 states, SYNCs seen
 
 It prints `drivesim: ready, control 127.0.0.1:PORT` once the nodes have booted.
+
+The drives are strict as real ones are (see `axis.Strictness`); `--lenient heartbeat_consumer`
+or `--lenient cob_id_valid_bit` relaxes one, `--mode-display-delay-ms` sets how late 0x6061
+shows a new mode (`inf`: never).
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import os
 import signal
 import socket
 import threading
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +33,7 @@ import numpy as np
 
 from orccadd.config.robot import RobotConfig, read_toml
 from orccadd.drivers.canopen.settings import CanopenSettings
-from orccadd.drivesim.axis import AxisUnits
+from orccadd.drivesim.axis import AxisUnits, Strictness
 from orccadd.drivesim.simulator import AxisSpec, DriveSimulator
 from orccadd.drivesim.socketcand import QueuedSocketcandBus
 from orccadd.errors import OrccaddError
@@ -110,7 +114,25 @@ def main(argv: list[str] | None = None) -> int:
         "should not depend on the controller's load); 0: normal",
     )
     ap.add_argument("--nice", type=int, default=0, help="scheduling weight at normal priority (-20..19)")
+    switches = [f.name for f in fields(Strictness) if isinstance(f.default, bool)]
+    ap.add_argument(
+        "--lenient",
+        action="append",
+        default=[],
+        choices=switches,
+        help="relax one of the drives' strict behaviours",
+    )
+    ap.add_argument(
+        "--mode-display-delay-ms",
+        type=float,
+        default=Strictness.mode_display_delay_s * 1e3,
+        help="how late the drives show a new mode of operation (0x6061); inf: never",
+    )
     args = ap.parse_args(argv)
+    strict = Strictness(
+        **{name: name not in args.lenient for name in switches},
+        mode_display_delay_s=args.mode_display_delay_ms / 1e3,
+    )
     try:
         setup_logging("orccadd.drivesim")
     except LogSetupError as e:
@@ -129,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
             if s.interface == "socketcand"
             else can.Bus(**s.bus_kwargs())
         )
-        sim = DriveSimulator(plant_config(cfg, args.plant), specs, bus)
+        sim = DriveSimulator(plant_config(cfg, args.plant), specs, bus, strict)
     except (OrccaddError, can.CanError, OSError) as e:
         log.error("%s", e)
         return 1

@@ -7,12 +7,15 @@ second, torques in thousandths of the rated torque (0x6076, motor side), through
     increments = rad × counts_per_rev × gear_ratio / 2π
     per mille  = τ_joint / (gear_ratio × rated_torque_nm) × 1000
 
-Every SYNC (`cycle`): the mode display follows 0x6060; in OPERATION ENABLED the target of the
-mode (CSP 0x607A, CSV 0x60FF, CST 0x6071, plus the torque offset 0x60B2 if mapped) becomes the
-joint's reference; a quick stop or a fault reaction ramps the joint down at the quick-stop
-deceleration (0x6085) and then switches the power stage off; a CSP following error beyond the
-window (0x6065) for its time-out (0x6066) is a fault (EMCY 0x8611). Actual values (0x6064,
-0x606C, 0x6077) and the statusword are refreshed before the TPDOs go out.
+The drive runs in the mode its display shows (0x6061), which follows a write of 0x6060 after
+`Strictness.mode_display_delay_s` (real drives take a few ms). Every SYNC (`cycle`): in
+OPERATION ENABLED the target of the mode (CSP 0x607A, CSV 0x60FF, CST 0x6071, plus the torque
+offset 0x60B2 if mapped) becomes the joint's reference; a quick stop or a fault reaction ramps
+the joint down at the quick-stop deceleration (0x6085) and then switches the power stage off;
+a CSP following error beyond the window (0x6065) for its time-out (0x6066) is a fault (EMCY
+0x8611). Actual values (0x6064, 0x606C, 0x6077) and the statusword are refreshed before the
+TPDOs go out. A drive that watches a heartbeat (0x1016) and loses it faults with EMCY 0x8130
+(`Strictness.heartbeat_consumer`).
 """
 
 from __future__ import annotations
@@ -41,8 +44,23 @@ EMCY_HEARTBEAT = 0x8130
 EMCY_RESET = 0x0000
 ERR_REG_GENERIC, ERR_REG_CURRENT, ERR_REG_COMM, ERR_REG_MANUFACTURER = 0x01, 0x02, 0x10, 0x80
 
+NEVER = math.inf  # a mode display delay: the drive never shows the mode asked
 STOP_SPEED_RAD_S = 0.01
 STOP_TIMEOUT_S = 1.0  # after the ramp, longest wait for standstill before the brake
+
+
+@dataclass(frozen=True)
+class Strictness:
+    """Behaviours of real drives that a lenient simulation would let a master get away with. All
+    on by default, so the master is tested against them; each can be relaxed for a test that
+    needs the lenient drive."""
+
+    heartbeat_consumer: bool = True  # a heartbeat watched (0x1016) and lost: FAULT, EMCY 0x8130
+    cob_id_valid_bit: bool = True  # a valid COB-ID's identifier cannot change: abort 0x06090030
+    mode_display_delay_s: float = 0.001  # 0x6061 shows a new 0x6060 this much later (NEVER: never)
+
+
+STRICT = Strictness()
 
 
 @dataclass(frozen=True)
@@ -61,8 +79,11 @@ class AxisUnits:
 
 
 class Axis:
-    def __init__(self, node: SlaveNode, joint: int, arm: DriveTrainArm, units: AxisUnits) -> None:
+    def __init__(
+        self, node: SlaveNode, joint: int, arm: DriveTrainArm, units: AxisUnits, strict: Strictness = STRICT
+    ) -> None:
         self.node = node
+        self.strict = strict
         self.j = joint
         self.arm = arm
         self.units = units
@@ -73,10 +94,12 @@ class Axis:
         self._stop_t0 = 0.0
         self._prev_target: float | None = None
         self._limits: dict[tuple[int, int], tuple[int, int]] = {}
+        self._mode_due: tuple[int, float] | None = None  # (mode asked, when the display shows it)
         node.on_write[(0x6040, 0)] = self._controlword
-        node.on_write[(0x6060, 0)] = lambda mode: self._set(0x6061, int(mode))  # shown at once
+        node.on_write[(0x6060, 0)] = self._mode_asked
         node.on_reset_node = self.reset
-        node.on_heartbeat_lost = lambda producer: self.fault(EMCY_HEARTBEAT, ERR_REG_COMM)
+        if strict.heartbeat_consumer:
+            node.on_heartbeat_lost = lambda producer: self.fault(EMCY_HEARTBEAT, ERR_REG_COMM)
 
     # ---- object access with defaults for objects a description may lack -----------------------
     def _get(self, index: int, default: int, sub: int = 0) -> int:
@@ -98,12 +121,15 @@ class Axis:
     def boot(self) -> None:
         self.sm = DriveStateMachine(self._get(0x605A, 2))
         self.sm.boot()
+        self._mode_due = None
+        self._set(0x6061, self._get(0x6060, 0))  # powered up in the mode of 0x6060
         self._publish()
 
     def reset(self) -> None:
         """NMT reset node: the drive restarts (power stage off, fault cleared, self-test done)."""
         self.arm.drive[self.j] = Drive.OFF
         self.fault_code = 0
+        self._mode_due = None
         self.sm = DriveStateMachine(self._get(0x605A, 2))
         self.sm.boot()
 
@@ -143,14 +169,26 @@ class Axis:
         self._stop_v0 = float(self.arm.dq[self.j])
         self._stop_t0 = float(self.arm.t_sim_s or 0.0)
 
+    def _mode_asked(self, mode: int) -> None:
+        self._mode_due = (int(mode), self.node.now_s + self.strict.mode_display_delay_s)
+        self.poll(self.node.now_s)
+
+    def poll(self, now_s: float) -> None:
+        """Timers between SYNCs: the mode display catches up with a mode asked."""
+        due = self._mode_due
+        if due is not None and now_s >= due[1]:
+            self._mode_due = None
+            self._set(0x6061, due[0])
+
     def _mode(self) -> int:
-        return self._get(0x6060, 0)
+        """The mode the drive runs in: the one it shows (0x6061)."""
+        return self._get(0x6061, 0)
 
     # ---- the drive's cycle, once per SYNC --------------------------------------------------------
     def cycle(self, now_s: float, period_s: float) -> None:
         arm, j, sm = self.arm, self.j, self.sm
+        self.poll(now_s)
         mode = self._mode()
-        self._set(0x6061, mode)
         st = sm.state
         if st is State.OPERATION_ENABLED and mode in (MODE_CSP, MODE_CSV, MODE_CST):
             self._follow(mode, now_s, period_s)

@@ -3,7 +3,9 @@
 `DriveSimulator.run()` is the drives' side of the bus in one loop: every frame is handed to
 the nodes, a SYNC runs every drive's cycle (synchronous RPDOs applied, references to the arm,
 actual values sampled, TPDOs sent), and the arm integrates on the wall clock in between, so it
-keeps moving (or falls, braked) whatever the bus does. Faults are injected with `inject`.
+keeps moving (or falls, braked) whatever the bus does. Faults are injected with `inject`. The
+drives are as strict as real ones (`Strictness`: heartbeat consumer, COB-ID valid bit, a mode
+display that lags) unless told otherwise.
 """
 
 from __future__ import annotations
@@ -18,7 +20,15 @@ from dataclasses import dataclass
 import can
 
 from orccadd.config.robot import RobotConfig
-from orccadd.drivesim.axis import EMCY_FOLLOWING_ERROR, EMCY_OVERCURRENT, ERR_REG_CURRENT, Axis, AxisUnits
+from orccadd.drivesim.axis import (
+    EMCY_FOLLOWING_ERROR,
+    EMCY_OVERCURRENT,
+    ERR_REG_CURRENT,
+    STRICT,
+    Axis,
+    AxisUnits,
+    Strictness,
+)
 from orccadd.drivesim.plant import DriveTrainArm
 from orccadd.drivesim.slave import COB_SYNC, SlaveNode
 from orccadd.model import RobotModel
@@ -36,16 +46,20 @@ class AxisSpec:
 
 
 class DriveSimulator:
-    def __init__(self, cfg: RobotConfig, axes: list[AxisSpec], bus: can.BusABC) -> None:
+    def __init__(
+        self, cfg: RobotConfig, axes: list[AxisSpec], bus: can.BusABC, strict: Strictness = STRICT
+    ) -> None:
         if len(axes) != cfg.dof:
             raise ValueError(f"{len(axes)} drives for a {cfg.dof}-joint arm")
         self.cfg = cfg
         self.bus = bus
+        self.strict = strict
         self.arm = DriveTrainArm(cfg, RobotModel.from_config(cfg))
         self.lock = threading.Lock()  # held while frames, SYNCs, timers or injections run
-        self.nodes = [SlaveNode(a.node_id, a.eds, self._send) for a in axes]
+        self.nodes = [SlaveNode(a.node_id, a.eds, self._send, strict.cob_id_valid_bit) for a in axes]
         self.axes = [
-            Axis(node, j, self.arm, a.units) for j, (node, a) in enumerate(zip(self.nodes, axes, strict=True))
+            Axis(node, j, self.arm, a.units, strict)
+            for j, (node, a) in enumerate(zip(self.nodes, axes, strict=True))
         ]
         self.by_id = {a.node_id: ax for a, ax in zip(axes, self.axes, strict=True)}
         self.syncs = 0
@@ -121,8 +135,9 @@ class DriveSimulator:
                 self.arm.step_to(now)
                 for msg in batch:
                     self._dispatch(msg, now)
-                for node in self.nodes:
+                for node, axis in zip(self.nodes, self.axes, strict=True):
                     node.poll(now)
+                    axis.poll(now)
                 self._send_queued()
 
     def _dispatch(self, msg: can.Message, now_s: float) -> None:

@@ -14,7 +14,11 @@ through the `send` callable given at construction. What it does:
   transmission type are applied at the next SYNC, others at once; TPDOs of type 1-240 go out
   every n-th SYNC, type 0 on SYNC when changed, 254/255 on their event timer;
 - heartbeat producer (0x1017) and consumer (0x1016, a lost producer is reported to the owner),
-  EMCY (0x1014, default 0x80 + node id) with the error register 0x1001.
+  EMCY (0x1014, default 0x80 + node id) with the error register 0x1001;
+- COB-IDs as strict drives keep them (`strict_cob_ids`, on by default): a write that changes the
+  identifier (bits 0-29) of a valid COB-ID (bit 31 clear) of a PDO (0x1400-/0x1800- sub 1) or of
+  the EMCY (0x1014) is aborted with 0x06090030, as CiA 301 lets the identifier change only while
+  bit 31 says "not valid".
 
 Write hooks (`on_write`) let the drive behind the node react to controlword and friends,
 whether they arrive by PDO or SDO.
@@ -43,6 +47,7 @@ ABORT_NOT_MAPPABLE = 0x06040041
 ABORT_PDO_LENGTH = 0x06040042
 ABORT_LENGTH = 0x06070010
 ABORT_NO_SUBINDEX = 0x06090011
+ABORT_VALUE_RANGE = 0x06090030
 ABORT_VALUE_HIGH = 0x06090031
 ABORT_VALUE_LOW = 0x06090032
 ABORT_DEVICE_STATE = 0x08000022
@@ -56,7 +61,8 @@ _EMPTY: dict[int, Any] = {
     canopen.objectdictionary.OCTET_STRING: b"",
     canopen.objectdictionary.DOMAIN: b"",
 }
-PDO_INVALID = 1 << 31
+COB_INVALID = 1 << 31  # bit 31 of a COB-ID (PDO, EMCY): 1 = not valid
+COB_IDENTIFIER = 0x3FFFFFFF  # bits 0-29: what may change only while not valid
 
 
 class Nmt(IntEnum):
@@ -103,8 +109,12 @@ class _Segmented:
 
 
 class SlaveNode:
-    def __init__(self, node_id: int, eds: str, send: Callable[[can.Message], None]) -> None:
+    def __init__(
+        self, node_id: int, eds: str, send: Callable[[can.Message], None], strict_cob_ids: bool = True
+    ) -> None:
         self.node_id = node_id
+        self.strict_cob_ids = strict_cob_ids
+        self.now_s = 0.0  # the time of the frame or poll being handled
         self.eds = eds
         self.od = canopen.import_od(eds, node_id)
         self.send = send
@@ -180,6 +190,7 @@ class SlaveNode:
 
     # ---- frames in -----------------------------------------------------------------------
     def on_frame(self, msg: can.Message, now_s: float) -> None:
+        self.now_s = now_s
         cob = msg.arbitration_id
         data = bytes(msg.data)
         if msg.is_extended_id or msg.is_remote_frame:
@@ -237,6 +248,7 @@ class SlaveNode:
 
     def poll(self, now_s: float) -> None:
         """Timers: heartbeat producer, event-timer TPDOs, heartbeat consumers."""
+        self.now_s = now_s
         if self.nmt is Nmt.INITIALISING:
             return
         period_ms = int(self.values.get((0x1017, 0), 0) or 0)
@@ -302,7 +314,7 @@ class SlaveNode:
         self.pdo_generation += 1
         cob = int(self.values[(pdo.comm, 1)])
         pdo.cob_id = cob & 0x7FF
-        pdo.valid = not cob & PDO_INVALID and pdo.cob_id != 0
+        pdo.valid = not cob & COB_INVALID and pdo.cob_id != 0
         pdo.trans_type = int(self.values.get((pdo.comm, 2), 255))
         pdo.event_timer_ms = int(self.values.get((pdo.comm, 5), 0) or 0) if pdo.transmit else 0
         n = int(self.values[(pdo.mapping, 0)])
@@ -359,6 +371,16 @@ class SlaveNode:
             raise SdoAbortError(ABORT_DEVICE_STATE)  # set the count to 0 first (CiA 301)
         else:
             self._check_entry(value, pdo.transmit)
+
+    def _check_cob_id_write(self, key: tuple[int, int], value: int) -> None:
+        """Strict drives: a valid COB-ID keeps its identifier (CiA 301)."""
+        is_cob_id = key == (0x1014, 0) or (key[1] == 1 and self._pdo_by_comm(key[0]) is not None)
+        if not self.strict_cob_ids or not is_cob_id:
+            return
+        current = int(self.values.get(key, 0) or 0)
+        valid = not current & COB_INVALID and current & COB_IDENTIFIER
+        if valid and (current ^ value) & COB_IDENTIFIER:
+            raise SdoAbortError(ABORT_VALUE_RANGE)
 
     def _check_entry(self, entry: int, transmit: bool) -> int:
         index, sub, bits = entry >> 16, entry >> 8 & 0xFF, entry & 0xFF
@@ -487,6 +509,7 @@ class SlaveNode:
         key = (var.index, var.subindex)
         if isinstance(value, int):
             self._check_mapping_write(var.index, var.subindex, value)
+            self._check_cob_id_write(key, value)
         self.values[key] = value
         pdo = self._pdo_by_comm(var.index) or self._pdo_by_mapping(var.index)
         if pdo is not None:  # a PDO's parameters changed: it follows at once

@@ -2,9 +2,13 @@
 
 The resource maps the Physical Resource contract onto the drives (`drivers.canopen.master`):
 
-- configure: the startup sequence (reset, boot-up, PDO mapping, heartbeats, mode), SYNC on;
-- activate(mode): the drives' mode (POSITION = CSP, VELOCITY = CSV, TORQUE = CST), then
-  each drive walked to OPERATION ENABLED holding where it is;
+- configure: the startup sequence (reset, boot-up, PDO mapping, heartbeats, mode), SYNC on, then
+  every drive walked to SWITCHED ON (powered, torque off, brake on);
+- activate(mode): the drives' mode (POSITION = CSP, VELOCITY = CSV, TORQUE = CST), shown by
+  every drive (0x6061); Enable Operation is left to the first ticks of the loop, once SYNC runs
+  and every drive answered it, holding where the arm is (until then reads say TORQUE_OFF and
+  commands are not sent): the daemon's setup between activate and the loop's first tick leaves
+  no enabled drive without SYNC, and our heartbeat runs through it (`CanopenMaster.start`);
 - read: the frames of the last cycle (positions in increments and torques in per mille through
   the gear; velocity from successive positions), and the watchdogs: a drive fault (EMCY) is
   FAULT, a lost heartbeat, a silent node, a reboot or a dead bus is COMM_LOST, both type 3;
@@ -31,8 +35,10 @@ import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
 from orccadd.drivers.canopen import cia402
-from orccadd.drivers.canopen.master import MODE_CODES, POWERED, CanopenMaster
+from orccadd.drivers.canopen.capabilities import MODE_CODES
+from orccadd.drivers.canopen.master import POWERED, CanopenMaster
 from orccadd.drivers.canopen.settings import CanopenSettings, load_canopen_settings
+from orccadd.drivers.canopen.startup import mode_not_shown
 from orccadd.errors import ResourceError
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
@@ -90,7 +96,9 @@ class Canopen402Arm(PhysicalResource):
         self._pos = np.zeros(n)
         self._vel = np.zeros(n)
         self._tau = np.zeros(n)
-        self._enabling = False
+        self._walk_to: cia402.State | None = None  # where the ticks take the drives (None: nowhere)
+        self._walk_after: list[int] = []  # each drive's TPDO count when the walk began
+        self._pumping = False  # a cycle run by this resource, not by the control loop
         self._fault_reset = False
         self._stop_t0 = 0.0
         self._comm_lost = False
@@ -102,16 +110,20 @@ class Canopen402Arm(PhysicalResource):
             logging.getLogger("orccadd.canopen").warning("%s: %s", self.name, w)
         modes = frozenset.intersection(*(a.modes for a in self.master.axes))
         self.supported_modes = frozenset(COMMAND_OF[m] for m in modes)
-        self._wait(lambda: all(a.tpdo_seen_s for a in self.master.axes), "a first TPDO from every drive")
+        self._walk(cia402.State.SWITCHED_ON)
+        self._wait(lambda: self._walk_to is None, "SWITCHED ON on every drive")
 
     def _on_activate(self, mode: CommandMode) -> None:
+        """The mode, then Enable Operation from the loop's first ticks (see the module's doc)."""
         self._set_mode_blocking(mode)
-        self._enable_blocking()
+        self._hold_here()
+        self._walk(cia402.State.OPERATION_ENABLED)
 
     def _on_switch_mode(self, mode: CommandMode) -> None:
         self.master.write_mode(MODE_OF[mode])
 
     def _on_deactivate(self) -> None:
+        self._walk_to = None
         self.master.set_controlword(cia402.CW_SHUTDOWN)  # power stage off, still ready
         self._pump(0.1)
 
@@ -141,8 +153,12 @@ class Canopen402Arm(PhysicalResource):
 
     def _cycle_without_loop(self) -> None:
         now = time.monotonic()
-        self._read_into(now, self.state)
-        self._on_keep_alive(now)
+        self._pumping = True
+        try:
+            self._read_into(now, self.state)
+            self._on_keep_alive(now)
+        finally:
+            self._pumping = False
         time.sleep(self.config.control_period_s)
 
     def _wait(self, done: Any, what: str) -> None:
@@ -159,28 +175,58 @@ class Canopen402Arm(PhysicalResource):
                 self._cycle_without_loop()
 
     def _set_mode_blocking(self, mode: CommandMode) -> None:
+        """0x6060 on every drive, then 0x6061 read until every drive shows the mode."""
         code = MODE_OF[mode]
-        if all(a.mode_code == code and a.sdo_pending is None for a in self.master.axes):
+        m = self.master
+        if all(a.mode_code == code and a.mode_shown == code and a.sdo_pending is None for a in m.axes):
             return
-        self.master.write_mode(code)
-        self._wait(
-            lambda: all(a.sdo_pending is None for a in self.master.axes),
-            f"answer to the mode change ({mode.name.lower()})",
-        )
+        m.write_mode(code)
+        self._await_sdo_answers(f"answer to the mode change ({mode.name.lower()})")
+        timeout_s = self.settings.mode_display_timeout_s
+        end = time.monotonic() + timeout_s
+        while True:
+            m.request_mode_display()
+            self._await_sdo_answers("modes of operation display (0x6061)")
+            late = [a for a in m.axes if a.mode_shown != code]
+            if not late:
+                return
+            if time.monotonic() > end:
+                a = late[0]
+                error = mode_not_shown(f"node {a.node_id} ({a.name})", code, a.mode_shown, timeout_s)
+                raise ResourceError(f"resource {self.name!r}: {error}")
+
+    def _await_sdo_answers(self, what: str) -> None:
+        self._wait(lambda: all(a.sdo_pending is None for a in self.master.axes), what)
         errors = [a.sdo_error for a in self.master.axes if a.sdo_error]
         if errors:
             raise ResourceError(f"resource {self.name!r}: {errors[0]}")
 
+    def _walk(self, target: cia402.State) -> None:
+        """From the next tick on, take every drive to `target`, once each answered a SYNC since
+        now (a fresh TPDO: its state is current and the cyclic exchange runs)."""
+        self._walk_after = [a.tpdo_count for a in self.master.axes]
+        self._walk_to = target
+
+    def _step_walk(self, target: cia402.State) -> None:
+        m = self.master
+        if any(a.tpdo_count <= n for a, n in zip(m.axes, self._walk_after, strict=True)):
+            return  # controlwords as they are until every drive answered a SYNC
+        if target is cia402.State.OPERATION_ENABLED:
+            q = self.state.q_rad
+            for j, a in enumerate(m.axes):  # enabled holding where it is, as measured now
+                if a.state is not cia402.State.OPERATION_ENABLED:
+                    self._pos[j] = q[j]
+                    self._vel[j] = 0.0
+        if m.step_towards(target):
+            self._walk_to = None
+
     def _enable_blocking(self) -> None:
         self._hold_here()
-        self._enabling = True
+        self._walk(cia402.State.OPERATION_ENABLED)
         try:
-            self._wait(
-                lambda: all(a.state is cia402.State.OPERATION_ENABLED for a in self.master.axes),
-                "OPERATION ENABLED on every drive",
-            )
+            self._wait(lambda: self._walk_to is None, "OPERATION ENABLED on every drive")
         finally:
-            self._enabling = False
+            self._walk_to = None
         self.master.set_controlword(cia402.CW_ENABLE_OPERATION)
         self._hold_here()
 
@@ -194,6 +240,8 @@ class Canopen402Arm(PhysicalResource):
     # ---- tick hooks -------------------------------------------------------------------------
     def _read_into(self, t_s: float, state: JointState) -> int:
         m = self.master
+        if not self._pumping:
+            m.loop_started()  # our heartbeat from the loop's ticks on
         rep = m.receive(t_s)
         flags = 0
         powered = True
@@ -225,10 +273,11 @@ class Canopen402Arm(PhysicalResource):
         """No command this tick: the controlwords of the sequence under way (quick stop, fault
         reset, enabling) and targets that hold, so every drive still gets its RPDO."""
         m = self.master
+        walk_to = self._walk_to
         if self._fault_reset:
             self._fault_reset = not m.step_fault_reset()
-        elif self._enabling:
-            m.step_enable()
+        elif walk_to is not None:
+            self._step_walk(walk_to)
         elif self._stop_flags & Status.STOPPING:
             off = m.step_quick_stop()
             timed_out = t_s - self._stop_t0 > self.config.safe_stop.timeout_s
@@ -237,6 +286,9 @@ class Canopen402Arm(PhysicalResource):
         m.transmit(t_s, self._pos, self._vel, self._tau)
 
     def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
+        if self._walk_to is not None:  # not enabled yet: hold, the command is not sent
+            self._on_keep_alive(t_s)
+            return 0
         st = self.state
         if mode is CommandMode.POSITION:
             self._pos[:] = command
@@ -254,6 +306,7 @@ class Canopen402Arm(PhysicalResource):
         return 0
 
     def _begin_safe_stop(self) -> None:
+        self._walk_to = None
         t_s = self.state.t_s  # the tick's time (safe_stop runs inside a tick, after read)
         self._stop_t0 = t_s
         self._pos[:] = self.state.q_rad

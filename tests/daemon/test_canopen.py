@@ -9,7 +9,15 @@ from pathlib import Path
 
 import pytest
 
-from tests.canopen_rig import Rig, canopen_rig
+from tests.canopen_rig import (
+    BusRecorder,
+    Rig,
+    canopen_rig,
+    emcy_errors,
+    enable_to_sync_gaps_s,
+    nodes_enabled,
+    until,
+)
 from tests.daemon.conftest import Daemon, start_daemon_with
 
 MISSION = str(Path(__file__).resolve().parent / "missions/canopen.mission")
@@ -67,3 +75,26 @@ def test_drive_fault_type_3_quick_stop_then_reset_through_orccadctl(rig_daemon: 
     s = d.wait(lambda s: s["active_task"] == "Track" or s["faulted"] or s["state"] != "running", 60)
     assert s["active_task"] == "Track" and not s["faulted"], s["fault"]
     d.call("abort")
+
+
+def test_the_daemon_enables_the_drives_once_its_loop_runs(tmp_path: Path) -> None:
+    """Issue 15: the daemon activates the arm, then builds its machine for 0.15-0.22 s before the
+    loop's first tick. The drives (watching our heartbeat) wait in SWITCHED ON meanwhile, and the
+    loop enables them: every Enable Operation is followed by a SYNC well within a heartbeat period
+    (the hub's own time stamps), and no drive reports an error. (What comes after the startup is
+    the other tests': a drive simulator starved by this loaded VM makes the arm COMM_LOST.)"""
+    with canopen_rig(tmp_path) as rig, BusRecorder(rig) as bus:
+        d = start_daemon_with(tmp_path, rig.config)
+        try:
+            deadline = time.monotonic() + 10
+            while nodes_enabled(list(bus.frames)) != set(range(1, 7)) and time.monotonic() < deadline:
+                time.sleep(0.1)
+            time.sleep(0.5)  # past the drives' heartbeat timeout (3 × 100 ms)
+            end_s = time.time()
+        finally:
+            d.stop()
+    frames = until(bus.frames, end_s)
+    assert nodes_enabled(frames) == set(range(1, 7)), d.log.read_text()
+    assert not emcy_errors(frames)
+    gaps_s = enable_to_sync_gaps_s(frames)
+    assert gaps_s and max(gaps_s) < 0.1, max(gaps_s)  # the rig's controller_heartbeat_ms

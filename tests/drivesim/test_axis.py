@@ -7,8 +7,8 @@ import struct
 import can
 import pytest
 
-from orccadd.drivers.canopen.cia402 import State
-from orccadd.drivesim.axis import MODE_CSP, Axis, AxisUnits
+from orccadd.drivers.canopen.cia402 import MODE_CSP, MODE_CST, State
+from orccadd.drivesim.axis import NEVER, STRICT, Axis, AxisUnits, Strictness
 from orccadd.drivesim.plant import DriveTrainArm
 from orccadd.drivesim.slave import SlaveNode
 from orccadd.model import RobotModel
@@ -35,6 +35,8 @@ def enabled_in_csp(eds_file: str) -> Axis:
     axis = Axis(node, 0, arm, UNITS)
     axis.boot()
     sdo_write(node, 0x6060, 0, MODE_CSP, 1)
+    axis.poll(STRICT.mode_display_delay_s)  # the drive shows (and runs) CSP from then on
+    assert node.get(0x6061) == MODE_CSP
     for cw in (0x06, 0x07, 0x0F):  # transitions 2, 3, 4
         sdo_write(node, 0x6040, 0, cw, 2)
     assert axis.sm.state is State.OPERATION_ENABLED
@@ -84,3 +86,27 @@ def test_following_error_supervision(csp_axis: Axis, window: int, faults: bool) 
         csp_axis.cycle(k * 0.001, 0.001)
     assert (csp_axis.sm.state is State.FAULT) is faults
     assert (csp_axis.fault_code == 0x8611) is faults
+
+
+@pytest.mark.parametrize("delay_s", [0.002, NEVER])
+def test_the_mode_display_follows_0x6060_after_its_delay(delay_s: float) -> None:
+    """0x6061 shows a new mode only `mode_display_delay_s` after 0x6060 was written (a real
+    drive's few ms; NEVER: a drive that does not switch), and the drive runs in the mode shown."""
+    cfg = with_backend(load_robot_config(UR5E), "sim")
+    node = SlaveNode(1, str(eds("ros_canopen/Elmo.dcf")), lambda msg: None)
+    node.boot(0.0)
+    axis = Axis(
+        node,
+        0,
+        DriveTrainArm(cfg, RobotModel.from_config(cfg)),
+        UNITS,
+        Strictness(mode_display_delay_s=delay_s),
+    )
+    axis.boot()
+    before = node.get(0x6061)
+    assert before != MODE_CST
+    sdo_write(node, 0x6060, 0, MODE_CST, 1)  # at t = 0
+    axis.poll(0.001)
+    assert node.get(0x6061) == before and axis._mode() == before
+    axis.poll(0.0025)
+    assert node.get(0x6061) == (before if delay_s == NEVER else MODE_CST)

@@ -10,7 +10,7 @@ import can
 import canopen
 import pytest
 
-from orccadd.drivesim.axis import AxisUnits
+from orccadd.drivesim.axis import STRICT, AxisUnits, Strictness
 from orccadd.drivesim.simulator import AxisSpec, DriveSimulator
 from orccadd.robot import load_robot_config, with_backend
 from tests.conftest import UR5E, eds
@@ -19,12 +19,12 @@ UNITS = AxisUnits(counts_per_rev=4096, gear_ratio=100.0, rated_torque_nm=0.5)
 
 
 class Rig:
-    def __init__(self, eds_file: str) -> None:
+    def __init__(self, eds_file: str, strict: Strictness = STRICT) -> None:
         channel = f"drivesim-{id(self)}"
         cfg = with_backend(load_robot_config(UR5E), "sim")
         self.sim_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         specs = [AxisSpec(j + 1, eds_file, UNITS) for j in range(cfg.dof)]
-        self.sim = DriveSimulator(cfg, specs, self.sim_bus)
+        self.sim = DriveSimulator(cfg, specs, self.sim_bus, strict)
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self.sim.run, args=(self.stop.is_set,), daemon=True)
         self.network = canopen.Network()
@@ -187,16 +187,22 @@ def test_an_injected_fault_sends_emcy_and_the_drive_ends_in_fault(elmo: Rig) -> 
     assert not node.emcy.active  # the error reset EMCY cleared it
 
 
-def test_lost_controller_heartbeat_faults_the_drive() -> None:
+@pytest.mark.parametrize("strict", [True, False], ids=["strict", "lenient"])
+def test_lost_controller_heartbeat_faults_the_drive(strict: bool) -> None:
+    """A drive that watches a heartbeat (0x1016) and loses it faults with EMCY 0x8130; one with
+    `Strictness.heartbeat_consumer` off (lenient) does not."""
     # Elmo's description caps 0x1016 entries at 0xFFFF (no room for a producer id): another one
-    elmo = Rig(str(eds("ros2_canopen/canopen_tests_config_cia402_cia402_slave.eds")))
+    elmo = Rig(
+        str(eds("ros2_canopen/canopen_tests_config_cia402_cia402_slave.eds")),
+        Strictness(heartbeat_consumer=strict),
+    )
     try:
-        _lost_heartbeat(elmo)
+        _lost_heartbeat(elmo, strict)
     finally:
         elmo.close()
 
 
-def _lost_heartbeat(elmo: Rig) -> None:
+def _lost_heartbeat(elmo: Rig, faults: bool) -> None:
     node = _cyclic_node(elmo, 0x607A, 8)
     node.sdo[0x1016][1].raw = 0x7F << 16 | 100  # consume node 0x7F's heartbeat, 100 ms
     beating = threading.Event()
@@ -213,10 +219,13 @@ def _lost_heartbeat(elmo: Rig) -> None:
     assert node.state == "OPERATION ENABLED"
     beating.clear()
     t.join()
-    deadline = time.monotonic() + 2
+    deadline = time.monotonic() + (2 if faults else 0.5)  # timeout: 100 ms
     while node.state != "FAULT" and time.monotonic() < deadline:
         time.sleep(0.02)
-    assert node.state == "FAULT" and node.emcy.active[-1].code == 0x8130
+    if faults:
+        assert node.state == "FAULT" and node.emcy.active[-1].code == 0x8130
+    else:
+        assert node.state == "OPERATION ENABLED" and not node.emcy.active
 
 
 def test_silences(elmo: Rig) -> None:

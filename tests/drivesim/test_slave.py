@@ -10,7 +10,9 @@ import can
 import canopen
 import pytest
 
+from orccadd.drivers.canopen.startup import write_cob_id
 from orccadd.drivesim.slave import Nmt, SlaveNode
+from tests.canopen_rig import sdo_downloads
 from tests.conftest import eds
 
 NODE = 5
@@ -19,11 +21,11 @@ NODE = 5
 class Harness:
     """A slave node served by a thread on one end of a virtual bus, canopen's master on the other."""
 
-    def __init__(self, eds_file: str) -> None:
-        channel = f"slave-test-{id(self)}"
+    def __init__(self, eds_file: str, strict_cob_ids: bool = True) -> None:
+        channel = self.channel = f"slave-test-{id(self)}"
         self.bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         self.lock = threading.Lock()
-        self.node = SlaveNode(NODE, eds_file, self.bus.send)
+        self.node = SlaveNode(NODE, eds_file, self.bus.send, strict_cob_ids)
         self.network = canopen.Network()
         self.network.connect(interface="virtual", channel=channel, receive_own_messages=False)
         self.master = canopen.RemoteNode(NODE, eds_file)
@@ -56,6 +58,16 @@ class Harness:
 @pytest.fixture
 def h() -> Iterator[Harness]:
     harness = Harness(str(eds("ros_canopen/Elmo.dcf")))
+    try:
+        yield harness
+    finally:
+        harness.close()
+
+
+@pytest.fixture
+def e35() -> Iterator[Harness]:
+    """e35's description: a writable EMCY COB-ID, 0xA0 for every node, RPDO1 on 0x220."""
+    harness = Harness(str(eds("canopen/e35.eds")))
     try:
         yield harness
     finally:
@@ -150,3 +162,56 @@ def test_rpdo_applied_and_hook_called(h: Harness) -> None:
         h.network.sync.transmit()
         time.sleep(0.05)
     assert seen == [0x0F] and h.node.get(0x6040) == 0x0F
+
+
+INVALID = 1 << 31
+
+
+@pytest.mark.parametrize(("index", "sub"), [(0x1014, 0), (0x1400, 1), (0x1800, 1)])
+def test_a_valid_cob_id_keeps_its_identifier(e35: Harness, index: int, sub: int) -> None:
+    """CiA 301: a COB-ID's identifier changes only while bit 31 says "not valid"; strict drives
+    abort with 0x06090030 otherwise, also when the same write sets bit 31 (what canopen's own
+    `PdoMap.save` does)."""
+    cob = e35.node.get(index, sub)
+    assert not cob & INVALID
+    other = (cob & ~0x7FF) | 0x185
+    for value in (other, other | INVALID):
+        with pytest.raises(canopen.SdoAbortedError) as e:
+            e35.master.sdo.download(index, sub, value.to_bytes(4, "little"))
+        assert e.value.code == 0x06090030
+    assert e35.node.get(index, sub) == cob
+    for value in (cob | INVALID, other | INVALID, other):  # the two steps (and the new one valid)
+        e35.master.sdo.download(index, sub, value.to_bytes(4, "little"))
+    assert e35.node.get(index, sub) == other
+
+
+def test_a_lenient_drive_lets_a_valid_cob_id_change() -> None:
+    h = Harness(str(eds("canopen/e35.eds")), strict_cob_ids=False)
+    try:
+        h.master.sdo[0x1014].raw = 0x85
+        assert h.node.get(0x1014) == 0x85
+    finally:
+        h.close()
+
+
+def test_write_cob_id_invalidates_changes_then_validates(e35: Harness) -> None:
+    recorder = can.Bus(interface="virtual", channel=e35.channel, receive_own_messages=False)
+    try:
+        write_cob_id(e35.master, 0x1014, 0, 0x80 + NODE)
+        write_cob_id(e35.master, 0x1400, 1, 0x200 + NODE)
+        write_cob_id(e35.master, 0x1400, 1, 0x200 + NODE)  # as it is: nothing written
+        frames = []
+        while (msg := recorder.recv(0.05)) is not None:
+            frames.append(msg)
+    finally:
+        recorder.shutdown()
+    assert [write[1:] for write in sdo_downloads(frames) if write[0] == NODE] == [
+        (0x1014, 0, 0xA0 | INVALID),
+        (0x1014, 0, 0x85 | INVALID),
+        (0x1014, 0, 0x85),
+        (0x1400, 1, 0x220 | INVALID),
+        (0x1400, 1, 0x205 | INVALID),
+        (0x1400, 1, 0x205),
+    ]
+    assert e35.node.get(0x1014) == 0x85
+    assert e35.node.rpdos[0x1400].cob_id == 0x205 and e35.node.rpdos[0x1400].valid

@@ -10,6 +10,9 @@ plus 0x6040 controlword, 0x6041 statusword and 0x6060/0x6061 modes of operation.
 that lacks one of them cannot do that mode: `require` says so with the file and the object.
 0x6502 (supported drive modes) is only a hint here (its default in an EDS is often stale); the
 driver reads the drive's own value at startup.
+
+`consumer_entry` finds the heartbeat consumer entry (0x1016) the controller's heartbeat can take
+in a description, or says what the description lacks for it.
 """
 
 from __future__ import annotations
@@ -18,6 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import canopen
+from canopen.objectdictionary import ODArray, ODRecord
+
+from orccadd.drivers.canopen.cia402 import MODE_CSP, MODE_CST, MODE_CSV
 
 MODES: dict[str, tuple[int, int, int]] = {  # name -> (target, actual, 0x6502 bit)
     "csp": (0x607A, 0x6064, 7),
@@ -29,6 +35,7 @@ MODE_NAMES = {
     "csv": "cyclic synchronous velocity",
     "cst": "cyclic synchronous torque",
 }
+MODE_CODES = {"csp": MODE_CSP, "csv": MODE_CSV, "cst": MODE_CST}  # modes of operation (0x6060)
 COMMON = {
     0x6040: "controlword",
     0x6041: "statusword",
@@ -105,3 +112,45 @@ def _mappable(od: canopen.ObjectDictionary, index: int, sdo_ok: bool) -> bool:
     if not isinstance(var, canopen.objectdictionary.ODVariable):
         return False
     return sdo_ok or index in (0x6060, 0x6061) or bool(var.pdo_mappable)
+
+
+def mode_name(code: int) -> str:
+    """A mode of operation (0x6060/0x6061 value) by its name here, else its number."""
+    return next((name for name, c in MODE_CODES.items() if c == code), str(code))
+
+
+def consumer_entry(od: canopen.ObjectDictionary, producer_id: int) -> int:
+    """The sub-index of 0x1016 (consumer heartbeat time) that can watch `producer_id`: one that
+    already does, else the first unused one (0) among the description's number of entries (sub 0).
+    ValueError saying what is missing when there is none: an entry beyond the number of entries
+    is never watched by the drive, and entries watching other producers are not ours to take."""
+    consumer = od.get(0x1016)
+    if not isinstance(consumer, ODArray | ODRecord):
+        raise ValueError("it has no heartbeat consumer object 0x1016")
+    count = _od_value(consumer, 0)
+    if count is None or count < 1:
+        raise ValueError(f"0x1016 has {count or 0} consumer heartbeat entries (number of entries, sub 0)")
+    missing = [sub for sub in range(1, count + 1) if sub not in consumer]
+    if missing:
+        raise ValueError(
+            f"0x1016 counts {count} consumer heartbeat entries (sub 0) but describes no sub-index "
+            f"{', '.join(str(m) for m in missing)}"
+        )
+    entries = {sub: _od_value(consumer, sub) or 0 for sub in range(1, count + 1)}
+    for sub, entry in entries.items():
+        if entry >> 16 & 0x7F == producer_id:
+            return sub
+    for sub, entry in entries.items():
+        if entry >> 16 & 0x7F == 0 or entry & 0xFFFF == 0:
+            return sub
+    others = ", ".join(f"sub {sub} watches node {e >> 16 & 0x7F}" for sub, e in entries.items())
+    raise ValueError(f"all {count} consumer heartbeat entries of 0x1016 are taken ({others})")
+
+
+def _od_value(obj: ODArray | ODRecord, sub: int) -> int | None:
+    """A sub-object's value as the description sets it (a DCF's ParameterValue, else the default)."""
+    if sub not in obj:
+        return None
+    var = obj[sub]
+    value = var.value if var.value is not None else var.default
+    return int(value) if isinstance(value, int) else None

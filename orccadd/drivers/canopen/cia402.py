@@ -22,7 +22,8 @@ state and statusword out, transitions numbered as in the standard's figure:
     16  QUICK STOP ACTIVE -> OPERATION ENABLED             Enable operation (option 5-8)
 
 `decode_state` and `command_towards` are the controller's side: what state a statusword
-reports, and which controlword moves a drive one step towards OPERATION ENABLED.
+reports, and which controlword moves a drive one step towards OPERATION ENABLED (or towards
+SWITCHED ON, where the startup parks the drives until the cyclic exchange runs).
 """
 
 from __future__ import annotations
@@ -87,20 +88,36 @@ def state_bits(state: State) -> int:
     return STATE_CODES[state][1]
 
 
-def command_towards(state: State) -> int | None:
-    """The controlword that moves a drive in `state` one step towards OPERATION ENABLED
-    (None: wait, the drive moves on by itself). FAULT needs a rising edge of bit 7: send
-    CW_DISABLE_VOLTAGE first when the last controlword already had it."""
-    return {
+# target state -> state now -> controlword (the comments: the standard's transition numbers)
+TOWARDS: dict[State, dict[State, int | None]] = {
+    State.OPERATION_ENABLED: {
         State.NOT_READY_TO_SWITCH_ON: None,
         State.FAULT_REACTION_ACTIVE: None,
-        State.FAULT: CW_FAULT_RESET,
-        State.SWITCH_ON_DISABLED: CW_SHUTDOWN,
-        State.READY_TO_SWITCH_ON: CW_SWITCH_ON,
-        State.SWITCHED_ON: CW_ENABLE_OPERATION,
-        State.OPERATION_ENABLED: CW_ENABLE_OPERATION,
-        State.QUICK_STOP_ACTIVE: CW_DISABLE_VOLTAGE,
-    }[state]
+        State.FAULT: CW_FAULT_RESET,  # 15
+        State.SWITCH_ON_DISABLED: CW_SHUTDOWN,  # 2
+        State.READY_TO_SWITCH_ON: CW_SWITCH_ON,  # 3
+        State.SWITCHED_ON: CW_ENABLE_OPERATION,  # 4
+        State.OPERATION_ENABLED: CW_ENABLE_OPERATION,  # stay
+        State.QUICK_STOP_ACTIVE: CW_DISABLE_VOLTAGE,  # 12
+    },
+    State.SWITCHED_ON: {  # powered, torque off: where the startup leaves a drive until SYNC runs
+        State.NOT_READY_TO_SWITCH_ON: None,
+        State.FAULT_REACTION_ACTIVE: None,
+        State.FAULT: CW_FAULT_RESET,  # 15
+        State.SWITCH_ON_DISABLED: CW_SHUTDOWN,  # 2
+        State.READY_TO_SWITCH_ON: CW_SWITCH_ON,  # 3
+        State.SWITCHED_ON: CW_SWITCH_ON,  # stay
+        State.OPERATION_ENABLED: CW_SWITCH_ON,  # 5 (disable operation)
+        State.QUICK_STOP_ACTIVE: CW_DISABLE_VOLTAGE,  # 12
+    },
+}
+
+
+def command_towards(state: State, target: State = State.OPERATION_ENABLED) -> int | None:
+    """The controlword that moves a drive in `state` one step towards `target` (OPERATION
+    ENABLED or SWITCHED ON; None: wait, the drive moves on by itself). FAULT needs a rising
+    edge of bit 7: send CW_DISABLE_VOLTAGE first when the last controlword already had it."""
+    return TOWARDS[target][state]
 
 
 def _is_shutdown(cw: int) -> bool:

@@ -1,13 +1,16 @@
 """The controller's side of a CANopen CiA 402 bus: startup over SDO, then the cyclic exchange.
 
 Startup (`CanopenMaster.start`, before the control loop runs; blocking SDO through the
-`canopen` library): NMT reset, wait for every boot-up, check the drive's own supported modes
-(0x6502), map one RPDO and one TPDO per axis, both synchronous (type 1), set the heartbeat
-producer (0x1017) and, where the description lets us, a consumer of our heartbeat (0x1016), the
-SYNC COB-ID and the communication cycle, the EMCY COB-ID, the following error window in the
-drive's increments, the mode of operation; NMT start; SYNC production
-through python-can's periodic send on SocketCAN (the kernel's broadcast manager), else by the
-control loop itself once per tick (python-can would use a thread in the real-time process).
+`canopen` library): our heartbeat starts at once, from a startup producer (python-can's periodic
+send), so drives that watch it never starve while the startup and then the daemon's own setup
+keep the loop from running; NMT reset, wait for every boot-up, configure each drive
+(`startup.configure_drive`: modes, PDO mapping, heartbeats, COB-IDs, mode of operation shown);
+NMT start; SYNC production through python-can's periodic send on SocketCAN (the kernel's
+broadcast manager), else by the control loop itself once per tick (python-can would use a
+thread in the real-time process). The resource then walks the drives to SWITCHED ON (the power
+stage still off) and leaves Enable Operation to the loop's first ticks, once SYNC runs; the
+first tick of the loop takes the heartbeat over (`loop_started`), so a stalled loop is one the
+drives notice.
 
     RPDO (0x200 + id):  controlword 0x6040 | target of the mode (0x607A or 0x60FF, 4 bytes)
                         | target torque 0x6071 (2 bytes) when the drive has CST, so the tasks
@@ -17,7 +20,7 @@ control loop itself once per tick (python-can would use a thread in the real-tim
 Velocity is not mapped (it would not fit the 8 bytes): it is estimated from successive
 positions. Cyclic part (`receive` at the start of a tick, `transmit` at its end; no thread, no
 blocking call): frames already on the bus are drained and decoded (TPDOs, EMCY, heartbeats,
-boot-ups, answers to our non-blocking SDO writes), watchdogs are checked (a TPDO missing for
+boot-ups, answers to our non-blocking SDO requests), watchdogs are checked (a TPDO missing for
 `missed_tpdo_periods`, a heartbeat silent for 3 × `heartbeat_ms`, a drive that rebooted, a bus
 error), and each axis's RPDO goes out with the controlword that the resource's state asks for.
 """
@@ -35,12 +38,11 @@ import canopen
 import numpy as np
 
 from orccadd.drivers.canopen import cia402
-from orccadd.drivers.canopen.capabilities import MODES
+from orccadd.drivers.canopen.capabilities import MODE_CODES
 from orccadd.drivers.canopen.settings import CanopenSettings
+from orccadd.drivers.canopen.startup import CONTROLLER_NODE_ID, configure_drive
 from orccadd.errors import ResourceError
 
-CONTROLLER_NODE_ID = 0x7F  # our heartbeat's producer id (drives consume it)
-MODE_CODES = {"csp": cia402.MODE_CSP, "csv": cia402.MODE_CSV, "cst": cia402.MODE_CST}
 POWERED = (cia402.State.OPERATION_ENABLED, cia402.State.QUICK_STOP_ACTIVE, cia402.State.FAULT_REACTION_ACTIVE)
 _TARGET_OF = {cia402.MODE_CSP: 0x607A, cia402.MODE_CSV: 0x60FF, cia402.MODE_CST: 0x6071}
 _TARGET_FMT = {0x607A: "i", 0x60FF: "i", 0x6071: "h"}
@@ -73,7 +75,8 @@ class AxisLink:
     emcy_text: str = ""
     rebooted: bool = False
     mode_code: int = 0
-    sdo_pending: tuple[int, int, float] | None = None  # (index, sub, deadline_s) of a write
+    mode_shown: int | None = None  # modes of operation display (0x6061) as last read
+    sdo_pending: tuple[int, int, float] | None = None  # (index, sub, deadline_s) of a request
     sdo_error: str = ""
     controlword: int = 0
     consumer_ok: bool = False  # the drive watches our heartbeat
@@ -116,6 +119,10 @@ class CanopenMaster:
         self._rx_tpdo: dict[int, AxisLink] = {}
         self._by_id: dict[int, AxisLink] = {}
         self._sync_msg = can.Message(arbitration_id=0x80, data=b"", is_extended_id=False)
+        self._heartbeat_msg = can.Message(
+            arbitration_id=0x700 + CONTROLLER_NODE_ID, data=b"\x05", is_extended_id=False
+        )
+        self.startup_heartbeat: can.broadcastmanager.CyclicSendTaskABC | None = None
         # SocketCAN: the kernel's broadcast manager produces SYNC, jitter-free and independent
         # of the loop. Elsewhere python-can would need a thread in the real-time process for it:
         # the control loop sends SYNC itself, once per tick, after draining the bus.
@@ -131,21 +138,13 @@ class CanopenMaster:
             self.bus = can.Bus(**s.bus_kwargs())
         except (can.CanError, OSError, ValueError) as e:
             raise ResourceError(f"CAN bus {_where(s)}: cannot open: {e}") from None
+        self._start_startup_heartbeat()
         net = canopen.Network(self.bus)
         net.NOTIFIER_CYCLE = 0.05
         net.connect()
         self.network = net
         try:
-            for i, ax in enumerate(s.axes):
-                node = canopen.RemoteNode(ax.node_id, s.eds_paths[i])
-                node.sdo.RESPONSE_TIMEOUT = s.sdo_timeout_s
-                net.add_node(node)
-                self.nodes.append(node)
-            self._reset_and_wait_for_bootups(net)
-            for i, node in enumerate(self.nodes):
-                self.axes.append(self._configure_axis(i, node, warnings))
-            for node in self.nodes:
-                node.nmt.send_command(0x01)  # start: OPERATIONAL
+            self._configure_drives(net, warnings)
         except (canopen.SdoAbortedError, canopen.SdoCommunicationError) as e:
             self.close()
             raise ResourceError(f"CAN bus {_where(s)}: SDO configuration failed: {e}") from None
@@ -163,6 +162,57 @@ class CanopenMaster:
         if self.sync_by_kernel:
             self.sync_task = self.bus.send_periodic(self._sync_msg, self.period_s)
         return warnings
+
+    def _start_startup_heartbeat(self) -> None:
+        """Our heartbeat from the moment the bus is open until the loop's first tick: python-can's
+        periodic send (the kernel's broadcast manager on SocketCAN, a thread elsewhere)."""
+        assert self.bus is not None
+        period_s = self.s.controller_heartbeat_ms / 1000
+        try:
+            self.startup_heartbeat = self.bus.send_periodic(self._heartbeat_msg, period_s)
+        except (can.CanError, OSError) as e:
+            self.close()
+            raise ResourceError(f"CAN bus {_where(self.s)}: cannot send our heartbeat: {e}") from None
+
+    def loop_started(self) -> None:
+        """The control loop ticks: from now on `transmit` produces our heartbeat, and the startup
+        producer stops (a loop that stalls must go unheard by the drives). Tick-safe (stopping the
+        task only raises its flag, or is one system call), idempotent."""
+        task = self.startup_heartbeat
+        if task is not None:
+            self.startup_heartbeat = None
+            self._next_heartbeat_s = 0.0  # the loop's first transmit sends one
+            with contextlib.suppress(can.CanError, OSError):
+                task.stop()
+
+    def _configure_drives(self, net: canopen.Network, warnings: list[str]) -> None:
+        s = self.s
+        for i, ax in enumerate(s.axes):
+            node = canopen.RemoteNode(ax.node_id, s.eds_paths[i])
+            node.sdo.RESPONSE_TIMEOUT = s.sdo_timeout_s
+            net.add_node(node)
+            self.nodes.append(node)
+        self._reset_and_wait_for_bootups(net)
+        for i, node in enumerate(self.nodes):
+            setup = configure_drive(node, s, i, self.names[i], self.period_s, warnings)
+            self.axes.append(self._link(i, setup.has_torque_actual, setup.consumer_ok, setup.rx_objects))
+        for node in self.nodes:
+            node.nmt.send_command(0x01)  # start: OPERATIONAL
+
+    def _link(self, i: int, has_tq: bool, consumer_ok: bool, rx: tuple[int, ...]) -> AxisLink:
+        ax, code = self.s.axes[i], MODE_CODES[self.s.mode]
+        return AxisLink(
+            node_id=ax.node_id,
+            name=self.names[i],
+            counts_per_rad=ax.counts_per_rev * ax.gear_ratio / (2 * np.pi),
+            nm_per_mille=ax.gear_ratio * ax.rated_torque_nm / 1000.0,
+            has_torque_actual=has_tq,
+            mode_code=code,
+            mode_shown=code,  # configure_drive saw it
+            consumer_ok=consumer_ok,
+            rx_objects=rx,
+            rx_format="<H" + "".join(_TARGET_FMT[index] for index in rx),
+        )
 
     def _reset_and_wait_for_bootups(self, net: canopen.Network) -> None:
         """NMT reset node on every drive; every boot-up message seen (in any order) or an error."""
@@ -190,104 +240,6 @@ class CanopenMaster:
                 f"CAN bus {_where(self.s)}: node {', '.join(missing)} did not boot within "
                 f"{self.s.startup_timeout_s:g} s after NMT reset (wrong node id, bus, or power?)"
             )
-
-    def _configure_axis(self, i: int, node: canopen.RemoteNode, warnings: list[str]) -> AxisLink:
-        s, ax, name = self.s, self.s.axes[i], self.names[i]
-        od = node.object_dictionary
-        mode = s.mode
-        if 0x6502 in od:
-            supported = int(node.sdo[0x6502].raw)
-            bit = MODES[mode][2]
-            if not supported >> bit & 1:
-                raise ResourceError(
-                    f"node {node.id} ({name}): the drive reports supported drive modes 0x{supported:X} "
-                    f"(0x6502) without {mode}: it cannot run this config"
-                )
-
-        def mappable(index: int) -> bool:
-            var = od.get(index)
-            return isinstance(var, canopen.objectdictionary.ODVariable) and bool(var.pdo_mappable)
-
-        has_tq = mappable(0x6077)
-        node.tpdo.read()  # type: ignore[no-untyped-call]
-        node.rpdo.read()  # type: ignore[no-untyped-call]
-        target = MODES[mode][0]
-        # the mode's target, and the one it may switch with at run time: torque, or from
-        # torque, position
-        partner = 0x607A if target == 0x6071 else 0x6071
-        rx = [0x6040, target] + ([partner] if mappable(partner) else [])
-        tx = [0x6041, 0x6064] + ([0x6077] if has_tq else [])
-        for pdos, objs, base in ((node.rpdo, rx, 0x200), (node.tpdo, tx, 0x180)):
-            for k, pdo in (pdos.map or {}).items():
-                pdo.clear()
-                pdo.enabled = k == 1
-                if k == 1:
-                    for index in objs:
-                        pdo.add_variable(index)
-                    pdo.cob_id = base + ax.node_id
-                    pdo.trans_type = 1
-                pdo.save()
-        node.sdo[0x1017].raw = s.heartbeat_ms
-        consumer_ok = False
-        entry = CONTROLLER_NODE_ID << 16 | 3 * s.controller_heartbeat_ms
-        consumer = od.get(0x1016)
-        limit = _sub_max(consumer, 1)
-        if consumer is not None and limit is not None and entry > limit:
-            warnings.append(
-                f"node {node.id} ({name}): its description caps heartbeat consumer entries (0x1016:01) "
-                f"at 0x{limit:X}, no room for a producer id: the drive cannot watch our heartbeat"
-            )
-        elif consumer is not None:
-            try:
-                node.sdo[0x1016][1].raw = entry
-                consumer_ok = True
-            except (canopen.SdoAbortedError, ValueError, KeyError) as e:
-                warnings.append(f"node {node.id} ({name}): cannot watch our heartbeat (0x1016: {e})")
-        else:
-            warnings.append(f"node {node.id} ({name}): its description has no heartbeat consumer (0x1016)")
-        counts_per_rad = ax.counts_per_rev * ax.gear_ratio / (2 * np.pi)
-        for index, value in (
-            (0x6065, round(s.following_error_rad * counts_per_rad)),  # in the drive's increments
-            (0x6066, s.following_error_timeout_ms),
-        ):
-            var = od.get(index)
-            if isinstance(var, canopen.objectdictionary.ODVariable) and var.writable:
-                node.sdo[index].raw = min(value, 0xFFFFFFFE)
-        emcy = od.get(0x1014)
-        if isinstance(emcy, canopen.objectdictionary.ODVariable) and emcy.writable:
-            node.sdo[0x1014].raw = 0x80 + ax.node_id  # some descriptions fix it (e35: 0x81 for all)
-        if 0x1005 in od:
-            node.sdo[0x1005].raw = 0x80
-        if 0x1006 in od:
-            node.sdo[0x1006].raw = round(self.period_s * 1e6)
-        interpolation = od.get(0x60C2)
-        if isinstance(interpolation, canopen.objectdictionary.ODRecord) and {1, 2} <= set(
-            interpolation.subindices
-        ):
-            try:  # the drive interpolates (and derives its CSP velocity feed-forward) over this time
-                value, exponent = interpolation_time_period(self.period_s)
-                node.sdo[0x60C2][1].raw = value
-                node.sdo[0x60C2][2].raw = exponent
-            except ValueError as e:
-                warnings.append(f"node {node.id} ({name}): interpolation time period left as it is: {e}")
-        node.sdo[0x6060].raw = MODE_CODES[mode]
-        shown = int(node.sdo[0x6061].raw)
-        if shown != MODE_CODES[mode]:
-            raise ResourceError(
-                f"node {node.id} ({name}): asked mode {mode}, the drive shows {shown} (0x6061)"
-            )
-        gear = ax.gear_ratio
-        return AxisLink(
-            node_id=ax.node_id,
-            name=name,
-            counts_per_rad=ax.counts_per_rev * gear / (2 * np.pi),
-            nm_per_mille=gear * ax.rated_torque_nm / 1000.0,
-            has_torque_actual=has_tq,
-            mode_code=MODE_CODES[mode],
-            consumer_ok=consumer_ok,
-            rx_objects=tuple(rx[1:]),
-            rx_format="<H" + "".join(_TARGET_FMT[i] for i in rx[1:]),
-        )
 
     # ---- cyclic part (tick-safe: no blocking call, no allocation beyond frames) --------------
     def receive(self, now_s: float) -> CycleReport:
@@ -337,7 +289,9 @@ class CanopenMaster:
                 )
                 rep.fault_code = code
             if a.sdo_pending is not None and now_s > a.sdo_pending[2]:
-                a.sdo_error = f"node {a.node_id} ({a.name}): no answer to SDO write 0x{a.sdo_pending[0]:04X}"
+                a.sdo_error = (
+                    f"node {a.node_id} ({a.name}): no answer to SDO request 0x{a.sdo_pending[0]:04X}"
+                )
                 a.sdo_pending = None
             if a.sdo_error and not rep.comm_lost:
                 rep.comm_lost = a.sdo_error
@@ -380,15 +334,23 @@ class CanopenMaster:
         elif kind == 0x080 and len(data) >= 3:
             a.emcy_code = struct.unpack_from("<H", data, 0)[0]
             a.emcy_text = _emcy_text(a.emcy_code)
-        elif kind == 0x580 and a.sdo_pending is not None and len(data) >= 4:
-            index, sub = struct.unpack_from("<HB", data, 1)
-            if (index, sub) == a.sdo_pending[:2]:
-                if data[0] == 0x80:
-                    code = struct.unpack_from("<I", data, 4)[0]
-                    a.sdo_error = (
-                        f"node {a.node_id} ({a.name}): SDO write 0x{index:04X} refused (abort 0x{code:08X})"
-                    )
-                a.sdo_pending = None
+        elif kind == 0x580 and a.sdo_pending is not None and len(data) >= 8:
+            self._sdo_answer(a, bytes(data))
+
+    def _sdo_answer(self, a: AxisLink, data: bytes) -> None:
+        """The answer to our pending non-blocking SDO request: an abort is an error; an
+        expedited upload of 0x6061 is the mode shown."""
+        index, sub = struct.unpack_from("<HB", data, 1)
+        if a.sdo_pending is None or (index, sub) != a.sdo_pending[:2]:
+            return
+        if data[0] == 0x80:
+            code = struct.unpack_from("<I", data, 4)[0]
+            a.sdo_error = (
+                f"node {a.node_id} ({a.name}): SDO request 0x{index:04X} refused (abort 0x{code:08X})"
+            )
+        elif index == 0x6061 and data[0] & 0xE2 == 0x42:  # expedited upload
+            a.mode_shown = struct.unpack_from("<b", data, 4)[0]
+        a.sdo_pending = None
 
     def transmit(
         self, now_s: float, position_rad: np.ndarray, velocity_rad_s: np.ndarray, torque_nm: np.ndarray
@@ -411,11 +373,9 @@ class CanopenMaster:
                         values.append(_per_mille(float(torque_nm[j]), a))
                 body = struct.pack(a.rx_format, a.controlword, *values)
                 bus.send(can.Message(arbitration_id=0x200 + a.node_id, data=body, is_extended_id=False))
-            if now_s >= self._next_heartbeat_s:
+            if now_s >= self._next_heartbeat_s and self.startup_heartbeat is None:
                 self._next_heartbeat_s = now_s + self.s.controller_heartbeat_ms / 1000
-                bus.send(
-                    can.Message(arbitration_id=0x700 + CONTROLLER_NODE_ID, data=b"\x05", is_extended_id=False)
-                )
+                bus.send(self._heartbeat_msg)
         except (can.CanError, OSError) as e:
             self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
 
@@ -446,25 +406,26 @@ class CanopenMaster:
                 done = False
         return done
 
-    def step_enable(self) -> bool:
-        """One cycle towards OPERATION ENABLED on every axis (CiA 402 transitions 2, 3, 4, and 15
-        out of a fault). True once every axis is there."""
-        enabled = True
+    def step_towards(self, target: cia402.State) -> bool:
+        """One cycle towards `target` (SWITCHED ON or OPERATION ENABLED) on every axis (CiA 402
+        transitions 2, 3, 4 or 5, and 15 out of a fault). True once every axis is there."""
+        there = True
         for a in self.axes:
-            cw = cia402.command_towards(a.state)
+            cw = cia402.command_towards(a.state, target)
             if cw == cia402.CW_FAULT_RESET and a.controlword == cia402.CW_FAULT_RESET:
                 cw = cia402.CW_DISABLE_VOLTAGE  # for a rising edge next time
             if cw is not None:
                 a.controlword = cw
-            enabled = enabled and a.state is cia402.State.OPERATION_ENABLED
-        return enabled
+            there = there and a.state is target
+        return there
 
     def step_quick_stop(self) -> bool:
         """One cycle of quick stop (transition 11) on every enabled axis. True once every axis has
         its power stage off."""
         off = True
         for a in self.axes:
-            if a.state is cia402.State.OPERATION_ENABLED:
+            # an axis asked to enable may be enabled already, its TPDO saying so not yet here
+            if a.state is cia402.State.OPERATION_ENABLED or a.controlword == cia402.CW_ENABLE_OPERATION:
                 a.controlword = cia402.CW_QUICK_STOP
             off = off and a.state not in POWERED
         return off
@@ -484,8 +445,27 @@ class CanopenMaster:
             except (can.CanError, OSError) as e:
                 self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
 
+    def request_mode_display(self) -> None:
+        """Ask every drive for its modes of operation display (0x6061) by a non-blocking SDO
+        upload; `AxisLink.mode_shown` gets the answer in `receive` (None until then)."""
+        if self.bus is None:
+            return
+        deadline = time.monotonic() + self.s.sdo_timeout_s
+        req = struct.pack("<BHB4x", 0x40, 0x6061, 0)
+        for a in self.axes:
+            a.sdo_pending = (0x6061, 0, deadline)
+            a.mode_shown = None
+            try:
+                self.bus.send(can.Message(arbitration_id=0x600 + a.node_id, data=req, is_extended_id=False))
+            except (can.CanError, OSError) as e:
+                self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
+
     # ---- shutdown ------------------------------------------------------------------------------
     def close(self) -> None:
+        if self.startup_heartbeat is not None:
+            with contextlib.suppress(can.CanError, OSError):
+                self.startup_heartbeat.stop()
+            self.startup_heartbeat = None
         if self.sync_task is not None:
             self.sync_task.stop()
             self.sync_task = None
@@ -508,24 +488,6 @@ class CanopenMaster:
             with contextlib.suppress(can.CanError, OSError):
                 self.bus.shutdown()
             self.bus = None
-
-
-def interpolation_time_period(period_s: float) -> tuple[int, int]:
-    """0x60C2 as (value, exponent): value × 10^exponent s = `period_s`, value ≤ 255, the
-    coarsest exponent first (2 ms is (2, -3), 250 µs is (25, -5))."""
-    for exponent in range(-3, -7, -1):
-        value = period_s / 10.0**exponent
-        if abs(value - round(value)) < 1e-6 and 1 <= round(value) <= 255:
-            return round(value), exponent
-    raise ValueError(f"a period of {period_s * 1e3:g} ms has no 0x60C2 encoding (value 1-255 × 10^-3..-6 s)")
-
-
-def _sub_max(obj: object, sub: int) -> int | None:
-    """The description's upper bound of `obj`[sub], if it has one."""
-    if isinstance(obj, canopen.objectdictionary.ODArray | canopen.objectdictionary.ODRecord) and sub in obj:
-        hi = obj[sub].max
-        return int(hi) if hi is not None else None
-    return None
 
 
 def _per_mille(tau_nm: float, a: AxisLink) -> int:

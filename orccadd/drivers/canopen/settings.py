@@ -60,6 +60,8 @@ class CanopenSettings:
     following_error_rad: float = field(default=0.1, bounds=(0.0, 10.0), open_lo=True)  # CSP, 0x6065
     following_error_timeout_ms: int = field(default=100, bounds=(0, 65535))  # 0x6066
     sdo_timeout_s: float = field(default=0.5, bounds=(0.01, 10.0))
+    # how long a drive may take to show a new mode of operation (0x6061) once 0x6060 is written
+    mode_display_timeout_s: float = field(default=0.5, bounds=(0.01, 10.0))
     startup_timeout_s: float = field(default=5.0, bounds=(0.1, 120.0))
     emcy_type2_codes: tuple[int, ...] = field(default=(), bounds=(0, 0xFFFF))
     eds_paths: tuple[str, ...] = field(default=())  # resolved (absolute) by the loader

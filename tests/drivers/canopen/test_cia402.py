@@ -146,3 +146,21 @@ def test_command_towards_reaches_operation_enabled_from_every_state(start: State
         if d.state is S.OPERATION_ENABLED:
             break
     assert d.state is S.OPERATION_ENABLED
+
+
+@pytest.mark.parametrize("start", list(S))
+def test_command_towards_switched_on_reaches_it_from_every_state_and_stays(start: State) -> None:
+    """Where the startup parks the drives (powered, torque off) until SYNC runs."""
+    d = drive_in(start)
+    for _ in range(10):
+        if d.state is S.FAULT_REACTION_ACTIVE:
+            d.fault_reaction_done()
+        if d.state is S.NOT_READY_TO_SWITCH_ON:
+            d.boot()
+        cw = command_towards(decode_state(d.statusword), S.SWITCHED_ON)
+        if cw == CW_FAULT_RESET and d._cw & 0x80:
+            d.controlword(CW_DISABLE_VOLTAGE)
+        if cw is not None:
+            d.controlword(cw)
+    assert d.state is S.SWITCHED_ON
+    assert not d.power_stage_on

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from orccadd.drivers.canopen.master import interpolation_time_period
+from orccadd.drivers.canopen.startup import interpolation_time_period
 
 
 @pytest.mark.parametrize(
