@@ -22,6 +22,12 @@ from orccadd.runtime.executor import PeriodicExecutor
 from orccadd.runtime.rt import enter_realtime
 from orccadd.types import CommandMode, Lifecycle
 
+# A step this many periods after the last one means the process was not running (a VM or
+# scheduler stall): the simulated world pauses for the excess instead of integrating the last
+# command over it, which no real arm and controller pair would see (the controller, stalled too,
+# finds an arm thrown by a stale torque). Counted in `paused_s`.
+PAUSE_AFTER_PERIODS = 4
+
 
 class PlantServer:
     """One plant step per control period: requests → integrate → publish → command."""
@@ -41,6 +47,8 @@ class PlantServer:
         self.done = False
         self.watchdog_trips = 0
         self.cycle_fd = cycle_fd  # one byte per step: the controller's loop is paced by it
+        self.period_s = cfg.control_period_s
+        self.paused_s = 0.0
 
     def _handle_request(self) -> None:
         ctl, arm = self.ch.ctl, self.arm
@@ -78,6 +86,10 @@ class PlantServer:
     def step(self, t_s: float) -> None:
         ctl, arm = self.ch.ctl, self.arm
         self._handle_request()
+        last = arm.t_sim_s
+        if last is not None and t_s - last > PAUSE_AFTER_PERIODS * self.period_s:
+            self.paused_s += t_s - last - self.period_s
+            arm.t_sim_s = t_s - self.period_s  # one period is integrated, the rest was a pause
         st = arm.read(t_s)
         self.ch.publish_state(t_s, st.q_rad, st.dq_rad_s, st.tau_nm, st.status)
         ctl[Ctl.FAULT_CODE] = st.fault_code
