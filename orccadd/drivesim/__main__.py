@@ -85,6 +85,7 @@ def _client(sim: DriveSimulator, conn: socket.socket) -> None:
                             "bus_error": sim.bus_error,
                             "frame_age_ms": _figures_ms(list(sim.frame_age_s)),
                             "longest_loop_gap_ms": sim.longest_gap_s * 1e3,
+                            "paused_ms": sim.arm.paused_s * 1e3,
                         }
             except (ValueError, KeyError, TypeError) as e:
                 reply = {"ok": False, "error": str(e)}

@@ -28,6 +28,13 @@ class Drive(IntEnum):
     POSITION = 3  # position servo to a reference (rad) with velocity feed-forward
 
 
+# The simulator integrates at least every 5 ms (its bus poll); a gap longer than this means its
+# process did not run (a VM or scheduler stall): the simulated world pauses for the excess rather
+# than integrate the drives' last references over it (real drives run on; a controller stalled
+# that long has faulted anyway). Counted in `paused_s`.
+PAUSE_AFTER_S = 0.02
+
+
 class DriveTrainArm(SimulatedArm):
     def __init__(self, config: RobotConfig, model: RobotModel) -> None:
         super().__init__(config, model)
@@ -43,6 +50,7 @@ class DriveTrainArm(SimulatedArm):
         self._kp_on = np.zeros(n)  # position gain, 0 unless POSITION
         self._kd_on = np.zeros(n)  # velocity gain: kd (POSITION), 4 kd (VELOCITY), else 0
         self._brake_on = np.zeros(n)  # the holding brake's torque where the power stage is off
+        self.paused_s = 0.0
         self.configure()
         self.activate(CommandMode.TORQUE)  # the base class's lifecycle: powered, per-joint below
 
@@ -50,6 +58,9 @@ class DriveTrainArm(SimulatedArm):
         """Integrate the dynamics up to `t_s` (wall time, seconds) with the references held."""
         if self.t_sim_s is None:
             self.t_sim_s = t_s
+        if t_s - self.t_sim_s > PAUSE_AFTER_S:
+            self.paused_s += t_s - self.t_sim_s - PAUSE_AFTER_S
+            self.t_sim_s = t_s - PAUSE_AFTER_S
         d = self.drive
         pos, vel = d == POSITION, d == VELOCITY
         self._torque_on[:] = d == TORQUE

@@ -245,3 +245,27 @@ def test_silences(elmo: Rig) -> None:
     node.nmt.wait_for_heartbeat(1.0)
     with pytest.raises(ValueError, match="no drive with node id 9"):
         elmo.sim.inject(9, "overcurrent")
+
+
+def test_a_stall_of_the_simulator_pauses_the_arm_instead_of_integrating_stale_references() -> None:
+    from orccadd.drivesim.plant import PAUSE_AFTER_S, Drive, DriveTrainArm
+    from orccadd.model import RobotModel
+    from orccadd.robot import load_robot_config
+    from tests.conftest import UR5E
+
+    cfg = load_robot_config(UR5E)
+
+    def falling_arm() -> DriveTrainArm:
+        arm = DriveTrainArm(cfg, RobotModel.from_config(cfg))
+        arm.drive[:] = Drive.TORQUE
+        arm.torque_ref[:] = 0.0  # no torque: the arm falls under gravity
+        arm.step_to(100.0)
+        return arm
+
+    running, stalled = falling_arm(), falling_arm()
+    for k in range(1, 151):  # 0.3 s in steps of 2 ms: it keeps falling
+        running.step_to(100.0 + 0.002 * k)
+    stalled.step_to(100.3)  # its process did not run for 0.3 s
+    assert stalled.paused_s > 0.25
+    fell = float(abs(running.dq).max())
+    assert float(abs(stalled.dq).max()) < fell * 2 * PAUSE_AFTER_S / 0.3, (stalled.dq, running.dq)

@@ -1,0 +1,156 @@
+"""`python -m orccadd.ursim --config ROBOT.toml`: a simulated UR controller on 127.0.0.1.
+
+It serves RTDE on 30004, the dashboard server on 29999 and the script ports 30001-30003 (the
+ports stock ur_rtde uses; all can be moved), as an e-Series controller (PolyScope 5.11,
+500 Hz) or, with --cb3, a CB3 (3.15, 125 Hz). The arm is the robot config's (joints, limits,
+URDF); --plant gives the `sim` settings of its dynamics (friction, initial_q_rad). The robot
+boots powered off, as a real one does, unless --boot running.
+
+It prints `ursim: ready, control 127.0.0.1:PORT` once every port listens; the control port
+takes the fault injections (see `orccadd.ursim.faults`). A port already in use is an error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import faulthandler
+import gc
+import logging
+import signal
+import socket
+import sys
+import threading
+from pathlib import Path
+
+from orccadd.config.robot import read_robot_config, read_toml
+from orccadd.errors import OrccaddError
+from orccadd.logsetup import LogSetupError, setup_logging
+from orccadd.ursim.faults import serve_control
+from orccadd.ursim.series import CB3, E_SERIES
+from orccadd.ursim.simulator import DEFAULT_PORTS, UrSimulator
+
+log = logging.getLogger("orccadd.ursim")
+
+UR_DOF = 6
+
+
+def _loopback(host: str) -> str:
+    if host != "localhost" and not host.startswith("127."):
+        raise argparse.ArgumentTypeError(
+            f"{host} is not a loopback address: the simulator serves 127.0.0.1 only"
+        )
+    return host
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(
+        prog="python -m orccadd.ursim",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    ap.add_argument("--config", required=True, help="the robot config (joints, limits, URDF)")
+    ap.add_argument(
+        "--host", type=_loopback, default="127.0.0.1", help="a loopback address (default 127.0.0.1)"
+    )
+    ap.add_argument("--rtde-port", type=int, default=DEFAULT_PORTS["rtde"])
+    ap.add_argument("--dashboard-port", type=int, default=DEFAULT_PORTS["dashboard"])
+    ap.add_argument("--primary-port", type=int, default=DEFAULT_PORTS["primary"])
+    ap.add_argument("--secondary-port", type=int, default=DEFAULT_PORTS["secondary"])
+    ap.add_argument(
+        "--script-port",
+        type=int,
+        default=DEFAULT_PORTS["realtime"],
+        help="the real-time port ur_rtde uploads to",
+    )
+    ap.add_argument(
+        "--control-port", type=int, default=0, help="fault injection and status (default: any free)"
+    )
+    ap.add_argument("--cb3", action="store_true", help="a CB3 controller: version 3.15, 125 Hz")
+    ap.add_argument(
+        "--plant", default="", help="TOML table of `sim` settings for the arm (friction, initial_q_rad)"
+    )
+    ap.add_argument(
+        "--unlock-delay-s",
+        type=float,
+        default=5.0,
+        help="how long after a protective stop it may be unlocked (UR: 5 s)",
+    )
+    ap.add_argument(
+        "--boot", choices=("power_off", "running"), default="power_off", help="the robot mode at boot"
+    )
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        setup_logging("orccadd.ursim")
+    except LogSetupError as e:
+        raise SystemExit(f"python -m orccadd.ursim: error: {e}") from None
+    try:
+        cfg = read_robot_config(args.config)
+        if cfg.dof != UR_DOF:
+            raise OrccaddError(f"{args.config}: a UR arm has {UR_DOF} joints, this config {cfg.dof}")
+        plant = read_toml(Path(args.plant)) if args.plant else {}
+        ports = {
+            "rtde": args.rtde_port,
+            "dashboard": args.dashboard_port,
+            "primary": args.primary_port,
+            "secondary": args.secondary_port,
+            "realtime": args.script_port,
+        }
+        sim = UrSimulator(
+            cfg,
+            CB3 if args.cb3 else E_SERIES,
+            host=args.host,
+            ports=ports,
+            sim_settings=plant,
+            sim_settings_file=args.plant,
+            unlock_delay_s=args.unlock_delay_s,
+            boot_running=args.boot == "running",
+        )
+    except OrccaddError as e:
+        log.error("%s", e)
+        return 1
+    try:
+        sim.open()
+    except OrccaddError as e:
+        log.error("%s", e)
+        return 1
+    try:
+        control = socket.create_server(("127.0.0.1", args.control_port))
+    except OSError as e:
+        log.error("control port %d: %s", args.control_port, e.strerror)
+        sim.close()
+        return 1
+    faulthandler.register(signal.SIGUSR1)  # `kill -USR1 PID`: every thread's stack to the log
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    threading.Thread(target=serve_control, args=(sim, control), name="ursim-control", daemon=True).start()
+    gc.collect()
+    gc.freeze()  # the model and tables are long-lived: keep the collector's passes short
+    # the cycle's thread waits at most this long for the interpreter when a server thread holds
+    # it (the default, 5 ms, is longer than an e-Series cycle)
+    sys.setswitchinterval(0.0005)
+    series = sim.ctl.series
+    log.info(
+        "%s %s at %g Hz on %s: %s",
+        series.name,
+        series.version_text,
+        series.rate_hz,
+        args.host,
+        ", ".join(f"{n} {s.port}" for n, s in sim.servers.items()),
+    )
+    print(f"ursim: ready, control 127.0.0.1:{control.getsockname()[1]}", flush=True)
+    try:
+        sim.run(stop.is_set)
+    finally:
+        control.close()
+        sim.close()
+    log.info("stopped after %d cycles", sim.ctl.cycles)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

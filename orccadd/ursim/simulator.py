@@ -1,0 +1,168 @@
+"""The whole simulated controller: the controller's cycle, its servers and its faults.
+
+`UrSimulator.open()` listens on every port (or raises `PortTakenError`), `run()` runs the controller
+cycle on absolute deadlines until told to stop. Faults (`inject`) act as the real ones would:
+
+- `protective_stop`, `emergency_stop` (then `emergency_stop_release`): the safety system;
+- `stream_stall` (`duration_s`): no RTDE data package leaves for that long, then the stream
+  resumes with the newest data (a stalled network or an overloaded controller);
+- `drop_connection` (`ports`: rtde, dashboard, script or all): the open connections are cut,
+  the ports stay open;
+- `controller_restart` (`down_s`): every port closes, the controller reboots (power off,
+  program and registers cleared), and the ports open again `down_s` later.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from orccadd.config.robot import RobotConfig
+from orccadd.errors import OrccaddError
+from orccadd.runtime import PeriodicExecutor, WallClock
+from orccadd.ursim.arm import UrArm
+from orccadd.ursim.controller import UrController
+from orccadd.ursim.dashboard import dashboard_handler
+from orccadd.ursim.net import Server
+from orccadd.ursim.rtde_server import Stall, rtde_handler
+from orccadd.ursim.script_server import script_handler
+from orccadd.ursim.series import Series
+
+log = logging.getLogger("orccadd.ursim")
+
+DEFAULT_PORTS = {"rtde": 30004, "dashboard": 29999, "primary": 30001, "secondary": 30002, "realtime": 30003}
+FAULTS = (
+    "protective_stop",
+    "emergency_stop",
+    "emergency_stop_release",
+    "stream_stall",
+    "drop_connection",
+    "controller_restart",
+)
+
+
+class UrSimulator:
+    def __init__(
+        self,
+        cfg: RobotConfig,
+        series: Series,
+        *,
+        host: str = "127.0.0.1",
+        ports: dict[str, int] | None = None,
+        sim_settings: dict[str, Any] | None = None,
+        sim_settings_file: str = "",
+        unlock_delay_s: float = 5.0,
+        boot_running: bool = False,
+    ) -> None:
+        arm = UrArm(cfg, 1.0 / series.rate_hz, sim_settings or {}, sim_settings_file)
+        self.ctl = UrController(arm, series, unlock_delay_s, boot_running)
+        self.stall = Stall()
+        self.stop_requested = threading.Event()
+        p = {**DEFAULT_PORTS, **(ports or {})}
+        self.servers: dict[str, Server] = {
+            "rtde": Server("rtde", host, p["rtde"], rtde_handler(self.ctl, self.stall)),
+            "dashboard": Server(
+                "dashboard", host, p["dashboard"], dashboard_handler(self.ctl, self.stop_requested.set)
+            ),
+        }
+        for name in ("primary", "secondary", "realtime"):
+            self.servers[name] = Server(name, host, p[name], script_handler(self.ctl, p[name]))
+        self.executor = PeriodicExecutor(WallClock(), self.ctl.period_s, self._step)
+        self._down = False
+
+    def open(self) -> None:
+        """Listen on every port; on `PortTakenError` none stays open."""
+        try:
+            for srv in self.servers.values():
+                srv.open()
+        except Exception:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        for srv in self.servers.values():
+            srv.close()
+
+    def run(self, stop: Callable[[], bool]) -> None:
+        """The controller's cycle until `stop()` (checked after every cycle)."""
+        self.executor.run(until=lambda: stop() or self.stop_requested.is_set())
+
+    def _step(self, t_s: float) -> None:
+        if not self._down:
+            self.ctl.step(t_s)
+
+    # ---- faults ---------------------------------------------------------------------------
+    def inject(self, fault: str, **params: Any) -> None:
+        """Inject one of `FAULTS` (`ValueError` for an unknown one or a bad parameter)."""
+        ctl = self.ctl
+        if fault == "protective_stop":
+            with ctl.lock:
+                ctl.protective_stop(str(params.get("reason", "injected protective stop")))
+        elif fault == "emergency_stop":
+            with ctl.lock:
+                ctl.emergency_stop()
+        elif fault == "emergency_stop_release":
+            with ctl.lock:
+                ctl.release_emergency_stop()
+        elif fault == "stream_stall":
+            duration = float(params.get("duration_s", 1.0))
+            self.stall.hold(duration)
+        elif fault == "drop_connection":
+            which = str(params.get("ports", "rtde"))
+            names = {
+                "rtde": ["rtde"],
+                "dashboard": ["dashboard"],
+                "script": ["primary", "secondary", "realtime"],
+            }
+            if which != "all" and which not in names:
+                raise ValueError(f"ports (={which!r}) must be rtde, dashboard, script or all")
+            for name in names.get(which, list(self.servers)):
+                self.servers[name].drop_connections()
+        elif fault == "controller_restart":
+            down = float(params.get("down_s", 1.0))
+            threading.Thread(target=self._restart, args=(down,), daemon=True).start()
+        else:
+            raise ValueError(f"unknown fault {fault!r} (faults: {', '.join(FAULTS)})")
+        log.info("fault injected: %s %s", fault, params or "")
+
+    def _restart(self, down_s: float) -> None:
+        self._down = True
+        self.close()
+        with self.ctl.lock:
+            self.ctl.reset()
+        time.sleep(down_s)
+        for srv in self.servers.values():
+            for attempt in range(50):
+                try:
+                    srv.open()
+                    break
+                except OrccaddError as e:  # taken meanwhile: retry for 5 s, then say so
+                    if attempt == 49:
+                        log.error("after the restart: %s", e)
+                    time.sleep(0.1)
+        self._down = False
+        log.info("controller restarted")
+
+    def status(self) -> dict[str, Any]:
+        ctl = self.ctl
+        with ctl.lock:
+            return {
+                "robot_mode": ctl.robot_mode.name,
+                "safety_mode": ctl.safety_mode.name,
+                "runtime_state": ctl.runtime_state.name,
+                "program": ctl.program_name if ctl.program is not None else "",
+                "stop_reason": ctl.stop_reason,
+                "protective_stops": ctl.protective_stops,
+                "q_rad": ctl.arm.q_rad.tolist(),
+                "target_q_rad": ctl.target.q.tolist(),
+                "cycles": ctl.cycles,
+                "rate_hz": ctl.series.rate_hz,
+                "overruns": self.executor.stats.overruns,
+                "rtde_streams": len(ctl.subscribers),
+                "connections": {name: srv.connections for name, srv in self.servers.items()},
+                "ports": {name: srv.port for name, srv in self.servers.items()},
+                "down": self._down,
+            }
