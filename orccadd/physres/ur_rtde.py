@@ -91,6 +91,12 @@ class UrRtdeArm(PhysicalResource):
         s = load_dataclass(UrRtdeSettings, raw, file, "resource.settings")
         if len(cfg.joints) != 6:
             raise ConfigError(file, "joints", f"a UR arm has 6 joints, the config lists {len(cfg.joints)}")
+        try:
+            parse_polyscope_version(s.min_version)
+        except ValueError:
+            raise ConfigError(
+                file, "resource.settings.min_version", f"(={s.min_version!r}) is not a version like 5.4"
+            ) from None
         return s
 
     def __init__(self, config: RobotConfig, model: RobotModel) -> None:
@@ -105,6 +111,7 @@ class UrRtdeArm(PhysicalResource):
         self._last_stamp = -1.0
         self._stale_ticks = 0
         self._comm_lost = ""
+        self._controller_stopped = False  # the controller stopped the arm itself (its script too)
         self._fault_since = 0.0  # monotonic time a protective stop was first seen
         self._hold = np.zeros(self.dof)  # the command kept while waiting (position mode)
         self._ramp_v = np.zeros(self.dof)  # safe stop: current ramp velocity
@@ -233,6 +240,7 @@ class UrRtdeArm(PhysicalResource):
                 )
             self.dashboard.unlockProtectiveStop()
             self.dashboard.closeSafetyPopup()
+        self.control.stopScript()  # ur_rtde clears the command registers (no stale servoJ target)
         self.control.reuploadScript()  # the script stopped with the stop: restart it
         self.fault_message = ""
         st.fault_code = 0
@@ -284,17 +292,19 @@ class UrRtdeArm(PhysicalResource):
             self._stale_ticks = 0
             self._last_stamp = stamp
         if not connected or self._stale_ticks >= self.settings.stall_periods:
-            self._comm_lost = (
-                "the RTDE connection is closed" if not connected
-                else f"no RTDE package for {self._stale_ticks} periods (the stream stalled)"
-            )  # fmt: skip
-            self.fault_message = f"{self.name}: {self._comm_lost}"
+            if not self._comm_lost:  # latched until `reset` reconnects: said as first seen
+                self._comm_lost = (
+                    "the RTDE connection is closed" if not connected
+                    else f"no RTDE package for {self._stale_ticks} periods (the stream stalled)"
+                )  # fmt: skip
+                self.fault_message = f"{self.name}: {self._comm_lost}"
             return int(Status.COMM_LOST)
         state.q_rad[:] = r.getActualQ()
         state.dq_rad_s[:] = r.getActualQd()
         state.tau_nm[:] = r.getTargetMoment()
         robot_mode, safety_mode = int(r.getRobotMode()), int(r.getSafetyMode())
         cond = condition(robot_mode, safety_mode, int(r.getRuntimeState()), self._script_running())
+        self._controller_stopped = cond is not None
         if cond is None:
             self._fault_since = 0.0
             return 0
@@ -333,7 +343,12 @@ class UrRtdeArm(PhysicalResource):
 
     def _ramp_step(self, t_s: float) -> None:
         """One period of the stop: every joint's speed down at the configured deceleration,
-        together (the path is kept), through the active mode's stream."""
+        together (the path is kept), through the active mode's stream. When the controller has
+        stopped the arm itself (a protective stop, its script halted), it is only watched."""
+        if self._controller_stopped:
+            if float(np.abs(self.state.dq_rad_s).max()) < AT_REST_RAD_S:
+                self._mark_stopped(self.config.safe_stop.category == 1)
+            return
         dt = max(0.0, t_s - self._ramp_t) or self.period_s
         self._ramp_t = t_s
         peak = float(np.abs(self._ramp_v).max())

@@ -137,10 +137,10 @@ class Version:
 
 def parse_polyscope_version(reply: str) -> Version:
     """`URSoftware 5.11.1.108318 (Jan 14 2022)` (dashboard `PolyscopeVersion`) -> Version."""
-    m = re.search(r"(\d+)\.(\d+)\.(\d+)(?:\.(\d+))?", reply)
+    m = re.search(r"(\d+)\.(\d+)(?:\.(\d+))?(?:\.(\d+))?", reply)
     if m is None:
         raise ValueError(f"not a PolyscopeVersion reply: {reply!r}")
-    return Version(int(m[1]), int(m[2]), int(m[3]), int(m[4] or 0))
+    return Version(int(m[1]), int(m[2]), int(m[3] or 0), int(m[4] or 0))
 
 
 def robot_model_name(reply: str, version: Version) -> str:

@@ -1,0 +1,149 @@
+"""The `ur_rtde` backend against the UR controller simulator (a separate process that stock
+ur_rtde talks to): device-paced motion, the controller's safety stops as type 3 exceptions,
+what `reset` can and cannot clear, a dead controller, and the startup checks."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from orccadd.errors import ResourceError
+from orccadd.model import RobotModel
+from orccadd.physres.ur_rtde import UrRtdeArm
+from orccadd.robot import load_robot_config
+from orccadd.session import Session
+from orccadd.task import RobotTask
+from orccadd.task.loop import resource_clock
+from orccadd.types import CommandMode, Phase, Status
+from orccadd.ursim.process import UrSimProcess
+from tests.conftest import ROOT
+from tests.safety import TickRecorder, assert_commands_within_limits, assert_safe_stop_in_time, status_shows
+
+CONFIG = ROOT / "configs/robots/ur5e-rtde-sim.toml"
+MOVE = ROOT / "configs/tasks/move_joints_csp.toml"
+REACH = [0.5, -1.3, 1.3, -1.6, -1.3, 0.3]
+HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+
+# ur_rtde blocks in C++ holding the interpreter: only a thread can time such a test out
+pytestmark = pytest.mark.timeout(180, method="thread")
+
+
+@pytest.fixture
+def sim() -> Iterator[UrSimProcess]:
+    with UrSimProcess(CONFIG, "--boot", "running", "--unlock-delay-s", "1") as s:
+        yield s
+
+
+@pytest.fixture
+def arm(sim: UrSimProcess) -> Iterator[Session]:
+    s = Session.open(CONFIG, CommandMode.POSITION)
+    yield s
+    s.close()  # ur_rtde's clients go before the simulator does
+
+
+def move(s: Session, target: list[float]) -> tuple[RobotTask, TickRecorder]:
+    task = s.task(MOVE)
+    next(m for m in task.modules if m.name == "traj").configure({"target_rad": target, "speed_scale": 0.5})
+    loop = TickRecorder(s.resource, resource_clock(s.resource), overrun_limit=10**6)
+    return task, loop
+
+
+def test_a_motion_is_paced_by_the_controllers_stream_and_reaches_its_target(arm: Session) -> None:
+    task, loop = move(arm, REACH)
+    assert loop.run_task(task, timeout_s=20.0) is Phase.DONE
+    assert arm.event_names() == ["MoveJointsCSP.done"]
+    period_us = arm.config.control_period_s * 1e6
+    assert period_us / 3 < loop.stats.release_period.median_us < 3 * period_us  # the controller's 500 Hz
+    assert max(abs(q - t) for q, t in zip(arm.resource.state.q_rad, REACH, strict=True)) < 0.01
+    assert_commands_within_limits(loop.ticks(), arm.config)
+    d = arm.resource.diagnostics()
+    assert d.details["controller"] == "UR5e 5.11.1.108318"
+
+
+def test_protective_stop_mid_motion_is_a_type_3_then_reset_unlocks_and_it_moves_again(
+    sim: UrSimProcess, arm: Session
+) -> None:
+    task, loop = move(arm, REACH)
+    task.activate()
+    loop.active = task
+    loop.run_for(0.5)
+    sim.inject("protective_stop")
+    loop.run_for(0.5)
+    assert task.phase is Phase.FAULT
+    assert [n for n in arm.event_names() if ".T3." in n] == ["MoveJointsCSP.T3.ResourceFault"]
+    assert "safety mode PROTECTIVE_STOP" in arm.resource.fault_message
+    ticks = loop.ticks()
+    assert_safe_stop_in_time(ticks, status_shows(ticks, Status.FAULT))
+    assert_commands_within_limits(ticks, arm.config)
+    res = arm.resource
+    deadline = time.monotonic() + 10
+    while True:  # the controller allows the unlock 1 s (here; 5 s on a real one) after the stop
+        try:
+            res.reset_fault()
+            break
+        except ResourceError as e:
+            assert "unlocks it" in str(e) and time.monotonic() < deadline, e
+            loop.run_for(0.2)
+    loop.run_for(1.0)
+    assert not res.state.status & Status.FAULT, res.fault_message
+    assert res.state.status & Status.STOPPED
+    res.clear_stop()
+    task2, loop2 = move(arm, HOME)
+    assert loop2.run_task(task2, timeout_s=20.0) is Phase.DONE
+
+
+def test_an_emergency_stop_cannot_be_reset_from_here(sim: UrSimProcess, arm: Session) -> None:
+    task, loop = move(arm, REACH)
+    task.activate()
+    loop.active = task
+    loop.run_for(0.3)
+    sim.inject("emergency_stop")
+    loop.run_for(0.5)
+    assert task.phase is Phase.FAULT
+    assert "EMERGENCY_STOP" in arm.resource.fault_message
+    with pytest.raises(ResourceError, match="release the emergency stop button"):
+        arm.resource.reset_fault()
+
+
+def test_a_dead_controller_is_comm_lost_within_three_periods(sim: UrSimProcess, arm: Session) -> None:
+    task, loop = move(arm, REACH)
+    task.activate()
+    loop.active = task
+    loop.run_for(0.3)
+    sim.inject("stream_stall", duration_s=1.0)
+    loop.executor.run(max_ticks=20)  # released by the clock's stall timeout
+    assert task.phase is Phase.FAULT
+    assert [n for n in arm.event_names() if ".T3." in n] == ["MoveJointsCSP.T3.CommLost"]
+    assert "no RTDE package for 3 periods" in arm.resource.fault_message
+    ticks = loop.ticks()
+    assert_safe_stop_in_time(ticks, status_shows(ticks, Status.COMM_LOST))
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"control_period_s": 0.004}, "period"),
+        ({"model": "UR10e"}, "the controller drives a UR5e, the config describes a UR10e"),
+    ],
+)
+def test_a_config_that_is_not_this_controller_is_refused(
+    sim: UrSimProcess, tmp_path: Path, change: dict[str, object], message: str
+) -> None:
+    cfg = load_robot_config(CONFIG)
+    if "model" in change:
+        settings = dataclasses.replace(cfg.backend_settings, model=change["model"])
+        cfg = dataclasses.replace(cfg, backend_settings=settings)
+        res = UrRtdeArm(cfg, RobotModel.from_config(cfg))
+        with pytest.raises(ResourceError, match=message):
+            res.configure()
+        return
+    text = CONFIG.read_text().replace("control_period_s = 0.002", "control_period_s = 0.004")
+    text = text.replace('"../urdf/', f'"{ROOT}/configs/urdf/')
+    path = tmp_path / "ur.toml"
+    path.write_text(text)
+    with pytest.raises(Exception, match=message):
+        load_robot_config(path)
