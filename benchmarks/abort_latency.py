@@ -9,7 +9,9 @@ Ruckig + computed torque). Load, in processes of their own, all through the real
 - 10 `monitor` streams at 100 Hz.
 
 Each round: start the mission, let it move, send `abort` (or, with `--command stop`, the
-mission's graceful Stop) from a client of its own, and take the first tick whose record shows
+mission's graceful Stop) from a client of its own, alternately through the urgent socket (what
+`orccadctl abort` uses: the real-time process reads it) and through the main socket (the command
+daemon's queue), and take the first tick whose record shows
 the safe stop (status `stopping`/`stopped`; for stop, the task switch or end). The latency is
 that tick's release time minus the moment the request was written to the socket (both
 CLOCK_MONOTONIC): what an operator's abort waits for, the command daemon included. Then reset
@@ -34,6 +36,7 @@ from harness import ROOT, figures, running_daemon
 from orccadd.ctl.client import Client, ClientError
 from orccadd.types import Status
 from orccadd.wire.schema import H, OperatorAction, R, T, Trace
+from orccadd.wire.socketdir import urgent_socket_path
 from orccadd.wire.telemetry import RingReader, TelemetryBlock
 
 MISSION = ROOT / "benchmarks/missions/isolation.mission"
@@ -98,7 +101,7 @@ def handled_at(tel: TelemetryBlock, trace: RingReader, cmd: str) -> float:
     return float("nan")
 
 
-def one_round(c: Client, tel: TelemetryBlock, cmd: str) -> tuple[float, float]:
+def one_round(c: Client, tel: TelemetryBlock, cmd: str, sender: Client) -> tuple[float, float]:
     """(written -> handled by the real-time process, written -> first tick acted on), seconds."""
     c.call("start")
     time.sleep(0.6 + np.random.default_rng().uniform(0, 0.4))  # moving, at a random phase
@@ -106,7 +109,7 @@ def one_round(c: Client, tel: TelemetryBlock, cmd: str) -> tuple[float, float]:
     trace = RingReader(tel.trace, tel.header, H.TRACE_HEAD, from_now=True)
     task0 = int(tel.ticks[(int(tel.header[H.TICK_HEAD]) - 1) % len(tel.ticks), T.TASK])
     sent = time.monotonic()
-    c.call(cmd)
+    sender.call(cmd)
     latency = acted_on(tel, reader, sent, cmd, task0) - sent
     handled = handled_at(tel, trace, cmd) - sent
     at_rest = cmd == "stop" or "stopped" in c.call("status").get("resource_status", [])
@@ -135,7 +138,7 @@ def main() -> int:
     args = ap.parse_args()
     ctx = mp.get_context("fork")
     stop = ctx.Event()
-    latencies: list[tuple[float, float]] = []
+    latencies: dict[str, list[tuple[float, float]]] = {"urgent": [], "main": []}
     with running_daemon() as d, Client(d.socket, timeout_s=120) as c:
         c.call("load", path=str(MISSION))
         tel = TelemetryBlock.attach(str(c.call("describe")["telemetry"]))
@@ -152,8 +155,10 @@ def main() -> int:
             p.start()
         try:
             time.sleep(1.0)
-            for _ in range(args.rounds):
-                latencies.append(one_round(c, tel, args.command))
+            with Client(urgent_socket_path(d.socket)) as urgent:
+                for k in range(args.rounds):  # both paths in turn, under the same load
+                    path = "urgent" if k % 2 == 0 else "main"
+                    latencies[path].append(one_round(c, tel, args.command, urgent if path == "urgent" else c))
             ticks = int(tel.header[H.TICKS])
             overruns = int(tel.header[H.OVERRUNS])
         finally:
@@ -166,17 +171,24 @@ def main() -> int:
                 m.terminate()
                 m.wait(timeout=10)
             tel.close()
-    handled, lat = (np.array(x) for x in zip(*latencies, strict=True))
     print(
         f"abort_latency: sim-ur5e, {1 / period_s:g} Hz, mission Shuttle; `{args.command}` x {args.rounds} "
         f"under {args.busy} busy control clients, {args.big} clients of 900 kB requests, {MONITORS} monitors"
     )
-    print(f"  request written -> handled (rt process) {figures(handled * 1e6, 'µs', 0)}")
-    print(f"  request written -> first tick acted on  {figures(lat * 1e6, 'µs', 0)}")
-    print(f"  in control periods                      {figures(lat / period_s, 'periods', 2)}")
+    worst = 0.0
+    for path, label in (
+        ("urgent", "urgent socket (orccadctl abort/stop)"),
+        ("main", "main socket (command daemon)"),
+    ):
+        handled, lat = (np.array(x) for x in zip(*latencies[path], strict=True))
+        print(f"  {label}:")
+        print(f"    request written -> handled (rt process) {figures(handled * 1e6, 'µs', 0)}")
+        print(f"    request written -> first tick acted on  {figures(lat * 1e6, 'µs', 0)}")
+        print(f"    in control periods                      {figures(lat / period_s, 'periods', 2)}")
+        if path == "urgent":
+            worst = float(lat.max() / period_s)
     print(f"  loop: {ticks} ticks, {overruns} overruns")
-    worst = float(lat.max() / period_s)
-    print(f"  target: max ≤ 2 periods -> {'met' if worst <= 2 else 'NOT met'} ({worst:.2f})")
+    print(f"  target (urgent socket): max ≤ 2 periods -> {'met' if worst <= 2 else 'NOT met'} ({worst:.2f})")
     return 0
 
 

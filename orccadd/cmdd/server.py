@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import grp
 import json
 import logging
 import os
@@ -20,7 +19,6 @@ import pwd
 import signal
 import socket
 import stat
-import struct
 import time
 from pathlib import Path
 from typing import Any
@@ -41,6 +39,7 @@ from orccadd.wire.commands import (
     parse_request,
     with_defaults,
 )
+from orccadd.wire.roles import Roles, peer_credentials
 from orccadd.wire.schema import PROTOCOL_VERSION, H, S
 from orccadd.wire.socketdir import SocketPathError, prepare_socket_dir
 from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
@@ -53,46 +52,6 @@ ROLELESS_WAIT_S = 2.0
 RT_TIMEOUT_S = 5.0
 LOAD_TIMEOUT_S = 600.0
 RT_MAX = 1 << 20
-
-
-def peer_credentials(sock: socket.socket) -> tuple[int, int, int]:
-    """(pid, uid, gid) of the process at the other end of a Unix socket."""
-    raw = sock.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i"))
-    pid, uid, gid = struct.unpack("3i", raw)
-    return pid, uid, gid
-
-
-class Roles:
-    """Who may do what: `control` ⊃ `read`. Root and the daemon's own user always control."""
-
-    def __init__(self, cfg: DaemonConfig) -> None:
-        self.cfg = cfg
-
-    def _groups(self, uid: int, gid: int) -> set[str]:
-        names = set()
-        gids = {gid}
-        with contextlib.suppress(KeyError):
-            user = pwd.getpwuid(uid).pw_name
-            gids |= set(os.getgrouplist(user, gid))
-        for g in gids:
-            with contextlib.suppress(KeyError):
-                names.add(grp.getgrgid(g).gr_name)
-        return names
-
-    def role(self, uid: int, gid: int) -> Role | None:
-        if uid in (0, os.getuid()):
-            return Role.CONTROL
-        try:
-            user = pwd.getpwuid(uid).pw_name
-        except KeyError:
-            user = str(uid)
-        groups = self._groups(uid, gid)
-        c = self.cfg
-        if user in c.control_users or groups & set(c.control_groups):
-            return Role.CONTROL
-        if user in c.read_users or groups & set(c.read_groups):
-            return Role.READ
-        return None
 
 
 class RtLink:

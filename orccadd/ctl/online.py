@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -11,6 +12,7 @@ from typing import Any
 
 from orccadd.ctl.client import Client, ClientError, default_socket
 from orccadd.wire.commands import COMMANDS
+from orccadd.wire.socketdir import urgent_socket_path
 
 EXIT_OK, EXIT_REFUSED, EXIT_ERROR = 0, 1, 2
 
@@ -99,23 +101,50 @@ def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     return cmd, {}
 
 
-def run_online(a: argparse.Namespace) -> int:
+def _urgent_reply(a: argparse.Namespace) -> dict[str, Any] | None:
+    """`abort` and `stop` through the real-time process's own socket, when it is there (no
+    queue of other clients' requests in front of them); None: use the main socket."""
+    path = urgent_socket_path(a.socket or default_socket())
+    if not os.path.exists(path):
+        return None
     try:
-        with Client(a.socket) as c:
-            if a.online == "monitor":
-                return _monitor(c, a)
-            if a.online == "events" and a.follow:
-                return _follow(c, a)
-            if a.online == "top":
-                return _top(c, a)
-            if a.online == "events":
-                r = c.reply("events", last=a.last)
-            else:
-                cmd, args = _args(a)
-                r = c.reply(cmd, **args)
-    except ClientError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_ERROR
+        with Client(path) as c:
+            return c.reply(a.online)
+    except (ClientError, OSError):
+        return None
+
+
+def run_online(a: argparse.Namespace) -> int:
+    r = _urgent_reply(a) if a.online in ("abort", "stop") else None
+    if r is None:
+        try:
+            online = _online(a)
+        except ClientError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return EXIT_ERROR
+        if isinstance(online, int):
+            return online
+        r = online
+    return _report(a, r)
+
+
+def _online(a: argparse.Namespace) -> dict[str, Any] | int:
+    """The reply to the command of `a` through the command daemon, or an exit status for the
+    streaming commands (monitor, events --follow, top)."""
+    with Client(a.socket) as c:
+        if a.online == "monitor":
+            return _monitor(c, a)
+        if a.online == "events" and a.follow:
+            return _follow(c, a)
+        if a.online == "top":
+            return _top(c, a)
+        if a.online == "events":
+            return c.reply("events", last=a.last)
+        cmd, args = _args(a)
+        return c.reply(cmd, **args)
+
+
+def _report(a: argparse.Namespace, r: dict[str, Any]) -> int:
     fetched = EXIT_OK
     if r.get("ok") and a.online == "log" and a.action == "stop" and r["result"].get("dest"):
         fetched = _fetch_log(r["result"], quiet=a.json)

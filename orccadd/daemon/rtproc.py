@@ -35,6 +35,7 @@ from orccadd.config.robot import RobotConfig
 from orccadd.daemon.machine import Machine
 from orccadd.daemon.notify import Notifier
 from orccadd.daemon.replies import CommandError, Pending, Result
+from orccadd.daemon.urgent import UrgentSocket
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.robot import create_resource, load_robot_config, with_backend
@@ -44,7 +45,7 @@ from orccadd.task.loop import resource_clock
 from orccadd.types import CommandMode, Status
 from orccadd.wire.commands import COMMANDS, ProtocolError, check_args
 from orccadd.wire.schema import H, Layout, MachineState, MissionResult, OperatorAction, Trace
-from orccadd.wire.socketdir import check_socket_path, prepare_socket_dir
+from orccadd.wire.socketdir import check_socket_path, prepare_socket_dir, urgent_socket_path
 from orccadd.wire.telemetry import TelemetryBlock
 
 log = logging.getLogger("orccadd")
@@ -98,13 +99,15 @@ class RealtimeProcess:
         self.inbox: deque[bytes] = deque()  # requests waiting for the loop's slack
         self.inbox_since_ns = 0
         self.pending: list[tuple[Any, Pending]] = []  # (request id, reply to complete)
+        self.urgent: UrgentSocket | None = None
 
     # ---- startup --------------------------------------------------------------------------
     def start(self) -> None:
         cfg = self.cfg
         # the socket's place first: nothing is started for a daemon that could not be reached
-        prepare_socket_dir(Path(self.socket_path).parent, cfg.daemon.socket_group)
+        self.gid = prepare_socket_dir(Path(self.socket_path).parent, cfg.daemon.socket_group)
         check_socket_path(Path(self.socket_path))
+        check_socket_path(Path(urgent_socket_path(self.socket_path)))
         hold = load_task_file(cfg.resolve(cfg.daemon.hold_task))  # checked before anything moves
         self.resource.configure()
         self.resource.activate(CommandMode[hold.task.command.upper()])  # the Hold task's mode
@@ -120,6 +123,7 @@ class RealtimeProcess:
             allow_fault_injection=self.args.allow_fault_injection,
         )
         self._open_socket()
+        self.urgent = UrgentSocket(urgent_socket_path(self.socket_path), cfg.daemon, self.gid, self._urgent)
         self.thread = threading.Thread(target=self._control_main, name="control", daemon=True)
         self.thread.start()  # the arm is held (the Hold task) while the startup mission loads
         if self.args.mission:
@@ -202,6 +206,8 @@ class RealtimeProcess:
                     fds.add(self.conn.fileno())
                 if self.cmdd_pidfd >= 0:
                     fds.add(self.cmdd_pidfd)
+                if self.urgent is not None:
+                    fds.update(self.urgent.fds())
                 if self.inbox:
                     fds.add(self.machine.loop.slack_fd)
                 fds.discard(-1)
@@ -226,6 +232,8 @@ class RealtimeProcess:
                         self._receive()
                     elif fd == self.cmdd_pidfd:
                         self._cmdd_exited()
+                    elif self.urgent is not None:
+                        self.urgent.on_readable(fd)
                 self._serve_inbox()
                 self._complete_pending()
                 if self.cmdd is None and self.respawn_at and time.monotonic() >= self.respawn_at:
@@ -234,6 +242,8 @@ class RealtimeProcess:
                 now = time.monotonic()
                 if now >= next_ping:
                     next_ping = now + self._ping()
+                    if self.urgent is not None:
+                        self.urgent.expire()
         finally:
             code = self.shutdown()
             leave_realtime(rt)
@@ -360,6 +370,11 @@ class RealtimeProcess:
             with contextlib.suppress(BlockingIOError, OSError):
                 self.conn.send(json.dumps(reply, default=str).encode())
 
+    def _urgent(self, line: bytes) -> dict[str, Any]:
+        """An abort or a stop from the urgent socket (never a Pending: both act at once)."""
+        rid, reply = self._handle(line)
+        return reply if isinstance(reply, dict) else {"id": rid, "ok": False, "error": "not served here"}
+
     def _handle(self, data: bytes) -> tuple[Any, dict[str, Any] | Pending]:
         """(request id, reply or Pending). Any failure becomes an error reply with the id."""
         rid = None
@@ -456,6 +471,8 @@ class RealtimeProcess:
         for s in (self.conn, self.listener):
             if s is not None:
                 s.close()
+        if self.urgent is not None:
+            self.urgent.close()
         with contextlib.suppress(FileNotFoundError):
             os.unlink(self.rt_path)
         res.shutdown()

@@ -84,3 +84,8 @@ def check_socket_path(path: Path) -> None:
     finally:
         with contextlib.suppress(OSError):
             probe.close()
+
+
+def urgent_socket_path(public: str) -> str:
+    """Where the real-time process takes `abort` and `stop` itself (`orccadd.daemon.urgent`)."""
+    return public + ".urgent"
