@@ -32,13 +32,18 @@ class RunningDaemon:
 
 
 @contextlib.contextmanager
-def running_daemon(config: Path = UR5E, *extra: str) -> Iterator[RunningDaemon]:
-    """`orccadd --config CONFIG` with its command daemon, stopped (SIGTERM) on exit."""
+def running_daemon(config: Path = UR5E, *extra: str, new_session: bool = False) -> Iterator[RunningDaemon]:
+    """`orccadd --config CONFIG` with its command daemon, stopped (SIGTERM) on exit.
+
+    `new_session`: in a session of its own, so a Ctrl-C at the terminal reaches the benchmark
+    alone, which then stops the daemon itself (after its own teardown)."""
     tmp = Path(tempfile.mkdtemp(prefix="orccadd-bench-"))
     sock = str(tmp / "orccadd.sock")
     log = tmp / "orccadd.log"
     cmd = [sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(config), "--socket", sock, *extra]
-    proc = subprocess.Popen(cmd, stdout=log.open("w"), stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(
+        cmd, stdout=log.open("w"), stderr=subprocess.STDOUT, start_new_session=new_session
+    )
     try:
         wait_up(sock, proc)
         yield RunningDaemon(proc, sock, tmp, log)

@@ -33,13 +33,18 @@ def example_robot_data_dir() -> Path:
 
 def resolve_urdf(cfg: RobotConfig) -> Path:
     urdf = cfg.model.urdf
-    path = (
-        example_robot_data_dir() / urdf[len(ERD_PREFIX) :]
-        if urdf.startswith(ERD_PREFIX)
-        else cfg.resolve(urdf)
-    )
-    if not path.is_file():
-        raise ConfigError(cfg.source, "model.urdf", f"(={urdf!r}) names no file ({path})")
+    shown = urdf[:200].encode("utf-8", "backslashreplace").decode()
+    try:
+        path = (
+            example_robot_data_dir() / urdf[len(ERD_PREFIX) :]
+            if urdf.startswith(ERD_PREFIX)
+            else cfg.resolve(urdf)
+        )
+        found = path.is_file()
+    except (OSError, ValueError) as e:  # a NUL, a name too long, ...
+        raise ConfigError(cfg.source, "model.urdf", f"(={shown!r}) is not a usable path ({e})") from None
+    if not found:
+        raise ConfigError(cfg.source, "model.urdf", f"(={shown!r}) names no file ({path})")
     return path
 
 
@@ -91,7 +96,11 @@ class RobotModel:
         try:
             full = pin.buildModelFromUrdf(str(path))
         except Exception as e:  # pinocchio raises plain exceptions on malformed files
-            raise ModelError(f"{path}: cannot load URDF: {e}") from e
+            raise ConfigError(
+                cfg.source,
+                "model.urdf",
+                f"(={cfg.model.urdf!r}): {path} is not a URDF pinocchio can load: {e}",
+            ) from None
         names = list(full.names)[1:]
         for i, name in enumerate(cfg.model.locked_joints):
             if name not in names:

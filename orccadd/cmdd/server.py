@@ -46,6 +46,8 @@ from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 
 log = logging.getLogger("orccadd.cmdd")
 NICE = -10
+MONITOR_MIN_HZ = 0.01
+GONE_CHECK_S = 0.25  # how soon a stream notices its client has gone
 
 ROLELESS_MAX = 8  # peers without a role waited for at once (each gets one refusal)
 ROLELESS_WAIT_S = 2.0
@@ -134,6 +136,7 @@ class CommandDaemon:
         self.done = asyncio.Event()
         self.sock_ino = 0
         self.dispatch = Dispatcher(self, "cmdd")
+        self.readers: dict[asyncio.StreamWriter, asyncio.StreamReader] = {}  # for streams: gone?
 
     async def refresh(self) -> None:
         st = read_status(self.tel)
@@ -217,11 +220,15 @@ class CommandDaemon:
                 await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
                 return
             self.slots[role] += 1
+            self.readers[writer] = reader
             try:
                 await self._serve_client(reader, writer, role, uid)
             finally:
                 self.slots[role] -= 1
+                self.readers.pop(writer, None)
         except (ConnectionError, BrokenPipeError, TimeoutError):
+            return
+        except asyncio.CancelledError:  # the daemon is stopping: the connection just ends
             return
         finally:
             with contextlib.suppress(Exception):
@@ -277,7 +284,7 @@ class CommandDaemon:
         try:
             rid, cmd, args = parse_request(line)
         except ProtocolError as e:
-            writer.write(encode(error_reply(rid, str(e))))
+            writer.write(encode(error_reply(e.rid, str(e))))
             await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
             return
         spec = COMMANDS[cmd]
@@ -335,8 +342,10 @@ class CommandDaemon:
             raise ValueError("monitor: signals must be a list of names")
         sel = views.SignalSelection(list(signals or []), self.desc.get("joints", []))
         max_rate = 1.0 / self.tel.period_s
-        if not 0 < rate_hz <= max_rate:
-            raise ValueError(f"monitor: rate_hz (={rate_hz}) must be in (0, {max_rate:g}] (the control rate)")
+        if not MONITOR_MIN_HZ <= rate_hz <= max_rate:
+            raise ValueError(
+                f"monitor: rate_hz (={rate_hz}) must be in [{MONITOR_MIN_HZ:g}, {max_rate:g}] (the loop rate)"
+            )
         if count < 0 or duration_s < 0:
             raise ValueError("monitor: count and duration_s must be positive")
         sent = 0
@@ -344,7 +353,7 @@ class CommandDaemon:
         writer.write(encode({"id": rid, "ok": True, "stream": {"signals": ["t_s", *sel.labels]}}))
         period = 1.0 / rate_hz
         nxt = time.monotonic()
-        while (not count or sent < count) and time.monotonic() < t_end and not self.done.is_set():
+        while time.monotonic() < t_end and not self.done.is_set():
             rec = views.latest_tick(self.tel)
             if rec is not None:
                 writer.write(
@@ -352,9 +361,29 @@ class CommandDaemon:
                 )
                 await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
                 sent += 1
+            if count and sent >= count:
+                break
             nxt += period
-            await asyncio.sleep(max(0.0, nxt - time.monotonic()))
+            if not await self._wait_while_connected(writer, min(nxt, t_end) - time.monotonic()):
+                break
         return {"samples": sent}
+
+    async def _wait_while_connected(self, writer: asyncio.StreamWriter, seconds: float) -> bool:
+        """Sleep `seconds` (in short steps); False as soon as the client has gone (its end closed:
+        a stream must not keep a slot for nobody) or the daemon is stopping."""
+        reader = self.readers.get(writer)
+        end = time.monotonic() + seconds
+        while True:
+            if (
+                self.done.is_set()
+                or writer.transport.is_closing()
+                or (reader is not None and reader.at_eof())
+            ):
+                return False
+            left = end - time.monotonic()
+            if left <= 0:
+                return True
+            await asyncio.sleep(min(left, GONE_CHECK_S))
 
     @handles("events")
     async def do_events(
@@ -376,8 +405,7 @@ class CommandDaemon:
         for e in out:
             writer.write(encode({"id": rid, "ok": True, "stream": e}))
         t_end = time.monotonic() + duration_s if duration_s else float("inf")
-        while time.monotonic() < t_end and not self.done.is_set():
-            await asyncio.sleep(0.05)
+        while time.monotonic() < t_end and await self._wait_while_connected(writer, 0.05):
             new = r.poll()
             if len(new):
                 await self.refresh()

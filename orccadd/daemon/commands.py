@@ -130,11 +130,12 @@ class RtCommands:
             inside = any(real.is_relative_to(d) for d in dirs)
             if inside and real.is_file():
                 return str(real)
-        except (OSError, RuntimeError):  # absent, a name too long, a symlink loop
+        except (OSError, RuntimeError, ValueError):  # absent, too long, a link loop, a NUL, a surrogate
             inside = False
+        shown = path[:300].encode("utf-8", "backslashreplace").decode()
         if not inside:
-            raise CommandError(f"{path[:300]}: missions are loaded from {allowed} only (daemon.mission_dirs)")
-        raise CommandError(f"{path[:300]}: no such mission file")
+            raise CommandError(f"{shown}: missions are loaded from {allowed} only (daemon.mission_dirs)")
+        raise CommandError(f"{shown}: no such mission file")
 
     def _install(self, path: str, automaton: Automaton, report: Report) -> Result:
         mc = self.m.mission

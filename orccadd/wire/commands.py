@@ -106,7 +106,7 @@ COMMANDS: dict[str, CommandSpec] = {
             "`phase`, `status`, `mode`",
             (
                 Arg("signals", (list,), "signal names (default: q)", default=None),
-                Arg("rate_hz", NUMBER, "samples per second, at most the control rate", default=10.0),
+                Arg("rate_hz", NUMBER, "samples per second, 0.01 to the control rate", default=10.0),
                 Arg("count", (int,), "stop after this many samples (0: never)", default=0),
                 Arg("duration_s", NUMBER, "stop after this long (0: never)", default=0.0),
             ),
@@ -185,7 +185,12 @@ COMMANDS: dict[str, CommandSpec] = {
 
 
 class ProtocolError(Exception):
-    """A request that is not well formed; the message says why, in the client's terms."""
+    """A request that is not well formed; the message says why, in the client's terms, and
+    `rid` is the request's id when it could be read (the error reply carries it)."""
+
+    def __init__(self, message: str, rid: Any = None) -> None:
+        super().__init__(message)
+        self.rid = rid
 
 
 def parse_request(line: bytes) -> tuple[Any, str, dict[str, Any]]:
@@ -200,24 +205,26 @@ def parse_request(line: bytes) -> tuple[Any, str, dict[str, Any]]:
         raise ProtocolError(f"not JSON: {type(e).__name__}: {str(e)[:200]}") from None
     if not isinstance(msg, dict):
         raise ProtocolError('a request is a JSON object {"cmd": ..., "args": {...}}')
-    unknown = set(msg) - {"id", "cmd", "args"}
-    if unknown:
-        raise ProtocolError(
-            f"unknown request fields: {', '.join(sorted(map(str, unknown)))[:200]} (fields: id, cmd, args)"
-        )
     rid = msg.get("id")
     if not isinstance(rid, str | int | float | None) or isinstance(rid, bool):
         raise ProtocolError("'id' must be a number, a string or null")
+    unknown = set(msg) - {"id", "cmd", "args"}
+    if unknown:
+        names = ", ".join(sorted(map(str, unknown)))[:200]
+        raise ProtocolError(f"unknown request fields: {names} (fields: id, cmd, args)", rid)
     cmd = msg.get("cmd")
     if not isinstance(cmd, str):
-        raise ProtocolError("'cmd' must be a string")
+        raise ProtocolError("'cmd' must be a string", rid)
     spec = COMMANDS.get(cmd)
     if spec is None:
-        raise ProtocolError(f"unknown command {cmd[:64]!r} (commands: {', '.join(sorted(COMMANDS))})")
+        raise ProtocolError(f"unknown command {cmd[:64]!r} (commands: {', '.join(sorted(COMMANDS))})", rid)
     args = msg.get("args", {})
     if not isinstance(args, dict):
-        raise ProtocolError("'args' must be an object")
-    check_args(spec, args)
+        raise ProtocolError("'args' must be an object", rid)
+    try:
+        check_args(spec, args)
+    except ProtocolError as e:
+        raise ProtocolError(str(e), rid) from None
     return rid, cmd, args
 
 

@@ -361,3 +361,25 @@ def test_a_client_that_stops_reading_is_cut_off_and_its_connection_freed(tmp_pat
         assert d.status()["state"] == "idle"
     finally:
         d.stop()
+
+
+def test_streams_whose_clients_left_free_their_slots_and_a_counted_monitor_ends_at_once(
+    daemon: Daemon,
+) -> None:
+    for req in (
+        b'{"id": 1, "cmd": "monitor", "args": {"rate_hz": 0.01}}\n',
+        b'{"id": 1, "cmd": "events", "args": {"follow": true}}\n',
+    ):
+        for _ in range(20):  # more than daemon.control_clients (16): each must have been freed
+            with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+                s.settimeout(10)
+                s.connect(daemon.socket)
+                s.sendall(req)
+                time.sleep(0.05)  # the stream has begun (events: nothing to say yet); the client leaves
+        time.sleep(0.5)
+        assert daemon.status()["state"] == "idle"  # a control client still gets a slot
+    t0 = time.monotonic()
+    with Client(daemon.socket) as c:
+        items = list(c.stream("monitor", rate_hz=0.01, count=1))
+    assert len(items) == 2  # the header, the one sample; then the final reply
+    assert time.monotonic() - t0 < 10  # at once, not after the 100 s period

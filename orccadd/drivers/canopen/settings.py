@@ -92,7 +92,13 @@ def find_eds(name: str, cfg_dir: Path) -> Path | None:
     for d in os.environ.get("ORCCADD_EDS_PATH", "").split(os.pathsep):
         if d:
             cands.append(Path(d) / name)
-    return next((p.resolve() for p in cands if p.is_file()), None)
+    for p in cands:
+        try:
+            if p.is_file():
+                return p.resolve()
+        except (OSError, ValueError):  # a name too long, a NUL: not found here
+            continue
+    return None
 
 
 def load_canopen_settings(raw: Any, cfg: RobotConfig, file: str) -> CanopenSettings:
