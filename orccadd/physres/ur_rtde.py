@@ -179,9 +179,15 @@ class UrRtdeArm(PhysicalResource):
         import rtde_control
         import rtde_receive
 
-        host, hz = self.settings.host, 1.0 / self.period_s
-        self.receive = self._try(lambda: rtde_receive.RTDEReceiveInterface(host, hz), f"RTDE at {host}:30004")
-        self.control = self._try(lambda: rtde_control.RTDEControlInterface(host, hz), "the control script")
+        host, hz, prio = self.settings.host, 1.0 / self.period_s, self.settings.rtde_priority
+        self.receive = self._try(
+            lambda: rtde_receive.RTDEReceiveInterface(host, hz, [], False, False, prio),
+            f"RTDE at {host}:30004",
+        )
+        flags = rtde_control.RTDEControlInterface.FLAG_UPLOAD_SCRIPT
+        self.control = self._try(
+            lambda: rtde_control.RTDEControlInterface(host, hz, flags, 50002, prio), "the control script"
+        )
         self._last_stamp = -1.0
         self._stale_ticks = 0
         self._comm_lost = ""

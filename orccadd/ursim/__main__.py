@@ -25,6 +25,7 @@ from pathlib import Path
 from orccadd.config.robot import read_robot_config, read_toml
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
+from orccadd.runtime.rt import enter_realtime
 from orccadd.ursim.faults import serve_control
 from orccadd.ursim.series import CB3, E_SERIES
 from orccadd.ursim.simulator import DEFAULT_PORTS, UrSimulator
@@ -78,6 +79,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument(
         "--boot", choices=("power_off", "running"), default="power_off", help="the robot mode at boot"
     )
+    ap.add_argument(
+        "--priority",
+        type=int,
+        default=0,
+        help="SCHED_FIFO priority of the simulator's threads (0: time-shared); a real controller "
+        "keeps its cycle whatever the robot PC does, this one only if it is real-time too",
+    )
     return ap.parse_args(argv)
 
 
@@ -112,6 +120,11 @@ def main(argv: list[str] | None = None) -> int:
     except OrccaddError as e:
         log.error("%s", e)
         return 1
+    if args.priority:
+        for warning in enter_realtime(
+            args.priority, lock_memory=False, freeze_gc=False, cpu_dma_latency_us=None
+        ).warnings:
+            log.warning("%s", warning)
     try:
         sim.open()
     except OrccaddError as e:

@@ -34,7 +34,7 @@ pytestmark = pytest.mark.timeout(180, method="thread")
 
 @pytest.fixture
 def sim() -> Iterator[UrSimProcess]:
-    with UrSimProcess(CONFIG, "--boot", "running", "--unlock-delay-s", "1") as s:
+    with UrSimProcess(CONFIG, "--boot", "running", "--unlock-delay-s", "1", "--priority", "70") as s:
         yield s
 
 

@@ -25,5 +25,8 @@ class UrRtdeSettings:
     gain: float = field(default=300.0, bounds=GAIN)
     speedj_acceleration_rad_s2: float = field(default=1.4, bounds=(0.01, 40.0))
     power_on: bool = field(default=False, doc="power on and release the brakes at startup")
+    # ur_rtde's receive and control threads at SCHED_FIFO (0: time-shared): just below the
+    # control thread (daemon.control_priority, 80), so the stream keeps up on a busy machine
+    rtde_priority: int = field(default=79, bounds=(0, 98))
     stall_periods: int = field(default=3, bounds=(2, 1000), doc="no packet for this many periods: CommLost")
     connect_timeout_s: float = field(default=10.0, bounds=(0.5, 120.0))

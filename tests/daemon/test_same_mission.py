@@ -1,0 +1,79 @@
+"""The same position-mode mission (configs/missions/demo_position.mission) on every backend,
+through orccadd and orccadctl, each in its own processes: it runs to completion and its reactive
+trace (the instants: states, inputs, actions) is the same whatever the arm."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from orccadd.ursim.process import UrSimProcess
+from tests.canopen_rig import canopen_rig
+from tests.daemon.conftest import ROOT, Daemon, robot_config, start_daemon_with
+
+MISSION = str(ROOT / "configs/missions/demo_position.mission")
+UR = ROOT / "configs/robots/ur5e-rtde-sim.toml"
+
+
+def local_config(tmp: Path, source: Path) -> Path:
+    """`source` with its relative paths made absolute and the test's mission directory allowed."""
+    text = source.read_text().replace('"../', f'"{source.parent.parent}/')
+    path = tmp / source.name
+    path.write_text(text)
+    return path
+
+
+def run_mission(d: Daemon) -> list[tuple[int, int, tuple[str, ...], tuple[str, ...]]]:
+    r = d.ctl("load", MISSION)
+    assert r.returncode == 0, r.stderr
+    r = d.ctl("start")
+    assert r.returncode == 0, r.stderr
+    s = d.wait(lambda s: s["state"] != "running", timeout_s=90)
+    assert s["result"] == "success" and not s["faulted"], s
+    events = d.call("events", last=100)["events"]  # type: ignore[index]
+    return [
+        (e["from"], e["to"], tuple(e["inputs"]), tuple(e["actions"]))
+        for e in events
+        if e["kind"] == "instant"
+    ]
+
+
+@pytest.fixture(params=["sim", "canopen402", "ur_rtde"])
+def backend_daemon(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Daemon]:
+    if request.param == "sim":
+        d = start_daemon_with(tmp_path, robot_config(tmp_path))
+        try:
+            yield d
+        finally:
+            d.stop()
+    elif request.param == "canopen402":
+        with canopen_rig(tmp_path) as rig:
+            d = start_daemon_with(tmp_path, rig.config)
+            try:
+                yield d
+            finally:
+                d.stop()
+    else:
+        with UrSimProcess(UR, "--boot", "running", "--priority", "70"):
+            d = start_daemon_with(tmp_path, local_config(tmp_path, UR))
+            try:
+                yield d
+            finally:
+                d.stop()
+
+
+EXPECTED = [
+    (0, 1, (), ("start Home",)),
+    (1, 3, ("Home.done",), ("stop Home", "start Reach")),
+    (3, 5, ("Reach.done",), ("stop Reach", "start Back")),
+    (5, 2, ("Back.done",), ("stop Back", "success")),
+]
+
+
+@pytest.mark.timeout(300, method="thread")
+def test_the_position_mission_runs_with_the_same_reactive_trace_on_every_backend(
+    backend_daemon: Daemon,
+) -> None:
+    assert run_mission(backend_daemon) == EXPECTED
