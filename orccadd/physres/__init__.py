@@ -19,6 +19,7 @@ BACKENDS: dict[str, tuple[str, str]] = {
     "sim_process": ("orccadd.physres.sim_process", "SimProcessArm"),
     "canopen402": ("orccadd.physres.canopen402", "Canopen402Arm"),
     "ur_rtde": ("orccadd.physres.ur_rtde", "UrRtdeArm"),
+    "dynamixel": ("orccadd.physres.dynamixel", "DynamixelArm"),
 }
 
 

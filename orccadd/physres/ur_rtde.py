@@ -109,7 +109,7 @@ class UrRtdeArm(PhysicalResource):
         self.version: Version | None = None
         self.robot_model = ""
         self._last_stamp = -1.0
-        self._stale_ticks = 0
+        self._last_new_s = 0.0  # tick time at which the last new package was seen
         self._comm_lost = ""
         self._controller_stopped = False  # the controller stopped the arm itself (its script too)
         self._fault_since = 0.0  # monotonic time a protective stop was first seen
@@ -189,7 +189,7 @@ class UrRtdeArm(PhysicalResource):
             lambda: rtde_control.RTDEControlInterface(host, hz, flags, 50002, prio), "the control script"
         )
         self._last_stamp = -1.0
-        self._stale_ticks = 0
+        self._last_new_s = 0.0
         self._comm_lost = ""
 
     def _try(self, fn: Any, what: str) -> Any:
@@ -287,21 +287,16 @@ class UrRtdeArm(PhysicalResource):
             stamp = r.getTimestamp()
         except RuntimeError:
             connected, stamp = False, self._last_stamp
-        if stamp == self._last_stamp:
-            self._stale_ticks += 1
-        else:
-            self.packets_missed += (
-                max(0, int(round((stamp - self._last_stamp) / self.period_s)) - 1)
-                if self._last_stamp >= 0
-                else 0
-            )
-            self._stale_ticks = 0
-            self._last_stamp = stamp
-        if not connected or self._stale_ticks >= self.settings.stall_periods:
+        if stamp != self._last_stamp or not self._last_new_s:
+            if self._last_stamp >= 0:
+                self.packets_missed += max(0, round((stamp - self._last_stamp) / self.period_s) - 1)
+            self._last_stamp, self._last_new_s = stamp, t_s
+        silent = round((t_s - self._last_new_s) / self.period_s)
+        if not connected or silent >= self.settings.stall_periods:
             if not self._comm_lost:  # latched until `reset` reconnects: said as first seen
                 self._comm_lost = (
                     "the RTDE connection is closed" if not connected
-                    else f"no RTDE package for {self._stale_ticks} periods (the stream stalled)"
+                    else f"no RTDE package for {silent} periods (the stream stalled)"
                 )  # fmt: skip
                 self.fault_message = f"{self.name}: {self._comm_lost}"
             return int(Status.COMM_LOST)

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from orccadd.ctl.client import Client
+from orccadd.wire.schema import PROTOCOL_VERSION
 from tests.daemon.conftest import ROOT, Daemon, start_daemon
 
 DEMO = str(ROOT / "configs/missions/demo.mission")
@@ -183,7 +184,7 @@ def test_unauthorised_peer_is_refused(tmp_path: Path) -> None:
 def test_too_many_clients(daemon: Daemon) -> None:
     first = daemon.call("ping")
     assert isinstance(first, dict)
-    assert first["pong"] is True and first["protocol_version"] == 2
+    assert first["pong"] is True and first["protocol_version"] == PROTOCOL_VERSION
     assert isinstance(first["pid"], int) and first["pid"] != daemon.proc.pid  # the command daemon's own
     socks = []
     try:

@@ -40,7 +40,7 @@ def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("fuzzcfg") / "robot.toml"
 
 
-@fuzz(max_examples=200, shrink=False)  # a failing config is shown whole
+@fuzz(max_examples=100, shrink=False)  # a failing config is shown whole
 @given(data=configs())
 def test_mutated_configs_load_or_are_refused(config_file: Path, data: bytes) -> None:
     load_outcome(config_file, data)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -16,8 +17,9 @@ from orccadd.robot import create_resource, load_robot_config, with_backend
 from orccadd.types import CommandMode, Lifecycle, Status
 from tests.canopen_rig import Rig, canopen_rig
 from tests.conftest import UR5E
+from tests.physres.test_dynamixel import DxlRig, dxl_rig
 
-BACKENDS = ["sim", "sim_process", "canopen402"]
+BACKENDS = ["sim", "sim_process", "canopen402", "dynamixel"]
 
 
 @pytest.fixture(scope="module")
@@ -27,10 +29,25 @@ def can_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Rig]:
         yield rig
 
 
+@pytest.fixture
+def dxl(tmp_path: Path) -> Iterator[DxlRig]:
+    """Six simulated DYNAMIXEL servos (a separate process, one per test: a test may leave the
+    arm fallen), the contract's category 1 allowed by declaring torque off at rest safe."""
+    with dxl_rig(
+        tmp_path,
+        ("category = 2", "category = 1"),
+        ("deceleration_rad_s2 = 4.0", "deceleration_rad_s2 = 10.0"),
+        ("baud_rate = 4_000_000", "baud_rate = 4_000_000\ntorque_off_at_rest = true"),
+    ) as rig:
+        yield rig
+
+
 @pytest.fixture(params=BACKENDS)
 def resource(request: pytest.FixtureRequest) -> Iterator[PhysicalResource]:
     if request.param == "canopen402":
         cfg = load_robot_config(request.getfixturevalue("can_rig").config)
+    elif request.param == "dynamixel":
+        cfg = load_robot_config(request.getfixturevalue("dxl").config)
     else:
         cfg = with_backend(load_robot_config(UR5E), request.param)
     res = create_resource(cfg)
@@ -46,6 +63,9 @@ def inject_device_fault(request: pytest.FixtureRequest, resource: PhysicalResour
     the device otherwise (a simulated drive's over-current)."""
     if "device" in resource.description.fault_injection:
         return lambda: resource.inject_fault("device", "over-current")
+    if resource.description.backend == "dynamixel":
+        dxl: DxlRig = request.getfixturevalue("dxl")
+        return lambda: dxl.sim.inject("overload", 3)
     rig: Rig = request.getfixturevalue("can_rig")
     return lambda: rig.drives.inject(3, "overcurrent")
 

@@ -1,0 +1,138 @@
+"""The serial port under the SDK: blocking reads, our timeouts, and the USB latency timer.
+
+`dynamixel_sdk.PortHandler` opens the port with no read timeout and its `rxPacket` polls
+`readPort` in a loop until the packet is complete or its timeout (at least 34 ms: twice a 16 ms
+USB latency, plus 2 ms) passes: a busy loop that cost ~3 ms per transaction on a pseudo-terminal
+here, and a timeout far beyond a control period. `BlockingPort` keeps the SDK's protocol code
+(packets, CRC, stuffing, the group classes) and changes only the port under it:
+
+- `readPort` waits in `select` until bytes arrive or the packet's deadline passes, then takes
+  what is there (the SDK asks for exactly the bytes it still needs);
+- a packet's deadline is the wire time of the request and of the expected reply at the baud
+  rate, plus the adapter's latency and `read_timeout_s` (see `setPacketTimeout`);
+- time is CLOCK_MONOTONIC (the SDK uses the wall clock).
+
+`latency_timer_s` reads an FTDI adapter's latency timer from sysfs; `check_latency` refuses a
+period it cannot meet, with the fix.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import time
+from pathlib import Path
+
+from dynamixel_sdk import PortHandler
+
+from orccadd.errors import ResourceError
+
+SYSFS_USB_SERIAL = Path("/sys/bus/usb-serial/devices")
+
+
+class BlockingPort(PortHandler):  # type: ignore[misc]  # the SDK is untyped
+    """`PortHandler` with blocking reads and deadlines from the wire time (see the module)."""
+
+    def __init__(self, port_name: str, read_timeout_s: float, latency_s: float = 0.0) -> None:
+        super().__init__(port_name)
+        self.latency_ms = latency_s * 1e3
+        self.extra_ms = read_timeout_s * 1e3 + self.latency_ms
+        self.last_tx_bytes = 0
+        self._fd = -1
+
+    def setupPort(self, cflag_baud: int) -> bool:  # noqa: N802 - the SDK's name
+        ok = bool(super().setupPort(cflag_baud))
+        self._fd = self.ser.fileno()
+        return ok
+
+    def writePort(self, packet: list[int]) -> int:  # noqa: N802
+        """The packet in one write(2) (pyserial's own write waits in `select` first); the rest,
+        if the driver took only part of it, through pyserial."""
+        data = bytes(packet)
+        self.last_tx_bytes = len(data)
+        try:
+            n = os.write(self._fd, data)
+        except BlockingIOError:
+            n = 0
+        return n if n == len(data) else n + int(self.ser.write(data[n:]))
+
+    def readPort(self, length: int) -> bytes:  # noqa: N802
+        """What has arrived of the `length` bytes the SDK still needs, waiting for the first of
+        them until the packet's deadline (bytes already there are taken even past it)."""
+        remaining_s = (self.packet_timeout - (self.getCurrentTime() - self.packet_start_time)) * 1e-3
+        ready, _, _ = select.select((self._fd,), (), (), max(0.0, remaining_s))
+        if not ready:
+            return b""
+        try:
+            return os.read(self._fd, length)
+        except BlockingIOError:
+            return b""
+
+    def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802
+        """Deadline for a reply of `packet_length` bytes to the request just written."""
+        self.packet_start_time = self.getCurrentTime()
+        wire_ms = self.tx_time_per_byte * (packet_length + self.last_tx_bytes)
+        self.packet_timeout = wire_ms + self.extra_ms
+
+    def patient(self, timeout_s: float) -> _Patience:
+        """`with port.patient(0.05):` transactions that may wait longer than the cycle's (a
+        servo's first answer, one busy writing its EEPROM): lifecycle steps, never a tick."""
+        return _Patience(self, timeout_s * 1e3 + self.latency_ms)
+
+    def getCurrentTime(self) -> float:  # noqa: N802
+        """Milliseconds on CLOCK_MONOTONIC."""
+        return time.monotonic_ns() * 1e-6
+
+
+class _Patience:
+    def __init__(self, port: BlockingPort, extra_ms: float) -> None:
+        self.port, self.extra_ms, self.saved_ms = port, extra_ms, port.extra_ms
+
+    def __enter__(self) -> None:
+        self.saved_ms = self.port.extra_ms
+        self.port.extra_ms = max(self.extra_ms, self.saved_ms)
+
+    def __exit__(self, *exc: object) -> None:
+        self.port.extra_ms = self.saved_ms
+
+
+def open_port(path: str, baud_bit_s: int, read_timeout_s: float, latency_s: float = 0.0) -> BlockingPort:
+    """The port at `baud_bit_s`, or a `ResourceError` saying why not."""
+    port = BlockingPort(path, read_timeout_s, latency_s)
+    try:
+        port.baudrate = baud_bit_s
+        ok = port.openPort()
+    except (OSError, ValueError) as e:  # serial.SerialException is an OSError
+        raise ResourceError(f"cannot open the DYNAMIXEL port {path}: {e}") from None
+    if not ok:
+        raise ResourceError(f"cannot open the DYNAMIXEL port {path} at {baud_bit_s} bit/s")
+    return port
+
+
+def latency_timer_s(port_path: str, sysfs: Path = SYSFS_USB_SERIAL) -> float | None:
+    """The USB-serial adapter's latency timer behind `port_path` (a link such as
+    /dev/serial/by-id/... is followed), or None when the device is no USB-serial tty (a
+    pseudo-terminal, a CDC-ACM board, a native UART)."""
+    name = Path(os.path.realpath(port_path)).name
+    f = sysfs / name / "latency_timer"
+    try:
+        return int(f.read_text().strip()) * 1e-3
+    except (OSError, ValueError):
+        return None
+
+
+def check_latency(port_path: str, period_s: float, busy_s: float, sysfs: Path = SYSFS_USB_SERIAL) -> float:
+    """The adapter's latency (0 when it has no latency timer); a `ResourceError` with the fix
+    when a reply held back by it would not fit in the period with the wire time `busy_s`."""
+    latency = latency_timer_s(port_path, sysfs)
+    if latency is None:
+        return 0.0
+    if latency + busy_s > period_s:
+        name = Path(os.path.realpath(port_path)).name
+        path = sysfs / name / "latency_timer"
+        raise ResourceError(
+            f"{port_path}: the USB adapter's latency timer is {latency * 1e3:g} ms: with the chain's "
+            f"{busy_s * 1e3:.2g} ms of wire time it cannot meet control_period_s = {period_s:g}. "
+            f"Set it to 1 ms: echo 1 | sudo tee {path}"
+        )
+    return latency

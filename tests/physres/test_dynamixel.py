@@ -1,0 +1,337 @@
+"""The dynamixel resource against the simulated servo chain in another process (`python -m
+orccadd.dxlsim` on a pseudo-terminal): startup checks, a position motion under a Robot-Task on
+the wall clock, an overload and its reset, an unplugged servo, CRC noise, mode switches.
+Timing is checked to orders of magnitude only (a shared 2-core VM)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
+
+from orccadd.drivers.dynamixel import table as T
+from orccadd.dxlsim.process import DxlSimProcess
+from orccadd.errors import ConfigError, ResourceError
+from orccadd.physres.dynamixel import DynamixelArm
+from orccadd.robot import create_resource, load_robot_config
+from orccadd.session import Session
+from orccadd.task import RobotTask
+from orccadd.task.loop import resource_clock
+from orccadd.types import CommandMode, Phase, Status
+from tests.conftest import ROOT, variant_text
+from tests.safety import TickRecorder, assert_commands_within_limits, assert_safe_stop_in_time, status_shows
+
+SIM = ROOT / "configs/robots/dxl-6axis-sim.toml"
+MOVE_CSP = ROOT / "configs/tasks/move_joints_csp.toml"
+TARGET = [0.6, -0.3, -1.2, 0.5, 0.4, -0.5]
+BACK = [0.0, -0.16, -1.41, 0.0, 0.1, 0.0]
+SETTINGS = "baud_rate = 4_000_000"
+pytestmark = pytest.mark.timeout(120)
+
+
+@dataclass
+class DxlRig:
+    config: Path  # the robot config the simulator serves (its port)
+    sim: DxlSimProcess
+
+    def variant(self, *edits: tuple[str, str], name: str = "variant.toml") -> Path:
+        """The rig's config with more edits (the resource's view; the simulator keeps its own)."""
+        p = self.config.with_name(name)
+        text = self.config.read_text()
+        for old, new in edits:
+            assert old in text, old
+            text = text.replace(old, new, 1)
+        p.write_text(text)
+        return p
+
+
+@contextmanager
+def dxl_rig(tmp: Path, *edits: tuple[str, str]) -> Iterator[DxlRig]:
+    """dxl-6axis-sim.toml with `edits`, its port under `tmp`, and the simulator serving it."""
+    config = tmp / "dxl.toml"
+    port = tmp / "ttyDXL"
+    config.write_text(variant_text(SIM, ('port = "/tmp/orccadd-dxl-6axis"', f'port = "{port}"'), *edits))
+    sim = DxlSimProcess(config)
+    try:
+        yield DxlRig(config, sim)
+    finally:
+        sim.stop()
+
+
+@pytest.fixture
+def rig(tmp_path: Path) -> Iterator[DxlRig]:
+    with dxl_rig(tmp_path) as r:
+        yield r
+
+
+@pytest.fixture
+def session(rig: DxlRig) -> Iterator[Session]:
+    s = Session.from_config(load_robot_config(rig.config), CommandMode.POSITION)
+    try:
+        yield s
+    finally:
+        s.close()
+
+
+def move(s: Session, target: list[float]) -> tuple[RobotTask, TickRecorder]:
+    """The shipped position-mode move, reached within 0.01 rad: the servos' position loops (P
+    only, their default gains) stop 3-4 ticks (~5 mrad) short against the gear's friction."""
+    task_file = Path(s.config.source).with_name("move_csp.toml")
+    task_file.write_text(variant_text(MOVE_CSP, ("tolerance_rad = 0.005", "tolerance_rad = 0.01")))
+    task = s.task(task_file)
+    next(m for m in task.modules if m.name == "traj").configure({"target_rad": target})
+    loop = TickRecorder(s.resource, resource_clock(s.resource), overrun_limit=10**6)
+    loop.active = task
+    task.activate()
+    return task, loop
+
+
+def settle(s: Session, loop: TickRecorder, flag: Status, timeout_s: float) -> None:
+    end = time.monotonic() + timeout_s
+    while not s.resource.state.status & flag:
+        assert time.monotonic() < end, f"no {flag!r} within {timeout_s} s: {s.resource.fault_message}"
+        loop.executor.run(max_ticks=20)
+
+
+# ---- startup -------------------------------------------------------------------------------------
+def test_a_wrong_model_in_the_config_is_refused_naming_the_id(rig: DxlRig) -> None:
+    wrong = rig.variant(('id = 4\nmodel = "XM430-W350"', 'id = 4\nmodel = "XM540-W270"'))
+    res = create_resource(load_robot_config(wrong))
+    with pytest.raises(ResourceError) as e:
+        res.configure()
+    assert "servo 4 (forearm_roll, XM540-W270): the servo with ID 4 is a XM430-W350 (1020), " in str(e.value)
+    assert "the config says XM540-W270 (1120)" in str(e.value)
+    missing = rig.variant(("id = 6\n", "id = 7\n"))
+    res = create_resource(load_robot_config(missing))
+    with pytest.raises(ResourceError, match=r"servo 7 \(wrist_rotate, XM430-W350\) does not answer a ping"):
+        res.configure()
+
+
+def test_a_period_shorter_than_the_chains_read_and_write_is_refused_at_config_load(tmp_path: Path) -> None:
+    slow = tmp_path / "slow.toml"
+    slow.write_text(
+        variant_text(
+            SIM,
+            (SETTINGS, "baud_rate = 1_000_000"),
+            ("control_period_s = 0.005", "control_period_s = 0.0003"),
+        )
+    )
+    with pytest.raises(ConfigError) as e:
+        load_robot_config(slow)
+    msg = "control_period_s (=0.0003) must be at least the dynamixel resource's read + write time"
+    assert msg in str(e.value) and "(0.00112 + 0.00044 s)" in str(e.value)  # 112 + 44 bytes at 1 Mbit/s
+
+
+def test_category_0_is_refused_on_the_gravity_loaded_arm(tmp_path: Path) -> None:
+    cat0 = tmp_path / "cat0.toml"
+    cat0.write_text(variant_text(SIM, ("category = 2", "category = 0")))
+    with pytest.raises(ConfigError) as e:
+        load_robot_config(cat0)
+    assert "safe_stop.category (=0) would drop the arm: the dynamixel resource has no brakes" in str(e.value)
+
+
+def test_startup_writes_the_eeprom_and_enables_without_a_jump(rig: DxlRig) -> None:
+    # a goal left far away by someone else: torque on must not head for it
+    port = PortHandler(rig.sim.port)
+    assert port.openPort() and port.setBaudRate(4_000_000)
+    try:
+        assert PacketHandler(2.0).write4ByteTxRx(port, 1, T.GOAL_POSITION.address, 3000) == (COMM_SUCCESS, 0)
+    finally:
+        port.closePort()
+    res = create_resource(load_robot_config(rig.config))
+    assert isinstance(res, DynamixelArm)
+    try:
+        res.configure()
+        assert res.read(time.monotonic()).status & Status.TORQUE_OFF
+        res.activate(CommandMode.POSITION)
+        q0 = res.state.q_rad.copy()
+        for _ in range(40):
+            now = time.monotonic()
+            res.read(now)
+            res.keep_alive(now)
+            time.sleep(0.005)
+        assert np.abs(res.state.q_rad - q0).max() < 0.01
+        servos = rig.sim.status()["servos"]
+        assert all(s["torque_enable"] == 1 and s["operating_mode"] == 3 for s in servos)
+        assert abs(servos[0]["goal_position"] - servos[0]["present_position"]) < 5
+        assert [res.chain.read(j, T.RETURN_DELAY_TIME) for j in range(6)] == [0] * 6
+        assert res.chain.read(0, T.VELOCITY_LIMIT) == 115
+    finally:
+        res.shutdown()
+
+
+def sdk_torque_on(rig: DxlRig, dxl_id: int) -> None:
+    """Another program left servo `dxl_id` enabled, holding where it is."""
+    port = PortHandler(rig.sim.port)
+    assert port.openPort() and port.setBaudRate(4_000_000)
+    ph = PacketHandler(2.0)
+    try:
+        present, result, _ = ph.read4ByteTxRx(port, dxl_id, T.PRESENT_POSITION.address)
+        assert result == COMM_SUCCESS
+        assert ph.write4ByteTxRx(port, dxl_id, T.GOAL_POSITION.address, present) == (COMM_SUCCESS, 0)
+        assert ph.write1ByteTxRx(port, dxl_id, T.TORQUE_ENABLE.address, 1) == (COMM_SUCCESS, 0)
+    finally:
+        port.closePort()
+
+
+def test_a_servo_left_enabled_is_refused_if_its_eeprom_must_change_else_taken_over(rig: DxlRig) -> None:
+    sdk_torque_on(rig, 3)  # factory EEPROM: Return Delay Time 250, Velocity Limit 128, ...
+    res = create_resource(load_robot_config(rig.config))
+    with pytest.raises(ResourceError) as e:
+        res.configure()
+    assert "servo 3 (elbow, XM540-W270) has its torque on and needs Return Delay Time(9) = 0" in str(e.value)
+    assert rig.sim.status()["servos"][2]["torque_enable"] == 1  # never switched off under the arm
+    port = PortHandler(rig.sim.port)
+    assert port.openPort() and port.setBaudRate(4_000_000)
+    assert PacketHandler(2.0).write1ByteTxRx(port, 3, T.TORQUE_ENABLE.address, 0) == (COMM_SUCCESS, 0)
+    port.closePort()
+    res = create_resource(load_robot_config(rig.config))
+    res.configure()  # writes the EEPROM
+    res.shutdown()
+    sdk_torque_on(rig, 3)  # the same EEPROM now: the servo is taken over as it is
+    res = create_resource(load_robot_config(rig.config))
+    try:
+        res.configure()
+        res.activate(CommandMode.POSITION)
+        assert all(s["torque_enable"] == 1 for s in rig.sim.status()["servos"])
+        q0 = res.state.q_rad.copy()
+        for _ in range(20):
+            now = time.monotonic()
+            res.read(now)
+            res.keep_alive(now)
+            time.sleep(0.005)
+        assert np.abs(res.state.q_rad - q0).max() < 0.01
+    finally:
+        res.shutdown()
+
+
+# ---- motion, faults ------------------------------------------------------------------------------
+def test_a_position_motion_under_a_robot_task_on_the_wall_clock(rig: DxlRig, session: Session) -> None:
+    task, loop = move(session, TARGET)
+    loop.executor.run(max_ticks=1000, until=lambda: task.phase is not Phase.RUN)
+    assert task.phase is Phase.DONE, (task.phase, task.fault_reason, session.resource.fault_message)
+    np.testing.assert_allclose(session.resource.state.q_rad, TARGET, atol=0.01)
+    np.testing.assert_allclose(rig.sim.status()["q_rad"], TARGET, atol=0.01)  # the arm, not a register
+    ticks = loop.ticks()
+    assert_commands_within_limits(ticks, session.config)
+    assert not (ticks.status.astype(int) & (Status.FAULT | Status.COMM_LOST | Status.LIMIT_VIOLATION)).any()
+
+
+def test_an_overload_mid_motion_faults_stops_and_a_reset_reboots_the_servo(
+    rig: DxlRig, session: Session
+) -> None:
+    res = session.resource
+    task, loop = move(session, TARGET)
+    loop.run_for(0.2)  # moving
+    rig.sim.inject("overload", 1)
+    loop.executor.run(max_ticks=60)
+    assert task.phase is Phase.FAULT
+    assert [n for n in session.event_names() if ".T3." in n] == ["MoveJointsCSP.T3.ResourceFault"]
+    assert "servo 1 (waist, XM540-W270): hardware error: overload (bit 5)" in res.fault_message
+    assert res.state.fault_code == 1 << 8 | 0x20
+    ticks = loop.ticks()
+    assert_safe_stop_in_time(ticks, status_shows(ticks, Status.FAULT))
+    assert_commands_within_limits(ticks, session.config)
+    settle(session, loop, Status.STOPPED, 5.0)
+    assert not res.state.status & Status.TORQUE_OFF  # category 2: the others hold
+    res.reset_fault()
+    servo1 = rig.sim.status()["servos"][0]
+    assert (servo1["hardware_error_status"], servo1["torque_enable"]) == (0, 1)  # rebooted, re-enabled
+    res.read(time.monotonic())
+    assert not res.state.status & Status.FAULT and res.fault_message == ""
+    res.clear_stop()
+    again, loop = move(session, BACK)
+    loop.executor.run(max_ticks=1000, until=lambda: again.phase is not Phase.RUN)
+    assert again.phase is Phase.DONE, (again.fault_reason, res.fault_message)
+    np.testing.assert_allclose(res.state.q_rad, BACK, atol=0.01)
+
+
+def test_an_unplugged_servo_is_comm_lost_naming_it(rig: DxlRig, session: Session) -> None:
+    res = session.resource
+    task, loop = move(session, TARGET)
+    loop.run_for(0.2)
+    rig.sim.inject("unplug", 5)
+    loop.executor.run(max_ticks=60)
+    assert task.phase is Phase.FAULT
+    assert [n for n in session.event_names() if ".T3." in n] == ["MoveJointsCSP.T3.CommLost"]
+    assert (
+        "servo 5 (wrist_angle, XM430-W350) does not answer: 5 sync reads in a row stopped"
+        in res.fault_message
+    )
+    ticks = loop.ticks()
+    assert_safe_stop_in_time(ticks, status_shows(ticks, Status.COMM_LOST))
+    assert_commands_within_limits(ticks, session.config)
+    settle(session, loop, Status.STOPPED, 5.0)  # the other five are still read and stopped
+    assert res.diagnostics().details["lost"] == "servo 5 (wrist_angle, XM430-W350)"
+
+
+def test_crc_noise_below_the_threshold_is_counted_and_the_motion_completes(
+    rig: DxlRig, session: Session
+) -> None:
+    rig.sim.inject("noise", rate=0.001)  # ~9 % of the 92-byte status packets damaged
+    try:
+        task, loop = move(session, TARGET)
+        loop.executor.run(max_ticks=1000, until=lambda: task.phase is not Phase.RUN)
+    finally:
+        rig.sim.inject("clear")
+    assert task.phase is Phase.DONE, (task.fault_reason, session.resource.fault_message)
+    details = session.resource.diagnostics().details
+    assert int(details["crc_errors"]) > 0, details
+    assert not (loop.ticks().status.astype(int) & Status.COMM_LOST).any()
+
+
+def test_mode_switches_hold_the_arm(rig: DxlRig, session: Session) -> None:
+    res = session.resource
+    assert res.description.mode_switch_needs_disable
+    q0 = res.read(time.monotonic()).q_rad.copy()
+
+    def hold(seconds: float) -> int:
+        seen = 0
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            now = time.monotonic()
+            seen |= res.read(now).status
+            res.keep_alive(now)
+            time.sleep(0.005)
+        return seen
+
+    for mode, code in ((CommandMode.VELOCITY, 1), (CommandMode.TORQUE, 0), (CommandMode.POSITION, 3)):
+        res.switch_mode(mode)
+        seen = hold(0.3)
+        assert not seen & (Status.FAULT | Status.COMM_LOST | Status.TORQUE_OFF), (mode, res.fault_message)
+        servos = rig.sim.status()["servos"]
+        assert all(s["operating_mode"] == code and s["torque_enable"] == 1 for s in servos), mode
+        assert np.abs(res.state.q_rad - q0).max() < 0.02, mode
+
+
+def test_the_plain_sync_read_names_a_missing_servo_too(rig: DxlRig) -> None:
+    """`fast_sync_read = false` (firmware without it): one status packet per servo."""
+    plain = rig.variant((SETTINGS, f"{SETTINGS}\nfast_sync_read = false"))
+    cfg = load_robot_config(plain)
+    assert DynamixelArm.describe(cfg).read_time_s == pytest.approx((20 + 6 * 21) * 10 / 4e6)
+    res = create_resource(cfg)
+    try:
+        res.configure()
+        res.activate(CommandMode.POSITION)
+        seen = 0
+        for _ in range(20):
+            now = time.monotonic()
+            seen |= res.read(now).status
+            res.keep_alive(now)
+            time.sleep(0.005)
+        assert not seen & (Status.FAULT | Status.COMM_LOST), res.fault_message
+        rig.sim.inject("unplug", 2)
+        for _ in range(20):
+            now = time.monotonic()
+            if res.read(now).status & Status.COMM_LOST:
+                break
+            res.keep_alive(now)
+        assert "servo 2 (shoulder, XM540-W270) does not answer" in res.fault_message
+    finally:
+        res.shutdown()
