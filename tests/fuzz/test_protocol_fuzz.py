@@ -82,7 +82,7 @@ def test_load_refuses_hostile_paths_without_reading_them(target: Target) -> None
 def test_fuzzed_requests_each_get_one_well_formed_reply(target: Target) -> None:
     since = snapshot(target.daemon)
 
-    @fuzz(max_examples=150)
+    @fuzz(max_examples=100)
     @given(data=st.data())
     def one_connection(data: st.DataObject) -> None:
         frames = data.draw(connections(target.paths), label="frames")
