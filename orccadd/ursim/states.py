@@ -13,47 +13,10 @@ from __future__ import annotations
 
 from enum import IntEnum, IntFlag
 
-
-class RobotMode(IntEnum):
-    NO_CONTROLLER = -1
-    DISCONNECTED = 0
-    CONFIRM_SAFETY = 1
-    BOOTING = 2
-    POWER_OFF = 3
-    POWER_ON = 4
-    IDLE = 5
-    BACKDRIVE = 6
-    RUNNING = 7
-    UPDATING_FIRMWARE = 8
-
-
-class SafetyMode(IntEnum):
-    """Also the values of `safety_status` (which adds nothing below 14)."""
-
-    NORMAL = 1
-    REDUCED = 2
-    PROTECTIVE_STOP = 3
-    RECOVERY = 4
-    SAFEGUARD_STOP = 5
-    SYSTEM_EMERGENCY_STOP = 6
-    ROBOT_EMERGENCY_STOP = 7
-    VIOLATION = 8
-    FAULT = 9
-    VALIDATE_JOINT_ID = 10
-    UNDEFINED_SAFETY_MODE = 11
-    AUTOMATIC_MODE_SAFEGUARD_STOP = 12
-    SYSTEM_THREE_POSITION_ENABLING_STOP = 13
-
-
-class RuntimeState(IntEnum):
-    """`runtime_state`: the program's state."""
-
-    STOPPING = 0
-    STOPPED = 1
-    PLAYING = 2
-    PAUSING = 3
-    PAUSED = 4
-    RESUMING = 5
+# the controller's words, defined once for the backend and the simulator
+from orccadd.drivers.ur.controller import RobotMode as RobotMode
+from orccadd.drivers.ur.controller import RuntimeState as RuntimeState
+from orccadd.drivers.ur.controller import SafetyMode as SafetyMode
 
 
 class JointMode(IntEnum):
