@@ -85,7 +85,7 @@ class Supervisor:
             return {"reset": True}
 
         def poll() -> Result | None:
-            return None if res.state.status & Status.FAULT else finish()
+            return None if res.state.status & (Status.FAULT | Status.COMM_LOST) else finish()
 
         done = poll()
         if done is not None:

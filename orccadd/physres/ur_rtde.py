@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import threading
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -34,7 +35,7 @@ import numpy as np
 from orccadd.config.robot import RobotConfig
 from orccadd.drivers.ur.controller import (
     ROBOT_PROGRAM_RUNNING,
-    UNLOCK_WAIT_S,
+    Condition,
     RobotMode,
     SafetyMode,
     Version,
@@ -112,15 +113,26 @@ class UrRtdeArm(PhysicalResource):
         self._last_new_s = 0.0  # tick time at which the last new package was seen
         self._comm_lost = ""
         self._controller_stopped = False  # the controller stopped the arm itself (its script too)
-        self._fault_since = 0.0  # monotonic time a protective stop was first seen
         self._hold = np.zeros(self.dof)  # the command kept while waiting (position mode)
         self._ramp_v = np.zeros(self.dof)  # safe stop: current ramp velocity
         self._ramp_q = np.zeros(self.dof)
         self._ramp_t = 0.0
+        self._stop_t0 = 0.0  # tick time the safe stop began
         self.packets_missed = 0
+        # `reset` and `clear_stop` come from the daemon's command thread while the control thread
+        # ticks: they hold this lock over their dashboard/script work and link replacement, and a
+        # tick that finds it taken leaves the links alone (the arm is at rest: reset needs it)
+        self._io = threading.Lock()
+        self._flags = 0  # the last read's status flags, repeated while a reset holds the links
+        self._watchdog_armed = False
 
     # ---- lifecycle ------------------------------------------------------------------------
     def _on_configure(self) -> None:
+        self._connect()
+
+    def _connect(self) -> None:
+        """The dashboard (controller, model, period; power when configured), then RTDE and the
+        control script with the controller's watchdog on our commands."""
         import dashboard_client
 
         s = self.settings
@@ -188,6 +200,7 @@ class UrRtdeArm(PhysicalResource):
         self.control = self._try(
             lambda: rtde_control.RTDEControlInterface(host, hz, flags, 50002, prio), "the control script"
         )
+        self._watchdog_armed = False
         self._last_stamp = -1.0
         self._last_new_s = 0.0
         self._comm_lost = ""
@@ -206,63 +219,83 @@ class UrRtdeArm(PhysicalResource):
         self._hold[:] = self.state.q_rad
 
     def _on_deactivate(self) -> None:
-        if self.control is not None:
+        if self.control is not None and not self._comm_lost:
             self.control.servoStop(self.config.safe_stop.deceleration_rad_s2)
 
     def _on_shutdown(self) -> None:
-        for link in (self.control, self.receive):
-            if link is not None:
-                link.disconnect()
-        if self.dashboard is not None:
-            self.dashboard.disconnect()
+        self._close_links()
 
     def _on_clear_stop(self) -> None:
+        with self._io:
+            self._clear_stop_locked()
+
+    def _clear_stop_locked(self) -> None:
         if self.config.safe_stop.category == 1:  # it was powered off at rest
             if not self.settings.power_on:
                 raise ResourceError(f"{self.name}: powered off by the stop: power it on at the pendant")
             self._power_on()
-            self.control.reuploadScript()
+            self._restart_script()
         self._hold[:] = self.state.q_rad
 
     def _on_reset_fault(self) -> None:
+        with self._io:
+            self._reset_fault_locked()
+
+    def _reset_fault_locked(self) -> None:
         if self._comm_lost:
             self._reconnect()
             return
         st = self.state
-        cond = condition(
-            int(self.receive.getRobotMode()), int(self.receive.getSafetyMode()),
-            int(self.receive.getRuntimeState()), self._script_running(),
-        )  # fmt: skip
+        cond = self._condition()
         if cond is None:
             return
         if cond.needs:
             raise ResourceError(f"{self.name}: {cond.what}: `reset` cannot clear it ({cond.needs})")
-        if cond.unlockable:
-            wait = UNLOCK_WAIT_S - (time.monotonic() - self._fault_since)
-            if wait > 0:
-                raise ResourceError(
-                    f"{self.name}: protective stop: the controller unlocks it 5 s after it began "
-                    f"(in {wait:.1f} s): reset again then"
-                )
-            self.dashboard.unlockProtectiveStop()
+        if cond.unlockable:  # the controller allows it 5 s after the stop began, and says so
+            try:
+                self.dashboard.unlockProtectiveStop()
+            except RuntimeError as e:
+                raise ResourceError(f"{self.name}: protective stop: {e}: reset again then") from None
             self.dashboard.closeSafetyPopup()
-        self.control.stopScript()  # ur_rtde clears the command registers (no stale servoJ target)
-        self.control.reuploadScript()  # the script stopped with the stop: restart it
+        self._restart_script()
         self.fault_message = ""
         st.fault_code = 0
 
+    def _restart_script(self) -> None:
+        """The script stopped with the controller's stop: start it again, its watchdog too."""
+        self.control.stopScript()  # ur_rtde clears the command registers (no stale servoJ target)
+        self.control.reuploadScript()
+        self._watchdog_armed = False
+
     def _reconnect(self) -> None:
-        for link in (self.control, self.receive):
+        """After CommLost, with the arm safe-stopped: every link closed and opened again as at
+        startup (the controller may have been restarted: model, version and period checked
+        again), the state read afresh, and the stop's hold taken from where the arm now is."""
+        self._close_links()
+        self._connect()
+        self._flags = self._read_locked(time.monotonic(), self.state)
+        if self._comm_lost:
+            raise ResourceError(f"{self.fault_message}: reconnected, but no package has come")
+        self._hold[:] = self.state.q_rad
+        self._begin_safe_stop()
+        self.fault_message = ""
+        self.state.fault_code = 0
+
+    def _close_links(self) -> None:
+        # ur_rtde's control interface first: left connected to a dead controller, it tries to
+        # reconnect by itself from its own thread
+        for link in (self.control, self.receive, self.dashboard):
             if link is not None:
                 with contextlib.suppress(RuntimeError):
                     link.disconnect()
-        self._try(self.dashboard.connect, "the dashboard server")
-        self._open_rtde()
-        self.fault_message = ""
+        self.control = self.receive = self.dashboard = None
 
     # ---- the device's clock ---------------------------------------------------------------
     def wait_for_cycle(self, timeout_s: float) -> int:
         """Until ur_rtde's receive thread has a package with a new controller timestamp."""
+        if self.receive is None or self._io.locked():  # no link, or a reset replacing it
+            time.sleep(timeout_s)
+            return -1
         end = time.monotonic() + timeout_s
         get = self.receive.getTimestamp
         last = self._last_stamp
@@ -281,9 +314,20 @@ class UrRtdeArm(PhysicalResource):
         return bool(int(self.receive.getRobotStatus()) & ROBOT_PROGRAM_RUNNING)
 
     def _read_into(self, t_s: float, state: JointState) -> int:
-        r = self.receive
+        if not self._io.acquire(blocking=False):
+            return self._flags
         try:
-            connected = r.isConnected()
+            self._flags = self._read_locked(t_s, state)
+        finally:
+            self._io.release()
+        return self._flags
+
+    def _read_locked(self, t_s: float, state: JointState) -> int:
+        r = self.receive
+        if r is None:  # a reconnection failed: nothing to read until the next `reset`
+            return int(Status.COMM_LOST)
+        try:  # ur_rtde's control link first: a command sent on a dead link blocks while it reconnects
+            connected = self.control.isConnected() and r.isConnected()
             stamp = r.getTimestamp()
         except RuntimeError:
             connected, stamp = False, self._last_stamp
@@ -307,10 +351,7 @@ class UrRtdeArm(PhysicalResource):
         cond = condition(robot_mode, safety_mode, int(r.getRuntimeState()), self._script_running())
         self._controller_stopped = cond is not None
         if cond is None:
-            self._fault_since = 0.0
             return 0
-        if not self._fault_since:
-            self._fault_since = time.monotonic()
         state.fault_code = safety_mode if safety_mode != SafetyMode.NORMAL else 100 + robot_mode
         self.fault_message = f"{self.name}: {cond.what}"
         flags = int(Status.FAULT)
@@ -319,28 +360,76 @@ class UrRtdeArm(PhysicalResource):
         return flags
 
     def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
+        if not self._io.acquire(blocking=False):
+            return 0
+        try:
+            return self._send(mode, command)
+        finally:
+            self._io.release()
+
+    def _control_ready(self) -> bool:
+        """The control link is up (a command sent on a dead one blocks while ur_rtde reconnects)
+        and the controller's watchdog armed: the first tick of a (re)started script arms it, so
+        that no startup gap between configure and the loop trips it. From then on the controller
+        stops the script, and the arm, when our commands stop coming for `watchdog_s`: this
+        process killed or stalled, the link cut (mid-speedJ above all)."""
+        c = self.control
+        if c is None or self._comm_lost or not c.isConnected():
+            return False
+        if not self._watchdog_armed:
+            c.setWatchdog(1.0 / self.settings.watchdog_s)  # one round trip to the script, once
+            self._watchdog_armed = True
+        return True
+
+    def _send(self, mode: CommandMode, command: FloatArray) -> int:
+        if not self._control_ready():
+            return int(Status.COMM_LOST)
         s = self.settings
         if mode is CommandMode.POSITION:
             self._hold[:] = command
             ok = self.control.servoJ(command.tolist(), 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
         else:
             ok = self.control.speedJ(command.tolist(), s.speedj_acceleration_rad_s2, self.period_s)
-        return 0 if ok else int(Status.FAULT)
+        if ok:
+            return 0
+        if not self.fault_message:  # the type 3 says why, even when this comes before the read
+            cond = self._condition()
+            why = cond.what if cond else "no stop reported yet"
+            self.fault_message = f"{self.name}: the controller refused the command ({why})"
+        return int(Status.FAULT)
+
+    def _condition(self) -> Condition | None:
+        r = self.receive
+        return condition(
+            int(r.getRobotMode()), int(r.getSafetyMode()), int(r.getRuntimeState()), self._script_running()
+        )
 
     def _on_keep_alive(self, t_s: float) -> None:
-        if self._comm_lost or self.control is None:
+        if self._comm_lost:  # nothing reaches the controller: its watchdog stops the script
+            if self._stop_flags & Status.STOPPING and t_s - self._stop_t0 > self.config.safe_stop.timeout_s:
+                self._mark_stopped(torque_off=False)
+            return
+        if not self._io.acquire(blocking=False):
+            return
+        try:
+            self._keep_alive_locked(t_s)
+        finally:
+            self._io.release()
+
+    def _keep_alive_locked(self, t_s: float) -> None:
+        if not self._control_ready():
             return
         if self._stop_flags & Status.STOPPING:
             self._ramp_step(t_s)
-        elif not self._stop_flags:
-            self._write_command(
-                t_s, self.mode, self._hold if self.mode is CommandMode.POSITION else self._ramp_v * 0
-            )
+        elif self._stop_flags:  # at rest after the stop: no command, the watchdog still fed
+            self.control.kickWatchdog()
+        else:
+            self._send(self.mode, self._hold if self.mode is CommandMode.POSITION else self._ramp_v * 0)
 
     def _begin_safe_stop(self) -> None:
         self._ramp_v[:] = self.state.dq_rad_s
         self._ramp_q[:] = self.state.q_rad
-        self._ramp_t = self.state.t_s
+        self._ramp_t = self._stop_t0 = self.state.t_s
 
     def _ramp_step(self, t_s: float) -> None:
         """One period of the stop: every joint's speed down at the configured deceleration,

@@ -76,7 +76,6 @@ RECOVERY = {
     SafetyMode.VALIDATE_JOINT_ID: "pendant: validate the joint ids",
     SafetyMode.UNDEFINED_SAFETY_MODE: "pendant",
 }
-UNLOCK_WAIT_S = 5.0  # a protective stop can be unlocked 5 s after it began (the controller's rule)
 
 
 @dataclass(frozen=True)
@@ -84,7 +83,7 @@ class Condition:
     """What stops the arm: `what` in words, and how it is recovered ("" if `reset` can)."""
 
     what: str
-    unlockable: bool  # a protective stop: `unlock protective stop` after `UNLOCK_WAIT_S`
+    unlockable: bool  # a protective stop: `unlock protective stop` (the controller allows it 5 s after)
     needs: str  # what a person must do, when no command can recover it
 
 

@@ -28,5 +28,8 @@ class UrRtdeSettings:
     # ur_rtde's receive and control threads at SCHED_FIFO (0: time-shared): just below the
     # control thread (daemon.control_priority, 80), so the stream keeps up on a busy machine
     rtde_priority: int = field(default=79, bounds=(0, 98))
+    # the controller's RTDE watchdog: no command from us for this long stops the control script
+    # (and the arm), whatever became of this process
+    watchdog_s: float = field(default=0.1, bounds=(0.01, 1.0))
     stall_periods: int = field(default=3, bounds=(2, 1000), doc="no packet for this many periods: CommLost")
     connect_timeout_s: float = field(default=10.0, bounds=(0.5, 120.0))

@@ -1,0 +1,145 @@
+"""orccadd on a UR arm, everything in its own process: the UR controller simulator (stock ur_rtde
+protocols), orccadd (real-time process + command daemon) and orccadctl. The controller's own
+stops end in the mission's safe procedure and `orccadctl reset` recovers what a command may; a
+controller that dies is CommLost at once, and `reset` reconnects once it is back."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from orccadd.types import Status
+from orccadd.ursim.process import UrSimProcess
+from tests.daemon.conftest import ROOT, Daemon, start_daemon_with
+from tests.daemon.test_same_mission import local_config
+from tests.safety import assert_commands_within_limits, assert_safe_stop_in_time, from_telemetry, status_shows
+
+UR = ROOT / "configs/robots/ur5e-rtde-sim.toml"
+MISSION = str(ROOT / "configs/missions/demo_position.mission")
+SIM_ARGS = ("--boot", "running", "--unlock-delay-s", "1", "--priority", "70")
+
+# ur_rtde blocks in C++ holding the interpreter: only a thread can time such a test out
+pytestmark = pytest.mark.timeout(180, method="thread")
+
+
+@pytest.fixture
+def sim() -> Iterator[UrSimProcess]:
+    with UrSimProcess(UR, *SIM_ARGS) as s:
+        yield s
+
+
+@pytest.fixture
+def daemon(sim: UrSimProcess, tmp_path: Path) -> Iterator[Daemon]:
+    d = start_daemon_with(tmp_path, local_config(tmp_path, UR))
+    try:
+        yield d
+    finally:
+        d.stop()  # ur_rtde's clients go before the simulator does
+
+
+def telemetry(d: Daemon) -> str:
+    return str(d.call("describe")["telemetry"])  # type: ignore[index]
+
+
+def t3_inputs(d: Daemon) -> list[str]:
+    ev = d.call("events", last=60)
+    return [i for e in ev["events"] if e["kind"] == "instant" for i in e["inputs"] if ".T3." in i]  # type: ignore[index]
+
+
+def start_mission_until_reach(d: Daemon) -> None:
+    r = d.ctl("load", MISSION)
+    assert r.returncode == 0, r.stderr
+    d.call("start")
+    d.wait(lambda s: s["active_task"] == "Reach", timeout_s=30)
+    time.sleep(0.3)  # mid-motion
+
+
+def acknowledge(d: Daemon) -> None:
+    """The safe procedure awaits the operator's Stop."""
+    s = d.status()
+    assert s["state"] == "running", s
+    d.call("stop")
+    s = d.wait(lambda s: s["state"] == "ready")
+    assert s["result"] == "safe", s
+
+
+def run_to_success(d: Daemon) -> None:
+    d.call("start")
+    s = d.wait(lambda s: s["state"] != "running", timeout_s=90)
+    assert s["result"] == "success" and not s["faulted"], s
+
+
+def test_protective_stop_mid_motion_safe_procedure_then_orccadctl_reset_and_a_new_run(
+    sim: UrSimProcess, daemon: Daemon
+) -> None:
+    start_mission_until_reach(daemon)
+    sim.inject("protective_stop")
+    s = daemon.wait(lambda s: s["faulted"] and "stopped" in s.get("resource_status", []), timeout_s=20)
+    assert "safety mode PROTECTIVE_STOP" in str(s["fault"]), s["fault"]
+    assert t3_inputs(daemon) == ["Reach.T3.ResourceFault"]
+    ticks = from_telemetry(telemetry(daemon))
+    assert_safe_stop_in_time(ticks, status_shows(ticks, Status.FAULT))
+    assert_commands_within_limits(ticks, UR)
+    acknowledge(daemon)
+    deadline = time.monotonic() + 15
+    while True:  # the controller allows the unlock 1 s after the stop (here; 5 s on a real one)
+        r = daemon.ctl("reset")
+        if r.returncode == 0:
+            break
+        assert "Cannot unlock protective stop" in r.stderr and time.monotonic() < deadline, r.stderr
+        time.sleep(0.3)
+    daemon.wait(lambda s: not s["faulted"] and not s.get("resource_status"))
+    st = sim.status()
+    assert st["safety_mode"] == "NORMAL" and st["runtime_state"] == "PLAYING", st
+    run_to_success(daemon)
+
+
+def test_an_emergency_stop_is_a_type_3_and_reset_says_what_the_pendant_needs(
+    sim: UrSimProcess, daemon: Daemon
+) -> None:
+    start_mission_until_reach(daemon)
+    sim.inject("emergency_stop")
+    s = daemon.wait(lambda s: s["faulted"] and "stopped" in s.get("resource_status", []), timeout_s=20)
+    assert "EMERGENCY_STOP" in str(s["fault"]), s["fault"]
+    acknowledge(daemon)
+    r = daemon.ctl("reset")
+    assert r.returncode != 0
+    assert "release the emergency stop button" in r.stderr, r.stderr
+    assert daemon.status()["faulted"]  # nothing cleared, the daemon carries on
+    sim.inject("emergency_stop_release")
+
+
+def test_a_killed_controller_is_comm_lost_at_once_and_reset_reconnects_to_the_restarted_one(
+    sim: UrSimProcess, daemon: Daemon
+) -> None:
+    start_mission_until_reach(daemon)
+    killed_s = time.monotonic()
+    sim.proc.kill()  # its UrSimProcess keeps UR's ports (the machine-wide lock) for this test
+    sim.proc.wait()
+    s = daemon.wait(lambda s: s["faulted"] and "comm_lost" in s.get("resource_status", []), timeout_s=10)
+    assert "the RTDE connection is closed" in str(s["fault"]), s["fault"]
+    assert t3_inputs(daemon) == ["Reach.T3.CommLost"]
+    ticks = from_telemetry(telemetry(daemon))
+    lost = int(np.argmax((ticks.status.astype(int) & Status.COMM_LOST) != 0))
+    period_s = 0.002
+    # orders of magnitude only on this VM (the figure: a tick or two, the time ur_rtde's
+    # thread takes to see the socket close)
+    assert ticks.t_s[lost] - killed_s < 50 * period_s, (ticks.t_s[lost] - killed_s) / period_s
+    assert not ticks.wrote[lost:].any()  # nothing sent to a controller that is not there
+    assert_safe_stop_in_time(ticks, status_shows(ticks, Status.COMM_LOST))
+    # no controller to confirm the stop: after safe_stop.timeout_s, the controller's watchdog
+    # has stopped its script (or it is off): the stop is done
+    daemon.wait(lambda s: "stopped" in s.get("resource_status", []), timeout_s=10)
+    acknowledge(daemon)
+    r = daemon.ctl("reset")  # the controller is still down
+    assert r.returncode != 0 and "cannot reach the dashboard server" in r.stderr, r.stderr
+    with UrSimProcess(UR, *SIM_ARGS, lock=False):  # the killed one's lock still held
+        r = daemon.ctl("reset")
+        assert r.returncode == 0, r.stderr
+        daemon.wait(lambda s: not s["faulted"] and not s.get("resource_status"))
+        run_to_success(daemon)
+        daemon.stop()  # ur_rtde's clients go before this simulator does
