@@ -53,6 +53,7 @@ bench: setup
 	$(PY) benchmarks/isolation.py
 	$(PY) benchmarks/automaton.py --skip-large
 	$(PY) benchmarks/canopen_cycle.py
+	$(PY) benchmarks/ur_rtde_cycle.py
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache

@@ -113,7 +113,9 @@ class UrRtdeArm(PhysicalResource):
         self._last_new_s = 0.0  # tick time at which the last new package was seen
         self._comm_lost = ""
         self._controller_stopped = False  # the controller stopped the arm itself (its script too)
+        self._off_by_us = False  # our category 1 stop powered the arm off: not a fault
         self._hold = np.zeros(self.dof)  # the command kept while waiting (position mode)
+        self._cmd_v = np.zeros(self.dof)  # the servoJ targets' velocity (position mode)
         self._ramp_v = np.zeros(self.dof)  # safe stop: current ramp velocity
         self._ramp_q = np.zeros(self.dof)
         self._ramp_t = 0.0
@@ -213,10 +215,14 @@ class UrRtdeArm(PhysicalResource):
 
     def _on_activate(self, mode: CommandMode) -> None:
         self._read_into(time.monotonic(), self.state)
+        self._hold_here()
+
+    def _hold_here(self) -> None:
         self._hold[:] = self.state.q_rad
+        self._cmd_v[:] = 0.0
 
     def _on_switch_mode(self, mode: CommandMode) -> None:
-        self._hold[:] = self.state.q_rad
+        self._hold_here()
 
     def _on_deactivate(self) -> None:
         if self.control is not None and not self._comm_lost:
@@ -235,7 +241,8 @@ class UrRtdeArm(PhysicalResource):
                 raise ResourceError(f"{self.name}: powered off by the stop: power it on at the pendant")
             self._power_on()
             self._restart_script()
-        self._hold[:] = self.state.q_rad
+            self._off_by_us = False
+        self._hold_here()
 
     def _on_reset_fault(self) -> None:
         with self._io:
@@ -246,6 +253,8 @@ class UrRtdeArm(PhysicalResource):
             self._reconnect()
             return
         st = self.state
+        if self._off_by_us and int(self.receive.getSafetyMode()) == SafetyMode.NORMAL:
+            return  # nothing but our own power-off: `clear_stop` powers it on
         cond = self._condition()
         if cond is None:
             return
@@ -276,7 +285,7 @@ class UrRtdeArm(PhysicalResource):
         self._flags = self._read_locked(time.monotonic(), self.state)
         if self._comm_lost:
             raise ResourceError(f"{self.fault_message}: reconnected, but no package has come")
-        self._hold[:] = self.state.q_rad
+        self._hold_here()
         self._begin_safe_stop()
         self.fault_message = ""
         self.state.fault_code = 0
@@ -352,6 +361,8 @@ class UrRtdeArm(PhysicalResource):
         self._controller_stopped = cond is not None
         if cond is None:
             return 0
+        if self._off_by_us and safety_mode == SafetyMode.NORMAL:
+            return int(Status.TORQUE_OFF)  # as the stop left it, until `clear_stop` powers it on
         state.fault_code = safety_mode if safety_mode != SafetyMode.NORMAL else 100 + robot_mode
         self.fault_message = f"{self.name}: {cond.what}"
         flags = int(Status.FAULT)
@@ -386,6 +397,8 @@ class UrRtdeArm(PhysicalResource):
             return int(Status.COMM_LOST)
         s = self.settings
         if mode is CommandMode.POSITION:
+            np.subtract(command, self._hold, out=self._cmd_v)
+            self._cmd_v /= self.period_s
             self._hold[:] = command
             ok = self.control.servoJ(command.tolist(), 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
         else:
@@ -427,8 +440,12 @@ class UrRtdeArm(PhysicalResource):
             self._send(self.mode, self._hold if self.mode is CommandMode.POSITION else self._ramp_v * 0)
 
     def _begin_safe_stop(self) -> None:
-        self._ramp_v[:] = self.state.dq_rad_s
-        self._ramp_q[:] = self.state.q_rad
+        if self.mode is CommandMode.POSITION:  # from the servoJ target and its velocity: the arm
+            self._ramp_q[:] = self._hold  # lags it by the lookahead, and a target pulled back
+            self._ramp_v[:] = self._cmd_v  # to it is a deceleration step (a protective stop)
+        else:
+            self._ramp_q[:] = self.state.q_rad
+            self._ramp_v[:] = self.state.dq_rad_s
         self._ramp_t = self._stop_t0 = self.state.t_s
 
     def _ramp_step(self, t_s: float) -> None:
@@ -462,6 +479,7 @@ class UrRtdeArm(PhysicalResource):
         torque_off = self.config.safe_stop.category == 1
         if torque_off:
             self.dashboard.powerOff()
+            self._off_by_us = True
         self._mark_stopped(torque_off)
 
     # ---- diagnostics ----------------------------------------------------------------------

@@ -94,6 +94,7 @@ class UrController:
             self.history: deque[FloatArray] = deque(maxlen=HISTORY_CYCLES)
             self.cycles = 0
             self.protective_stops = 0
+            self._reset_counters()
             self.state.in_int[:] = [0] * len(self.state.in_int)
             self.state.out_int[:] = [0] * len(self.state.out_int)
             self.state.in_double[:] = [0.0] * len(self.state.in_double)
@@ -108,6 +109,11 @@ class UrController:
         """The controller's time (s since its first cycle) at its last cycle: every timing
         (power steps, unlock delay, watchdog, `timestamp`) follows the cycle's clock."""
         return self._now_s
+
+    def clock_origin_s(self) -> float | None:
+        """The CLOCK_MONOTONIC time (s) of the controller's time 0 (None before its first
+        cycle): a package's `timestamp` + this = the scheduled start of the cycle that made it."""
+        return self._t0_s
 
     # ---- power (dashboard) ----------------------------------------------------------------
     def power_event(self, event: PowerEvent) -> None:
@@ -282,6 +288,7 @@ class UrController:
 
     def inputs_written(self, names: tuple[str, ...]) -> None:
         """An RTDE data package wrote these inputs (feeds the RTDE watchdog)."""
+        self.input_packages += 1
         if self.watchdog is not None and self.watchdog[0] in names:
             self._watch_last_s = self.now_s()
 
@@ -313,6 +320,7 @@ class UrController:
             playing = self.program is not None and self.runtime_state is RuntimeState.PLAYING
             if playing and self.program is not None and not self.program.step():
                 self.stop_program("the program ended")
+            self._count_servoj_updates(playing)
             self._check_watchdog(now)
             if arm.brakes_released:
                 self._safe_target.q[:], self._safe_target.qd[:] = tgt.q, tgt.qd
@@ -333,6 +341,29 @@ class UrController:
             export_state(self, now, (time.perf_counter() - c0) * 1e3)
             for offer in self.subscribers:
                 offer(self.cycles)
+
+    # ---- counters for benchmarks (benchmarks/ur_rtde_cycle.py; in `status()`) ---------------
+    def _reset_counters(self) -> None:
+        self.input_packages = 0  # RTDE input data packages written, by any client
+        self._inputs_seen = 0  # `input_packages` at the previous cycle
+        self.servoj_cycles = 0  # cycles in which a running servoj took its target
+        self.servoj_stale_cycles = 0  # of which no input package had arrived since the last cycle
+        self.servoj_overwritten = 0  # packages written over by a newer one before a cycle read them
+        self.rtde_packages_skipped = 0  # data packages replaced before a session's thread sent them
+
+    def _count_servoj_updates(self, playing: bool) -> None:
+        """After the program's step: did a new servoj target (an input package: ur_rtde writes one
+        per servoJ call) reach this cycle? None since the previous cycle: the servo took the
+        last target again (a servoJ update missed); more than one: all but the last were lost."""
+        fresh = self.input_packages - self._inputs_seen
+        self._inputs_seen = self.input_packages
+        if not playing or self.motion.name != "servoj" or self.motion_done:
+            return
+        self.servoj_cycles += 1
+        if fresh == 0:
+            self.servoj_stale_cycles += 1
+        elif fresh > 1:
+            self.servoj_overwritten += fresh - 1
 
     # ---- queries for the control script -----------------------------------------------------
     def set_tcp(self, pose: FloatArray) -> None:

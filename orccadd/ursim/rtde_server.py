@@ -151,6 +151,7 @@ class RtdeSession:
             return
         if self._latest is not None:
             self.skipped += 1
+            self.ctl.rtde_packages_skipped += 1
         self._latest = frame(DATA_PACKAGE, bytes([self.output_id]) + self.output.pack())
         self._wake.set()
 

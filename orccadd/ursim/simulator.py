@@ -165,4 +165,12 @@ class UrSimulator:
                 "connections": {name: srv.connections for name, srv in self.servers.items()},
                 "ports": {name: srv.port for name, srv in self.servers.items()},
                 "down": self._down,
+                # for benchmarks (benchmarks/ur_rtde_cycle.py): the cycle's timing and servoJ updates
+                "missed_periods": self.executor.stats.missed_ticks,
+                "clock_origin_s": ctl.clock_origin_s(),
+                "input_packages": ctl.input_packages,
+                "servoj_cycles": ctl.servoj_cycles,
+                "servoj_stale_cycles": ctl.servoj_stale_cycles,
+                "servoj_overwritten": ctl.servoj_overwritten,
+                "rtde_packages_skipped": ctl.rtde_packages_skipped,
             }

@@ -15,11 +15,16 @@ from orccadd.physres import PhysicalResource
 from orccadd.physres.description import ClockSource, Source
 from orccadd.robot import create_resource, load_robot_config, with_backend
 from orccadd.types import CommandMode, Lifecycle, Status
+from orccadd.ursim.process import UrSimProcess
 from tests.canopen_rig import Rig, canopen_rig
-from tests.conftest import UR5E
+from tests.conftest import ROOT, UR5E, variant_text
 from tests.physres.test_dynamixel import DxlRig, dxl_rig
 
-BACKENDS = ["sim", "sim_process", "canopen402", "dynamixel"]
+BACKENDS = ["sim", "sim_process", "canopen402", "dynamixel", "ur_rtde"]
+UR_SIM = ROOT / "configs/robots/ur5e-rtde-sim.toml"
+
+# ur_rtde blocks in C++ holding the interpreter: only a thread can time such a test out
+pytestmark = pytest.mark.timeout(120, method="thread")
 
 
 @pytest.fixture(scope="module")
@@ -42,12 +47,30 @@ def dxl(tmp_path: Path) -> Iterator[DxlRig]:
         yield rig
 
 
+@pytest.fixture(scope="module")
+def ur_sim(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, UrSimProcess]]:
+    """A simulated UR controller (a separate process) for the module's tests, and the config
+    that reaches it: the contract's category 1 (power off at rest), so `power_on` for the next."""
+    config = tmp_path_factory.mktemp("contract-ur") / "ur.toml"
+    config.write_text(
+        variant_text(
+            UR_SIM,
+            ("category = 2", "category = 1"),
+            ('host = "127.0.0.1"', 'host = "127.0.0.1"\npower_on = true'),
+        )
+    )
+    with UrSimProcess(UR_SIM, "--boot", "running", "--unlock-delay-s", "1", "--priority", "70") as sim:
+        yield config, sim
+
+
 @pytest.fixture(params=BACKENDS)
 def resource(request: pytest.FixtureRequest) -> Iterator[PhysicalResource]:
     if request.param == "canopen402":
         cfg = load_robot_config(request.getfixturevalue("can_rig").config)
     elif request.param == "dynamixel":
         cfg = load_robot_config(request.getfixturevalue("dxl").config)
+    elif request.param == "ur_rtde":
+        cfg = load_robot_config(request.getfixturevalue("ur_sim")[0])
     else:
         cfg = with_backend(load_robot_config(UR5E), request.param)
     res = create_resource(cfg)
@@ -66,23 +89,37 @@ def inject_device_fault(request: pytest.FixtureRequest, resource: PhysicalResour
     if resource.description.backend == "dynamixel":
         dxl: DxlRig = request.getfixturevalue("dxl")
         return lambda: dxl.sim.inject("overload", 3)
+    if resource.description.backend == "ur_rtde":
+        sim: UrSimProcess = request.getfixturevalue("ur_sim")[1]
+        return lambda: sim.inject("protective_stop")
     rig: Rig = request.getfixturevalue("can_rig")
     return lambda: rig.drives.inject(3, "overcurrent")
 
 
-def drive(res: PhysicalResource, seconds: float, extra_nm: float = 0.0) -> None:
-    """Gravity compensation (+ a push) every period on the wall clock."""
+def hold_mode(res: PhysicalResource) -> CommandMode:
+    """Torque where the backend has it (gravity compensation holds the arm), position otherwise."""
+    return CommandMode.TORQUE if CommandMode.TORQUE in res.description.modes else CommandMode.POSITION
+
+
+def drive(res: PhysicalResource, seconds: float, push: float = 0.0) -> None:
+    """Hold the arm every period on the wall clock, and push it: in torque mode gravity
+    compensation + `push` N·m on every joint, in position mode joint 0 moving at `push` / 10 rad/s."""
     data = res.model.new_data()
     period = res.config.control_period_s
     t_end = time.monotonic() + seconds
+    target = res.read(time.monotonic()).q_rad.copy()
     while time.monotonic() < t_end:
         st = res.read(time.monotonic())
-        res.write(time.monotonic(), pin.computeGeneralizedGravity(res.model.model, data, st.q_rad) + extra_nm)
+        if res.mode is CommandMode.POSITION:
+            target[0] += push / 10 * period
+            res.write(time.monotonic(), target)
+        else:
+            res.write(time.monotonic(), pin.computeGeneralizedGravity(res.model.model, data, st.q_rad) + push)
         time.sleep(period)
 
 
 def test_activate_reports_the_measured_position(resource: PhysicalResource) -> None:
-    resource.activate(CommandMode.TORQUE)
+    resource.activate(hold_mode(resource))
     q0 = resource.state.q_rad.copy()
     assert np.abs(q0).max() > 0.1  # the configured initial pose, not zeros
     drive(resource, 0.2)
@@ -91,6 +128,8 @@ def test_activate_reports_the_measured_position(resource: PhysicalResource) -> N
 
 
 def test_torque_beyond_limit_is_clamped(resource: PhysicalResource) -> None:
+    if CommandMode.TORQUE not in resource.description.modes:
+        pytest.skip(f"{resource.description.backend} declares no torque mode")
     resource.activate(CommandMode.TORQUE)
     resource.read(time.monotonic())
     flags = resource.write(time.monotonic(), np.full(resource.dof, 1e4))
@@ -118,8 +157,8 @@ def test_position_steps_within_the_speed_limit_pass_unchanged(resource: Physical
 
 
 def test_safe_stop_brings_the_arm_to_rest(resource: PhysicalResource) -> None:
-    resource.activate(CommandMode.TORQUE)
-    drive(resource, 0.3, extra_nm=3.0)
+    resource.activate(hold_mode(resource))
+    drive(resource, 0.3, push=3.0)
     assert np.abs(resource.state.dq_rad_s).max() > 0.2
     assert resource.config.safe_stop.category == 1  # sim-ur5e's: decelerate, then torque off
     resource.safe_stop()
@@ -135,7 +174,7 @@ def test_safe_stop_brings_the_arm_to_rest(resource: PhysicalResource) -> None:
 def test_device_fault_is_reported_and_reset(
     resource: PhysicalResource, inject_device_fault: Callable[[], None]
 ) -> None:
-    resource.activate(CommandMode.TORQUE)
+    resource.activate(hold_mode(resource))
     drive(resource, 0.05)
     inject_device_fault()
     drive(resource, 0.3)
@@ -155,6 +194,8 @@ def test_device_fault_is_reported_and_reset(
 
 @pytest.mark.parametrize("mode", [CommandMode.TORQUE, CommandMode.POSITION])
 def test_a_command_with_nan_or_inf_is_not_sent(resource: PhysicalResource, mode: CommandMode) -> None:
+    if mode not in resource.description.modes:
+        pytest.skip(f"{resource.description.backend} declares no {mode.name.lower()} mode")
     resource.activate(mode)
     st = resource.read(time.monotonic())
     good = np.zeros(resource.dof) if mode is CommandMode.TORQUE else st.q_rad.copy()
@@ -182,11 +223,11 @@ def test_the_description_matches_the_config_and_the_device(resource: PhysicalRes
 
 
 def test_diagnostics_are_a_typed_snapshot(resource: PhysicalResource) -> None:
-    resource.activate(CommandMode.TORQUE)
+    resource.activate(hold_mode(resource))
     drive(resource, 0.05)
     diag = resource.diagnostics()
     assert diag.backend == resource.description.backend
-    assert diag.lifecycle == "active" and diag.mode == "torque"
+    assert diag.lifecycle == "active" and diag.mode == hold_mode(resource).name.lower()
     assert diag.fault_message == "" and "fault" not in diag.status
     assert all(isinstance(v, int | float | str) for v in diag.details.values())
 
