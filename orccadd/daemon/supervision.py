@@ -3,12 +3,14 @@ daemon's link.
 
 A type 3 exception has already safe-stopped the resource from the control thread; here it is
 recorded (`fault`, in words) so that nothing starts until `reset`. A reset is a sequence over
-several control ticks (the device leaves its fault, then the stop is cleared): it returns a
-`Pending` reply instead of sleeping in the automaton thread.
+several control ticks (the device leaves its fault, then the stop is cleared) and talks to the
+device (a servo's reboot, a controller's unlock or reconnection: up to seconds): that part runs
+in a thread of its own, and the automaton thread answers with a `Pending` reply that it polls.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 
@@ -22,6 +24,7 @@ from orccadd.types import Status
 from orccadd.wire.schema import MissionResult
 
 RESET_WAIT_S = 2.0  # longest wait for a device to leave its fault after a reset (bus round trips)
+RESET_DEVICE_S = 30.0  # longest a device's reset may take (a controller reconnected, a servo rebooted)
 
 
 class Supervisor:
@@ -39,6 +42,7 @@ class Supervisor:
         self.mission = mission
         self.note = note
         self.fault = ""  # why the resource was safe-stopped ("" when not)
+        self._resetting: _DeviceReset | None = None  # the device's last reset
 
     def on_t3(self, name: str) -> None:
         if not self.fault:
@@ -59,7 +63,10 @@ class Supervisor:
 
     def begin_reset(self, on_done: Callable[[], None]) -> Result | Pending:
         """Clear a safe stop once the arm is at rest: the device's fault first (if it has one),
-        then the stop. Refused (CommandError) while a run or the stop is still under way."""
+        then the stop. Refused (CommandError) while a run or the stop is still under way.
+
+        The device's reset talks to it (a servo's reboot, a controller's unlock, a reconnection:
+        up to seconds): it runs in a thread of its own, and the automaton thread only polls."""
         res = self.resource
         if not (self.fault or res.stopping_or_stopped):
             return {"reset": False, "detail": "nothing to reset"}
@@ -67,28 +74,58 @@ class Supervisor:
             raise CommandError("the mission is still running (its safe procedure): stop or abort it first")
         if not res.state.status & Status.STOPPED:
             raise CommandError("the safe stop is still under way: wait until the arm is at rest")
-        if res.description.fault_reset:
-            try:
-                res.reset_fault()
-            except OrccaddError as e:
-                raise CommandError(str(e)) from None
+        if self._resetting is not None and self._resetting.running():
+            raise CommandError("a reset is already under way")
+        wait_s = max(100 * self.cfg.control_period_s, RESET_WAIT_S)
+        device = self._resetting = _DeviceReset(res, wait_s)
 
-        def finish() -> Result:
-            try:
-                res.clear_stop()
-            except OrccaddError as e:
-                raise CommandError(str(e)) from None
+        def poll() -> Result | None:
+            if not device.done():
+                return None
             self.fault = ""
             self.loop.request_switch(self.loop.hold)
             self.note("reset: stop cleared, holding")
             on_done()
             return {"reset": True}
 
-        def poll() -> Result | None:
-            return None if res.state.status & (Status.FAULT | Status.COMM_LOST) else finish()
+        def expire() -> Result:
+            raise CommandError(f"the reset did not end within {RESET_DEVICE_S + wait_s:g} s")
 
-        done = poll()
-        if done is not None:
-            return done
-        wait_s = max(100 * self.cfg.control_period_s, RESET_WAIT_S)
-        return Pending(poll, time.monotonic_ns() + int(wait_s * 1e9), finish)
+        return Pending(poll, time.monotonic_ns() + int((RESET_DEVICE_S + wait_s) * 1e9), expire)
+
+
+class _DeviceReset:
+    """The reset's talk with the device, in a thread of its own: the device's fault reset (if it
+    has one), a wait (up to `wait_s`) for its reads to show neither fault nor lost link, then the
+    stop cleared. `done()` re-raises its error as a CommandError."""
+
+    def __init__(self, resource: PhysicalResource, wait_s: float) -> None:
+        self._error = ""
+        self._thread = threading.Thread(
+            target=self._run, args=(resource, wait_s), name="device-reset", daemon=True
+        )
+        self._thread.start()
+
+    def _run(self, res: PhysicalResource, wait_s: float) -> None:
+        try:
+            if res.description.fault_reset:
+                res.reset_fault()
+            end = time.monotonic() + wait_s
+            while res.state.status & (Status.FAULT | Status.COMM_LOST):  # the ticks' reads
+                if time.monotonic() > end:
+                    self._error = f"the device still reports a fault after the reset ({res.fault_message})"
+                    return
+                time.sleep(0.01)
+            res.clear_stop()
+        except OrccaddError as e:
+            self._error = str(e)
+
+    def running(self) -> bool:
+        return self._thread.is_alive()
+
+    def done(self) -> bool:
+        if self._thread.is_alive():
+            return False
+        if self._error:
+            raise CommandError(self._error)
+        return True

@@ -11,6 +11,7 @@ removes both on SIGTERM or SIGINT.
 from __future__ import annotations
 
 import argparse
+import gc
 import logging
 import signal
 import threading
@@ -23,6 +24,7 @@ from orccadd.dxlsim.server import Server
 from orccadd.dxlsim.settings import read_chain_settings
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
+from orccadd.runtime.rt import enter_realtime
 
 log = logging.getLogger("orccadd.dxlsim")
 
@@ -41,6 +43,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--control", default="", help="the fault-injection socket (default: PORT.control)")
     ap.add_argument(
         "--initial-q-rad", type=_floats, default=None, help="joint angles at start (default: home)"
+    )
+    ap.add_argument(
+        "--priority",
+        type=int,
+        default=0,
+        help="SCHED_FIFO priority of the simulator (0: time-shared); real servos answer whatever "
+        "the robot PC does, this simulator only if it is real-time too (beside orccadd's loop)",
     )
     args = ap.parse_args(argv)
     try:
@@ -71,6 +80,13 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     server = Server(chain, link, control)
+    if args.priority:
+        for warning in enter_realtime(
+            args.priority, lock_memory=False, freeze_gc=False, cpu_dma_latency_us=None
+        ).warnings:
+            log.warning("%s", warning)
+    gc.collect()
+    gc.freeze()  # the model and tables are long-lived: keep the collector's passes short
     print(f"dxlsim: ready, port {port}, control {control_path}", flush=True)
     try:
         server.run(stop.is_set)

@@ -345,13 +345,11 @@ class UrRtdeArm(PhysicalResource):
                 self.packets_missed += max(0, round((stamp - self._last_stamp) / self.period_s) - 1)
             self._last_stamp, self._last_new_s = stamp, t_s
         silent = round((t_s - self._last_new_s) / self.period_s)
-        if not connected or silent >= self.settings.stall_periods:
-            if not self._comm_lost:  # latched until `reset` reconnects: said as first seen
-                self._comm_lost = (
-                    "the RTDE connection is closed" if not connected
-                    else f"no RTDE package for {silent} periods (the stream stalled)"
-                )  # fmt: skip
-                self.fault_message = f"{self.name}: {self._comm_lost}"
+        if not connected:
+            self._lose("the RTDE connection is closed")
+        elif silent >= self.settings.stall_periods:
+            self._lose(f"no RTDE package for {silent} periods (the stream stalled)")
+        if self._comm_lost:  # latched until `reset` reconnects
             return int(Status.COMM_LOST)
         state.q_rad[:] = r.getActualQ()
         state.dq_rad_s[:] = r.getActualQd()
@@ -378,6 +376,12 @@ class UrRtdeArm(PhysicalResource):
         finally:
             self._io.release()
 
+    def _lose(self, why: str) -> None:
+        """CommLost, said as first seen (the type 3 reports the message of its tick)."""
+        if not self._comm_lost:
+            self._comm_lost = why
+            self.fault_message = f"{self.name}: {why}"
+
     def _control_ready(self) -> bool:
         """The control link is up (a command sent on a dead one blocks while ur_rtde reconnects)
         and the controller's watchdog armed: the first tick of a (re)started script arms it, so
@@ -385,7 +389,10 @@ class UrRtdeArm(PhysicalResource):
         stops the script, and the arm, when our commands stop coming for `watchdog_s`: this
         process killed or stalled, the link cut (mid-speedJ above all)."""
         c = self.control
-        if c is None or self._comm_lost or not c.isConnected():
+        if c is None or self._comm_lost:
+            return False
+        if not c.isConnected():
+            self._lose("the RTDE connection is closed")
             return False
         if not self._watchdog_armed:
             c.setWatchdog(1.0 / self.settings.watchdog_s)  # one round trip to the script, once

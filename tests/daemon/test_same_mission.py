@@ -1,6 +1,8 @@
-"""The same position-mode mission (configs/missions/demo_position.mission) on every backend,
-through orccadd and orccadctl, each in its own processes: it runs to completion and its reactive
-trace (the instants: states, inputs, actions) is the same whatever the arm."""
+"""The same position-mode mission (configs/missions/demo_position.mission) on every backend
+(sim-ur5e, canopen-6axis in CSP, ur5e-rtde-sim by servoJ, dxl-6axis-sim: a smaller arm with
+other joint limits), through orccadd and orccadctl, each in its own processes: it runs to
+completion and its reactive trace (the instants: states, inputs, actions) is the same whatever
+the arm."""
 
 from __future__ import annotations
 
@@ -12,6 +14,7 @@ import pytest
 from orccadd.ursim.process import UrSimProcess
 from tests.canopen_rig import canopen_rig
 from tests.daemon.conftest import ROOT, Daemon, robot_config, start_daemon_with
+from tests.daemon.test_dynamixel import dxl_daemon_rig
 
 MISSION = str(ROOT / "configs/missions/demo_position.mission")
 UR = ROOT / "configs/robots/ur5e-rtde-sim.toml"
@@ -40,7 +43,7 @@ def run_mission(d: Daemon) -> list[tuple[int, int, tuple[str, ...], tuple[str, .
     ]
 
 
-@pytest.fixture(params=["sim", "canopen402", "ur_rtde"])
+@pytest.fixture(params=["sim", "canopen402", "ur_rtde", "dynamixel"])
 def backend_daemon(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Daemon]:
     if request.param == "sim":
         d = start_daemon_with(tmp_path, robot_config(tmp_path))
@@ -55,9 +58,16 @@ def backend_daemon(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[D
                 yield d
             finally:
                 d.stop()
-    else:
+    elif request.param == "ur_rtde":
         with UrSimProcess(UR, "--boot", "running", "--priority", "70"):
             d = start_daemon_with(tmp_path, local_config(tmp_path, UR))
+            try:
+                yield d
+            finally:
+                d.stop()
+    else:  # dxl-6axis-sim: the servo simulator on a pseudo-terminal under tmp_path
+        with dxl_daemon_rig(tmp_path) as rig:
+            d = start_daemon_with(tmp_path, rig.config)
             try:
                 yield d
             finally:

@@ -52,12 +52,13 @@ class DxlRig:
 
 
 @contextmanager
-def dxl_rig(tmp: Path, *edits: tuple[str, str]) -> Iterator[DxlRig]:
-    """dxl-6axis-sim.toml with `edits`, its port under `tmp`, and the simulator serving it."""
+def dxl_rig(tmp: Path, *edits: tuple[str, str], sim_args: tuple[str, ...] = ()) -> Iterator[DxlRig]:
+    """dxl-6axis-sim.toml with `edits`, its port under `tmp`, and the simulator serving it
+    (started with `sim_args`)."""
     config = tmp / "dxl.toml"
     port = tmp / "ttyDXL"
     config.write_text(variant_text(SIM, ('port = "/tmp/orccadd-dxl-6axis"', f'port = "{port}"'), *edits))
-    sim = DxlSimProcess(config)
+    sim = DxlSimProcess(config, *sim_args)
     try:
         yield DxlRig(config, sim)
     finally:
@@ -221,6 +222,28 @@ def test_a_position_motion_under_a_robot_task_on_the_wall_clock(rig: DxlRig, ses
     ticks = loop.ticks()
     assert_commands_within_limits(ticks, session.config)
     assert not (ticks.status.astype(int) & (Status.FAULT | Status.COMM_LOST | Status.LIMIT_VIOLATION)).any()
+
+
+def test_the_4_dof_openmanipulator_x_moves_under_a_robot_task(tmp_path: Path) -> None:
+    """configs/robots/openmanipulator-x-sim.toml: four XM430-W350 (ids 11-14) at 1 Mbit/s; a
+    waist swing to a pose that needs little torque (the P-only loops sag by load/stiffness)."""
+    config = tmp_path / "omx.toml"
+    port = ('port = "/tmp/orccadd-omx"', f'port = "{tmp_path / "ttyOMX"}"')
+    config.write_text(variant_text(ROOT / "configs/robots/openmanipulator-x-sim.toml", port))
+    target = [0.8, -0.35, -0.85, -0.9]
+    sim = DxlSimProcess(config)
+    try:
+        s = Session.from_config(load_robot_config(config), CommandMode.POSITION)
+        try:
+            task, loop = move(s, target)
+            loop.executor.run(max_ticks=1000, until=lambda: task.phase is not Phase.RUN)
+            assert task.phase is Phase.DONE, (task.phase, task.fault_reason, s.resource.fault_message)
+            np.testing.assert_allclose(sim.status()["q_rad"], target, atol=0.01)
+            assert_commands_within_limits(loop.ticks(), s.config)
+        finally:
+            s.close()
+    finally:
+        sim.stop()
 
 
 def test_an_overload_mid_motion_faults_stops_and_a_reset_reboots_the_servo(
