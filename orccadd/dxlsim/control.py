@@ -29,6 +29,9 @@ from orccadd.dxlsim.chain import Chain
 MAX_LINE = 4096
 
 
+PID = (T.POSITION_P_GAIN, T.POSITION_I_GAIN, T.POSITION_D_GAIN)
+
+
 def status(chain: Chain) -> dict[str, Any]:
     servos = []
     for s in chain.servos:
@@ -43,6 +46,9 @@ def status(chain: Chain) -> dict[str, Any]:
                 "operating_mode": s.table.get(T.OPERATING_MODE),
                 "present_position": s.table.get(T.PRESENT_POSITION),
                 "goal_position": s.table.get(T.GOAL_POSITION),
+                "position_pid": [
+                    s.table.get(g) for g in (T.POSITION_P_GAIN, T.POSITION_I_GAIN, T.POSITION_D_GAIN)
+                ],
                 "present_temperature": s.table.get(T.PRESENT_TEMPERATURE),
             }
         )

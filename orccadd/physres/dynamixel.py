@@ -172,6 +172,10 @@ class DynamixelArm(PhysicalResource):
         everyone = dict.fromkeys(range(self.dof), 0)
         ch.sync_write(T.PROFILE_ACCELERATION, everyone)
         ch.sync_write(T.PROFILE_VELOCITY, everyone)
+        for j in range(self.dof):  # the others get theirs when enabled (`_enable`)
+            if self._enabled[j]:
+                for gain, value in self.settings.servos[j].position_gains():
+                    ch.write(j, gain, value)
         if any(self._enabled):
             self._switch(mode, target)
             self._check_switch(target)
@@ -279,6 +283,8 @@ class DynamixelArm(PhysicalResource):
         goals = self._holding_goals(mode)
         item = goal_item(mode)
         for j in joints:
+            for gain, value in self.settings.servos[j].position_gains():
+                ch.write(j, gain, value)
             self._goal[j] = goals[j]
             ch.write(j, item, goals[j])
             ch.write(j, T.TORQUE_ENABLE, 1)

@@ -496,4 +496,20 @@ class UrRtdeArm(PhysicalResource):
             "controller": f"{self.robot_model} {self.version}" if self.version else "",
             "packets_missed": self.packets_missed,
             "comm": self._comm_lost or "ok",
+            **self._measured(),
         }
+
+    def _measured(self) -> dict[str, float | int | str]:
+        """What the controller measures beyond the joint state (not for a tick): its time, the
+        joints' actual currents and the TCP pose (base frame, axis-angle)."""
+        r = self.receive
+        if r is None or self._comm_lost:
+            return {}
+        try:
+            return {
+                "controller_time_s": float(r.getTimestamp()),
+                "actual_current_a": " ".join(f"{i:.3f}" for i in r.getActualCurrent()),
+                "tcp_pose_m_rad": " ".join(f"{x:.4f}" for x in r.getActualTCPPose()),
+            }
+        except RuntimeError:
+            return {}

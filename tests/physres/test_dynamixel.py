@@ -238,7 +238,9 @@ def test_the_4_dof_openmanipulator_x_moves_under_a_robot_task(tmp_path: Path) ->
             task, loop = move(s, target)
             loop.executor.run(max_ticks=1000, until=lambda: task.phase is not Phase.RUN)
             assert task.phase is Phase.DONE, (task.phase, task.fault_reason, s.resource.fault_message)
-            np.testing.assert_allclose(sim.status()["q_rad"], target, atol=0.01)
+            st = sim.status()
+            np.testing.assert_allclose(st["q_rad"], target, atol=0.01)
+            assert [sv["position_pid"] for sv in st["servos"]] == [[800, 100, 0]] * 4  # the config's I gain
             assert_commands_within_limits(loop.ticks(), s.config)
         finally:
             s.close()

@@ -64,6 +64,9 @@ def test_a_motion_is_paced_by_the_controllers_stream_and_reaches_its_target(arm:
     assert_commands_within_limits(loop.ticks(), arm.config)
     d = arm.resource.diagnostics()
     assert d.details["controller"] == "UR5e 5.11.1.108318"
+    assert len(str(d.details["actual_current_a"]).split()) == 6
+    assert len(str(d.details["tcp_pose_m_rad"]).split()) == 6
+    assert float(d.details["controller_time_s"]) > 0
 
 
 def test_protective_stop_mid_motion_is_a_type_3_then_reset_unlocks_and_it_moves_again(

@@ -18,6 +18,8 @@
     operating_mode = "position"      # position | extended_position | current_based_position |
                                      # velocity | current: written at configure; position
                                      # commands use it if it is a position mode
+    position_p_gain = 800            # optional: Position P/I/D Gain(84/82/80), written at
+    position_i_gain = 100            # every enable (absent: the servo's own)
 
 Every check is here, before anything is opened: one servo per joint, ids once each, a rate the
 servos have, the model able to run the mode, a joint range that position mode (one horn turn,
@@ -51,6 +53,20 @@ class ServoConfig:
     offset_rad: float = field(default=0.0, bounds=(-100.0, 100.0))
     gear_ratio: float = field(default=1.0, bounds=(0.0, 1000.0), open_lo=True)
     operating_mode: OperatingMode = field(default="position")
+    # the position loop's PID gains (RAM: written at every enable, a reboot resets them); absent:
+    # the servo's own (P 800, I 0, D 0 on the X series: a joint sags by load / stiffness)
+    position_p_gain: int | None = field(default=None, bounds=(0, 16383))
+    position_i_gain: int | None = field(default=None, bounds=(0, 16383))
+    position_d_gain: int | None = field(default=None, bounds=(0, 16383))
+
+    def position_gains(self) -> list[tuple[T.Item, int]]:
+        """The configured gains, as the items to write."""
+        gains = (
+            (T.POSITION_P_GAIN, self.position_p_gain),
+            (T.POSITION_I_GAIN, self.position_i_gain),
+            (T.POSITION_D_GAIN, self.position_d_gain),
+        )
+        return [(item, v) for item, v in gains if v is not None]
 
 
 @dataclass(frozen=True)

@@ -49,6 +49,9 @@ EEPROM_END = 64
 TORQUE_ENABLE = Item("Torque Enable", 64, 1)
 STATUS_RETURN_LEVEL = Item("Status Return Level", 68, 1)
 HARDWARE_ERROR_STATUS = Item("Hardware Error Status", 70, 1)
+POSITION_D_GAIN = Item("Position D Gain", 80, 2)
+POSITION_I_GAIN = Item("Position I Gain", 82, 2)
+POSITION_P_GAIN = Item("Position P Gain", 84, 2)
 BUS_WATCHDOG = Item("Bus Watchdog", 98, 1, signed=True)  # 20 ms units; -1: it expired
 GOAL_CURRENT = Item("Goal Current", 102, 2, signed=True)
 GOAL_VELOCITY = Item("Goal Velocity", 104, 4, signed=True)
