@@ -207,12 +207,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--reactions", type=int, default=200_000)
     ap.add_argument(
-        "--write-missions", action="store_true", help="regenerate configs/missions/exomars_scale.mission"
+        "--write-missions", action="store_true", help="regenerate benchmarks/missions/exomars_scale.mission"
     )
     ap.add_argument("--skip-large", action="store_true", help="skip the 100,000-state automaton")
     args = ap.parse_args()
     if args.write_missions:
-        (MISSIONS / "exomars_scale.mission").write_text(exomars_mission())
+        (ROOT / "benchmarks" / "missions" / "exomars_scale.mission").write_text(exomars_mission())
     a, t = timed(compile_file, MISSIONS / "keepstable.mission")
     row("KEEPSTABLE", a, t, args.reactions)
     text = exomars_mission()

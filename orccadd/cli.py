@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from orccadd.ctl import offline, online
+from orccadd.wire.version import version_text
 
 
 def orccadd_main() -> int:
@@ -18,6 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="orccadctl", description="Check, draw, run, monitor and tune orccadd missions."
     )
+    parser.add_argument("--version", action="version", version=version_text("orccadctl"))
     sub = parser.add_subparsers(dest="command", required=True)
     offline.add_parsers(sub)
     online.add_parsers(sub)

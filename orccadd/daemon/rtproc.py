@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from orccadd.config.robot import RobotConfig
+from orccadd.config.shipped import list_configs, robot_config_path
 from orccadd.daemon.machine import Machine
 from orccadd.daemon.notify import Notifier
 from orccadd.daemon.replies import CommandError, Pending, Result
@@ -47,6 +48,7 @@ from orccadd.wire.commands import COMMANDS, ProtocolError, check_args
 from orccadd.wire.schema import H, Layout, MachineState, MissionResult, OperatorAction, Trace
 from orccadd.wire.socketdir import check_socket_path, prepare_socket_dir, urgent_socket_path
 from orccadd.wire.telemetry import TelemetryBlock
+from orccadd.wire.version import version_text
 
 log = logging.getLogger("orccadd")
 
@@ -487,7 +489,9 @@ class RealtimeProcess:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="orccadd", description="the orccadd real-time controller daemon")
-    ap.add_argument("--config", required=True, help="robot config (configs/robots/*.toml)")
+    ap.add_argument("--config", help="robot config: a file, or the name of a shipped one (--list-configs)")
+    ap.add_argument("--list-configs", action="store_true", help="list the shipped robot configs and missions")
+    ap.add_argument("--version", action="version", version=version_text())
     ap.add_argument("--mission", help="load this mission at startup (it does not start)")
     ap.add_argument("--socket", help="the command socket (default: the config's daemon.socket)")
     ap.add_argument("--no-command-daemon", action="store_true", help="do not spawn the command daemon")
@@ -495,6 +499,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--in-process-sim", action="store_true", help="simulate the arm inside this process")
     ap.add_argument("--spin-us", type=float, default=0.0, help="wake early and spin (µs)")
     args = ap.parse_args(argv)
+    if args.list_configs:
+        print(list_configs())
+        return 0
+    if not args.config:
+        ap.error("--config is required (a file, or a shipped config's name: --list-configs)")
     try:
         setup_logging("orccadd")
     except LogSetupError as e:
@@ -503,7 +512,7 @@ def main(argv: list[str] | None = None) -> int:
     # hand the GIL to the control thread within a fraction of a period, not the default 5 ms.
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     try:
-        cfg = load_robot_config(args.config)
+        cfg = load_robot_config(robot_config_path(args.config))
         if cfg.resource.backend == "sim" and not args.in_process_sim:
             # the simulated arm lives in its own process, like a real arm outside the controller
             cfg = with_backend(cfg, "sim_process")

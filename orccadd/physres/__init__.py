@@ -7,6 +7,7 @@ Built-in backends are listed in `BACKENDS`; third-party ones register under the
 from __future__ import annotations
 
 import importlib
+import importlib.util
 from importlib.metadata import entry_points
 
 from orccadd.errors import ConfigError
@@ -22,6 +23,27 @@ BACKENDS: dict[str, tuple[str, str]] = {
     "dynamixel": ("orccadd.physres.dynamixel", "DynamixelArm"),
 }
 
+# the bus packages a built-in backend needs, and the extra that installs them
+EXTRAS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "canopen402": ("canopen", ("can", "canopen")),
+    "dynamixel": ("dynamixel", ("serial", "dynamixel_sdk")),
+    "ur_rtde": ("ur", ("rtde_control", "rtde_receive", "dashboard_client")),
+}
+
+
+def _check_extra(name: str, file: str) -> None:
+    if name not in EXTRAS:
+        return
+    extra, modules = EXTRAS[name]
+    missing = [m for m in modules if importlib.util.find_spec(m) is None]
+    if missing:
+        raise ConfigError(
+            file,
+            "resource.backend",
+            f"(={name!r}) needs the Python package(s) {', '.join(missing)}, not installed: "
+            f"pip install 'orccadd[{extra}]'",
+        )
+
 
 def backend_names() -> list[str]:
     names = set(BACKENDS)
@@ -32,6 +54,7 @@ def backend_names() -> list[str]:
 def backend_class(name: str, file: str = "") -> type[PhysicalResource]:
     """The resource class for backend `name`; a ConfigError naming the choices otherwise."""
     if name in BACKENDS:
+        _check_extra(name, file)
         module, attr = BACKENDS[name]
         cls = getattr(importlib.import_module(module), attr)
     else:

@@ -89,3 +89,12 @@ def test_loading_a_config_applies_the_checks(robot_variant) -> None:  # type: ig
     assert d.brakes and d.stop_categories == {0, 1, 2} and d.torque.source is Source.MEASURED
     assert d.as_dict()["torque"] == "measured"
     assert ABSENT.describe() == "absent"
+
+
+def test_a_backend_whose_bus_package_is_missing_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    import orccadd.physres as physres
+
+    monkeypatch.setitem(physres.EXTRAS, "ur_rtde", ("ur", ("no_such_rtde_package",)))
+    needs = r"needs the Python package\(s\) no_such_rtde_package.*orccadd\[ur\]"
+    with pytest.raises(ConfigError, match=needs):
+        physres.backend_class("ur_rtde", "robot.toml")
