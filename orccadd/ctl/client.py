@@ -73,8 +73,10 @@ class Client:
         return r.get("result")
 
     def stream(self, cmd: str, **args: Any) -> Iterator[dict[str, Any]]:
-        """The stream items of a streaming command, until its final reply."""
+        """The stream items of a streaming command, until its final reply. No timeout: a follow on
+        a quiet daemon waits as long as it is quiet (the daemon ends the stream if it goes)."""
         self._send(cmd, args)
+        self.sock.settimeout(None)
         while True:
             r = self._line()
             if not r.get("ok"):

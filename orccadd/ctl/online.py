@@ -221,6 +221,13 @@ def format_status(s: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _stdout_gone() -> None:
+    """The reader of our output has gone (`| head`): end quietly, and let the interpreter's
+    final flush write nowhere instead of raising again."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+
+
 def _monitor(c: Client, a: argparse.Namespace) -> int:
     args: dict[str, Any] = {"signals": a.signals, "rate_hz": a.rate}
     if a.count:
@@ -237,6 +244,8 @@ def _monitor(c: Client, a: argparse.Namespace) -> int:
                 print(" ".join(f"{v:14.5f}" for v in [item["t_s"], *item["values"]]), flush=True)
     except KeyboardInterrupt:
         pass
+    except BrokenPipeError:
+        _stdout_gone()
     return EXIT_OK
 
 
@@ -251,6 +260,8 @@ def _follow(c: Client, a: argparse.Namespace) -> int:
             print(json.dumps(e) if a.json else format_trace(e), flush=True)
     except KeyboardInterrupt:
         pass
+    except BrokenPipeError:
+        _stdout_gone()
     return EXIT_OK
 
 
@@ -271,6 +282,8 @@ def _top(c: Client, a: argparse.Namespace) -> int:
             time.sleep(1.0 / a.rate)
     except KeyboardInterrupt:
         pass
+    except BrokenPipeError:
+        _stdout_gone()
     return EXIT_OK
 
 
