@@ -4,34 +4,24 @@ control socket."""
 from __future__ import annotations
 
 import json
-import os
-import select
 import socket
-import subprocess
-import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
+from orccadd.simproc import ChildProcess
 
-class DxlSimProcess:
+
+class DxlSimProcess(ChildProcess):
     """The simulator as a child process. `port` and `control` are the paths it serves."""
 
     def __init__(
         self, config: str | Path, *extra: str, env: dict[str, str] | None = None, timeout_s: float = 60.0
     ) -> None:
-        cmd = [sys.executable, "-m", "orccadd.dxlsim", "--config", str(config), *extra]
-        # its log goes to a file: a pipe nobody reads while it runs would block it once full
-        self.log = tempfile.TemporaryFile("w+")  # noqa: SIM115 - lives as long as the process
-        self.proc = subprocess.Popen(
-            cmd, stdout=subprocess.PIPE, stderr=self.log, text=True, env={**os.environ, **(env or {})}
+        args = ["--config", str(config), *extra]
+        super().__init__(
+            "orccadd.dxlsim", args, what="servo simulator", ready="ready", env=env, timeout_s=timeout_s
         )
-        assert self.proc.stdout is not None
-        ready, _, _ = select.select([self.proc.stdout], [], [], timeout_s)
-        line = self.proc.stdout.readline() if ready else ""
-        if "ready" not in line:
-            self.stop()
-            raise RuntimeError(f"servo simulator did not start: {line!r} {self.log_text()}")
+        line = self.ready_line
         fields = dict(part.strip().split(" ", 1) for part in line.split(":", 1)[1].split(",")[1:])
         self.port = fields["port"]
         self.control = fields["control"]
@@ -58,19 +48,3 @@ class DxlSimProcess:
 
     def status(self) -> dict[str, Any]:
         return self.request({"status": True})
-
-    def log_text(self) -> str:
-        self.log.seek(0)
-        return self.log.read()
-
-    def stop(self) -> int:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if self.proc.stdout is not None:
-            self.proc.stdout.close()
-        return int(self.proc.returncode)

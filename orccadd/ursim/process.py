@@ -14,22 +14,14 @@ ports of your own (`--rtde-port` ...) to run beside it.
 ur_rtde's calls block in C++ without releasing the interpreter: a test that may hang in one
 needs pytest-timeout's `method="thread"`. Disconnect ur_rtde's clients before the simulator
 stops (a client left connected tries to reconnect, and RTDEIOInterface aborts the process).
-This module imports only the standard library.
+This module imports only the standard library (and `orccadd.simproc`, which does too).
 """
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
-import ctypes.util
 import fcntl
 import json
-import os
-import select
-import signal
 import socket
-import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -37,16 +29,9 @@ from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
+from orccadd.simproc import ChildProcess
+
 PORTS_LOCK = Path(tempfile.gettempdir()) / "orccadd-ursim-ports.lock"
-PR_SET_PDEATHSIG = 1
-
-
-def _die_with_parent() -> None:
-    """In the child, before exec: SIGTERM when the parent dies (Linux), so a test killed
-    half-way never leaves a simulator holding UR's ports."""
-    with contextlib.suppress(OSError, AttributeError):
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 class PortsLock:
@@ -73,7 +58,7 @@ class PortsLock:
             self._f = None
 
 
-class UrSimProcess:
+class UrSimProcess(ChildProcess):
     """A running simulator: its control channel (`inject`, `status`) and its log."""
 
     def __init__(
@@ -86,24 +71,19 @@ class UrSimProcess:
         lock_timeout_s: float = 300.0,
     ) -> None:
         self.lock = PortsLock(lock_timeout_s) if lock else None
-        cmd = [sys.executable, "-m", "orccadd.ursim", "--config", str(config), *extra]
-        # its log goes to a file: a pipe nobody reads while it runs would block it once full
-        self.log = tempfile.TemporaryFile("w+")  # noqa: SIM115 - lives as long as the process
-        self.proc = subprocess.Popen(
-            cmd,
-            stdout=subprocess.PIPE,
-            stderr=self.log,
-            text=True,
-            env={**os.environ, **(env or {})},
-            preexec_fn=_die_with_parent,  # only prctl: safe between fork and exec
-        )
-        assert self.proc.stdout is not None
-        ready, _, _ = select.select([self.proc.stdout], [], [], timeout_s)
-        line = self.proc.stdout.readline() if ready else ""
-        if "ready" not in line:
-            self.stop()
-            raise RuntimeError(f"UR simulator did not start: {line!r} {self.log_text()}")
-        self.control_port = int(line.rsplit(":", 1)[1])
+        try:
+            super().__init__(
+                "orccadd.ursim",
+                ["--config", str(config), *extra],
+                what="UR simulator",
+                ready="ready",
+                env=env,
+                timeout_s=timeout_s,
+            )
+        except BaseException:
+            self._release()
+            raise
+        self.control_port = int(self.ready_line.rsplit(":", 1)[1])
 
     def __enter__(self) -> UrSimProcess:
         return self
@@ -145,23 +125,12 @@ class UrSimProcess:
                 raise TimeoutError(f"UR simulator: condition not met in {timeout_s:g} s; status {st}")
             time.sleep(0.02)
 
-    def log_text(self) -> str:
-        """What the simulator logged so far."""
-        self.log.seek(0)
-        return self.log.read()
-
     def stop(self) -> int:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if self.proc.stdout is not None:
-            with contextlib.suppress(OSError):
-                self.proc.stdout.close()
+        code = super().stop()
+        self._release()
+        return code
+
+    def _release(self) -> None:
         if self.lock is not None:
             self.lock.release()
             self.lock = None
-        return int(self.proc.returncode)

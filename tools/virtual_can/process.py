@@ -2,15 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import select
-import signal
 import socket
-import subprocess
-import sys
-import tempfile
 from pathlib import Path
 from typing import Any
+
+from orccadd.simproc import ChildProcess
 
 ROOT = Path(__file__).resolve().parents[2]
 HOST = "127.0.0.1"
@@ -27,46 +23,28 @@ def vcan_available(iface: str = "vcan0") -> bool:
     return True
 
 
-class HubProcess:
+class HubProcess(ChildProcess):
     """`python -m tools.virtual_can.hub --port 0` as a child; `port` once it listens."""
 
     def __init__(self, *extra: str, startup_timeout_s: float = 30.0) -> None:
-        cmd = [sys.executable, "-m", "tools.virtual_can.hub", "--port", "0", *extra]
-        # its log goes to a file: a pipe nobody reads while it runs would block it once full
-        self.log = tempfile.TemporaryFile("w+")  # noqa: SIM115 - lives as long as the process
-        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=self.log, text=True)
-        assert self.proc.stdout is not None
-        ready, _, _ = select.select([self.proc.stdout], [], [], startup_timeout_s)
-        line = self.proc.stdout.readline() if ready else ""
-        if "listening on" not in line:
-            self.stop()
-            raise RuntimeError(f"virtual CAN hub did not start: {line!r} {self.stderr_text()}")
-        self.port = int(line.rsplit(":", 1)[1])
+        args = ["--port", "0", *extra]
+        super().__init__(
+            "tools.virtual_can.hub",
+            args,
+            what="virtual CAN hub",
+            ready="listening on",
+            cwd=ROOT,
+            timeout_s=startup_timeout_s,
+        )
+        self.port = int(self.ready_line.rsplit(":", 1)[1])
 
     def bus_kwargs(self, channel: str = "can0") -> dict[str, Any]:
         """Keyword arguments of `can.Bus` for this hub."""
         return {"interface": "socketcand", "host": HOST, "port": self.port, "channel": channel}
 
-    def kill(self) -> None:
-        """Kill the hub abruptly (a bus failure, for fault tests)."""
-        if self.proc.poll() is None:
-            os.kill(self.proc.pid, signal.SIGKILL)
-            self.proc.wait()
-
-    def stop(self) -> int:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        return int(self.proc.returncode)
-
     def stderr_text(self) -> str:
         """What the hub logged so far."""
-        self.log.seek(0)
-        return self.log.read()
+        return self.log_text()
 
     def __enter__(self) -> HubProcess:
         return self
