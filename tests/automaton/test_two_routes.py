@@ -102,7 +102,7 @@ def agree(a: Automaton, seed: int, instants: int = 25) -> None:
 
 
 @settings(
-    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much]
+    max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much]
 )
 @given(statements(3), statements(1).filter(lambda s: "safe" not in s), st.integers(0, 2**32 - 1))
 def test_interpreter_and_automaton_agree_on_random_programs(main: str, safe: str, seed: int) -> None:

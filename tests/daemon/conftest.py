@@ -69,7 +69,7 @@ class Daemon:
                 return s
             if time.monotonic() > end:
                 raise AssertionError(f"timed out; last status: {s}\nlog:\n{self.log.read_text()}")
-            time.sleep(0.1)
+            time.sleep(0.05)
 
     def ctl(self, *argv: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]:
         env = {**os.environ, "ORCCADD_SOCKET": self.socket}
@@ -118,7 +118,7 @@ def start_daemon_with(tmp: Path, config: Path, *extra: str, own_group: bool = Fa
             if time.monotonic() > end:
                 d.stop()
                 raise AssertionError(f"orccadd did not come up:\n{log.read_text()}") from None
-            time.sleep(0.2)
+            time.sleep(0.02)
 
 
 @pytest.fixture

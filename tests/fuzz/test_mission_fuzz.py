@@ -31,7 +31,7 @@ def compile_outcome(seed: Path, text: str) -> str:
     return "compiled"
 
 
-@fuzz(max_examples=120)
+@fuzz(max_examples=60)
 @given(missions())
 def test_mutated_missions_compile_or_are_refused(case: tuple[Path, str]) -> None:
     compile_outcome(*case)

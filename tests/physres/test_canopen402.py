@@ -3,6 +3,7 @@ third (the userspace hub here; vcan0 where the kernel has it)."""
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -251,9 +252,15 @@ def test_a_drive_that_never_shows_the_mode_is_refused_within_the_timeout(tmp_pat
     )
 
 
+@functools.cache
+def _object_dictionary(path: Path, node: int) -> canopen.ObjectDictionary:
+    """A description parsed for `node` (once: parsing an EDS takes ~0.15 s here)."""
+    return canopen.import_od(str(path), node)
+
+
 def described(path: Path, node: int, index: int, sub: int) -> int:
     """An object's value as a description sets it for `node` (a DCF's value, else the default)."""
-    var = canopen.import_od(str(path), node).get_variable(index, sub)
+    var = _object_dictionary(path, node).get_variable(index, sub)
     assert var is not None
     value = var.value if var.value is not None else var.default
     assert isinstance(value, int)

@@ -14,6 +14,7 @@ from orccadd.errors import ResourceError
 from orccadd.physres import PhysicalResource
 from orccadd.physres.description import ClockSource, Source
 from orccadd.robot import create_resource, load_robot_config, with_backend
+from orccadd.state import JointState
 from orccadd.types import CommandMode, Lifecycle, Status
 from orccadd.ursim.process import UrSimProcess
 from tests.canopen_rig import Rig, canopen_rig
@@ -22,6 +23,7 @@ from tests.physres.test_dynamixel import DxlRig, dxl_rig
 
 BACKENDS = ["sim", "sim_process", "canopen402", "dynamixel", "ur_rtde"]
 UR_SIM = ROOT / "configs/robots/ur5e-rtde-sim.toml"
+UNLOCK_DELAY_S = 1  # the simulated UR controller's: a protective stop can be unlocked 1 s after it
 
 # ur_rtde blocks in C++ holding the interpreter: only a thread can time such a test out
 pytestmark = pytest.mark.timeout(120, method="thread")
@@ -59,7 +61,8 @@ def ur_sim(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, UrS
             ('host = "127.0.0.1"', 'host = "127.0.0.1"\npower_on = true'),
         )
     )
-    with UrSimProcess(UR_SIM, "--boot", "running", "--unlock-delay-s", "1", "--priority", "70") as sim:
+    unlock = ("--unlock-delay-s", str(UNLOCK_DELAY_S))
+    with UrSimProcess(UR_SIM, "--boot", "running", *unlock, "--priority", "70") as sim:
         yield config, sim
 
 
@@ -101,9 +104,15 @@ def hold_mode(res: PhysicalResource) -> CommandMode:
     return CommandMode.TORQUE if CommandMode.TORQUE in res.description.modes else CommandMode.POSITION
 
 
-def drive(res: PhysicalResource, seconds: float, push: float = 0.0) -> None:
+def drive(
+    res: PhysicalResource,
+    seconds: float,
+    push: float = 0.0,
+    until: Callable[[JointState], bool] | None = None,
+) -> None:
     """Hold the arm every period on the wall clock, and push it: in torque mode gravity
-    compensation + `push` N·m on every joint, in position mode joint 0 moving at `push` / 10 rad/s."""
+    compensation + `push` N·m on every joint, in position mode joint 0 moving at `push` / 10 rad/s.
+    `until`: return as soon as a read state satisfies it (at most `seconds` all the same)."""
     data = res.model.new_data()
     period = res.config.control_period_s
     t_end = time.monotonic() + seconds
@@ -115,7 +124,14 @@ def drive(res: PhysicalResource, seconds: float, push: float = 0.0) -> None:
             res.write(time.monotonic(), target)
         else:
             res.write(time.monotonic(), pin.computeGeneralizedGravity(res.model.model, data, st.q_rad) + push)
+        if until is not None and until(st):
+            return
         time.sleep(period)
+
+
+def at_rest(st: JointState, flags: Status) -> bool:
+    """`flags` all set and every joint still (what a stop ends in)."""
+    return st.status & flags == flags and bool(np.abs(st.dq_rad_s).max() < 0.01)
 
 
 def test_activate_reports_the_measured_position(resource: PhysicalResource) -> None:
@@ -164,9 +180,9 @@ def test_safe_stop_brings_the_arm_to_rest(resource: PhysicalResource) -> None:
     resource.safe_stop()
     st = resource.read(time.monotonic())
     assert st.status & Status.STOPPING and not st.status & Status.TORQUE_OFF, Status(st.status)
-    drive(resource, 2.0)
-    st = resource.state
     stopped_torque_off = Status.STOPPED | Status.TORQUE_OFF
+    drive(resource, 2.0, until=lambda s: at_rest(s, stopped_torque_off))
+    st = resource.state
     assert st.status & stopped_torque_off == stopped_torque_off, Status(st.status)
     assert np.abs(st.dq_rad_s).max() < 0.01
 
@@ -177,15 +193,22 @@ def test_device_fault_is_reported_and_reset(
     resource.activate(hold_mode(resource))
     drive(resource, 0.05)
     inject_device_fault()
-    drive(resource, 0.3)
+    injected_s = time.monotonic()
+    drive(resource, 0.3, until=lambda s: bool(s.status & Status.FAULT))
     assert resource.state.status & Status.FAULT
     assert resource.fault_message
     resource.safe_stop()
-    drive(resource, 2.0)
+    # stopped, and past the UR controller's unlock delay (a protective stop is reset 1 s after it)
+    reset_allowed_s = injected_s + UNLOCK_DELAY_S + 0.2
+    drive(
+        resource,
+        2.0,
+        until=lambda s: bool(s.status & Status.STOPPED) and time.monotonic() > reset_allowed_s,
+    )
     assert resource.state.status & Status.STOPPED
     assert resource.description.fault_reset
     resource.reset_fault()
-    drive(resource, 0.5)
+    drive(resource, 0.5, until=lambda s: not s.status & Status.FAULT)
     assert not resource.state.status & Status.FAULT, resource.fault_message
     resource.clear_stop()
     drive(resource, 0.2)
