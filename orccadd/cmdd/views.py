@@ -75,10 +75,13 @@ def latest_tick(tel: TelemetryBlock) -> np.ndarray | None:
         head = int(tel.header[H.TICK_HEAD])
         if head == 0:
             return None
-        slot = tel.ticks[(head - 1) % tel.tick_len]
-        rec = slot.copy()
-        if rec[0] == head and slot[0] == head:
-            return rec  # type: ignore[no-any-return]
+        for seq in (head, head - 1):  # the newest, else the one before (the newest being written)
+            if seq <= 0:
+                break
+            slot = tel.ticks[(seq - 1) % tel.tick_len]
+            rec = slot.copy()
+            if rec[0] == seq and slot[0] == seq:
+                return rec  # type: ignore[no-any-return]
     return None
 
 

@@ -52,7 +52,7 @@ class SwitchingLoop(ControlLoop):
         self.blend_ticks = blend_ticks
         self.tunes: Mailbox[ParameterChange] = Mailbox(64)
         self._task_ids: dict[int, int] = {id(hold): 0}  # id(task) -> telemetry task id
-        self._request: tuple[int, RobotTask] = (0, hold)
+        self._request: tuple[int, RobotTask, bool] = (0, hold, False)
         self._applied = -1
         self._notified = 0
         self.switches = 0
@@ -68,9 +68,16 @@ class SwitchingLoop(ControlLoop):
         """The task of the last switch request (applied or not)."""
         return self._request[1]
 
-    def request_switch(self, task: RobotTask) -> None:
-        """Make `task` the active one at the next tick (restarted if it already is)."""
-        self._request = (self._request[0] + 1, task)
+    def request_switch(self, task: RobotTask, fresh: bool = False) -> int:
+        """Make `task` the active one at the next tick (restarted if it already is). `fresh`:
+        from the measured state, not blended from the outgoing task's last command (after a
+        safe stop and a reset, that command is stale: the arm may be elsewhere)."""
+        self._request = (self._request[0] + 1, task, fresh)
+        return self._request[0]
+
+    def switched(self, request: int) -> bool:
+        """The control thread has applied switch request `request` (or a later one)."""
+        return self._applied >= request
 
     def set_mission_tasks(self, tasks: tuple[RobotTask, ...]) -> None:
         """Telemetry task ids: 0 the Hold task, k the mission's task k-1."""
@@ -112,7 +119,7 @@ class SwitchingLoop(ControlLoop):
         req = self._request
         if req[0] != self._applied:
             self._applied = req[0]
-            self._switch(req[1])
+            self._switch(req[1], req[2])
         task = self.active
         assert task is not None
         task.tick(t_s)
@@ -127,11 +134,11 @@ class SwitchingLoop(ControlLoop):
             with contextlib.suppress(BlockingIOError):  # wake-ups already pending
                 os.write(self.wake_fd, b"e")
 
-    def _switch(self, new: RobotTask) -> None:
+    def _switch(self, new: RobotTask, fresh: bool = False) -> None:
         old = self.active
         res = self.resource
         mode = new.signature.command
-        continues = old is not None and old.wrote and old.signature.command is mode
+        continues = not fresh and old is not None and old.wrote and old.signature.command is mode
         if old is not None and old is not new:
             old.deactivate()
         if mode is not res.mode:

@@ -77,13 +77,12 @@ class Supervisor:
         if self._resetting is not None and self._resetting.running():
             raise CommandError("a reset is already under way")
         wait_s = max(100 * self.cfg.control_period_s, RESET_WAIT_S)
-        device = self._resetting = _DeviceReset(res, wait_s)
+        device = self._resetting = _DeviceReset(res, self.loop, wait_s)
 
         def poll() -> Result | None:
             if not device.done():
                 return None
             self.fault = ""
-            self.loop.request_switch(self.loop.hold)
             self.note("reset: stop cleared, holding")
             on_done()
             return {"reset": True}
@@ -96,17 +95,19 @@ class Supervisor:
 
 class _DeviceReset:
     """The reset's talk with the device, in a thread of its own: the device's fault reset (if it
-    has one), a wait (up to `wait_s`) for its reads to show neither fault nor lost link, then the
+    has one), a wait (up to `wait_s`) for its reads to show neither fault nor lost link, the Hold
+    task restarted from the measured state while the stop still holds (the outgoing task's last
+    command is stale: the arm may be elsewhere now, after a controller's restart), then the
     stop cleared. `done()` re-raises its error as a CommandError."""
 
-    def __init__(self, resource: PhysicalResource, wait_s: float) -> None:
+    def __init__(self, resource: PhysicalResource, loop: SwitchingLoop, wait_s: float) -> None:
         self._error = ""
         self._thread = threading.Thread(
-            target=self._run, args=(resource, wait_s), name="device-reset", daemon=True
+            target=self._run, args=(resource, loop, wait_s), name="device-reset", daemon=True
         )
         self._thread.start()
 
-    def _run(self, res: PhysicalResource, wait_s: float) -> None:
+    def _run(self, res: PhysicalResource, loop: SwitchingLoop, wait_s: float) -> None:
         try:
             if res.description.fault_reset:
                 res.reset_fault()
@@ -116,6 +117,12 @@ class _DeviceReset:
                     self._error = f"the device still reports a fault after the reset ({res.fault_message})"
                     return
                 time.sleep(0.01)
+            request = loop.request_switch(loop.hold, fresh=True)
+            while not loop.switched(request):
+                if time.monotonic() > end:
+                    self._error = "the control loop did not take the Hold task"
+                    return
+                time.sleep(0.002)
             res.clear_stop()
         except OrccaddError as e:
             self._error = str(e)

@@ -23,7 +23,6 @@ brakes, protective-stop unlock, version and model).
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import threading
 import time
@@ -291,13 +290,14 @@ class UrRtdeArm(PhysicalResource):
         self.state.fault_code = 0
 
     def _close_links(self) -> None:
-        # ur_rtde's control interface first: left connected to a dead controller, it tries to
-        # reconnect by itself from its own thread
-        for link in (self.control, self.receive, self.dashboard):
-            if link is not None:
-                with contextlib.suppress(RuntimeError):
-                    link.disconnect()
-        self.control = self.receive = self.dashboard = None
+        """Every link dropped, ur_rtde's control interface first (left connected to a dead
+        controller, it reconnects by itself from its own thread). Dropping the last reference is
+        the disconnect: ur_rtde's destructors disconnect (0.5 s each, joining their threads), so
+        an explicit disconnect() before would cost it twice. Nothing else holds them: the
+        clock's wait looks `receive` up at every poll."""
+        self.control = None
+        self.receive = None
+        self.dashboard = None
 
     # ---- the device's clock ---------------------------------------------------------------
     def wait_for_cycle(self, timeout_s: float) -> int:
@@ -306,14 +306,17 @@ class UrRtdeArm(PhysicalResource):
             time.sleep(timeout_s)
             return -1
         end = time.monotonic() + timeout_s
-        get = self.receive.getTimestamp
         last = self._last_stamp
         while True:
+            receive = self.receive  # looked up each time: a reset may drop it meanwhile
+            if receive is None:
+                return -1
             try:
-                if get() != last:
+                if receive.getTimestamp() != last:
                     return time.monotonic_ns()
             except RuntimeError:
                 return -1
+            del receive
             if time.monotonic() >= end:
                 return -1
             time.sleep(POLL_S)

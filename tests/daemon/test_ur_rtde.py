@@ -122,7 +122,7 @@ def test_a_killed_controller_is_comm_lost_at_once_and_reset_reconnects_to_the_re
     sim.proc.wait()
     s = daemon.wait(lambda s: s["faulted"] and "comm_lost" in s.get("resource_status", []), timeout_s=10)
     assert "the RTDE connection is closed" in str(s["fault"]), s["fault"]
-    assert t3_inputs(daemon) == ["Reach.T3.CommLost"]
+    assert t3_inputs(daemon) == ["Reach.T3.CommLost"], daemon.log.read_text()[-3000:]
     ticks = from_telemetry(telemetry(daemon))
     lost = int(np.argmax((ticks.status.astype(int) & Status.COMM_LOST) != 0))
     period_s = 0.002
@@ -137,9 +137,9 @@ def test_a_killed_controller_is_comm_lost_at_once_and_reset_reconnects_to_the_re
     acknowledge(daemon)
     r = daemon.ctl("reset")  # the controller is still down
     assert r.returncode != 0 and "cannot reach the dashboard server" in r.stderr, r.stderr
-    with UrSimProcess(UR, *SIM_ARGS, lock=False):  # the killed one's lock still held
+    with UrSimProcess(UR, *SIM_ARGS, lock=False) as restarted:  # the killed one's lock still held
         r = daemon.ctl("reset")
-        assert r.returncode == 0, r.stderr
+        assert r.returncode == 0, r.stderr + restarted.log_text()[-3000:] + daemon.log.read_text()[-3000:]
         daemon.wait(lambda s: not s["faulted"] and not s.get("resource_status"))
         run_to_success(daemon)
         daemon.stop()  # ur_rtde's clients go before this simulator does
