@@ -20,6 +20,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="orccadctl", description="Check, draw, run, monitor and tune orccadd missions."
     )
     parser.add_argument("--version", action="version", version=version_text("orccadctl"))
+    # also after the subcommand (`orccadctl status --socket PATH`), where they take precedence
+    parser.add_argument("--socket", dest="global_socket", default=None, help="the daemon's socket")
+    parser.add_argument("--json", dest="global_json", action="store_true", help="print JSON replies")
     sub = parser.add_subparsers(dest="command", required=True)
     offline.add_parsers(sub)
     online.add_parsers(sub)
@@ -28,6 +31,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def orccadctl_main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.global_socket and getattr(args, "socket", None) is None and hasattr(args, "socket"):
+        args.socket = args.global_socket
+    if args.global_json and hasattr(args, "json"):
+        args.json = True
     if getattr(args, "online", None) or args.command == "plot":
         code: int = args.func(args)
         return code

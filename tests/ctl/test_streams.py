@@ -73,3 +73,13 @@ def test_monitor_into_a_closed_pipe_ends_quietly(server: tuple[str, list[float]]
     )  # fmt: skip
     assert len(out.stdout.splitlines()) == 2
     assert "Traceback" not in out.stderr and "BrokenPipe" not in out.stderr, out.stderr
+
+
+def test_the_socket_may_be_given_before_the_subcommand(server: tuple[str, list[float]]) -> None:
+    path, _ = server
+    env = {**os.environ, "ORCCADD_SOCKET": "/nonexistent/orccadd.sock"}  # the option wins
+    out = subprocess.run(
+        f"{sys.executable} -m orccadd.cli --socket {path} monitor q | head -1",
+        shell=True, capture_output=True, text=True, env=env, timeout=30,
+    )  # fmt: skip
+    assert out.stdout.split() == ["q.0"], out.stderr
