@@ -8,6 +8,8 @@ import socket
 from collections.abc import Iterator
 from typing import Any
 
+from orccadd.wire.schema import PROTOCOL_VERSION
+
 DEFAULT_SOCKET = "/run/orccadd/orccadd.sock"
 
 
@@ -56,7 +58,7 @@ class Client:
 
     def _send(self, cmd: str, args: dict[str, Any]) -> int:
         self.next_id += 1
-        msg = {"id": self.next_id, "cmd": cmd, "args": args}
+        msg = {"id": self.next_id, "cmd": cmd, "args": args, "protocol": PROTOCOL_VERSION}
         self.sock.sendall((json.dumps(msg) + "\n").encode())
         return self.next_id
 

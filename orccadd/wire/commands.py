@@ -9,6 +9,7 @@ each side's handlers are bound by name with `@handles` and checked complete agai
 Wire format: newline-delimited JSON over the daemon's Unix socket.
 
 Request:  {"id": <any>, "cmd": "<command>", "args": {...}}            (one line, ≤ 64 KiB)
+          optional "protocol": <PROTOCOL_VERSION>: refused if it is not this daemon's
 Reply:    {"id": <same>, "ok": true, "result": {...}}
           {"id": <same>, "ok": false, "error": "<what and why>"}
 Streams (`monitor`, `events` with follow): several `{"id", "ok": true, "stream": {...}}` lines,
@@ -23,6 +24,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, Literal, TypeVar
+
+from orccadd.wire.schema import PROTOCOL_VERSION
 
 MAX_LINE = 65536
 MAX_INT = 2**53  # integers a JSON peer can represent exactly; beyond: refused
@@ -208,10 +211,17 @@ def parse_request(line: bytes) -> tuple[Any, str, dict[str, Any]]:
     rid = msg.get("id")
     if not isinstance(rid, str | int | float | None) or isinstance(rid, bool):
         raise ProtocolError("'id' must be a number, a string or null")
-    unknown = set(msg) - {"id", "cmd", "args"}
+    unknown = set(msg) - {"id", "cmd", "args", "protocol"}
     if unknown:
         names = ", ".join(sorted(map(str, unknown)))[:200]
-        raise ProtocolError(f"unknown request fields: {names} (fields: id, cmd, args)", rid)
+        raise ProtocolError(f"unknown request fields: {names} (fields: id, cmd, args, protocol)", rid)
+    version = msg.get("protocol", PROTOCOL_VERSION)
+    if version != PROTOCOL_VERSION:
+        raise ProtocolError(
+            f"this orccadd speaks protocol {PROTOCOL_VERSION}, the client {str(version)[:20]}: use the "
+            "orccadctl of the same release (`orccadd --version`, `orccadctl --version`)",
+            rid,
+        )
     cmd = msg.get("cmd")
     if not isinstance(cmd, str):
         raise ProtocolError("'cmd' must be a string", rid)

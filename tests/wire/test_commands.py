@@ -92,3 +92,16 @@ def test_orccadctl_help_is_the_tables() -> None:
         timeout=60,
     )
     assert COMMANDS["abort"].help.replace("`", "") in " ".join(out.stdout.split())
+
+
+def test_a_request_of_another_protocol_version_is_refused_naming_both() -> None:
+    from orccadd.wire.schema import PROTOCOL_VERSION
+
+    ok = {"id": 1, "cmd": "status", "args": {}}
+    assert parse_request(json.dumps(ok).encode())[1] == "status"  # no version: accepted
+    assert parse_request(json.dumps({**ok, "protocol": PROTOCOL_VERSION}).encode())[1] == "status"
+    old = json.dumps({**ok, "protocol": PROTOCOL_VERSION - 1}).encode()
+    with pytest.raises(
+        ProtocolError, match=rf"speaks protocol {PROTOCOL_VERSION}, the client {PROTOCOL_VERSION - 1}"
+    ):
+        parse_request(old)
