@@ -44,6 +44,16 @@ def add_parsers(sub: Any) -> None:
         help="assertions to include: safety, conflicts (default: both)",
     )
     e.set_defaults(func=cmd_export)
+    m = sub.add_parser("modules", help="the module catalogue: ports, parameters, defaults and bounds")
+    m.add_argument("--config", default="sim-ur5e", help="the robot that sizes them (file or shipped name)")
+    m.set_defaults(func=cmd_modules)
+
+
+def cmd_modules(args: argparse.Namespace) -> int:
+    from orccadd.ctl.catalogue import catalogue
+
+    print(catalogue(args.config))
+    return EXIT_OK
 
 
 def cmd_check(args: argparse.Namespace) -> int:
