@@ -235,7 +235,8 @@ class UrRtdeArm(PhysicalResource):
             self._clear_stop_locked()
 
     def _clear_stop_locked(self) -> None:
-        if self.config.safe_stop.category == 1:  # it was powered off at rest
+        if self._off_by_us:  # our category 1 stop powered it off at rest (not the controller's stop:
+            # `reset` has restarted its script already; a second restart raced the next commands)
             if not self.settings.power_on:
                 raise ResourceError(f"{self.name}: powered off by the stop: power it on at the pendant")
             self._power_on()
