@@ -7,6 +7,7 @@ the arm."""
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -43,35 +44,30 @@ def run_mission(d: Daemon) -> list[tuple[int, int, tuple[str, ...], tuple[str, .
     ]
 
 
+@contextmanager
+def arm_config(backend: str, tmp: Path) -> Iterator[Path]:
+    """The robot config orccadd runs on for `backend`, with its device simulator running."""
+    if backend == "sim":
+        yield robot_config(tmp)
+    elif backend == "canopen402":
+        with canopen_rig(tmp) as rig:
+            yield rig.config
+    elif backend == "ur_rtde":
+        with UrSimProcess(UR, "--boot", "running", "--priority", "70"):
+            yield local_config(tmp, UR)
+    else:  # dxl-6axis-sim: the servo simulator on a pseudo-terminal under tmp
+        with dxl_daemon_rig(tmp) as rig:
+            yield rig.config
+
+
 @pytest.fixture(params=["sim", "canopen402", "ur_rtde", "dynamixel"])
 def backend_daemon(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Daemon]:
-    if request.param == "sim":
-        d = start_daemon_with(tmp_path, robot_config(tmp_path))
+    with arm_config(request.param, tmp_path) as config:
+        d = start_daemon_with(tmp_path, config)
         try:
             yield d
         finally:
-            d.stop()
-    elif request.param == "canopen402":
-        with canopen_rig(tmp_path) as rig:
-            d = start_daemon_with(tmp_path, rig.config)
-            try:
-                yield d
-            finally:
-                d.stop()
-    elif request.param == "ur_rtde":
-        with UrSimProcess(UR, "--boot", "running", "--priority", "70"):
-            d = start_daemon_with(tmp_path, local_config(tmp_path, UR))
-            try:
-                yield d
-            finally:
-                d.stop()
-    else:  # dxl-6axis-sim: the servo simulator on a pseudo-terminal under tmp_path
-        with dxl_daemon_rig(tmp_path) as rig:
-            d = start_daemon_with(tmp_path, rig.config)
-            try:
-                yield d
-            finally:
-                d.stop()
+            d.stop()  # before the simulator goes
 
 
 EXPECTED = [
