@@ -1,5 +1,6 @@
 """What a mission must pass before the daemon runs it: one function for `orccadctl check` and
-for the daemon's `load` (which then builds the tasks against its robot, `daemon.mission`).
+for the daemon's `load`, and the tasks built against a robot (`build_mission_tasks`: the daemon's
+`load`, and `orccadctl check --config ROBOT`).
 
 Compile (parse, elaborate, build the automaton: `MissionError` at file:line:col), then the
 verifier's checks with the execution machine's own (one Robot-Task active at a time, every task
@@ -8,11 +9,16 @@ from a task file): the `Report`, whose failures the caller refuses with their co
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from orccadd.automaton import Automaton, Report, compile_file, verify
+from orccadd.automaton import ast as A
 from orccadd.automaton.compiler import DEFAULT_MAX_STATES
 from orccadd.automaton.verify import CheckResult
+from orccadd.errors import MissionError, OrccaddError, ParameterError
+from orccadd.physres.base import PhysicalResource
+from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
 from orccadd.task.spec import read_task_interface
 
 
@@ -32,3 +38,88 @@ def _check_task_files(automaton: Automaton) -> CheckResult:
             explanation='the daemon runs tasks declared `from "file.toml"` only',
         )  # fmt: skip
     return CheckResult("task files", True, "every task is built from a task file")
+
+
+def build_mission_tasks(
+    automaton: Automaton, resource: PhysicalResource, registry: EventRegistry, queue: EventQueue
+) -> tuple[tuple[RobotTask, ...], dict[int, int]]:
+    """Every task of a compiled mission built for this robot's resource (modules instantiated,
+    ports bound, the mission's `set` lines applied), and event registry id → the automaton's
+    input bit. `MissionError` at the task's or `set` line's place, `OrccaddError` otherwise.
+    Needs no hardware: the resource is built, not configured. Not for a tick."""
+    p = automaton.program
+    text = p.text
+    for decl in p.ast.tasks:
+        if decl.resource != resource.name:
+            raise _err(
+                decl.loc,
+                text,
+                f"task {decl.name} runs on `{decl.resource}`, but this robot's resource is `{resource.name}`",
+            )
+    tasks = tuple(_build(decl, p.file, text, resource, registry, queue) for decl in p.ast.tasks)
+    bits: dict[int, int] = {}
+    for i, name in enumerate(p.inputs):
+        if p.input_task[i] < 0:
+            continue
+        try:
+            bits[registry.id(name)] = 1 << i
+        except KeyError:
+            raise OrccaddError(
+                f"{p.file}: the mission expects event {name}, which its task does not raise"
+            ) from None
+    return tasks, bits
+
+
+def _err(decl_loc: A.Loc, text: str, msg: str) -> MissionError:
+    return MissionError(decl_loc.file, decl_loc.line, decl_loc.col, msg, text)
+
+
+def _build(
+    decl: A.TaskDecl,
+    file: str,
+    text: str,
+    resource: PhysicalResource,
+    registry: EventRegistry,
+    queue: EventQueue,
+) -> RobotTask:
+    src = Path(decl.source)
+    if not src.is_absolute():
+        src = Path(file).parent / src
+    spec = load_task_file(src)
+    spec = replace(spec, task=replace(spec.task, name=decl.name))
+    try:
+        task = build_task(spec, resource, registry, queue)
+    except OrccaddError as e:
+        raise _err(decl.loc, text, f"task {decl.name}: {e}") from None
+    for ps in decl.params:
+        module = next(m for m in task.modules if m.name == ps.module)
+        value = list(ps.value) if isinstance(ps.value, tuple) else ps.value
+        try:
+            module.configure({ps.param: value})
+        except ParameterError as e:
+            raise _err(ps.loc, text, f"task {decl.name}: {e}") from None
+    missing = [f"{m.name}.{name}" for m in task.modules for name in m.missing()]
+    if missing:
+        first = missing[0]
+        raise _err(
+            decl.loc,
+            text,
+            f"task {decl.name}: {', '.join(missing)} required, and set neither in {src.name} "
+            f"(modules.{first}) nor by the mission (`set {first} = ...`)",
+        )
+    return task
+
+
+def check_on_robot(automaton: Automaton, resource: PhysicalResource, robot: str) -> CheckResult:
+    """Whether every task of the mission builds on this robot (`orccadctl check --config`):
+    a misspelt module parameter, a missing gain or a joint the robot lacks, before `load`."""
+    try:
+        tasks, _ = build_mission_tasks(automaton, resource, EventRegistry(), EventQueue())
+    except OrccaddError as e:
+        return CheckResult(f"robot {robot}", False, str(e).splitlines()[0], explanation=_rest(e))
+    built = ", ".join(f"{t.name} ({len(t.modules)} modules)" for t in tasks)
+    return CheckResult(f"robot {robot}", True, f"every task builds on {resource.name}: {built}")
+
+
+def _rest(e: OrccaddError) -> str:
+    return "\n       ".join(str(e).splitlines()[1:])

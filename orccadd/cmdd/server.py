@@ -128,6 +128,7 @@ class CommandDaemon:
         self.tel = TelemetryBlock.attach(telemetry)
         self.roles = Roles(cfg)
         self.desc: dict[str, Any] = {}
+        self.missions: dict[int, dict[str, Any]] = {}  # generation → mission: names the trace
         self.slots = {Role.CONTROL: 0, Role.READ: 0}  # connections served, per role
         self.roleless = 0
         self.csv: CsvLog | None = None
@@ -146,6 +147,10 @@ class CommandDaemon:
             reply = await self.rt.call("describe", {})
             if reply.get("ok"):
                 self.desc = reply["result"]
+                self.missions = {int(m["generation"]): m for m in self.desc.get("missions", [])}
+
+    def decode_trace(self, rec: Any) -> dict[str, Any]:
+        return views.decode_trace(rec, self.desc, self.missions)
 
     # ---- socket ---------------------------------------------------------------------------
     def _prepare_socket(self) -> socket.socket:
@@ -399,7 +404,7 @@ class CommandDaemon:
             raise ValueError("events: last must be in [0, 100000]")
         r = RingReader(self.tel.trace, self.tel.header, H.TRACE_HEAD, from_now=False)
         recs: Any = r.poll()[-last:] if last else []
-        out = [views.decode_trace(rec, self.desc) for rec in recs]
+        out = [self.decode_trace(rec) for rec in recs]
         if not follow:
             return {"events": out, "lost": r.lost}
         for e in out:
@@ -410,7 +415,7 @@ class CommandDaemon:
             if len(new):
                 await self.refresh()
             for rec in new:
-                writer.write(encode({"id": rid, "ok": True, "stream": views.decode_trace(rec, self.desc)}))
+                writer.write(encode({"id": rid, "ok": True, "stream": self.decode_trace(rec)}))
             await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
         return {"lost": r.lost}
 

@@ -8,6 +8,7 @@ when a new mission was loaded, to learn the names behind the indices).
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -145,12 +146,22 @@ def status(tel: TelemetryBlock, desc: dict[str, Any], log: dict[str, Any] | None
     return out
 
 
-def decode_trace(rec: np.ndarray, desc: dict[str, Any]) -> dict[str, Any]:
+def decode_trace(
+    rec: np.ndarray, desc: dict[str, Any], missions: Mapping[int, dict[str, Any]] | None = None
+) -> dict[str, Any]:
+    """One trace record for people and programs. An instant's input and action indices are named
+    by the mission that was loaded when it was written (`missions`: generation → the mission's
+    description, kept by the command daemon), not by the one loaded now; one no longer known (the
+    command daemon started after it was replaced) keeps its indices as `#i`."""
     kind = Trace(int(rec[R.KIND]))
-    mission = desc.get("mission") or {}
+    gen = int(rec[R.MISSION_GEN])
+    known = dict(missions or {})
+    if desc.get("generation") == gen:
+        known[gen] = desc.get("mission") or {}
+    mission = known.get(gen) or {}
     inputs: list[str] = mission.get("inputs", [])
     actions: list[str] = mission.get("actions", [])
-    events: list[str] = desc.get("events", [])
+    events: list[str] = desc.get("events", [])  # the registry only grows: ids keep their names
     out: dict[str, Any] = {
         "seq": int(rec[R.SEQ]),
         "kind": kind.name.lower(),
@@ -163,6 +174,7 @@ def decode_trace(rec: np.ndarray, desc: dict[str, Any]) -> dict[str, Any]:
         base = len(R)
         ins = [int(i) for i in rec[base : base + n_in]]
         acts = [int(i) for i in rec[base + TRACE_IDX : base + TRACE_IDX + n_act]]
+        out["mission"] = mission.get("name")
         out["from"] = int(rec[R.STATE_FROM])
         out["to"] = int(rec[R.STATE_TO])
         out["inputs"] = [inputs[i] if i < len(inputs) else f"#{i}" for i in ins]
@@ -170,8 +182,8 @@ def decode_trace(rec: np.ndarray, desc: dict[str, Any]) -> dict[str, Any]:
     elif kind is Trace.EVENT:
         out["event"] = events[code] if 0 <= code < len(events) else f"#{code}"
     else:
-        known = code in OperatorAction._value2member_map_
-        out["command"] = OperatorAction(code).name.lower() if known else code
+        known_action = code in OperatorAction._value2member_map_
+        out["command"] = OperatorAction(code).name.lower() if known_action else code
     return out
 
 

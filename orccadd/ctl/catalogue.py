@@ -32,8 +32,9 @@ def _value(v: object) -> str:
 def _param(p: Parameter) -> str:
     lo, hi = p.bounds
     tune = "tunable" if p.tunable else "fixed at load"
+    default = "required" if p.required else _value(p.default)
     return (
-        f"    {p.name:20s} default {_value(p.default):14s} in [{_value(lo)}, {_value(hi)}] {p.unit or '-'}"
+        f"    {p.name:20s} default {default:14s} in [{_value(lo)}, {_value(hi)}] {p.unit or '-'}"
         f"  ({'×'.join(map(str, p.shape)) or 'scalar'}, {tune})"
     )
 

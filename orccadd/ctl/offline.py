@@ -26,6 +26,11 @@ def add_parsers(sub: Any) -> None:
         action="store_true",
         help="the language's checks only, not whether this daemon can load it (another platform's mission)",
     )
+    p.add_argument(
+        "--config",
+        default=None,
+        help="also build every task on this robot (a robot config file or a shipped name)",
+    )
     p.set_defaults(func=cmd_check)
     g = sub.add_parser("graph", help="draw a mission's automaton, or an abstract view of it")
     g.add_argument("file")
@@ -68,6 +73,8 @@ def cmd_check(args: argparse.Namespace) -> int:
             report = verify(a)
         else:
             a, report = check_mission(args.file, args.max_states)
+            if args.config:
+                report.results.append(_on_robot(a, args.config))
     except MissionError as e:
         if args.json:
             print(
@@ -97,6 +104,15 @@ def cmd_check(args: argparse.Namespace) -> int:
     else:
         print(report.format())
     return EXIT_OK if report.ok else EXIT_FAILED
+
+
+def _on_robot(a: Any, config: str) -> Any:
+    from orccadd.config.shipped import robot_config_path
+    from orccadd.mission import check_on_robot
+    from orccadd.robot import load_robot
+
+    robot = load_robot(robot_config_path(config))  # ConfigError: exit 2, naming file and key
+    return check_on_robot(a, robot.resource, robot.config.name)
 
 
 def cmd_graph(args: argparse.Namespace) -> int:

@@ -116,6 +116,7 @@ class Machine:
             "tasks": [t.name for t in mc.tasks()],
             "events": self.registry.names(),
             "mission": mc.mission.describe() if mc.mission else None,
+            "missions": mc.loaded,  # the last ones loaded: the trace names its records by them
             "log": self.notes[-10:],
             "fault": self.supervisor.fault,
         }

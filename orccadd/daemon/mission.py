@@ -7,15 +7,14 @@ set from the mission's `set` lines), so that switching at run time only flips a 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 from orccadd.automaton import Automaton, Report
-from orccadd.automaton import ast as A
-from orccadd.errors import MissionError, OrccaddError, ParameterError, VerificationError
-from orccadd.mission import check_mission
+from orccadd.errors import VerificationError
+from orccadd.mission import build_mission_tasks, check_mission
 from orccadd.physres.base import PhysicalResource
-from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
+from orccadd.task import EventQueue, EventRegistry, RobotTask
 
 
 @dataclass(frozen=True)
@@ -48,10 +47,6 @@ class LoadedMission:
         }
 
 
-def _err(decl_loc: A.Loc, text: str, msg: str) -> MissionError:
-    return MissionError(decl_loc.file, decl_loc.line, decl_loc.col, msg, text)
-
-
 def load_mission(
     path: str | Path, resource: PhysicalResource, registry: EventRegistry, queue: EventQueue
 ) -> LoadedMission:
@@ -81,51 +76,5 @@ def prepare_mission(
     queue: EventQueue,
 ) -> LoadedMission:
     """Check a verified mission against this robot and build its tasks (milliseconds)."""
-    p = automaton.program
-    text = p.text
-    for decl in p.ast.tasks:
-        if decl.resource != resource.name:
-            raise _err(
-                decl.loc,
-                text,
-                f"task {decl.name} runs on `{decl.resource}`, but this robot's resource is `{resource.name}`",
-            )
-    tasks = [_build(decl, p.file, text, resource, registry, queue) for decl in p.ast.tasks]
-    bits: dict[int, int] = {}
-    for i, name in enumerate(p.inputs):
-        if p.input_task[i] < 0:
-            continue
-        try:
-            bits[registry.id(name)] = 1 << i
-        except KeyError:
-            raise OrccaddError(
-                f"{path}: the mission expects event {name}, which its task does not raise"
-            ) from None
-    return LoadedMission(str(path), automaton, report, tuple(tasks), bits)
-
-
-def _build(
-    decl: A.TaskDecl,
-    file: str,
-    text: str,
-    resource: PhysicalResource,
-    registry: EventRegistry,
-    queue: EventQueue,
-) -> RobotTask:
-    src = Path(decl.source)
-    if not src.is_absolute():
-        src = Path(file).parent / src
-    spec = load_task_file(src)
-    spec = replace(spec, task=replace(spec.task, name=decl.name))
-    try:
-        task = build_task(spec, resource, registry, queue)
-    except OrccaddError as e:
-        raise _err(decl.loc, text, f"task {decl.name}: {e}") from None
-    for ps in decl.params:
-        module = next(m for m in task.modules if m.name == ps.module)
-        value = list(ps.value) if isinstance(ps.value, tuple) else ps.value
-        try:
-            module.configure({ps.param: value})
-        except ParameterError as e:
-            raise _err(ps.loc, text, f"task {decl.name}: {e}") from None
-    return task
+    tasks, bits = build_mission_tasks(automaton, resource, registry, queue)
+    return LoadedMission(str(path), automaton, report, tasks, bits)

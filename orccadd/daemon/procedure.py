@@ -19,6 +19,7 @@ from orccadd.task import RobotTask
 from orccadd.wire.schema import MachineState, MissionResult, Trace
 
 REACTIONS_PER_INSTANT = 64  # instants the automaton may take on its own (`pause`) in one go
+MISSIONS_KEPT = 8  # missions whose names `describe` keeps for the trace
 
 
 def _bits(mask: int) -> list[int]:
@@ -49,6 +50,7 @@ class MissionControl:
         self.mission: LoadedMission | None = None
         self.runner: Runner | None = None
         self.generation = 0
+        self.loaded: list[dict[str, object]] = []  # the last missions loaded, names for the trace
         self.instants = 0
         self.result = MissionResult.NONE
         self.current: RobotTask | None = None  # the mission task the automaton wants active
@@ -72,6 +74,11 @@ class MissionControl:
         self.loop.set_mission_tasks(loaded.tasks)
         self.mission = loaded
         self.generation += 1
+        self.pub.mission_gen = self.generation
+        self.loaded = [
+            *self.loaded[-(MISSIONS_KEPT - 1) :],
+            {"generation": self.generation, **loaded.describe()},
+        ]
         self.state = MachineState.READY
         self.result = MissionResult.NONE
 

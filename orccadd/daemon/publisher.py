@@ -14,6 +14,7 @@ from orccadd.wire.telemetry import TelemetryBlock
 class Publisher:
     def __init__(self, tel: TelemetryBlock) -> None:
         self.tel = tel
+        self.mission_gen = 0  # stamped on every trace record: the mission whose names it uses
 
     def trace(
         self,
@@ -37,6 +38,7 @@ class Publisher:
         acts = (actions or [])[:TRACE_IDX]
         rec[R.N_IN] = len(ins)
         rec[R.N_ACT] = len(acts)
+        rec[R.MISSION_GEN] = self.mission_gen
         base = len(R)
         rec[base : base + len(ins)] = ins
         rec[base + TRACE_IDX : base + TRACE_IDX + len(acts)] = acts

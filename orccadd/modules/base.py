@@ -68,7 +68,10 @@ class Port:
 class Parameter:
     """A declared parameter. `value` is a numpy array updated in place (never rebound)."""
 
-    __slots__ = ("bounds", "default", "integer", "module", "name", "shape", "tunable", "unit", "value")
+    __slots__ = (
+        "bounds", "default", "given", "integer", "module", "name", "required", "shape", "tunable", "unit",
+        "value",
+    )  # fmt: skip
 
     def __init__(
         self,
@@ -80,6 +83,7 @@ class Parameter:
         tunable: bool,
         shape: tuple[int, ...],
         integer: bool = False,
+        required: bool = False,
     ) -> None:
         self.module = module
         self.name = name
@@ -91,6 +95,9 @@ class Parameter:
         self.value: FloatArray = np.zeros(shape)
         self.value[...] = self.check(default)
         self.default = self.value.copy()
+        # a mission's task must set it (task file or `set` line): the default is a placeholder
+        self.required = required
+        self.given = False
 
     @property
     def path(self) -> str:
@@ -130,6 +137,7 @@ class Parameter:
             "bounds": [np.asarray(b).tolist() for b in self.bounds],
             "unit": self.unit,
             "tunable": self.tunable,
+            "required": self.required,
         }
 
 
@@ -176,8 +184,12 @@ class Module(ABC):
         tunable: bool = False,
         shape: tuple[int, ...] = (),
         integer: bool = False,
+        required: bool = False,
     ) -> Parameter:
-        param = Parameter(self.name, name, default, bounds, unit, tunable, shape, integer)
+        """`required`: a task of a mission must set it (its task file or the mission's `set`);
+        `default` is then only what a task built outside a mission (a test, a benchmark) starts
+        from. A robot-specific gain or a goal, which no default fits."""
+        param = Parameter(self.name, name, default, bounds, unit, tunable, shape, integer, required)
         self.parameters[name] = param
         return param
 
@@ -190,7 +202,12 @@ class Module(ABC):
                 detail = f"is not a parameter of {self.type_name} (parameters: {allowed})"
                 raise ParameterError(f"{self.name}.{key} {detail}", name=key, detail=detail)
             self.parameters[key].value[...] = self.parameters[key].check(v)
+            self.parameters[key].given = True
             self.on_parameter_change(key)
+
+    def missing(self) -> list[str]:
+        """Required parameters not set yet (see `add_parameter`)."""
+        return [p.name for p in self.parameters.values() if p.required and not p.given]
 
     def start(self, state: JointState) -> None:
         """Initialise from the measured state when the task starts (no jump in the command)."""

@@ -91,9 +91,12 @@ class JointPDGravity(JointController):
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
         n = ctx.dof
-        self.kp = self.add_parameter("kp", 200.0, bounds=(0.0, 1e5), unit="N.m/rad", tunable=True, shape=(n,))
+        # stiffness in N.m/rad fits one arm only: a mission's task says it (no default used)
+        self.kp = self.add_parameter(
+            "kp", 200.0, bounds=(0.0, 1e5), unit="N.m/rad", tunable=True, shape=(n,), required=True
+        )
         self.kd = self.add_parameter(
-            "kd", 20.0, bounds=(0.0, 1e4), unit="N.m.s/rad", tunable=True, shape=(n,)
+            "kd", 20.0, bounds=(0.0, 1e4), unit="N.m.s/rad", tunable=True, shape=(n,), required=True
         )
 
     def update(self, t_s: float) -> None:

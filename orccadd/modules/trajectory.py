@@ -36,6 +36,7 @@ class RuckigTrajectory(Module):
             unit="rad",
             tunable=True,
             shape=(n,),
+            required=True,  # a goal: a copied task without one would go home
         )
         self.speed_scale = self.add_parameter("speed_scale", 1.0, bounds=(0.01, 1.0), unit="1", tunable=True)
         self._otg = Ruckig(n, ctx.period_s)

@@ -16,7 +16,7 @@ from enum import IntEnum
 
 from orccadd.types import CommandMode, Phase, Status
 
-PROTOCOL_VERSION = 3  # bumped when a request, reply, record layout or enum changes meaning
+PROTOCOL_VERSION = 4  # bumped when a request, reply, record layout or enum changes meaning
 
 MAGIC = 0x0CCADD02
 HEADER_LEN = 16
@@ -127,6 +127,7 @@ class R(IntEnum):
     CODE = 6  # event id (EVENT) or OperatorAction (COMMAND)
     N_IN = 7
     N_ACT = 8
+    MISSION_GEN = 9  # the mission loaded when it was written (S.MISSION_GEN): names its indices
 
 
 TRACE_WIDTH = len(R) + 2 * TRACE_IDX

@@ -118,3 +118,28 @@ safe procedure S
   await Stop
 end
 """
+
+
+def test_check_config_builds_every_task_on_the_robot(tmp_path: Path) -> None:
+    # a misspelt module parameter passes the language's checks, and is caught on the robot
+    text = (ROOT / "configs/missions/demo.mission").read_text()
+    text = text.replace('"../tasks/', f'"{ROOT}/configs/tasks/').replace(
+        "set traj.target_rad", "set traj.target_rads", 1
+    )
+    mission = tmp_path / "m.mission"
+    mission.write_text(text)
+    assert ctl("check", str(mission)).returncode == 0
+    r = ctl("check", str(mission), "--config", "sim-ur5e")
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "FAIL robot ur5e" in r.stdout and "traj.target_rads is not a parameter" in r.stdout
+    assert f"{mission}:11:" in r.stdout  # the `set` line
+    ok = ctl("check", str(ROOT / "configs/missions/demo.mission"), "--config", "sim-ur5e", "--json")
+    checks = {c["name"]: c for c in json.loads(ok.stdout)["checks"]}
+    assert ok.returncode == 0 and checks["robot ur5e"]["ok"], ok.stdout
+    bad = ctl("check", str(mission), "--config", "no-such-robot")
+    assert bad.returncode == 2 and "no shipped robot config" in bad.stderr
+    # a task copied without its goal (a required parameter): refused, naming it, not sent home
+    home_goal = "  set traj.target_rads = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]\n"
+    mission.write_text(text.replace(home_goal, ""))
+    r = ctl("check", str(mission), "--config", "sim-ur5e")
+    assert r.returncode == 1 and "task Home: traj.target_rad required" in r.stdout, r.stdout

@@ -84,6 +84,13 @@ def test_hold_resume_stop(daemon: Daemon) -> None:
     assert isinstance(r, dict) and r["stopped"]
     s = daemon.wait(lambda s: s["state"] == "ready" and s["active_task"] == "Hold")
     assert s["result"] == "success" and not s["faulted"]
+    # another mission loaded: the first run's trace keeps the names of the mission it came from
+    daemon.call("load", path=str(ROOT / "configs/missions/demo_position.mission"))
+    ev = daemon.call("events", last=500)
+    assert isinstance(ev, dict)
+    instants = [e for e in ev["events"] if e["kind"] == "instant"]
+    assert instants and {e["mission"] for e in instants} == {"PickDemo"}, instants
+    assert any("start Reach" in e["actions"] for e in instants)
 
 
 def test_abort_safe_stops_and_reset_recovers(daemon: Daemon) -> None:
