@@ -77,6 +77,7 @@ class TaskInterface:
     t2: tuple[str, ...]
     t3: tuple[str, ...]
     sync: tuple[str, ...]
+    times_out: bool = True  # raises the type 3 `Timeout` after its `timeout_s` (TASK_TIMEOUT)
 
 
 # Reads a task file's interface; raises an `OrccaddError` naming the file when it cannot.
@@ -87,3 +88,5 @@ TaskFileReader = Callable[[Path], TaskInterface]
 # violated, a device fault, a link lost), the executor (overruns in a row) and the task itself
 # (its law raised an exception: a module's or a backend's bug, never a dead control loop).
 BUILTIN_T3 = ("LimitViolation", "ResourceFault", "CommLost", "Overrun", "LawError")
+# ... and the one a task with a finite `timeout_s` has: it ran that long without ending
+TASK_TIMEOUT = "Timeout"

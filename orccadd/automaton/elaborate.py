@@ -23,7 +23,7 @@ from orccadd.automaton.program import (
     event_full_name,
 )
 from orccadd.errors import MissionError, OrccaddError
-from orccadd.types import BUILTIN_T3, TaskFileReader
+from orccadd.types import BUILTIN_T3, TASK_TIMEOUT, TaskFileReader
 
 # Words that would be read as a keyword where a name can stand (statements, signal expressions).
 _RESERVED = (
@@ -200,7 +200,7 @@ class _Elaborator:
             "post": {""} if spec.has_post else set(),
             "pre": {""} if spec.has_pre else set(),
             "T2": set(spec.t2),
-            "T3": set(spec.t3),
+            "T3": set(spec.t3) | ({TASK_TIMEOUT} if spec.times_out else set()),
             "sync": set(spec.sync),
         }
         for kind, name, loc in declared:

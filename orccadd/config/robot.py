@@ -111,6 +111,9 @@ class DaemonConfig:
     switch_blend_s: float = field(default=0.02, bounds=(0.0, 1.0))
     on_command_daemon_loss: Literal["continue", "safe_stop"] = field(default="continue")
     watchdog_stale_periods: int = field(default=50, bounds=(2, 100000))
+    # a mission's task that runs longer than this (its task file's `[task] timeout_s`, 0: this)
+    # raises the type 3 `Timeout`: nothing waits forever unless its task file says `inf`
+    task_timeout_s: float = field(default=300.0, bounds=(0.1, 86400.0))
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import replace
 from typing import Any
 
 from orccadd.config.robot import RobotConfig
@@ -57,9 +58,10 @@ class Machine:
         self.pub = Publisher(telemetry)
         self.registry = EventRegistry()
         self.queue = EventQueue(4096)
-        hold = build_task(
-            load_task_file(cfg.resolve(cfg.daemon.hold_task)), resource, self.registry, self.queue
-        )
+        hold_spec = load_task_file(cfg.resolve(cfg.daemon.hold_task))
+        # the daemon's own task holds for as long as nothing else commands the arm
+        hold_spec = replace(hold_spec, task=replace(hold_spec.task, timeout_s=float("inf")))
+        hold = build_task(hold_spec, resource, self.registry, self.queue)
         self.loop = SwitchingLoop(
             resource,
             clock,

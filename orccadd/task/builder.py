@@ -23,7 +23,7 @@ from orccadd.task.events import (
 )
 from orccadd.task.spec import EventSpec, TaskSpec
 from orccadd.task.task import Precondition, RobotTask, ShellEvent, TaskSignature
-from orccadd.types import BUILTIN_T3, CommandMode
+from orccadd.types import BUILTIN_T3, TASK_TIMEOUT, CommandMode
 
 WIRE_RE = re.compile(r"^\s*(\w+)\.(\w+)\s*->\s*(\w+)\.(\w+)\s*$")
 COMMAND_PORTS = {
@@ -152,6 +152,11 @@ def build_task(
         lo, hi = p.within if p.within else (-np.inf, np.inf)
         pres.append(Precondition(p.name, port.value, p.timeout_s, p.max_abs_below, lo, hi))
     builtin = {name: registry.register(h.name, EventKind.T3, name) for name in BUILTIN_T3}
+    timeout_s = h.timeout_s or resource.config.daemon.task_timeout_s
+    t3_builtin: tuple[str, ...] = BUILTIN_T3
+    if timeout_s != float("inf"):
+        builtin[TASK_TIMEOUT] = registry.register(h.name, EventKind.T3, TASK_TIMEOUT)
+        t3_builtin += (TASK_TIMEOUT,)
     t2 = [e.name for e in spec.events.T2]
     if spec.preconditions:
         builtin[PRECONDITION_TIMEOUT] = registry.register(h.name, EventKind.T2, PRECONDITION_TIMEOUT)
@@ -165,7 +170,7 @@ def build_task(
         has_post=bool(spec.events.post),
         t1=tuple(e.name for e in spec.events.T1),
         t2=tuple(t2),
-        t3=tuple(e.name for e in spec.events.T3) + BUILTIN_T3,
+        t3=tuple(e.name for e in spec.events.T3) + t3_builtin,
         sync=tuple(e.name for e in spec.events.sync),
     )
     return RobotTask(
@@ -179,6 +184,7 @@ def build_task(
         queue,
         decimation,
         period,
+        timeout_s,
     )
 
 
@@ -324,7 +330,7 @@ def _shell(
     for label, kind, specs in groups:
         for i, e in enumerate(specs):
             key = f"events.{label}[{i}]"
-            if kind is EventKind.T3 and e.name in BUILTIN_T3:
+            if kind is EventKind.T3 and e.name in (*BUILTIN_T3, TASK_TIMEOUT):
                 raise ConfigError(src, f"{key}.name", f"(={e.name!r}) is a built-in type 3 exception")
             port = flag_of(e.when, f"{key}.when")
             reaction: list[tuple[Module, Parameter, np.ndarray]] = []

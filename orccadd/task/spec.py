@@ -55,6 +55,9 @@ class TaskHeader:
     command: Literal["torque", "velocity", "position"] = field()
     joints: tuple[str, ...] = field(default=())  # empty: all joints of the resource
     period_s: float = field(default=0.0, bounds=(0.0, 1.0))  # 0: the robot's control period
+    # running longer is the type 3 `Timeout` (safe stop): 0 takes the robot's
+    # `[daemon] task_timeout_s`; `inf` says the task may run forever (no `Timeout` then)
+    timeout_s: float = field(default=0.0, bounds=(0.0, INF))
 
 
 @dataclass(frozen=True)
@@ -190,6 +193,7 @@ def interface_of(spec: TaskSpec) -> TaskInterface:
         t2=tuple(e.name for e in spec.events.T2),
         t3=tuple(e.name for e in spec.events.T3),
         sync=tuple(e.name for e in spec.events.sync),
+        times_out=t.timeout_s != INF,
     )
 
 

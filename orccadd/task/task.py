@@ -19,7 +19,7 @@ from orccadd.errors import ParameterError
 from orccadd.modules.base import Module, Parameter
 from orccadd.physres.base import PhysicalResource
 from orccadd.task.events import EventKind, EventQueue
-from orccadd.types import T3_MASK, CommandMode, Phase, Status
+from orccadd.types import T3_MASK, TASK_TIMEOUT, CommandMode, Phase, Status
 from orccadd.vec import max_of, min_of
 
 log = logging.getLogger("orccadd.task")
@@ -116,6 +116,7 @@ class RobotTask:
         queue: EventQueue,
         decimation: int,
         period_s: float,
+        timeout_s: float = float("inf"),
     ) -> None:
         self.signature = signature
         self.name = signature.name
@@ -129,6 +130,7 @@ class RobotTask:
         self.queue = queue
         self.decimation = decimation
         self.period_s = period_s
+        self.timeout_s = timeout_s  # of the law's run: then the type 3 `Timeout` (inf: never)
         self.phase = Phase.IDLE
         self.ticks = 0
         self.t_started_s = 0.0
@@ -252,6 +254,10 @@ class RobotTask:
             if self.preconditions:
                 self.queue.push(t_s, self.builtin_ids["pre"])
         if phase not in RUNNING:
+            return
+        if t_s - self.t_started_s >= self.timeout_s:
+            self.raise_t3(t_s, TASK_TIMEOUT)
+            self.fault_reason = f"{TASK_TIMEOUT}: ran {self.timeout_s:g} s (its timeout_s) without ending"
             return
         self.ticks += 1
         if self.decimation > 1 and (self.ticks - 1) % self.decimation:

@@ -119,6 +119,7 @@ def test_task_file_gives_its_events_to_the_mission() -> None:
     assert "Move.T2.TrackingLost" in a.program.inputs
     assert "Move.T3.NearJointLimit" in a.program.inputs
     assert "Move.T2.PreconditionTimeout" in a.program.inputs  # the file has preconditions
+    assert "Move.T3.Timeout" in a.program.inputs  # and no `timeout_s = inf`: it may time out
 
 
 def test_task_on_the_wrong_resource_for_its_file() -> None:

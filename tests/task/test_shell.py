@@ -135,3 +135,19 @@ def test_a_law_that_outputs_nan_is_a_type_3_and_nothing_is_sent() -> None:
     assert s.resource.rejected_count == 1  # the first one: then the safe stop ignores commands
     check_stopped_safely(s, loop, category_torque_off=True)
     assert np.isfinite(s.resource.state.vector).all()
+
+
+def test_a_task_that_runs_past_its_timeout_is_a_type_3(task_variant) -> None:  # type: ignore[no-untyped-def]
+    s, task, loop = open_task(task_variant(('command = "torque"', 'command = "torque"\ntimeout_s = 0.2')))
+    next(m for m in task.modules if m.name == "traj").configure({"target_rad": FAR})
+    assert loop.run_task(task, timeout_s=10.0) is Phase.FAULT
+    assert s.event_names() == ["MoveJoints.pre", "MoveJoints.T3.Timeout"]
+    assert "ran 0.2 s" in task.fault_reason
+    check_stopped_safely(s, loop, category_torque_off=True)
+
+
+def test_timeouts_default_to_the_robots_and_inf_means_none(task_variant) -> None:  # type: ignore[no-untyped-def]
+    _, task, _ = open_task()
+    assert task.timeout_s == 300.0 and "Timeout" in task.signature.t3  # sim-ur5e's default
+    _, forever, _ = open_task(task_variant(('command = "torque"', 'command = "torque"\ntimeout_s = inf')))
+    assert forever.timeout_s == float("inf") and "Timeout" not in forever.signature.t3
