@@ -1,8 +1,10 @@
-"""The systemd unit is valid, and orccadd speaks sd_notify: READY, WATCHDOG while healthy, STOPPING."""
+"""The systemd unit is valid and sandboxed (yet leaves real time its due), and orccadd speaks
+sd_notify: READY, WATCHDOG while healthy, STOPPING."""
 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -13,26 +15,108 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orccadd.ctl.client import Client, ClientError
+from orccadd.config.robot import DaemonConfig
+from orccadd.ctl.client import DEFAULT_SOCKET, Client, ClientError
 from tests.daemon.conftest import ROOT, robot_config
 
 UNIT = ROOT / "packaging/systemd/orccadd.service"
+CAN_UNIT = ROOT / "packaging/systemd/orccadd-can@.service"
+EXEC = "/opt/orccadd/venv/bin/orccadd"  # where docs/install.md installs it
+MAX_EXPOSURE = 5.0  # `systemd-analyze security`: 0 safest, 10 unsandboxed root (9.6 before issue 18)
+needs_analyze = pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze missing")
 
 
-@pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze missing")
-def test_unit_file_verifies(tmp_path: Path) -> None:
-    # systemd-analyze checks that ExecStart exists: point it at a real file in a copy of the unit
+def settings(text: str, key: str) -> list[str]:
+    """The values of every `key=` line of a unit file."""
+    return [ln.split("=", 1)[1].strip() for ln in text.splitlines() if ln.startswith(f"{key}=")]
+
+
+def unit_copy(tmp_path: Path) -> Path:
+    """The unit, its ExecStart pointed at a real file (systemd-analyze checks that it exists)."""
     exe = tmp_path / "orccadd"
     exe.write_text("#!/bin/sh\n")
     exe.chmod(0o755)
+    text = UNIT.read_text()
+    assert settings(text, "ExecStart")[0].startswith(EXEC + " ")
     unit = tmp_path / "orccadd.service"
-    unit.write_text(UNIT.read_text().replace("/opt/orccadd/.venv/bin/orccadd", str(exe)))
+    unit.write_text(text.replace(EXEC, str(exe)))
+    return unit
+
+
+def verify(unit: Path) -> None:
     p = subprocess.run(["systemd-analyze", "verify", str(unit)], capture_output=True, text=True, timeout=60)
-    problems = [ln for ln in p.stderr.splitlines() if "orccadd.service" in ln]
+    problems = [ln for ln in p.stderr.splitlines() if unit.name in ln]
     assert p.returncode == 0 and not problems, p.stderr
+
+
+@needs_analyze
+def test_unit_file_verifies(tmp_path: Path) -> None:
+    verify(unit_copy(tmp_path))
     text = UNIT.read_text()
     for key in ("Type=notify", "WatchdogSec=", "LimitRTPRIO=", "LimitMEMLOCK=infinity", "Restart=on-failure"):
         assert key in text
+
+
+@needs_analyze
+def test_can_link_unit_verifies(tmp_path: Path) -> None:
+    unit = tmp_path / "orccadd-can@can0.service"
+    unit.write_text(CAN_UNIT.read_text())
+    verify(unit)
+
+
+@needs_analyze
+def test_unit_is_sandboxed(tmp_path: Path) -> None:
+    unit = unit_copy(tmp_path)
+    cmd = ["systemd-analyze", "security", "--offline=true", f"--threshold={MAX_EXPOSURE * 10:g}", str(unit)]
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    if "--offline" in p.stderr and "unrecognized" in p.stderr:  # systemd < 250
+        pytest.skip("systemd-analyze security has no --offline")
+    m = re.search(r"Overall exposure level for orccadd\.service: (\d+(?:\.\d+)?)", p.stdout)
+    assert m, p.stdout + p.stderr
+    assert float(m.group(1)) <= MAX_EXPOSURE, p.stdout
+    assert p.returncode == 0, p.stdout + p.stderr  # --threshold: the tool's own verdict agrees
+
+
+def syscalls(*names: str) -> set[str]:
+    """System calls named, with `@groups` expanded (as `systemd-analyze syscall-filter` lists them)."""
+    out: set[str] = set()
+    for name in names:
+        if not name.startswith("@"):
+            out.add(name)
+            continue
+        cmd = ["systemd-analyze", "syscall-filter", name]
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+        assert p.returncode == 0, p.stderr
+        members = [ln.strip() for ln in p.stdout.splitlines()[1:]]
+        out |= syscalls(*(m for m in members if m and not m.startswith("#")))
+    return out
+
+
+@needs_analyze
+def test_sandbox_leaves_real_time_its_due() -> None:
+    """What the loop needs stays allowed: SCHED_FIFO up to the configured priorities, locked
+    memory, the PM QoS device, the command socket where clients look for it."""
+    text = UNIT.read_text()
+    cfg = DaemonConfig()
+    assert int(settings(text, "LimitRTPRIO")[0]) >= max(cfg.automaton_priority, cfg.control_priority)
+    assert settings(text, "LimitMEMLOCK") == ["infinity"]
+    assert settings(text, "RestrictRealtime") in ([], ["no"])
+    assert "/dev/cpu_dma_latency rw" in settings(text, "DeviceAllow")
+    allowed = set()
+    for value in settings(text, "SystemCallFilter"):
+        assert not value.startswith("~"), "a deny list would have to be checked against these calls"
+        allowed |= syscalls(*value.split())
+    assert {"sched_setscheduler", "sched_setaffinity", "mlockall", "setpriority"} <= allowed
+    assert "AF_UNIX" in settings(text, "RestrictAddressFamilies")[0].split()
+    assert settings(text, "User") != ["root"]
+    argv = settings(text, "ExecStart")[0].split()
+    assert argv[argv.index("--socket") + 1] == cfg.socket == DEFAULT_SOCKET
+    assert Path(cfg.socket).parent == Path("/run") / settings(text, "RuntimeDirectory")[0]
+
+
+def test_files_the_unit_names_are_shipped() -> None:
+    for rel in set(re.findall(r"packaging/\S+?\.(?:rules|service)", UNIT.read_text())):
+        assert (ROOT / rel).is_file(), rel
 
 
 def test_sd_notify_messages(tmp_path: Path) -> None:
