@@ -64,8 +64,8 @@ def record(switches: int) -> tuple[Path, dict[str, object], list[str], float]:
 
 
 def analyse(log: Path, tasks: list[str], period_s: float, n_max: int) -> dict[str, object]:
-    with log.open() as fh:
-        rows = list(csv.reader(fh))
+    with log.open() as fh:  # the header's comment lines and the events ('#') are not rows
+        rows = list(csv.reader(line for line in fh if not line.startswith("#")))
     head, data = rows[0], np.array(rows[1:], dtype=float)
     col = {name: i for i, name in enumerate(head)}
     t, task, phase = data[:, col["time_s"]], data[:, col["task"]], data[:, col["phase"]]

@@ -6,7 +6,10 @@ import argparse
 import sys
 
 from orccadd.ctl import offline, online
+from orccadd.ctl.completion import SHELLS
 from orccadd.wire.version import version_text
+
+EXIT_INTERRUPTED = 130  # Ctrl-C: 128 + SIGINT, as a shell reports it
 
 
 def orccadd_main() -> int:
@@ -26,11 +29,26 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     offline.add_parsers(sub)
     online.add_parsers(sub)
+    p = sub.add_parser("completion", help="print a shell completion script (bash, zsh)")
+    p.add_argument("shell", choices=SHELLS)
     return parser
 
 
 def orccadctl_main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # every command: quietly, no traceback
+        return EXIT_INTERRUPTED
+
+
+def _main(argv: list[str] | None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command == "completion":
+        from orccadd.ctl.completion import completion_script
+
+        sys.stdout.write(completion_script(parser, args.shell))
+        return 0
     if args.global_socket and getattr(args, "socket", None) is None and hasattr(args, "socket"):
         args.socket = args.global_socket
     if args.global_json and hasattr(args, "json"):

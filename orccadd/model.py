@@ -6,9 +6,7 @@ whoever computes with it makes its own `pin.Data` with `new_data()` (model/works
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -16,36 +14,10 @@ import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
 from orccadd.config.schema import format_range
-from orccadd.errors import ConfigError, ModelError
+from orccadd.config.urdf import resolve_urdf
+from orccadd.errors import ConfigError
 
 FloatArray = npt.NDArray[np.float64]
-ERD_PREFIX = "example-robot-data:"
-
-
-def example_robot_data_dir() -> Path:
-    """The share folder of the example-robot-data package (installed by pip under cmeel.prefix)."""
-    for entry in sys.path:
-        candidate = Path(entry) / "cmeel.prefix" / "share" / "example-robot-data"
-        if candidate.is_dir():
-            return candidate
-    raise ModelError("the example-robot-data package is not installed (pip install example-robot-data)")
-
-
-def resolve_urdf(cfg: RobotConfig) -> Path:
-    urdf = cfg.model.urdf
-    shown = urdf[:200].encode("utf-8", "backslashreplace").decode()
-    try:
-        path = (
-            example_robot_data_dir() / urdf[len(ERD_PREFIX) :]
-            if urdf.startswith(ERD_PREFIX)
-            else cfg.resolve(urdf)
-        )
-        found = path.is_file()
-    except (OSError, ValueError) as e:  # a NUL, a name too long, ...
-        raise ConfigError(cfg.source, "model.urdf", f"(={shown!r}) is not a usable path ({e})") from None
-    if not found:
-        raise ConfigError(cfg.source, "model.urdf", f"(={shown!r}) names no file ({path})")
-    return path
 
 
 @dataclass(frozen=True)

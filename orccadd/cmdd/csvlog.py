@@ -4,6 +4,14 @@ the real-time process starts after one died carries the log on from its last com
 the ticks of the gap taken from the telemetry ring (16 s of ticks; beyond, counted as lost).
 A write error (a full disk) ends the log with the reason in `status`; nothing else is touched.
 
+The file: `HEADER_LINES` comment lines (the log's wall-clock start and time origin as JSON, the
+units as JSON, a line saying how to read it), the column names (`time_s` first, seconds since the
+start of the log), then the rows, with the log's events as comment lines among them
+(`# event,<time_s>,<trace seq>,<kind>,<name>,<detail>`). `pandas.read_csv(f, comment="#")` and
+`numpy.loadtxt(f, delimiter=",", skiprows=4)` read it as it is. A unit given by mode (`cmd`: the
+command sent is a position, a velocity or a torque) is written `{"<mode>": "<unit>", ...}`, the
+mode in force told by the `mode` events.
+
 Every file is opened relative to the directory's descriptor with O_NOFOLLOW (new logs O_EXCL):
 nothing a client names can make the root daemon write through a link or outside the directory.
 """
@@ -15,19 +23,23 @@ import csv
 import json
 import os
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
 
+from orccadd.cmdd.logfeed import MODE_UNITS, FloatArray, LogEvent, LogOrigin, unit
 from orccadd.cmdd.views import SignalSelection
-from orccadd.wire.schema import H, T
+from orccadd.wire.schema import T
 from orccadd.wire.socketdir import SocketPathError, prepare_socket_dir
-from orccadd.wire.telemetry import RingReader, TelemetryBlock
 
 LOG_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}\.csv")
+PART_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,110}\.mcap")  # derived from a log's name
 STATE_FILE = ".active-log.json"  # starts with '.': no client can name a log so
 TAIL_BYTES = 1 << 16  # enough to find the last complete row
+HEADER_LINES = 3  # comment lines before the column names
+EVENT_SEQ = re.compile(rb"^# event,[^,\n]*,(\d+),", re.MULTILINE)
 
 
 class LogDir:
@@ -48,22 +60,41 @@ class LogDir:
             os.fchown(fd, -1, gid)
         return fd
 
-    def create(self, name: str) -> IO[str]:
-        """A new log `name`; `ValueError` saying why not."""
-        if not LOG_NAME.fullmatch(name):
+    def create_fd(self, name: str) -> int:
+        """A new file `name` (a log, or a part derived from its name); `ValueError` saying why not."""
+        if not (LOG_NAME.fullmatch(name) or PART_NAME.fullmatch(name)):
             raise ValueError(
                 f"log: name {name[:120]!r} must be letters, digits, '.', '_' or '-', end in .csv, "
                 "and not start with '.' (a file name, not a path)"
             )
         try:
-            fd = self._open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL)
+            return self._open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL)
         except SocketPathError as e:
             raise ValueError(f"log: {e}") from None
         except FileExistsError:
             raise ValueError(f"log: {name} already exists in {self.path}: choose another name") from None
         except OSError as e:
             raise ValueError(f"log: cannot create {name} in {self.path}: {e.strerror}") from None
-        return os.fdopen(fd, "w", newline="")
+
+    def create(self, name: str) -> IO[str]:
+        """A new CSV log `name`; `ValueError` saying why not."""
+        if not LOG_NAME.fullmatch(name):
+            raise ValueError(
+                f"log: name {name[:120]!r} must be letters, digits, '.', '_' or '-', end in .csv, "
+                "and not start with '.' (a file name, not a path)"
+            )
+        return os.fdopen(self.create_fd(name), "w", newline="", encoding="utf-8")
+
+    def open_existing(self, name: str) -> int:
+        """A part of the log in progress, read-write (never through a link)."""
+        if not (LOG_NAME.fullmatch(name) or PART_NAME.fullmatch(name)):
+            raise ValueError(f"not a log name: {name!r}")
+        return self._open(name, os.O_RDWR)
+
+    def remove(self, name: str) -> None:
+        if LOG_NAME.fullmatch(name) or PART_NAME.fullmatch(name):
+            with contextlib.suppress(OSError):
+                os.unlink(self.path / name)
 
     def save_state(self, state: dict[str, Any]) -> None:
         tmp = f"{STATE_FILE}.{os.getpid()}"
@@ -85,9 +116,8 @@ class LogDir:
         with contextlib.suppress(OSError):
             os.unlink(self.path / STATE_FILE)
 
-    def reopen(self, name: str) -> tuple[IO[str], float, int]:
-        """An existing log, cut after its last complete row, for appending; that row's time and
-        the number of rows."""
+    def reopen(self, name: str) -> tuple[IO[str], CsvTail]:
+        """An existing CSV log, cut after its last complete line, for appending; where it ends."""
         if not LOG_NAME.fullmatch(name):
             raise ValueError(f"not a log name: {name!r}")
         fd = self._open(name, os.O_RDWR)
@@ -95,89 +125,109 @@ class LogDir:
         start = max(0, size - TAIL_BYTES)
         tail = os.pread(fd, size - start, start)
         end = tail.rfind(b"\n") + 1
-        lines = tail[:end].splitlines()
-        last_t = float("-inf")
-        if lines and start + end > 0:
-            with contextlib.suppress(ValueError):
-                last_t = float(lines[-1].split(b",", 1)[0])
         os.ftruncate(fd, start + end)
-        rows = -1  # the header
-        os.lseek(fd, 0, os.SEEK_SET)
-        while chunk := os.read(fd, 1 << 20):
-            rows += chunk.count(b"\n")
-        return os.fdopen(fd, "w", newline=""), last_t, max(rows, 0)
+        last_t = float("-inf")
+        for line in reversed(tail[:end].splitlines()):
+            if not line.startswith(b"#"):  # the last row, or the column names if there is none
+                with contextlib.suppress(ValueError):
+                    last_t = float(line.split(b",", 1)[0])
+                break
+        lines, comments, last_seq = _scan(fd)
+        os.lseek(fd, 0, os.SEEK_END)
+        tail_info = CsvTail(last_t, max(lines - comments - 1, 0), last_seq)
+        return os.fdopen(fd, "w", newline="", encoding="utf-8"), tail_info
+
+
+@dataclass(frozen=True)
+class CsvTail:
+    """Where a CSV log left off: its last row's time (−inf: none), its rows, its last event's
+    trace number (−1: none)."""
+
+    last_time_s: float
+    rows: int
+    last_event_seq: int
+
+
+def _scan(fd: int) -> tuple[int, int, int]:
+    """Lines, comment lines and the highest event number of a file cut after a complete line."""
+    os.lseek(fd, 0, os.SEEK_SET)
+    carry = b""
+    lines = comments = 0
+    last_seq = -1
+    while chunk := os.read(fd, 1 << 20):
+        buf = carry + chunk
+        cut = buf.rfind(b"\n") + 1
+        whole, carry = buf[:cut], buf[cut:]
+        lines += whole.count(b"\n")
+        comments += whole.count(b"\n#") + whole.startswith(b"#")
+        for m in EVENT_SEQ.finditer(whole):
+            last_seq = max(last_seq, int(m.group(1)))
+    return lines, comments, last_seq
+
+
+def header_lines(origin: LogOrigin, labels: list[str], meta: dict[str, Any]) -> list[str]:
+    """The comment lines of a new log (without their line ends)."""
+    info = {"start_utc": origin.start_utc, "origin_t_s": origin.t_s, "origin_tick": origin.tick, **meta}
+    units: dict[str, Any] = {"time_s": "s"} | {label.partition(".")[0]: unit(label) for label in labels}
+    if "cmd" in units:  # the command's unit is its mode's: see the mode events
+        units["cmd"] = {mode.name.lower(): u for mode, u in MODE_UNITS.items()}
+    return [
+        f"# orccadd log {json.dumps(info)}",
+        f"# units {json.dumps(units)}",
+        "# time_s: seconds since the log started (the loop's clock minus origin_t_s); events: lines "
+        '"# event,<time_s>,<trace seq>,<kind>,<name>,<detail>" among the rows; read with '
+        f'pandas.read_csv(f, comment="#") or numpy.loadtxt(f, delimiter=",", skiprows={HEADER_LINES + 1})',
+    ]
 
 
 class CsvLog:
-    """Chosen signals at full rate into a CSV file (PlotJuggler: File > Load Data, time column `time_s`)."""
+    """Chosen signals at full rate into a CSV file, with the log's events as comment lines
+    (PlotJuggler: File > Load Data, time column `time_s`, skipping the header's comment lines)."""
 
     def __init__(
         self,
-        tel: TelemetryBlock,
         fh: IO[str],
         path: Path,
         selection: SignalSelection,
-        resume: tuple[int, float, int] | None = None,
+        origin: LogOrigin,
+        meta: dict[str, Any] | None = None,
+        rows: int = 0,
     ) -> None:
-        """A new log from the next tick, or with `resume` = (the tick the log started after, the
-        time of its last complete row, its rows) one carried on from the row after that one."""
+        """A new log (writes its header), or with `meta` None one carried on after `rows` rows."""
         self.path = path
         self.sel = selection
+        self.origin = origin
         self.fh = fh
-        self.writer = csv.writer(self.fh)
-        self.reader = RingReader(tel.ticks, tel.header, H.TICK_HEAD, from_now=True)
-        self.start_tick = self.reader.next
-        self.resumed = resume is not None
-        self.gap_lost = False
-        if resume is None:
-            self.rows = 0
+        self.writer = csv.writer(self.fh, lineterminator="\n")
+        self.rows = rows
+        if meta is not None:
+            for line in header_lines(origin, selection.labels, meta):
+                self.fh.write(line + "\n")
             self.writer.writerow(["time_s", *selection.labels])
-        else:
-            self.start_tick, last_t_s, self.rows = resume
-            self.reader.next = self._after(tel, last_t_s)
+            self.fh.flush()
 
-    def _after(self, tel: TelemetryBlock, last_t_s: float) -> int:
-        """Where to read on from: the record of the last row written, if the ring still has it."""
-        if last_t_s == float("-inf"):
-            after = self.start_tick
-        else:
-            ring = tel.ticks
-            hit = np.flatnonzero(np.abs(ring[:, T.T_S] - last_t_s) < 5e-7)
-            after = int(ring[hit[0], T.SEQ]) if len(hit) else -1
-        oldest = max(0, int(tel.header[H.TICK_HEAD]) - len(tel.ticks))
-        if after < oldest:  # the gap is longer than the ring keeps
-            self.gap_lost = True
-            return oldest
-        return after
-
-    def pump(self) -> None:
-        """Write the new ticks (`OSError` if the file cannot take them)."""
-        recs = self.reader.poll()
+    def write(self, recs: FloatArray, events: list[LogEvent]) -> None:
+        """The new rows, each event just before the first row at or after its time (`OSError`
+        if the file cannot take them)."""
         cols = self.sel.cols
-        for rec in recs:
-            self.writer.writerow([f"{rec[T.T_S]:.6f}", *(f"{rec[c]:.9g}" for c in cols)])
+        t0 = self.origin.t_s
+        times = recs[:, T.T_S] - t0
+        at: list[int] = np.searchsorted(times, [e.time_s for e in events], side="left").tolist()
+        k = 0
+        for i, rec in enumerate(recs):
+            while k < len(events) and at[k] <= i:
+                self._event(events[k])
+                k += 1
+            self.writer.writerow([f"{times[i]:.6f}", *(f"{rec[c]:.9g}" for c in cols)])
+        for e in events[k:]:
+            self._event(e)
         self.rows += len(recs)
         self.fh.flush()
 
-    def close(self) -> dict[str, Any]:
-        self.pump()
+    def _event(self, e: LogEvent) -> None:
+        self.writer.writerow(
+            ["# event", f"{e.time_s:.6f}", e.seq if e.seq >= 0 else "", e.kind, e.name, e.detail]
+        )
+
+    def close(self) -> None:
         self.fh.close()
-        return self.describe()
-
-    def abandon(self, error: OSError) -> dict[str, Any]:
-        """The file failed: close what can be closed and say why the log ended."""
-        with contextlib.suppress(OSError):
-            self.fh.close()
-        return {**self.describe(), "error": f"log ended: {error.strerror or error} after {self.rows} rows"}
-
-    def describe(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "file": str(self.path),
-            "rows": self.rows,
-            "lost": self.reader.lost,
-            "signals": self.sel.labels,
-            "resumed": self.resumed,
-        }
-        if self.gap_lost:
-            out["gap"] = "ticks lost while no command daemon ran (longer than the telemetry ring keeps)"
-        return out

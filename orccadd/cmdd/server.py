@@ -24,7 +24,9 @@ from pathlib import Path
 from typing import Any
 
 from orccadd.cmdd import views
-from orccadd.cmdd.csvlog import CsvLog, LogDir
+from orccadd.cmdd.csvlog import LogDir
+from orccadd.cmdd.logsession import TelemetryLog
+from orccadd.cmdd.urdf import urdf_path
 from orccadd.config.robot import DaemonConfig, read_robot_config
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.wire.commands import (
@@ -117,21 +119,29 @@ class RtLink:
 
 class CommandDaemon:
     def __init__(
-        self, cfg: DaemonConfig, socket_path: str, rt_path: str, telemetry: str, log_dir: Path | None = None
+        self,
+        cfg: DaemonConfig,
+        socket_path: str,
+        rt_path: str,
+        telemetry: str,
+        log_dir: Path | None = None,
+        urdf: Path | None = None,
     ) -> None:
         self.cfg = cfg
         self.socket_path = socket_path
         self.log_dir = log_dir or Path(socket_path).parent / "logs"
         self.logs = LogDir(self.log_dir, cfg.socket_group)
         self.log_dest = ""
+        self.urdf = urdf  # attached to each log's MCAP
         self.rt = RtLink(rt_path)
         self.tel = TelemetryBlock.attach(telemetry)
         self.roles = Roles(cfg)
         self.desc: dict[str, Any] = {}
+        self.desc_mark = (0, 0)  # (mission generation, safe stop number) `desc` was read at
         self.missions: dict[int, dict[str, Any]] = {}  # generation → mission: names the trace
         self.slots = {Role.CONTROL: 0, Role.READ: 0}  # connections served, per role
         self.roleless = 0
-        self.csv: CsvLog | None = None
+        self.recording: TelemetryLog | None = None
         self.last_log: dict[str, Any] | None = None
         self.server: asyncio.AbstractServer | None = None
         self.done = asyncio.Event()
@@ -141,12 +151,12 @@ class CommandDaemon:
 
     async def refresh(self) -> None:
         st = read_status(self.tel)
-        gen, faulted = int(st[S.MISSION_GEN]), bool(st[S.FAULTED])
-        stale = self.desc.get("generation") != gen or bool(self.desc.get("fault")) != faulted
-        if not self.desc or stale:  # a new mission, or a fault to explain (or one cleared)
+        mark = (int(st[S.MISSION_GEN]), int(st[S.FAULTED]))
+        if not self.desc or mark != self.desc_mark:  # a new mission, a new fault, or one cleared
             reply = await self.rt.call("describe", {})
             if reply.get("ok"):
                 self.desc = reply["result"]
+                self.desc_mark = mark
                 self.missions = {int(m["generation"]): m for m in self.desc.get("missions", [])}
 
     def decode_trace(self, rec: Any) -> dict[str, Any]:
@@ -185,9 +195,9 @@ class CommandDaemon:
         await self.done.wait()
         pump.cancel()
         self.server.close()
-        if self.csv is not None:
+        if self.recording is not None:
             with contextlib.suppress(OSError):
-                self.csv.close()
+                self.recording.close("the command daemon stopped")
             if not _alive(int(self.tel.header[H.PID])):
                 self.logs.clear_state()  # the daemon stopped; else a successor carries the log on
         with contextlib.suppress(FileNotFoundError):
@@ -198,11 +208,13 @@ class CommandDaemon:
         """Background: follow the log, notice the real-time process going away."""
         while True:
             await asyncio.sleep(0.05)
-            if self.csv is not None:
+            if self.recording is not None:
+                await self.refresh()  # the names of a new mission's events
+            if self.recording is not None:
                 try:
-                    self.csv.pump()
+                    self.recording.pump()
                 except OSError as e:
-                    self._end_log(self.csv.abandon(e))
+                    self._end_log(self.recording.abandon(e))
             if self.rt.closed or not _alive(int(self.tel.header[H.PID])):
                 log.info("the real-time process is gone; exiting")
                 self.done.set()
@@ -328,7 +340,7 @@ class CommandDaemon:
     @handles("status")
     async def do_status(self, writer: asyncio.StreamWriter, rid: Any) -> dict[str, Any]:
         await self.refresh()
-        log = self.csv.describe() if self.csv else self.last_log
+        log = self.recording.describe() if self.recording else self.last_log
         out = views.status(self.tel, self.desc, log)
         return out
 
@@ -430,31 +442,34 @@ class CommandDaemon:
         dest: str,
     ) -> dict[str, Any]:
         if action == "start":
-            if self.csv is not None:
-                raise ValueError(f"log: already logging to {self.csv.path} (log stop first)")
+            if self.recording is not None:
+                raise ValueError(f"log: already logging to {self.recording.path} (log stop first)")
             await self.refresh()
             sel = views.SignalSelection(
                 [str(s) for s in signals or ["q", "dq", "tau", "cmd"]], self.desc["joints"]
             )
             name = name or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv"
-            self.csv = CsvLog(self.tel, self.logs.create(name), self.log_dir / name, sel)
+            extra = {"dest": dest, "rt_pid": int(self.tel.header[H.PID])}
+            rec = TelemetryLog.start(
+                self.logs, self.tel, name, sel, lambda: self.desc, self.decode_trace, self.urdf, extra
+            )
+            self.recording = rec
             self.log_dest = dest
-            state = {"file": name, "signals": sel.labels, "dest": dest, "start_tick": self.csv.start_tick}
-            self.logs.save_state({**state, "rt_pid": int(self.tel.header[H.PID])})
-            return {**self.csv.describe(), "dest": dest}
-        if self.csv is None:
+            self.logs.save_state(rec.state)
+            return {**rec.describe(), "dest": dest}
+        if self.recording is None:
             raise ValueError("log: not logging")
         try:
-            self._end_log(self.csv.close())
+            self._end_log(self.recording.close())
         except OSError as e:
-            self._end_log(self.csv.abandon(e))
+            self._end_log(self.recording.abandon(e))
         return self.last_log or {}
 
     def _end_log(self, summary: dict[str, Any]) -> None:
         if "error" in summary:
             log.error("%s: %s", summary["file"], summary["error"])
         self.last_log = {**summary, "dest": self.log_dest}
-        self.csv = None
+        self.recording = None
         self.logs.clear_state()
 
     def _resume_log(self) -> None:
@@ -467,16 +482,20 @@ class CommandDaemon:
             self.logs.clear_state()
             return
         try:
-            sel = views.SignalSelection(list(state["signals"]), self.desc["joints"])
-            fh, last_t_s, rows = self.logs.reopen(str(state["file"]))
-            resume = (int(state["start_tick"]), last_t_s, rows)
-            self.csv = CsvLog(self.tel, fh, self.log_dir / str(state["file"]), sel, resume)
+            rec = TelemetryLog.resume(
+                self.logs, self.tel, state, lambda: self.desc, self.decode_trace, self.urdf
+            )
         except (OSError, SocketPathError, ValueError, KeyError, TypeError) as e:
             log.error("cannot carry on log %s: %s", state.get("file"), e)
             self.logs.clear_state()
             return
+        self.recording = rec
+        try:
+            self.logs.save_state(rec.state)  # its new MCAP part
+        except (OSError, SocketPathError) as e:
+            log.error("log %s: cannot update the state file: %s", rec.path, e)
         self.log_dest = str(state.get("dest", ""))
-        log.info("carrying on log %s after %d rows", self.csv.path, rows)
+        log.info("carrying on log %s after %d rows; %s", rec.path, rec.csv.rows, "; ".join(rec.notes))
 
 
 def _alive(pid: int) -> bool:
@@ -495,7 +514,8 @@ def _above_clients() -> None:
     try:
         os.setpriority(os.PRIO_PROCESS, 0, NICE)
     except PermissionError:
-        log.info("running at nice %d (not %d: needs CAP_SYS_NICE)", os.getpriority(os.PRIO_PROCESS, 0), NICE)
+        now = os.getpriority(os.PRIO_PROCESS, 0)
+        log.info("running at nice %d (not %d: needs CAP_SYS_NICE or LimitNICE=-10)", now, NICE)
 
 
 def _user(uid: int) -> str:
@@ -520,7 +540,7 @@ def main(argv: list[str] | None = None) -> int:
     cfg = read_robot_config(args.config)
     log_dir = cfg.resolve(cfg.daemon.log_dir) if cfg.daemon.log_dir else None
     try:
-        d = CommandDaemon(cfg.daemon, args.socket, args.rt_socket, args.telemetry, log_dir)
+        d = CommandDaemon(cfg.daemon, args.socket, args.rt_socket, args.telemetry, log_dir, urdf_path(cfg))
     except (OSError, ValueError) as e:
         log.error("cannot attach to the real-time process: %s", e)
         return 2

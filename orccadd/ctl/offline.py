@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from orccadd.ctl.format import error_line
 from orccadd.errors import MissionError, OrccaddError
 
 # The compiler and verifier (lark, ...) are imported by the commands that use them, so that
@@ -86,7 +87,7 @@ def cmd_check(args: argparse.Namespace) -> int:
                 )
             )
         else:
-            print(f"error: {e}", file=sys.stderr)
+            print(error_line(str(e)), file=sys.stderr)
         return EXIT_FAILED
     if args.json:
         print(json.dumps({
@@ -150,8 +151,8 @@ def run(args: argparse.Namespace) -> int:
         code: int = args.func(args)
         return code
     except MissionError as e:
-        print(f"error: {e}", file=sys.stderr)
+        print(error_line(str(e)), file=sys.stderr)
         return EXIT_FAILED
     except OrccaddError as e:
-        print(f"error: {e}", file=sys.stderr)
+        print(error_line(str(e)), file=sys.stderr)
         return EXIT_ERROR

@@ -11,10 +11,14 @@ from pathlib import Path
 from typing import Any
 
 from orccadd.ctl.client import Client, ClientError, default_socket
+from orccadd.ctl.format import error_line, format_trace
+from orccadd.ctl.format import format_status as format_status  # the demo prints it
+from orccadd.ctl.human import context_requests, format_reply
 from orccadd.wire.commands import COMMANDS
 from orccadd.wire.socketdir import urgent_socket_path
 
-EXIT_OK, EXIT_REFUSED, EXIT_ERROR = 0, 1, 2
+EXIT_OK, EXIT_REFUSED, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
+CALL_WAIT_S, LOAD_WAIT_S = 10.0, 660.0  # a load compiles and verifies for up to 600 s
 
 
 def add_parsers(sub: Any) -> None:
@@ -54,7 +58,11 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--last", type=int, default=50)
     p.add_argument("--follow", action="store_true")
     p.add_argument("--duration", type=float, default=0.0)
-    p = add("top", "a live terminal view (state, tasks, joints, timing, last events)")
+    p = add(
+        "top",
+        "a live terminal view (state, goal, last error, joints, timing, last events); keys: "
+        "q quit, p pause the display, h hold, r resume",
+    )
     p.add_argument("--rate", type=float, default=4.0)
     p.add_argument("--count", type=int, default=0, help="refreshes before exiting (0: until Ctrl-C)")
     p = add("log")
@@ -65,11 +73,16 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("fault", choices=COMMANDS["inject"].arg("fault").choices)
     p.add_argument("--ticks", type=int, default=20)
     p.add_argument("--extra-ms", type=float, default=0.0)
-    p = sub.add_parser("plot", help="plot a CSV log to a PNG (no daemon needed)")
+    text = "plot a CSV log: a panel per signal group with its unit, the events marked (no daemon needed)"
+    p = sub.add_parser("plot", help=text, description=text)
     p.add_argument("log")
     p.add_argument("-o", "--output", required=True)
     p.add_argument("--signals", default="", help="comma-separated column prefixes (default: all)")
+    p.add_argument("--format", choices=("png", "svg"), help="default: the output's suffix, else png")
     p.set_defaults(func=run_plot)
+    from orccadd.ctl.foxglove import add_parser as add_foxglove
+
+    add_foxglove(sub)
 
 
 def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
@@ -98,6 +111,8 @@ def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
         return cmd, args
     if cmd == "inject":
         return cmd, {"fault": a.fault, "ticks": a.ticks, "extra_ms": a.extra_ms}
+    if cmd == "events":
+        return cmd, {"last": a.last}
     return cmd, {}
 
 
@@ -115,110 +130,92 @@ def _urgent_reply(a: argparse.Namespace) -> dict[str, Any] | None:
 
 
 def run_online(a: argparse.Namespace) -> int:
-    r = _urgent_reply(a) if a.online in ("abort", "stop") else None
-    if r is None:
-        try:
-            online = _online(a)
-        except ClientError as e:
-            print(f"error: {e}", file=sys.stderr)
-            return EXIT_ERROR
-        if isinstance(online, int):
-            return online
-        r = online
-    return _report(a, r)
-
-
-def _online(a: argparse.Namespace) -> dict[str, Any] | int:
-    """The reply to the command of `a` through the command daemon, or an exit status for the
-    streaming commands (monitor, events --follow, top)."""
-    with Client(a.socket) as c:
-        if a.online == "monitor":
-            return _monitor(c, a)
-        if a.online == "events" and a.follow:
-            return _follow(c, a)
-        if a.online == "top":
-            return _top(c, a)
-        if a.online == "events":
-            return c.reply("events", last=a.last)
+    """One command: its reply in words (or JSON); a refusal or an unreachable daemon in one
+    line on stderr (the daemon's own words), Ctrl-C quietly."""
+    try:
         cmd, args = _args(a)
-        return c.reply(cmd, **args)
+        r = _urgent_reply(a) if a.online in ("abort", "stop") else None
+        context: dict[str, Any] = {}
+        if r is None:
+            online = _online(a, cmd, args)
+            if isinstance(online, int):
+                return online
+            r, context = online
+        return _report(a, r, context, args)
+    except ClientError as e:
+        print(error_line(str(e)), file=sys.stderr)
+    except BrokenPipeError:
+        _stdout_gone()
+        return EXIT_OK
+    except OSError as e:  # no reply in time, the connection reset mid-reply
+        print(error_line(f"orccadd at {a.socket or default_socket()}: {e.strerror or e}"), file=sys.stderr)
+    except ValueError as e:  # a reply that is not JSON
+        print(error_line(f"unreadable reply from orccadd: {e}"), file=sys.stderr)
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+    return EXIT_ERROR
 
 
-def _report(a: argparse.Namespace, r: dict[str, Any]) -> int:
+def _online(
+    a: argparse.Namespace, cmd: str, args: dict[str, Any]
+) -> tuple[dict[str, Any], dict[str, Any]] | int:
+    """The reply to `cmd` through the command daemon and, for words, the replies that give it
+    context (`human.context_requests`); or an exit status for the streaming commands (monitor,
+    events --follow, top)."""
+    with Client(a.socket, timeout_s=LOAD_WAIT_S if cmd == "load" else CALL_WAIT_S) as c:
+        if cmd == "monitor":
+            return _monitor(c, a)
+        if cmd == "events" and a.follow:
+            return _follow(c, a)
+        if cmd == "top":
+            return _top(c, a)
+        r = c.reply(cmd, **args)
+        context: dict[str, Any] = {}
+        if r.get("ok") and not a.json:
+            for name, (extra, extra_args) in context_requests(cmd, args).items():
+                more = c.reply(extra, **extra_args)
+                if more.get("ok"):
+                    context[name] = more["result"]
+        return r, context
+
+
+def _report(a: argparse.Namespace, r: dict[str, Any], context: dict[str, Any], args: dict[str, Any]) -> int:
     fetched = EXIT_OK
-    if r.get("ok") and a.online == "log" and a.action == "stop" and r["result"].get("dest"):
+    copied = a.online == "log" and a.action == "stop" and r.get("ok") and r["result"].get("dest")
+    if copied:
         fetched = _fetch_log(r["result"], quiet=a.json)
     if a.json:
         print(json.dumps(r, indent=1))
         return (EXIT_OK if r.get("ok") else EXIT_REFUSED) or fetched
     if not r.get("ok"):
-        print(f"refused: {r.get('error')}", file=sys.stderr)
+        print(error_line(str(r.get("error"))), file=sys.stderr)
         return EXIT_REFUSED
-    if a.online != "log" or not r["result"].get("dest"):
-        _print(a.online, r["result"])
+    if not copied:  # a copied log is reported by _fetch_log
+        print(format_reply(a.online, r["result"], context, args))
     return fetched
 
 
 def _fetch_log(info: dict[str, Any], quiet: bool) -> int:
-    """Copy the daemon's log file to where `log start -o` asked, with this user's rights."""
+    """Copy the daemon's log (the CSV, and its MCAP parts beside it: run.mcap, run-2.mcap, ...)
+    to where `log start -o` asked, with this user's rights."""
     import shutil
 
-    try:
-        shutil.copyfile(info["file"], info["dest"])
-    except OSError as e:
-        print(
-            f"log: {info['rows']} rows in {info['file']}; not copied to {info['dest']}: {e}", file=sys.stderr
-        )
-        return EXIT_ERROR
+    dest = Path(info["dest"])
+    copies = [(Path(info["file"]), dest)]
+    for part in info.get("mcap", []):  # run.mcap → DEST's name with .mcap (run-2.mcap → DEST-2.mcap)
+        suffix = Path(part).stem.removeprefix(Path(info["file"]).stem)
+        copies.append((Path(part), dest.with_name(f"{dest.stem}{suffix}.mcap")))
+    for src, to in copies:
+        try:
+            shutil.copyfile(src, to)
+        except OSError as e:
+            why = f"log: {info['rows']} rows in {info['file']}; {src.name} not copied to {to}: {e}"
+            print(error_line(why), file=sys.stderr)
+            return EXIT_ERROR
     if not quiet:
-        print(f"log: {info['rows']} rows ({info['lost']} lost) in {info['dest']} (kept in {info['file']})")
+        also = "".join(f", {to}" for _, to in copies[1:])
+        print(f"log: {info['rows']} rows ({info['lost']} lost) in {dest}{also} (kept in {info['file']})")
     return EXIT_OK
-
-
-def _print(cmd: str, res: Any) -> None:
-    if cmd == "status":
-        print(format_status(res))
-    elif cmd == "events":
-        from orccadd.ctl.format import format_trace
-
-        for e in res["events"]:
-            print(format_trace(e))
-    elif cmd == "load":
-        print(res["report"])
-    elif cmd == "params":
-        for task, params in res["params"].items():
-            for p in params:
-                flag = "" if p["tunable"] else "  (not tunable)"
-                print(f"{task}.{p['name']:28s} = {p['value']}  {p['bounds']} {p['unit']}{flag}")
-    else:
-        print(json.dumps(res) if not isinstance(res, str) else res)
-
-
-def format_status(s: dict[str, Any]) -> str:
-    lines = [
-        f"{s.get('robot')}: {s['state']}"
-        + (f", mission {s['mission']}" if s.get("mission") else "")
-        + (f" (automaton state {s['automaton_state']})" if s["automaton_state"] >= 0 else "")
-        + (f", FAULTED: {s.get('fault') or '?'} (reset needed)" if s.get("faulted") else ""),
-        f"active task {s.get('active_task')} ({s.get('task_phase')}), last result {s['result']}, "
-        f"resource {','.join(s.get('resource_status') or ['ok'])}",
-    ]
-    t = s.get("timing") or {}
-    if t:
-        lines.append(
-            f"loop: {s['ticks']} ticks, {s['overruns']} overruns, {s['switches']} switches; wake-up median "
-            f"{t['wake_median_us']} p99 {t['wake_p99_us']} max {t['wake_max_us']} µs; compute median "
-            f"{t['compute_median_us']} p99 {t['compute_p99_us']} µs"
-        )
-    lines.append(f"{'joint':22s} {'q rad':>10s} {'dq rad/s':>10s} {'tau N.m':>10s} {'cmd':>10s}")
-    for j in s.get("joints", []):
-        lines.append(
-            f"{j['name']:22s} {j['q_rad']:10.4f} {j['dq_rad_s']:10.4f} {j['tau_nm']:10.2f} {j['cmd']:10.2f}"
-        )
-    if s.get("log"):
-        lg = s["log"]
-        lines.append(f"log: {lg['file']} ({lg['rows']} rows, {lg['lost']} lost)")
-    return "\n".join(lines)
 
 
 def _stdout_gone() -> None:
@@ -243,15 +240,13 @@ def _monitor(c: Client, a: argparse.Namespace) -> int:
             else:
                 print(" ".join(f"{v:14.5f}" for v in [item["t_s"], *item["values"]]), flush=True)
     except KeyboardInterrupt:
-        pass
+        return EXIT_INTERRUPTED
     except BrokenPipeError:
         _stdout_gone()
     return EXIT_OK
 
 
 def _follow(c: Client, a: argparse.Namespace) -> int:
-    from orccadd.ctl.format import format_trace
-
     args: dict[str, Any] = {"last": a.last, "follow": True}
     if a.duration:
         args["duration_s"] = a.duration
@@ -259,29 +254,33 @@ def _follow(c: Client, a: argparse.Namespace) -> int:
         for e in c.stream("events", **args):
             print(json.dumps(e) if a.json else format_trace(e), flush=True)
     except KeyboardInterrupt:
-        pass
+        return EXIT_INTERRUPTED
     except BrokenPipeError:
         _stdout_gone()
     return EXIT_OK
 
 
 def _top(c: Client, a: argparse.Namespace) -> int:
-    from orccadd.ctl.format import format_trace
+    """The live view on a terminal (keys: q p h r), frames one after the other elsewhere, or a
+    JSON line of status and last events per refresh with --json."""
+    from orccadd.ctl.terminal import AnsiScreen, TerminalKeys
+    from orccadd.ctl.top import Top
 
-    n = 0
+    if a.rate <= 0:
+        raise ClientError(f"top: --rate (={a.rate:g}) must be positive")
     try:
-        while not a.count or n < a.count:
-            s = c.call("status")
-            ev = c.call("events", last=8)["events"]
-            screen = format_status(s) + "\n\nlast events:\n" + "\n".join(format_trace(e) for e in ev)
-            if sys.stdout.isatty():
-                print("\x1b[H\x1b[2J" + screen, flush=True)
-            else:
-                print(screen + "\n", flush=True)
-            n += 1
-            time.sleep(1.0 / a.rate)
+        if a.json:
+            n = 0
+            while not a.count or n < a.count:
+                time.sleep(1.0 / a.rate if n else 0.0)
+                frame = {"status": c.call("status"), "events": c.call("events", last=8)["events"]}
+                print(json.dumps(frame), flush=True)
+                n += 1
+            return EXIT_OK
+        with TerminalKeys() as keys, AnsiScreen() as screen:
+            Top(c, keys, screen, rate_hz=a.rate, count=a.count).run()
     except KeyboardInterrupt:
-        pass
+        return EXIT_INTERRUPTED
     except BrokenPipeError:
         _stdout_gone()
     return EXIT_OK
@@ -291,9 +290,9 @@ def run_plot(a: argparse.Namespace) -> int:
     from orccadd.ctl.plot import plot_csv
 
     try:
-        info = plot_csv(Path(a.log), Path(a.output), [s for s in a.signals.split(",") if s])
+        info = plot_csv(Path(a.log), Path(a.output), [s for s in a.signals.split(",") if s], a.format)
     except (OSError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
+        print(error_line(str(e)), file=sys.stderr)
         return EXIT_ERROR
     print(info)
     return EXIT_OK

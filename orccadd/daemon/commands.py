@@ -156,7 +156,9 @@ class RtCommands:
         if self.m.supervisor.fault:
             raise CommandError(f"the arm was safe-stopped ({self.m.supervisor.fault}): `reset` first")
         t = self._trace(OperatorAction.START)
-        return {"started": mc.start(t, procedure)}
+        main = mc.start(t, procedure)
+        assert mc.mission is not None
+        return {"started": main, "mission": mc.mission.name, "run": mc.runs}
 
     @handles("send")
     def send(self, input: str) -> Result:

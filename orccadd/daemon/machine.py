@@ -99,7 +99,7 @@ class Machine:
                 S.MISSION_GEN: float(mc.generation),
                 S.INSTANTS: float(mc.instants),
                 S.RESULT: float(mc.result),
-                S.FAULTED: 1.0 if self.supervisor.fault else 0.0,
+                S.FAULTED: float(self.supervisor.faults) if self.supervisor.fault else 0.0,
                 S.HELPER_PID: float(self.resource.helper_pid()),
             }
         )
@@ -111,6 +111,18 @@ class Machine:
             "config": self.cfg.source,
             "dof": self.cfg.dof,
             "joints": list(self.cfg.joint_names),
+            # the limits the controller enforces, per joint (SI units in the keys)
+            "joint_limits": [
+                {
+                    "name": j.name,
+                    "position_min_rad": j.position_min_rad,
+                    "position_max_rad": j.position_max_rad,
+                    "max_velocity_rad_s": j.max_velocity_rad_s,
+                    "max_acceleration_rad_s2": j.max_acceleration_rad_s2,
+                    "max_torque_nm": j.max_torque_nm,
+                }
+                for j in self.cfg.joints
+            ],
             "period_s": self.cfg.control_period_s,
             "telemetry": self.tel.name,
             "resource": describe_resource(self),

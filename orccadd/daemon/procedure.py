@@ -50,6 +50,7 @@ class MissionControl:
         self.mission: LoadedMission | None = None
         self.runner: Runner | None = None
         self.generation = 0
+        self.runs = 0  # runs started since the daemon started (any mission)
         self.loaded: list[dict[str, object]] = []  # the last missions loaded, names for the trace
         self.instants = 0
         self.result = MissionResult.NONE
@@ -92,6 +93,7 @@ class MissionControl:
                 f"mission {mission.name} has no main procedure {procedure!r} (it has {main!r})"
             )
         self.runner = Runner(mission.automaton)
+        self.runs += 1
         self.state = MachineState.RUNNING
         self.result = MissionResult.NONE
         self.note(f"start {mission.name}")

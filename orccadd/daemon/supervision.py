@@ -42,17 +42,21 @@ class Supervisor:
         self.mission = mission
         self.note = note
         self.fault = ""  # why the resource was safe-stopped ("" when not)
+        self.faults = 0  # safe stops so far: a new fault is a new number, even with the same words
         self._resetting: _DeviceReset | None = None  # the device's last reset
 
     def on_t3(self, name: str) -> None:
         if not self.fault:
+            self.faults += 1
             self.fault = f"{name} ({self.resource.fault_message or 'safe stop'})"
             self.note(f"type 3: {name}: safe stop")
 
     def abort(self, why: str) -> None:
         """Safe stop at the next tick, remember why, end the run (`aborted`)."""
         self.loop.request_safe_stop()
-        self.fault = self.fault or why
+        if not self.fault:
+            self.faults += 1
+            self.fault = why
         self.note(f"abort: {why}")
         self.mission.end(MissionResult.ABORTED)
 

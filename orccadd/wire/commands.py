@@ -163,8 +163,9 @@ COMMANDS: dict[str, CommandSpec] = {
             "log",
             C,
             "cmdd",
-            "start/stop a full-rate CSV log, written by the command daemon into its own log directory "
-            "(daemon.log_dir); the reply names the file",
+            "start/stop a full-rate log, CSV and MCAP beside it, written by the command daemon into its "
+            "own log directory (daemon.log_dir); the reply names the files (`file`, `mcap` parts), the "
+            "wall-clock start (`start_utc`) and the loop time rows count from (`origin_t_s`)",
             (
                 Arg("action", (str,), "start or stop", required=True, choices=("start", "stop")),
                 Arg("signals", (list,), "signal names (default: q dq tau cmd)", default=None),

@@ -93,7 +93,7 @@ class S(IntEnum):
     MISSION_GEN = 3  # changes each time a mission is loaded (names may change)
     INSTANTS = 4
     RESULT = 5  # MissionResult of the last run
-    FAULTED = 6  # 1: the resource was safe-stopped; `reset` is needed before motion
+    FAULTED = 6  # 0, or the safe stop's number (counts from 1): `reset` is needed before motion
     HELPER_PID = 7  # a process the resource runs (the simulated plant), 0 if none
 
 

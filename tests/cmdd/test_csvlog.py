@@ -8,21 +8,26 @@ from pathlib import Path
 
 import pytest
 
-from orccadd.cmdd.csvlog import STATE_FILE, LogDir
+from orccadd.cmdd.csvlog import STATE_FILE, CsvTail, LogDir
 
 
 def test_a_log_cut_mid_row_is_reopened_after_its_last_complete_row(tmp_path: Path) -> None:
     d = LogDir(tmp_path / "logs", "")
-    with d.create("run.csv") as fh:
-        fh.write("time_s,q.j1\n0.002000,1\n0.004000,2\n0.0060")  # killed mid-row
-    fh2, last_t_s, rows = d.reopen("run.csv")
+    head = "# orccadd log {}\n# units {}\n# time_s: ...\ntime_s,q.j1\n"
+    with d.create("run.csv") as fh:  # killed mid-row, an event after the last row
+        fh.write(
+            head
+            + "# event,0.002000,7,command,start,\n0.002000,1\n0.004000,2\n# event,0.004,9,event,x,\n0.0060"
+        )
+    fh2, tail = d.reopen("run.csv")
     with fh2:
         fh2.write("0.006000,3\n")
-    assert (last_t_s, rows) == (0.004, 2)
-    assert (tmp_path / "logs/run.csv").read_text() == "time_s,q.j1\n0.002000,1\n0.004000,2\n0.006000,3\n"
+    assert tail == CsvTail(last_time_s=0.004, rows=2, last_event_seq=9)
+    text = (tmp_path / "logs/run.csv").read_text()
+    assert text.startswith(head) and text.endswith("0.004000,2\n# event,0.004,9,event,x,\n0.006000,3\n")
     with d.create("empty.csv") as fh:
-        fh.write("time_s,q.j1\n")
-    assert d.reopen("empty.csv")[1:] == (float("-inf"), 0)
+        fh.write(head)
+    assert d.reopen("empty.csv")[1] == CsvTail(float("-inf"), 0, -1)
 
 
 def test_the_state_file_round_trips_and_is_never_followed_through_a_link(tmp_path: Path) -> None:

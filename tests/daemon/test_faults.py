@@ -172,7 +172,7 @@ def test_command_daemon_killed_mid_log_the_next_one_carries_the_log_on_without_a
     info = daemon.call("log", action="stop")
     assert isinstance(info, dict) and info["lost"] == 0 and "gap" not in info, info
     text = (Path(daemon.socket).parent / "logs" / "run.csv").read_text()
-    lines = text.splitlines()
+    lines = [x for x in text.splitlines() if not x.startswith("#")]  # header comments, events
     assert lines[0] == "time_s,q.shoulder_pan_joint" and text.endswith("\n")
     t = np.array([float(x.split(",")[0]) for x in lines[1:]])
     period_s = float(np.median(np.diff(t)))
@@ -181,6 +181,8 @@ def test_command_daemon_killed_mid_log_the_next_one_carries_the_log_on_without_a
     # was ≥ 0.5 s, hundreds of periods); a skipped period of an overrun is a few at most
     assert np.all(np.diff(t) > 0) and np.diff(t).max() < 5 * period_s, np.diff(t).max()
     assert len(t) > 1.5 / period_s
+    assert 0 < t[0] < 5 * period_s  # seconds since the log started, the same origin after the resume
+    assert [Path(p).name for p in info["mcap"]] == ["run.mcap", "run-2.mcap"]  # MCAP: a new part
 
 
 def test_log_disk_full_ends_the_log_with_the_reason_and_nothing_else(tmp_path: Path) -> None:

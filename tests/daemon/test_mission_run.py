@@ -102,10 +102,20 @@ def test_abort_safe_stops_and_reset_recovers(daemon: Daemon) -> None:
     assert s["faulted"] and s["result"] == "aborted" and s["state"] == "ready"
     r = daemon.reply("start")
     assert not r["ok"] and "reset" in str(r["error"])
+    assert s["fault"].startswith("aborted"), s["fault"]
     daemon.call("reset")
     s = daemon.wait(lambda s: not s["faulted"] and s["task_phase"] == "run")
-    daemon.call("start")
+    r = daemon.call("start")
+    assert r == {"started": "PickAndInspect", "mission": "PickDemo", "run": 2}
     daemon.wait(lambda s: s["active_task"] == "Home")
+    # a second fault, with no status read between the reset and it: told in its own words
+    daemon.call("abort")
+    daemon.wait(lambda s: "stopped" in s.get("resource_status", []))
+    daemon.call("reset")
+    daemon.call("start")
+    daemon.call("inject", fault="resource")
+    s = daemon.wait(lambda s: s["faulted"])
+    assert "ResourceFault" in s["fault"], s["fault"]
 
 
 def test_sigterm_mid_motion_safe_stops_and_exits_cleanly(daemon: Daemon) -> None:

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
 
 from orccadd.ctl.client import Client
 from orccadd.wire.schema import PROTOCOL_VERSION
@@ -132,8 +133,12 @@ def test_monitor_and_log_through_orccadctl(daemon: Daemon, tmp_path: Path) -> No
     stop = daemon.ctl("log", "stop", "--json")
     info = json.loads(stop.stdout)["result"]
     assert info["rows"] > 100 and info["lost"] == 0
-    header = out.read_text().splitlines()[0].split(",")
+    header = next(x for x in out.read_text().splitlines() if not x.startswith("#")).split(",")
     assert header[0] == "time_s" and len(header) == 13
+    copied = tmp_path / "run.mcap"  # the MCAP beside the CSV comes along, read by mcap's reader
+    with copied.open("rb") as f:
+        topics = {ch.topic for ch in make_reader(f).get_summary().channels.values()}  # type: ignore[union-attr]
+    assert {"/q", "/tau", "/joint_states", "/events"} <= topics
     png = tmp_path / "run.png"
     assert daemon.ctl("plot", str(out), "-o", str(png)).returncode == 0
     assert png.stat().st_size > 1000

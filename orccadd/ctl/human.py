@@ -1,0 +1,229 @@
+"""Each online command's reply in words, for people (`--json` prints the reply itself).
+
+`format_reply(cmd, result, context)` takes the `result` of a successful reply as the daemon
+sends it (orccadd/daemon/commands.py, orccadd/cmdd/server.py) and, for the commands whose reply
+names things without their context, what orccadctl asked the daemon next (`context_requests`):
+the parameters for `describe` (modules and parameters of each task) and `tune` (the unit).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from orccadd.ctl.format import format_status, format_trace, num, param_lines, table
+
+Formatter = Callable[[dict[str, Any], dict[str, Any]], str]
+
+
+def context_requests(cmd: str, args: dict[str, Any]) -> dict[str, tuple[str, dict[str, Any]]]:
+    """What to ask the daemon, after a successful `cmd`, to say it in words: name → (command,
+    arguments). Read-only requests; if one fails the words are shorter, nothing else."""
+    if cmd == "describe":
+        return {"params": ("params", {})}
+    if cmd == "tune":
+        return {"params": ("params", {"task": str(args["path"]).split(".")[0]})}
+    return {}
+
+
+def format_reply(
+    cmd: str,
+    result: dict[str, Any],
+    context: dict[str, Any] | None = None,
+    args: dict[str, Any] | None = None,
+) -> str:
+    """`result` in words; `context`: the replies to `context_requests` (by name), `args`: the
+    request's arguments (`log` says `start` and `stop` differently)."""
+    return FORMATTERS.get(cmd, _generic)(result, {**(context or {}), "args": args or {}})
+
+
+def _generic(r: dict[str, Any], _: dict[str, Any]) -> str:
+    return ", ".join(f"{k} {num(v)}" for k, v in r.items())
+
+
+def _describe(r: dict[str, Any], ctx: dict[str, Any]) -> str:
+    period = float(r["period_s"])
+    lines = [f"robot {r['robot']}: {r['dof']} joints, control period {period * 1e3:g} ms ({1 / period:g} Hz)"]
+    lines += table([("config", str(r["config"])), ("telemetry", str(r["telemetry"]))], "  ")
+    lines += _resource(r["resource"])
+    lines += _joint_limits(r)
+    m = r.get("mission")
+    if m:
+        lines.append(f"mission {m['name']} ({m['file']})")
+        lines += table(
+            [
+                ("main procedure", str(m["main_procedure"])),
+                ("automaton", f"{m['states']} states, {m['transitions']} transitions"),
+                ("operator inputs", ", ".join(m["operator_inputs"]) or "none"),
+                ("inputs", f"{len(m['inputs'])} (events of the tasks and operator inputs)"),
+            ],
+            "  ",
+        )
+    else:
+        lines.append("mission: none loaded (`orccadctl load FILE`)")
+    params = (ctx.get("params") or {}).get("params")
+    if params:
+        lines.append("tasks: modules and their parameters (values: `orccadctl params TASK`)")
+        lines += table(_modules(params), "  ")
+    else:
+        lines.append("tasks: " + ", ".join(r["tasks"]))
+    if r.get("fault"):
+        lines.append(f"fault: {r['fault']} (`reset` needed)")
+    if r.get("log"):
+        lines.append("recent")
+        lines += ["  " + str(n) for n in r["log"]]
+    return "\n".join(lines)
+
+
+def _modules(params: dict[str, list[dict[str, Any]]]) -> list[tuple[str, ...]]:
+    """(task, module, its parameters) rows, each task and module named once."""
+    rows: list[tuple[str, ...]] = []
+    for task, plist in params.items():
+        modules: dict[str, list[str]] = {}
+        for p in plist:
+            module, _, name = str(p["name"]).rpartition(".")
+            modules.setdefault(module, []).append(name + ("" if p.get("tunable", True) else " (fixed)"))
+        for i, (module, names) in enumerate(modules.items()):
+            rows.append((task if i == 0 else "", module, ", ".join(names)))
+    return rows
+
+
+RESOURCE_SHOWN = {
+    "backend", "modes", "mode_switch_needs_disable", "position", "velocity", "torque", "brakes",
+    "stop_categories", "read_time_s", "write_time_s", "clock", "device_period_s", "fault_reset",
+    "fault_injection", "diagnostics", "protocol_version",
+}  # fmt: skip
+
+
+def _resource(res: dict[str, Any]) -> list[str]:
+    d = res.get("diagnostics") or {}
+    status = ", ".join(d.get("status") or []) or "ok"
+    head = f"resource {res['backend']}: {d.get('lifecycle', '?')}, mode {d.get('mode', '?')}, status {status}"
+    clock = str(res["clock"])
+    if res.get("device_period_s"):
+        clock += f" (the device's cycle, {float(res['device_period_s']) * 1e3:g} ms)"
+    switch = "motors disabled to switch" if res["mode_switch_needs_disable"] else "switched live"
+    rows = [
+        ("modes", f"{', '.join(res['modes'])} ({switch})"),
+        ("measures", f"position {res['position']}, velocity {res['velocity']}, torque {res['torque']}"),
+        ("brakes", "yes" if res["brakes"] else "no"),
+        ("stop categories", ", ".join(str(c) for c in res["stop_categories"])),
+        ("clock", clock),
+        ("bus time", f"read {num(res['read_time_s'])} s, write {num(res['write_time_s'])} s"),
+        ("fault reset", "yes" if res["fault_reset"] else "no"),
+        ("fault injection", ", ".join(res["fault_injection"]) or "none"),
+    ]
+    rows += [(k, str(v)) for k, v in res.items() if k not in RESOURCE_SHOWN]
+    if d.get("fault_message") or d.get("fault_code"):
+        rows.append(("device fault", f"{d.get('fault_message')} (code {d.get('fault_code')})"))
+    if d.get("helper_pid"):
+        rows.append(("helper pid", str(d["helper_pid"])))
+    rows += [(str(k), num(v)) for k, v in (d.get("details") or {}).items()]
+    return [head, *table(rows, "  ")]
+
+
+def _load(r: dict[str, Any], _: dict[str, Any]) -> str:
+    m = r["mission"]
+    return (
+        f"loaded mission {m['name']} from {m['file']}; `orccadctl start` runs {m['main_procedure']}\n"
+        + str(r["report"])
+    )
+
+
+def _joint_limits(r: dict[str, Any]) -> list[str]:
+    limits = r.get("joint_limits")
+    if not limits:  # a daemon before protocol 4 names the joints only
+        return ["joints", *table([(str(i), str(name)) for i, name in enumerate(r["joints"])], "  ")]
+    head = ("joint", "q min rad", "q max rad", "v max rad/s", "a max rad/s^2", "tau max N.m")
+    rows = [head] + [
+        (
+            str(j["name"]),
+            *(
+                f"{float(j[k]):.4g}"
+                for k in ("position_min_rad", "position_max_rad", "max_velocity_rad_s",
+                          "max_acceleration_rad_s2", "max_torque_nm")
+            ),
+        )
+        for j in limits
+    ]  # fmt: skip
+    return ["joints", *table(rows, "  ")]
+
+
+def _start(r: dict[str, Any], ctx: dict[str, Any]) -> str:
+    return f"started mission {r['mission']} (procedure {r['started']}, run {r['run']})"
+
+
+def _tune(r: dict[str, Any], ctx: dict[str, Any]) -> str:
+    path = str(r["tuned"])
+    task, _, name = path.partition(".")
+    plist = ((ctx.get("params") or {}).get("params") or {}).get(task, [])
+    unit = next((str(p["unit"]) for p in plist if p["name"] == name), "")
+    unit = "" if unit in ("", "1") else " " + unit
+    return f"{path}: {num(r['previous'])} → {num(r['value'])}{unit} (applied at tick {r['applied_at_tick']})"
+
+
+def _stop(r: dict[str, Any], _: dict[str, Any]) -> str:
+    if r["stopped"]:
+        return f"stopped: the mission has ended, orccadd is {r['state']}"
+    return f"Stop sent: the mission is still {r['state']} (its Stop handling goes on)"
+
+
+def _reset(r: dict[str, Any], _: dict[str, Any]) -> str:
+    if not r["reset"]:
+        return f"reset: {r.get('detail') or 'nothing done'}"
+    return "reset: the safe stop is cleared; the Hold task holds the arm"
+
+
+def _resume(r: dict[str, Any], _: dict[str, Any]) -> str:
+    task = r.get("resumed")
+    if task:
+        return f"resumed: {task} restarts from the measured state"
+    return "resumed: no task was active (the mission's next reaction chooses one)"
+
+
+def _params(r: dict[str, Any], _: dict[str, Any]) -> str:
+    return "\n".join(param_lines(r["params"]))
+
+
+def _events(r: dict[str, Any], _: dict[str, Any]) -> str:
+    lines = [format_trace(e) for e in r["events"]]
+    if r.get("lost"):
+        lines.append(f"({r['lost']} records lost: the trace ring was overwritten before they were read)")
+    return "\n".join(lines) if lines else "no events yet"
+
+
+def _log(r: dict[str, Any], ctx: dict[str, Any]) -> str:
+    if ctx.get("args", {}).get("action") == "start":
+        text = f"logging {len(r['signals'])} signals to {r['file']}"
+        return text + (f" (copied to {r['dest']} at `log stop`)" if r.get("dest") else "")
+    text = f"log: {r['rows']} rows ({r['lost']} lost) in {r['file']}"
+    if r.get("mcap"):  # the same run for Foxglove, when the daemon writes it
+        text += f", MCAP {', '.join(r['mcap'])}"
+    if r.get("gap"):
+        text += f"; {r['gap']}"
+    return text + (f"; then: {r['error']}" if r.get("error") else "")
+
+
+FORMATTERS: dict[str, Formatter] = {
+    "status": lambda r, _: format_status(r),
+    "describe": _describe,
+    "params": _params,
+    "events": _events,
+    "load": _load,
+    "start": _start,
+    "stop": _stop,
+    "abort": lambda r, _: (
+        "aborted: safe stop at the next tick, the mission ends `aborted`; "
+        "`orccadctl reset` once the arm is at rest"
+    ),
+    "hold": lambda r, _: (
+        "holding: the mission is suspended, the Hold task holds the arm "
+        "(`orccadctl resume` restarts the task)"
+    ),
+    "resume": _resume,
+    "reset": _reset,
+    "send": lambda r, _: f"sent {r['sent']}",
+    "tune": _tune,
+    "log": _log,
+    "inject": lambda r, _: f"injected fault: {r['injected']}",
+}

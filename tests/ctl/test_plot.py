@@ -1,0 +1,98 @@
+"""`orccadctl plot`: a panel per signal group with its unit, the events marked with their names,
+PNG or SVG; a log written by the command daemon's own writer (from a stand-in telemetry block)."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from orccadd.cli import orccadctl_main
+from orccadd.cmdd.csvlog import LogDir
+from orccadd.cmdd.logsession import TelemetryLog
+from orccadd.cmdd.views import SignalSelection
+from orccadd.ctl.plot import output_format, plot_csv, read_log
+from orccadd.wire.schema import CommandMode, Layout, OperatorAction, Trace
+from orccadd.wire.telemetry import TelemetryBlock
+from tests.cmdd.conftest import DESC, PERIOD_S, URDF, FakeLoop, decode
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture
+def log(tmp_path: Path) -> Iterator[Path]:
+    """A short log: q, dq, tau, cmd and wake_us; a start, an instant, a task event, a change of
+    command mode (torque, then position)."""
+    tel = TelemetryBlock.create(Layout(dof=2, tick_len=1024, trace_len=16), PERIOD_S)
+    try:
+        loop = FakeLoop(tel)
+        loop.ticks(5)
+        sel = SignalSelection(["q", "dq", "tau", "cmd", "wake_us"], DESC["joints"])
+        rec = TelemetryLog.start(
+            LogDir(tmp_path / "logs", ""), tel, "run.csv", sel, lambda: DESC, decode, URDF, {}
+        )
+        loop.ticks(50)
+        loop.trace(Trace.COMMAND, OperatorAction.START)
+        loop.trace(Trace.INSTANT, inputs=(0,), actions=(0,))
+        rec.pump()
+        loop.ticks(50)
+        loop.trace(Trace.EVENT, 0)  # Approach.T1.TrackingDrift
+        loop.mode = CommandMode.POSITION
+        loop.ticks(50)
+        rec.close()
+    finally:
+        tel.close()
+    yield tmp_path / "logs/run.csv"
+
+
+def test_an_svg_names_the_events_and_the_units_of_every_axis(log: Path, tmp_path: Path) -> None:
+    out = tmp_path / "run.svg"
+    info = plot_csv(log, out, [])
+    text = out.read_text()
+    assert text.lstrip().startswith("<?xml") and "<svg" in text and text.rstrip().endswith("</svg>")
+    for label in ("q [rad]", "dq [rad/s]", "tau [N.m]", "wake_us [us]", "time since the log started [s]"):
+        assert label in text, label
+    assert "cmd [N.m | rad]" in text and re.search(r">\s*position\s*<", text)  # the mode's change marked
+    for name in ("start", "Approach.T1.TrackingDrift"):
+        assert re.search(rf">\s*{re.escape(name)}\s*<", text), name
+    assert "5 plots, 150 samples" in info and "3 events" in info and "(svg)" in info
+
+
+def test_a_png_by_default_or_by_suffix(log: Path, tmp_path: Path) -> None:
+    assert orccadctl_main(["plot", str(log), "-o", str(tmp_path / "run.png"), "--signals", "q"]) == 0
+    assert orccadctl_main(["plot", str(log), "-o", str(tmp_path / "run.out"), "--signals", "q"]) == 0
+    assert (
+        orccadctl_main(["plot", str(log), "-o", str(tmp_path / "x.png"), "--format", "svg", "--signals", "q"])
+        == 0
+    )
+    for name in ("run.png", "run.out"):
+        assert (tmp_path / name).read_bytes()[:8] == PNG_MAGIC
+    assert b"<svg" in (tmp_path / "x.png").read_bytes()[:500]  # --format wins over the suffix
+    assert [output_format(Path(p), None) for p in ("a.svg", "a.SVG", "a.png", "a.pdf", "a")] == [
+        "svg",
+        "svg",
+        "png",
+        "png",
+        "png",
+    ]
+
+
+def test_a_log_without_a_header_still_plots(tmp_path: Path) -> None:
+    """An old log: absolute times, no units, no events."""
+    old = tmp_path / "old.csv"
+    old.write_text("time_s,q.j1\r\n1000.002000,1\r\n1000.004000,2\r\n")
+    d = read_log(old)
+    assert d.data[:, 0].tolist() == pytest.approx([0.0, 0.002]) and not d.events
+    out = tmp_path / "old.svg"
+    plot_csv(old, out, [])
+    assert "q [unit not recorded]" in out.read_text()
+
+
+def test_not_a_log_is_refused(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.csv"
+    bad.write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="not an orccadd log"):
+        plot_csv(bad, tmp_path / "x.png", [])
+    assert orccadctl_main(["plot", str(bad), "-o", str(tmp_path / "x.png")]) == 2
