@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The wheel as a user gets it (CI runs this after `make test`): built from this checkout,
 # installed with every bus extra into an empty virtual environment, then, from outside the
-# checkout: --version, `orccadctl check` on every shipped mission, orccadd on the shipped
+# checkout: --version, `orccadctl check` on every shipped mission (its tasks built on sim-ur5e),
+# the service files, completion, the module catalogue, orccadd on the shipped
 # sim-ur5e config for two seconds, status, and a SIGTERM that must end it cleanly (exit 0).
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
@@ -24,13 +25,21 @@ cd "$work"  # nothing of the checkout from here on
 share="$work/venv/share/orccadd/configs"
 for mission in "$share"/missions/*.mission; do
     if grep -q '^task .* from "' "$mission"; then
-        "$bin/orccadctl" check "$mission" >/dev/null
-        echo "checked $(basename "$mission")"
+        "$bin/orccadctl" check "$mission" --config sim-ur5e >/dev/null  # every task built on it
+        echo "checked $(basename "$mission") (and its tasks on sim-ur5e)"
     else  # the seed's KEEPSTABLE (an underwater vehicle): no task files for an arm
         "$bin/orccadctl" check --language-only "$mission" >/dev/null
         echo "checked $(basename "$mission") (language and automaton: it has no task files)"
     fi
 done
+
+for f in systemd/orccadd.service systemd/orccadd-can@.service udev/60-orccadd-cpu-dma-latency.rules \
+         udev/60-orccadd-dynamixel.rules; do  # what docs/install.md installs from the wheel
+    [ -f "$work/venv/share/orccadd/$f" ] || { echo "smoke: the wheel lacks share/orccadd/$f" >&2; exit 1; }
+done
+[ -f "$work/venv/share/doc/orccadd/install.md" ] || { echo "smoke: the wheel lacks install.md" >&2; exit 1; }
+"$bin/orccadctl" completion bash | bash -n
+"$bin/orccadctl" modules --config sim-ur5e | grep -q "target_rad .*default required"
 
 sock="$work/run/orccadd.sock"
 "$bin/orccadd" --config sim-ur5e --socket "$sock" > "$work/orccadd.log" 2>&1 &
