@@ -49,6 +49,7 @@ test: lint typecheck unit
 # Timing scripts (run as root for SCHED_FIFO); each prints median / p99 / max and its targets.
 bench: setup
 	$(PY) benchmarks/loop_latency.py
+	$(PY) benchmarks/tick_profile.py
 	$(PY) benchmarks/switching.py
 	$(PY) benchmarks/isolation.py
 	$(PY) benchmarks/automaton.py --skip-large

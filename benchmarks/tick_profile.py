@@ -1,0 +1,123 @@
+"""Where a task's tick goes: the cost of each module's update, of the resource's read and write,
+and of the shell (preconditions, events, blending), per tick (median / p99 / max, µs).
+
+Runs the task off real time on the simulated arm (`sim` backend: the plant is stepped inside
+`read`, reported apart) for --ticks ticks, re-armed toward the next of three targets each time it
+reaches one, so the profile covers motion and settling. Each module's `update` is timed on its own
+(perf_counter_ns around the call: about 0.1 µs of the figure is the timer itself). So a user sees
+which module eats the budget before putting a task on a robot:
+
+    python benchmarks/tick_profile.py --robot sim-panda --task configs/tasks/move_joints.toml
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from orccadd.config.shipped import robot_config_path
+from orccadd.robot import load_robot_config, with_backend
+from orccadd.session import Session
+from orccadd.types import Phase
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def targets_for(lo: np.ndarray, hi: np.ndarray, home: np.ndarray) -> list[list[float]]:
+    """Three goals well inside the limits: home, and an eighth of the range either side of it."""
+    span = np.minimum(hi - lo, 2 * np.pi) / 8
+    lo, hi = lo + span / 2, hi - span / 2
+    return [home.tolist(), np.clip(home + span, lo, hi).tolist(), np.clip(home - span, lo, hi).tolist()]
+
+
+def row(name: str, ns: np.ndarray) -> str:
+    us = ns / 1e3
+    return f"{name:28s} {np.median(us):9.2f} {np.percentile(us, 99):9.2f} {us.max():9.2f}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--robot", default="sim-ur5e", help="a robot config (file or shipped name)")
+    ap.add_argument("--task", default=str(ROOT / "configs/tasks/move_joints.toml"))
+    ap.add_argument("--ticks", type=int, default=20_000)
+    args = ap.parse_args()
+
+    cfg = with_backend(load_robot_config(robot_config_path(args.robot)), "sim")
+    s = Session.from_config(cfg)
+    task = s.task(Path(args.task))
+    m = s.resource.model
+    goals = targets_for(m.q_min_rad, m.q_max_rad, m.home_rad)
+    traj = next((mod for mod in task.modules if "target_rad" in mod.parameters), None)
+
+    n = args.ticks
+    perf = time.perf_counter_ns
+    per_module = {mod.name: np.zeros(n, dtype=np.int64) for mod in task.modules}
+    tick_ns = np.zeros(n, dtype=np.int64)
+    read_ns = np.zeros(n, dtype=np.int64)
+    write_ns = np.zeros(n, dtype=np.int64)
+    k = [0]
+
+    def timed(name: str, update: Callable[[float], None]) -> Callable[[float], None]:
+        out = per_module[name]
+
+        def run(t_s: float) -> None:
+            t0 = perf()
+            update(t_s)
+            out[k[0]] = perf() - t0
+
+        return run
+
+    task.schedule = tuple(timed(mod.name, mod.update) for mod in task.modules)
+    res = s.resource
+    inner_read, inner_write = res.read, res.write
+
+    def read(t_s: float):  # type: ignore[no-untyped-def]
+        t0 = perf()
+        st = inner_read(t_s)
+        read_ns[k[0]] = perf() - t0
+        return st
+
+    def write(t_s: float, cmd: np.ndarray) -> int:
+        t0 = perf()
+        flags = inner_write(t_s, cmd)
+        write_ns[k[0]] = perf() - t0
+        return flags
+
+    res.read = read  # type: ignore[method-assign]
+    res.write = write  # type: ignore[method-assign]
+    if traj is not None:
+        traj.configure({"target_rad": goals[0]})
+    task.activate()
+    period = cfg.control_period_s
+    goal = 0
+    for i in range(n):
+        k[0] = i
+        t0 = perf()
+        task.tick(i * period)
+        tick_ns[i] = perf() - t0
+        if task.phase is Phase.DONE and traj is not None:
+            goal = (goal + 1) % len(goals)
+            task.tune(f"{traj.name}.target_rad", goals[goal])
+            task.activate()
+        elif task.phase not in (Phase.RUN, Phase.PRE, Phase.DONE):
+            raise SystemExit(f"the task ended {task.phase.name} at tick {i}: {task.fault_reason}")
+
+    modules_ns = np.sum(list(per_module.values()), axis=0)
+    shell_ns = tick_ns - read_ns - write_ns - modules_ns
+    print(f"{cfg.name} ({cfg.dof} joints), task {task.name}, {n} ticks off real time (µs per tick)")
+    print(f"{'':28s} {'median':>9s} {'p99':>9s} {'max':>9s}")
+    for mod in task.modules:
+        print(row(f"  {mod.name} ({mod.type_name})", per_module[mod.name]))
+    print(row("  modules, together", modules_ns))
+    print(row("  read (plant step inside)", read_ns))
+    print(row("  write", write_ns))
+    print(row("  shell (pre, events, blend)", shell_ns))
+    print(row("tick", tick_ns))
+
+
+if __name__ == "__main__":
+    main()
