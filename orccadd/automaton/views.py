@@ -5,6 +5,11 @@ A transition's label is the set of chosen atoms it shows: an input only where it
 reaction (the same instant without it would have gone elsewhere), `start(T)`/`stop(T)` actions,
 emitted signals, `success`, `safe`. A label with no chosen atom is silent (τ). By default the view
 leaves out type 3 exceptions (their handling is what the safety check proves); `faults=True` keeps them.
+
+In the picture a state shows its number and the Robot-Tasks active in it; states with the same
+tasks active are drawn in one box (a cluster: one step of a sequence, or one combination of
+parallel branches), the safe procedure's in red, final states doubled. The full view labels each
+edge with the inputs it needs (`Home.done`; none: it is taken otherwise) and its actions.
 """
 
 from __future__ import annotations
@@ -15,10 +20,11 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from orccadd.automaton.automaton import Automaton
+from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
 from orccadd.errors import OrccaddError
 
 TAU = ""
+EDGE_ALTERNATIVES_SHOWN = 4  # input sets named on one edge of the full view
 
 
 @dataclass(frozen=True)
@@ -29,6 +35,8 @@ class Lts:
     initial: int
     edges: tuple[tuple[int, str, int], ...]
     names: tuple[str, ...]  # per state, for the picture
+    tasks: tuple[str, ...] = ()  # per state: the Robot-Tasks active, for the picture
+    phases: tuple[int, ...] = ()  # per state: MAIN, SAFE or END
 
     def visible_labels(self) -> set[str]:
         return {lab for _, lab, _ in self.edges if lab != TAU}
@@ -96,7 +104,12 @@ def project(a: Automaton, names: Iterable[str], *, faults: bool = False) -> Lts:
             if n not in seen:
                 seen.add(n)
                 stack.append(n)
-    return Lts(a.n_states, 0, tuple(sorted(edges)), a.where)
+    return Lts(a.n_states, 0, tuple(sorted(edges)), a.where, _tasks(a), a.phase)
+
+
+def _tasks(a: Automaton) -> tuple[str, ...]:
+    names = [t.name for t in a.program.tasks]
+    return tuple(", ".join(names[i] for i in act) for act in a.active)
 
 
 def minimize(lts: Lts) -> Lts:
@@ -135,12 +148,19 @@ def minimize(lts: Lts) -> Lts:
                 order[t] = len(order)
                 frontier.append(t)
     edges = tuple(sorted({(order[s], lab, order[t]) for s, lab, t in q_edges if s in order}))
-    names = [""] * len(order)
+    rep = [-1] * len(order)  # a state of each block (the first): its names, tasks and phase
     for s in range(lts.n):
         b = block[s]
-        if b in order and not names[order[b]]:
-            names[order[b]] = lts.names[s]
-    return Lts(len(order), 0, edges, tuple(names))
+        if b in order and rep[order[b]] < 0:
+            rep[order[b]] = s
+    return Lts(
+        len(order),
+        0,
+        edges,
+        tuple(lts.names[s] for s in rep),
+        tuple(lts.tasks[s] for s in rep) if lts.tasks else (),
+        tuple(lts.phases[s] for s in rep) if lts.phases else (),
+    )
 
 
 def _tau_closure(s: int, succ_tau: list[list[int]]) -> set[int]:
@@ -154,34 +174,66 @@ def _tau_closure(s: int, succ_tau: list[list[int]]) -> set[int]:
 
 
 def full_view(a: Automaton, *, faults: bool = False) -> Lts:
-    """The whole automaton, one edge per (source, actions, target), labelled with its actions."""
+    """The whole automaton, one edge per (source, actions, target), labelled `inputs / actions`:
+    the least sets of inputs that take it, `∨` between them (none: it is taken otherwise)."""
     p = a.program
     t3_bits = 0
     for m in p.t3_masks:
         t3_bits |= m
-    edges: set[tuple[int, str, int]] = set()
+    groups: dict[tuple[int, int, int], list[int]] = {}  # (source, target, actions) → input sets
     for s in range(a.n_states):
         for inputs, (n, actions) in a.table[s].items():
             if inputs & t3_bits and not faults:
                 continue
             if n == s and not actions:
                 continue
-            edges.add((s, ", ".join(a.describe_actions(actions)), n))
-    return Lts(a.n_states, 0, tuple(sorted(edges)), a.where)
+            groups.setdefault((s, n, actions), []).append(inputs)
+    edges = set()
+    for (s, n, actions), sets in groups.items():
+        least = [x for x in sets if not any(y != x and y & x == y for y in sets)]
+        alternatives = [" ∧ ".join(p.inputs[i] for i in range(len(p.inputs)) if x >> i & 1) for x in least]
+        label = "" if 0 in least else " ∨ ".join(sorted(alternatives)[:EDGE_ALTERNATIVES_SHOWN])
+        if len(least) > EDGE_ALTERNATIVES_SHOWN and label:
+            label += " ∨ …"
+        acts = ", ".join(a.describe_actions(actions))
+        edges.add((s, f"{label} / {acts}" if label and acts else label or acts, n))
+    return Lts(a.n_states, 0, tuple(sorted(edges)), a.where, _tasks(a), a.phase)
 
 
 def to_dot(lts: Lts, title: str) -> str:
-    out = [f'digraph "{title}" {{', "  rankdir=LR;", '  node [shape=circle, fontname="Helvetica"];',
+    """Graphviz text: a state's number and active tasks; a box per set of active tasks."""
+    out = [f'digraph "{_q(title)}" {{', "  rankdir=LR;", '  node [shape=circle, fontname="Helvetica"];',
            '  edge [fontname="Helvetica", fontsize=10];', '  start [shape=point];']  # fmt: skip
+    boxes: dict[str, list[int]] = {}
     for s in range(lts.n):
-        tip = lts.names[s].replace('"', "'")
-        out.append(f'  s{s} [label="{s}", tooltip="{tip}"];')
+        boxes.setdefault(lts.tasks[s] if lts.tasks else "", []).append(s)
+    for k, (tasks, states) in enumerate(boxes.items()):
+        if tasks:
+            out.append(f'  subgraph cluster_{k} {{ label="{_q(tasks)}"; style=rounded; color=grey;')
+        for s in states:
+            out.append("    " + _node(lts, s))
+        if tasks:
+            out.append("  }")
     out.append(f"  start -> s{lts.initial};")
     for s, lab, t in lts.edges:
-        style = ' style=dashed label="τ"' if lab == TAU else f' label="{lab}"'
+        style = ' style=dashed label="τ"' if lab == TAU else f' label="{_q(lab)}"'
         out.append(f"  s{s} -> s{t} [{style.strip()}];")
     out.append("}")
     return "\n".join(out) + "\n"
+
+
+def _node(lts: Lts, s: int) -> str:
+    phase = lts.phases[s] if lts.phases else MAIN
+    tasks = lts.tasks[s] if lts.tasks else ""
+    label = f"{s}\\n{_q(tasks)}" if tasks else str(s)
+    shape = ", shape=doublecircle" if phase == END else ""
+    colour = ", color=red, fontcolor=red" if phase == SAFE else ""
+    return f's{s} [label="{label}", tooltip="{_q(lts.names[s])}"{shape}{colour}];'
+
+
+def _q(text: str) -> str:
+    """Text inside a DOT string."""
+    return text.replace("\\", "\\\\").replace('"', "'")
 
 
 def render(dot_text: str, out: Path) -> None:

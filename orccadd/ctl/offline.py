@@ -15,6 +15,7 @@ from orccadd.errors import MissionError, OrccaddError
 # `orccadctl status` and the other online commands start in tens of milliseconds.
 
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
+GRAPH_FULL_MAX = 50  # states a full graph stays readable with
 
 
 def add_parsers(sub: Any) -> None:
@@ -36,8 +37,12 @@ def add_parsers(sub: Any) -> None:
     g = sub.add_parser("graph", help="draw a mission's automaton, or an abstract view of it")
     g.add_argument("file")
     g.add_argument(
-        "--abstract", default="", help="comma-separated signals/tasks to keep (minimised by bisimulation)"
+        "--abstract",
+        default="",
+        help="comma-separated signals/tasks to keep (minimised by bisimulation); default for more than "
+        f"{GRAPH_FULL_MAX} states: every task, success and safe",
     )
+    g.add_argument("--full", action="store_true", help="the whole automaton, however large")
     g.add_argument("--faults", action="store_true", help="keep type 3 exceptions in the picture")
     g.add_argument("-o", "--output", required=True, help="out.svg, out.png, out.pdf or out.dot")
     g.set_defaults(func=cmd_graph)
@@ -123,6 +128,9 @@ def cmd_graph(args: argparse.Namespace) -> int:
 
     a = compile_file(args.file, task_files=read_task_interface)
     names = [n for n in args.abstract.split(",") if n.strip()]
+    if not names and not args.full and a.n_states > GRAPH_FULL_MAX:  # unreadable in full
+        names = [t.name for t in a.program.tasks] + ["success", "safe"]
+        print(f"{a.n_states} states: the abstract view on {', '.join(names)} (--full for all)")
     lts = minimize(project(a, names, faults=args.faults)) if names else full_view(a, faults=args.faults)
     render(to_dot(lts, a.program.name), Path(args.output))
     print(f"{args.output}: {lts.n} states, {len(lts.edges)} transitions")
