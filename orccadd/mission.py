@@ -14,7 +14,7 @@ from pathlib import Path
 
 from orccadd.automaton import Automaton, Report, compile_file, verify
 from orccadd.automaton import ast as A
-from orccadd.automaton.compiler import DEFAULT_MAX_STATES
+from orccadd.automaton.compiler import DEFAULT_MAX_STATES, Progress
 from orccadd.automaton.verify import CheckResult
 from orccadd.errors import MissionError, OrccaddError, ParameterError
 from orccadd.physres.base import PhysicalResource
@@ -22,9 +22,11 @@ from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_
 from orccadd.task.spec import read_task_interface
 
 
-def check_mission(path: str | Path, max_states: int = DEFAULT_MAX_STATES) -> tuple[Automaton, Report]:
+def check_mission(
+    path: str | Path, max_states: int = DEFAULT_MAX_STATES, progress: Progress | None = None
+) -> tuple[Automaton, Report]:
     """The compiled mission and its verification report; `MissionError` if it does not compile."""
-    automaton = compile_file(path, max_states, read_task_interface)
+    automaton = compile_file(path, max_states, read_task_interface, progress)
     report = verify(automaton, one_task_at_a_time=True)
     report.results.append(_check_task_files(automaton))
     return automaton, report

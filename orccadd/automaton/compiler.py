@@ -9,7 +9,9 @@ severe of one tick's events: T3 > T2 > post > pre > sync).
 from __future__ import annotations
 
 import itertools
+import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -162,9 +164,18 @@ class _CausalityError(Exception):
         self.solutions = solutions
 
 
-def compile_program(p: Program, max_states: int = DEFAULT_MAX_STATES) -> Automaton:
-    """Explore every reachable state (breadth first, so counterexamples are shortest)."""
+Progress = Callable[[int, int, float], None]  # (states, transitions, seconds so far)
+PROGRESS_EVERY_S = 0.5
+
+
+def compile_program(
+    p: Program, max_states: int = DEFAULT_MAX_STATES, progress: Progress | None = None
+) -> Automaton:
+    """Explore every reachable state (breadth first, so counterexamples are shortest).
+    `progress` is told the count every `PROGRESS_EVERY_S` (a long compilation on a terminal)."""
     layout = ActionLayout(p)
+    t0 = last = time.monotonic()
+    n_transitions = 0
     reactor = Reactor(p, layout)
     index: dict[Top, int] = {}
     states: list[Top] = []
@@ -224,6 +235,10 @@ def compile_program(p: Program, max_states: int = DEFAULT_MAX_STATES) -> Automat
         relevant.append(rel)
         table.append(row)
         active.append(act)
+        n_transitions += len(row)
+        if progress is not None and not s % 64 and time.monotonic() - last >= PROGRESS_EVERY_S:
+            last = time.monotonic()
+            progress(len(states), n_transitions, last - t0)
     where = tuple(describe_state(p, t) for t in states)
     return Automaton(
         program=p,

@@ -16,6 +16,7 @@ from orccadd.errors import MissionError, OrccaddError
 
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
 GRAPH_FULL_MAX = 50  # states a full graph stays readable with
+PROGRESS_LINE_S = 2.0  # a long compilation says how far it is this often (on a terminal)
 
 
 def add_parsers(sub: Any) -> None:
@@ -75,10 +76,10 @@ def cmd_check(args: argparse.Namespace) -> int:
 
     try:
         if args.language_only:
-            a = compile_file(args.file, args.max_states, read_task_interface)
+            a = compile_file(args.file, args.max_states, read_task_interface, _progress())
             report = verify(a)
         else:
-            a, report = check_mission(args.file, args.max_states)
+            a, report = check_mission(args.file, args.max_states, _progress())
             if args.config:
                 report.results.append(_on_robot(a, args.config))
     except MissionError as e:
@@ -126,7 +127,7 @@ def cmd_graph(args: argparse.Namespace) -> int:
     from orccadd.automaton.views import full_view, minimize, project, render, to_dot
     from orccadd.task.spec import read_task_interface
 
-    a = compile_file(args.file, task_files=read_task_interface)
+    a = compile_file(args.file, task_files=read_task_interface, progress=_progress())
     names = [n for n in args.abstract.split(",") if n.strip()]
     if not names and not args.full and a.n_states > GRAPH_FULL_MAX:  # unreadable in full
         names = [t.name for t in a.program.tasks] + ["success", "safe"]
@@ -152,6 +153,27 @@ def cmd_export(args: argparse.Namespace) -> int:
     else:
         Path(args.output).write_text(model)
     return EXIT_OK
+
+
+def _progress() -> Any:
+    """On a terminal, a long compilation's count on stderr, a line every `PROGRESS_LINE_S`
+    (Ctrl-C stops it: exit 130, no traceback)."""
+    if not sys.stderr.isatty():
+        return None
+    shown = [0.0]
+
+    def show(states: int, transitions: int, elapsed_s: float) -> None:
+        if elapsed_s - shown[0] < PROGRESS_LINE_S:
+            return
+        shown[0] = elapsed_s
+        rate = states / elapsed_s if elapsed_s > 0 else 0.0
+        print(
+            f"compiling: {states} states, {transitions} transitions ({rate:.0f} states/s, {elapsed_s:.0f} s)",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    return show
 
 
 def run(args: argparse.Namespace) -> int:

@@ -11,6 +11,7 @@ from orccadd.automaton import compile_text, verify
 from orccadd.automaton.elaborate import MAX_EXPANDED_NESTING, MAX_EXPANDED_STATEMENTS
 from orccadd.automaton.parser import MAX_MISSION_CHARS, MAX_NESTING
 from orccadd.errors import MissionError
+from tests.conftest import ROOT
 
 
 def mission(body: str, n_tasks: int = 1, procedures: str = "", inputs: str = "Stop") -> str:
@@ -91,3 +92,16 @@ def test_a_pass_that_still_runs_out_of_stack_is_a_mission_error(monkeypatch: pyt
             compile_text(text)
     finally:
         sys.setrecursionlimit(old)
+
+
+def test_a_long_compilation_reports_its_progress(monkeypatch: pytest.MonkeyPatch) -> None:
+    from orccadd.automaton import compile_file, compiler
+
+    monkeypatch.setattr(compiler, "PROGRESS_EVERY_S", 0.0)  # every 64 states, however quick
+    seen: list[tuple[int, int]] = []
+    a = compile_file(
+        ROOT / "benchmarks/missions/exomars_scale.mission",
+        progress=lambda states, transitions, _s: seen.append((states, transitions)),
+    )
+    assert seen and all(0 < s <= a.n_states and 0 < t <= a.n_transitions for s, t in seen)
+    assert seen == sorted(seen)
