@@ -116,12 +116,15 @@ class When:
 
 @dataclass(frozen=True)
 class DoUntil:
-    """`do P until C`: strong preemption; `weak do P until C`: P reacts in the last instant too."""
+    """`do P until C`: strong preemption; `weak do P until C`: P reacts in the last instant too.
+    `immediate`: C is tested in the instant the statement starts too (Esterel's `abort P when
+    immediate C`): a strong one then does not start P at all."""
 
     body: Stmt
     cond: SigExpr
     weak: bool
     loc: Loc
+    immediate: bool = False
 
 
 @dataclass(frozen=True)

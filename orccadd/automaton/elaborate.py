@@ -4,13 +4,17 @@ Checks: one mission name, one main and one safe procedure; no name declared twic
 keyword; tasks on declared resources, signatures agreeing with their task files; every signal
 known (short names only when unambiguous); only internal signals emitted; procedures not
 recursive; `exit` inside its trap; no `safe` inside the safe procedure; no loop body that can end
-in the instant it starts.
+in the instant it starts; no task in two branches of one `par` (it would be active twice at once).
+
+Besides the program's terms it records the `Site`s the dead-code check follows (task activations,
+`emit`s, branches), each with the kernel term that starts it.
 """
 
 from __future__ import annotations
 
 import difflib
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
+from functools import partial
 from pathlib import Path
 
 from orccadd.automaton import ast as A
@@ -19,6 +23,7 @@ from orccadd.automaton.program import (
     BUILTIN_T2,
     EVENT_KINDS,
     Program,
+    Site,
     TaskInfo,
     event_full_name,
 )
@@ -33,6 +38,7 @@ _RESERVED = (
 KEYWORDS = frozenset(_RESERVED.split())
 PROPERTY_FNS = ("active", "start", "stop")
 _TRAP_TOP = 500_000
+_SAFE_ENDED = _TRAP_TOP + 1  # the trap around the safe procedure: above every trap inside it
 
 
 def elaborate(m: A.MissionAst, task_files: TaskFileReader | None = None) -> Program:
@@ -62,6 +68,9 @@ class _Elaborator:
         self.declared: dict[str, A.Loc] = {}
         self.nesting = 0  # statements open around the one being elaborated, procedures expanded
         self.expanded = 0  # statements elaborated so far, procedures expanded at each call
+        self.runs: list[tuple[int, str]] = []  # every task activation so far: (task, where)
+        self.sites: list[Site | None] = []  # None: reserved for a branch being elaborated
+        self.open_sites: list[int] = []  # the branches around the statement being elaborated
 
     def err(self, loc: A.Loc, msg: str) -> MissionError:
         return MissionError(loc.file, loc.line, loc.col, msg, self.m.text)
@@ -131,9 +140,12 @@ class _Elaborator:
             )
         tasks = tuple(self.tasks.values())
         main = self.proc_term(mains[0], [], in_safe=False)
-        safe_body = self.proc_term(safes[0], [], in_safe=True)
-        fatal = K.IN, self.t3_of(safe_body)
-        safe = K.Handle(safe_body, (fatal,), (K.Exit(K.FAILED_CODE),))
+        safe_proc = safes[0]
+        safe_body = self.branch(
+            f"the safe procedure {safe_proc.name}", safe_proc.loc,
+            lambda: self.proc_term(safe_proc, [], in_safe=True), kind="safe",
+        )  # fmt: skip
+        safe = _guard_safe(safe_body, self.t3_of(safe_body))
         for prop in m.properties:
             self.check_prop(prop)
         return Program(
@@ -154,6 +166,7 @@ class _Elaborator:
             properties=m.properties,
             ast=m,
             names=self.spellings(),
+            sites=tuple(site for site in self.sites if site is not None),
         )
 
     def task(self, t: A.TaskDecl, index: int) -> TaskInfo:
@@ -299,13 +312,15 @@ class _Elaborator:
 
     # statements -----------------------------------------------------------------------------------
 
-    def proc_term(self, p: A.ProcDecl, stack: list[str], *, in_safe: bool) -> K.Term:
+    def proc_term(
+        self, p: A.ProcDecl, stack: list[str], *, in_safe: bool, via: tuple[tuple[str, A.Loc], ...] = ()
+    ) -> K.Term:
         if p.name in stack:
             cycle = " -> ".join([*stack[stack.index(p.name) :], p.name])
             raise self.err(
                 p.loc, f"procedure {p.name} calls itself ({cycle}); procedures cannot be recursive"
             )
-        scope = _Scope(stack=[*stack, p.name], traps={}, depth=0, in_safe=in_safe)
+        scope = _Scope(stack=[*stack, p.name], traps={}, depth=0, in_safe=in_safe, via=via)
         body = self.stmt(p.body, scope)
         if p.handlers:
             body = self.handle(body, p.handlers, scope)
@@ -324,8 +339,55 @@ class _Elaborator:
                 conds.append((K.IN, mask))
             else:
                 conds.append(self.cond(h.cond))
-            terms.append(self.stmt(h.body, scope))
+            what = "the handler `on " + ("fatal" if h.cond is None else A.show(h.cond)) + "`"
+            terms.append(self.branch(what, h.loc, partial(self.stmt, h.body, scope)))
         return K.Handle(body, tuple(conds), tuple(terms))
+
+    # what the dead-code check follows -------------------------------------------------------------
+
+    def add_site(self, kind: str, what: str, loc: A.Loc, term: K.Term) -> None:
+        parent = self.open_sites[-1] if self.open_sites else -1
+        self.sites.append(Site(kind, what, loc, term, parent))
+
+    def branch(self, what: str, loc: A.Loc, build: Callable[[], K.Term], kind: str = "branch") -> K.Term:
+        """Elaborate a branch (`build()`) and record it as a site, the parent of the sites inside."""
+        index = len(self.sites)
+        parent = self.open_sites[-1] if self.open_sites else -1
+        self.sites.append(None)
+        self.open_sites.append(index)
+        try:
+            term = build()
+        finally:
+            self.open_sites.pop()
+        self.sites[index] = Site(kind, what, loc, _anchor(term), parent)
+        return term
+
+    def place(self, loc: A.Loc, sc: _Scope) -> str:
+        """Where a statement is, with the procedure calls that brought it here."""
+        chain = "; ".join(f"in {name}, called at {at}" for name, at in reversed(sc.via))
+        return f"{loc} ({chain})" if chain else str(loc)
+
+    def par(self, s: A.Par, sc: _Scope) -> K.Term:
+        """A parallel statement; a task run in two of its branches is refused (it would be active
+        twice at once: one control law cannot run twice on its resource), naming both places."""
+        branches: list[K.Term] = []
+        earlier: dict[int, str] = {}  # task -> where an earlier branch runs it
+        for b in s.branches:
+            first_run = len(self.runs)
+            branches.append(self.stmt(b, sc))
+            mine: dict[int, str] = {}
+            for task, where in self.runs[first_run:]:
+                mine.setdefault(task, where)
+            for task, where in mine.items():
+                if task in earlier:
+                    name = self.m.tasks[task].name
+                    msg = (f"task {name} may be active twice at once: two branches of this `par` run it, "
+                           f"at {earlier[task]} and at {where}; a Robot-Task is one control law on its "
+                           "resource: run it in one branch only")  # fmt: skip
+                    raise self.err(s.loc, msg)
+            for task, where in mine.items():
+                earlier.setdefault(task, where)
+        return K.Par(tuple(branches))
 
     def t3_of(self, t: K.Term) -> int:
         by_index = {info.index: info for info in self.tasks.values()}
@@ -359,7 +421,10 @@ class _Elaborator:
             return K.seq([self.stmt(i, sc) for i in s.items])
         if isinstance(s, A.Call | A.Run):
             if s.name in self.tasks:
-                return K.Run(self.tasks[s.name].index, s.loc)
+                run = K.Run(self.tasks[s.name].index, s.loc)
+                self.runs.append((run.task, self.place(s.loc, sc)))
+                self.add_site("task", f"task {s.name}", s.loc, run)
+                return run
             if isinstance(s, A.Call) and s.name in self.procs:
                 p = self.procs[s.name]
                 if p.role == "main":
@@ -368,7 +433,7 @@ class _Elaborator:
                     raise self.err(
                         s.loc, f"{s.name} is the safe procedure: enter it with `safe`, not by calling it"
                     )
-                return self.proc_term(p, sc.stack, in_safe=sc.in_safe)
+                return self.proc_term(p, sc.stack, in_safe=sc.in_safe, via=(*sc.via, (p.name, s.loc)))
             if s.name in self.full or s.name in self.short:
                 raise self.err(s.loc, f"`{s.name}` is a signal: to wait for it write `await {s.name}`")
             known = [*self.tasks, *self.procs]
@@ -391,17 +456,20 @@ class _Elaborator:
                 msg = (f"cannot emit `{s.name}`: only `signal`s declared in the mission can be emitted "
                        "(operator inputs and task events come from outside)")  # fmt: skip
                 raise self.err(s.loc, msg)
-            return K.Emit(bit)
+            emit = K.Emit(bit)
+            self.add_site("emit", f"`emit {s.name}`", s.loc, emit)
+            return emit
         if isinstance(s, A.Await):
             return K.Await(self.cond(s.cond), s.immediate, s.loc)
         if isinstance(s, A.When):
             wait = K.Await(self.cond(s.cond), True, s.loc)
-            body = self.stmt(s.body, sc)
+            what = f"the body of `when {A.show(s.cond)}`"
+            body = self.branch(what, s.body.loc, partial(self.stmt, s.body, sc))
             if s.until is not None:
                 body = K.Abort(body, self.cond(s.until), False, False)
             return K.seq((wait, body))
         if isinstance(s, A.DoUntil):
-            return K.Abort(self.stmt(s.body, sc), self.cond(s.cond), s.weak, False)
+            return K.Abort(self.stmt(s.body, sc), self.cond(s.cond), s.weak, s.immediate)
         if isinstance(s, A.Loop):
             body = self.stmt(s.body, sc)
             if K.DONE in first_codes(body):
@@ -410,15 +478,14 @@ class _Elaborator:
                 raise self.err(s.loc, msg)
             return K.Loop(body, s.loc)
         if isinstance(s, A.Par):
-            return K.Par(tuple(self.stmt(b, sc) for b in s.branches))
+            return self.par(s, sc)
         if isinstance(s, A.Present):
-            orelse = self.stmt(s.orelse, sc) if s.orelse is not None else K.NOTHING
-            return K.Present(self.cond(s.cond), self.stmt(s.then, sc), orelse)
+            return self.present(s, sc)
         if isinstance(s, A.Trap):
             if s.name in sc.traps:
                 raise self.err(s.loc, f"trap {s.name} is already open here (line {sc.traps[s.name][1].line})")
             code = _TRAP_TOP - sc.depth
-            inner = _Scope(sc.stack, {**sc.traps, s.name: (code, s.loc)}, sc.depth + 1, sc.in_safe)
+            inner = _Scope(sc.stack, {**sc.traps, s.name: (code, s.loc)}, sc.depth + 1, sc.in_safe, sc.via)
             return K.Trap(code, self.stmt(s.body, inner))
         if isinstance(s, A.Exit):
             if s.name not in sc.traps:
@@ -429,23 +496,57 @@ class _Elaborator:
             return K.Exit(sc.traps[s.name][0])
         if isinstance(s, A.Every):
             c = self.cond(s.cond)
-            body = K.Abort(K.seq((self.stmt(s.body, sc), K.Halt(s.loc))), c, False, False)
+            what = f"the body of `every {A.show(s.cond)}`"
+            each = self.branch(what, s.body.loc, partial(self.stmt, s.body, sc))
+            body = K.Abort(K.seq((each, K.Halt(s.loc))), c, False, False)
             return K.seq((K.Await(c, False, s.loc), K.Loop(body, s.loc)))
         if isinstance(s, A.Handle):
             return self.handle(self.stmt(s.body, sc), s.handlers, sc)
         raise AssertionError(f"unhandled statement {s!r}")  # pragma: no cover
 
+    def present(self, s: A.Present, sc: _Scope) -> K.Term:
+        cond = A.show(s.cond)
+        then = self.branch(f"the `then` of `present {cond}`", s.then.loc, partial(self.stmt, s.then, sc))
+        orelse: K.Term = K.NOTHING
+        if s.orelse is not None:
+            what = f"the `else` of `present {cond}`"
+            orelse = self.branch(what, s.orelse.loc, partial(self.stmt, s.orelse, sc))
+        return K.Present(self.cond(s.cond), then, orelse)
+
 
 class _Scope:
-    __slots__ = ("depth", "in_safe", "stack", "traps")
+    __slots__ = ("depth", "in_safe", "stack", "traps", "via")
 
     def __init__(
-        self, stack: list[str], traps: dict[str, tuple[int, A.Loc]], depth: int, in_safe: bool
+        self,
+        stack: list[str],
+        traps: dict[str, tuple[int, A.Loc]],
+        depth: int,
+        in_safe: bool,
+        via: tuple[tuple[str, A.Loc], ...] = (),
     ) -> None:
         self.stack = stack
         self.traps = traps
         self.depth = depth
         self.in_safe = in_safe
+        self.via = via  # the procedure calls that led here: (procedure, where it is called)
+
+
+def _guard_safe(body: K.Term, t3: int) -> K.Term:
+    """The safe procedure, ended as *failed* by a type 3 exception of one of its own tasks: from the
+    instant after it is entered on (a non-immediate strong abort, like every other guard), not in
+    that instant, whose type 3 exception caused the entry (the safe procedure may run that task again)."""
+    ended = K.Exit(_SAFE_ENDED)
+    guarded = K.Abort(K.seq((body, ended)), (K.IN, t3), False, False)
+    return K.Trap(_SAFE_ENDED, K.seq((guarded, K.Exit(K.FAILED_CODE))))
+
+
+def _anchor(t: K.Term) -> K.Term:
+    """The term whose start is a branch's start: its first statement that is not `nothing` (a
+    sequence is spliced into the one around it, its items are kept); `K.NOTHING` if none."""
+    if isinstance(t, K.Seq):
+        return next((item for item in t.items if item is not K.NOTHING), K.NOTHING)
+    return t
 
 
 def _balanced(op: int, parts: list[K.Cond]) -> K.Cond:

@@ -172,11 +172,19 @@ class LoopN(Node):
 
 
 class AbortN(Node):
-    def __init__(self, body: Node, test: Callable[[Ctx], bool], weak: bool) -> None:
-        self.body, self.test, self.weak = body, test, weak
+    def __init__(self, body: Node, test: Callable[[Ctx], bool], weak: bool, immediate: bool = False) -> None:
+        self.body, self.test, self.weak, self.immediate = body, test, weak, immediate
 
     def start(self, c: Ctx) -> int:
-        return self.body.start(c)
+        if not self.immediate:
+            return self.body.start(c)
+        if not self.weak and self.test(c):  # preempted before it starts
+            return DONE
+        code = self.body.start(c)
+        if code == PAUSED and self.weak and self.test(c):
+            self.body.kill(c)
+            return DONE
+        return code
 
     def resume(self, c: Ctx) -> int:
         if not self.weak and self.test(c):
@@ -226,10 +234,13 @@ class TrapN(Node):
 
 
 class HandleN(Node):
-    """Immediate strong preemption by the first handler whose condition holds."""
+    """Strong preemption by the first handler whose condition holds: immediate (tested in the
+    instant the body starts too), or not (the safe procedure's guard: from the next instant on)."""
 
-    def __init__(self, body: Node, handlers: list[tuple[Callable[[Ctx], bool], Node]]) -> None:
-        self.body, self.handlers = body, handlers
+    def __init__(
+        self, body: Node, handlers: list[tuple[Callable[[Ctx], bool], Node]], immediate: bool = True
+    ) -> None:
+        self.body, self.handlers, self.immediate = body, handlers, immediate
         self.current: Node = body
 
     def _check(self, c: Ctx, running_body: bool) -> int | None:
@@ -243,7 +254,7 @@ class HandleN(Node):
 
     def start(self, c: Ctx) -> int:
         self.current = self.body
-        code = self._check(c, running_body=False)
+        code = self._check(c, running_body=False) if self.immediate else None
         return self.body.start(c) if code is None else code
 
     def resume(self, c: Ctx) -> int:
@@ -270,7 +281,10 @@ class Interpreter:
         self.main = self.proc(main, 0)
         safe_body = self.proc(safe, 0)
         t3 = self.t3_mask(self.tasks_of_proc(safe))
-        self.safe = HandleN(safe_body, [(lambda c: bool(c.inputs & t3), Leaf(FAILED_CODE, FAILED_CODE))])
+        failed: list[tuple[Callable[[Ctx], bool], Node]] = [
+            (lambda c: bool(c.inputs & t3), Leaf(FAILED_CODE, FAILED_CODE))
+        ]
+        self.safe = HandleN(safe_body, failed, immediate=False)  # the entry's type 3 is the main's
         self.phase = "start"
         self.instant = 0
         self.active: list[int] = []
@@ -375,7 +389,7 @@ class Interpreter:
                 body = AbortN(body, self.test(s.until), weak=False)
             return SeqN([AwaitN(self.test(s.cond), immediate=True), body])
         if isinstance(s, A.DoUntil):
-            return AbortN(self.node(s.body, depth, traps), self.test(s.cond), s.weak)
+            return AbortN(self.node(s.body, depth, traps), self.test(s.cond), s.weak, s.immediate)
         if isinstance(s, A.Loop):
             return LoopN(self.node(s.body, depth, traps))
         if isinstance(s, A.Par):

@@ -37,6 +37,7 @@ _WORDS = {
 # run before any recursive pass, so no mission can exhaust the interpreter's stack.
 MAX_MISSION_CHARS = 1_000_000
 MAX_NESTING = 64  # statements and signal expressions nested inside one another
+MAX_COUNT = 1000  # `repeat N times`, `await N C`: N copies in sequence (each counts against the limits)
 
 _NESTING_NODES = frozenset(
     "call run nothing pause halt safe emit await_ when_until when_do do_until weak_do_until loop seq par "
@@ -286,6 +287,24 @@ class _Builder:
         items = [self.stmt(s) for s in b.children if isinstance(s, lark.Tree)]
         return items[0] if len(items) == 1 else A.Seq(tuple(items), self.loc(b))
 
+    def await_(self, c: list[Any], loc: A.Loc) -> A.Stmt:
+        """`await C`, `await immediate C`, or `await N C` (the N-th C from the next instant on:
+        N awaits in sequence, as Esterel defines it)."""
+        immediate, count, cond = c[1] is not None, c[2], self.sexpr(c[3])
+        if count is None:
+            return A.Await(cond, immediate, loc)
+        if immediate:
+            raise self.err(count, "`await immediate` takes no count: `await N C` waits from the next instant")
+        n = self.count(count, "await", f"await {count}")
+        return A.Await(cond, False, loc) if n == 1 else A.Seq((A.Await(cond, False, loc),) * n, loc)
+
+    def count(self, token: Any, what: str, shown: str) -> int:
+        """A count in the text: a whole number from 1 to `MAX_COUNT`."""
+        text = str(token)
+        if not text.isdigit() or not 1 <= int(text) <= MAX_COUNT:
+            raise self.err(token, f"`{shown}`: the count must be a whole number from 1 to {MAX_COUNT}")
+        return int(text)
+
     def stmt(self, s: lark.Tree[Any]) -> A.Stmt:
         k = s.data
         c = s.children
@@ -302,17 +321,24 @@ class _Builder:
         if k == "emit":
             return A.Emit(self.qname(c[1]), loc)
         if k == "await_":
-            return A.Await(self.sexpr(c[2]), c[1] is not None, loc)
+            return self.await_(c, loc)
         if k == "when_until":
             return A.When(self.sexpr(c[1]), self.block(c[3]), self.sexpr(c[5]), loc)
         if k == "when_do":
             return A.When(self.sexpr(c[1]), self.block(c[3]), None, loc)
         if k == "do_until":
-            return A.DoUntil(self.block(c[1]), self.sexpr(c[3]), False, loc)
+            return A.DoUntil(self.block(c[1]), self.sexpr(c[4]), False, loc, c[3] is not None)
         if k == "weak_do_until":
-            return A.DoUntil(self.block(c[2]), self.sexpr(c[4]), True, loc)
+            return A.DoUntil(self.block(c[2]), self.sexpr(c[5]), True, loc, c[4] is not None)
         if k == "loop":
             return A.Loop(self.block(c[1]), loc)
+        if k == "loop_each":  # Esterel: loop (do P; halt until S) — P restarts at each S
+            body = A.Seq((self.block(c[1]), A.Halt(loc)), loc)
+            return A.Loop(A.DoUntil(body, self.sexpr(c[3]), False, loc), loc)
+        if k == "repeat":  # P, N times in sequence
+            n = self.count(c[1], "repeat", f"repeat {c[1]} times")
+            body = self.block(c[3])
+            return body if n == 1 else A.Seq((body,) * n, loc)
         if k == "seq":
             return self.block(c[1])
         if k == "par":

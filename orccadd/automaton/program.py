@@ -52,6 +52,20 @@ class TaskInfo:
         return bool(set(self.joints) & set(other.joints))
 
 
+@dataclass(frozen=True, eq=False)
+class Site:
+    """A statement the dead-code check follows (`verify`): a task activation, an `emit`, or the
+    start of a branch (a `present`'s `then`/`else`, a handler, the body of `when`/`every`, the safe
+    procedure). `term` is the kernel term that starts it, found by identity in `Program.main` or
+    `Program.safe`; a procedure called twice has two sites at one place."""
+
+    kind: str  # "task", "emit", "branch" or "safe" (the safe procedure)
+    what: str  # how a report names it: "task Grip", "`emit Ready`", "the `else` of `present Go`"
+    loc: Loc
+    term: Term
+    parent: int  # the enclosing site's index in `Program.sites`, -1 for none
+
+
 @dataclass(frozen=True)
 class Program:
     """Everything the compiler, the verifier and the interpreter need, all names resolved."""
@@ -73,6 +87,7 @@ class Program:
     properties: tuple[PropDecl, ...]
     ast: MissionAst
     names: Mapping[str, tuple[str, ...]]  # every accepted spelling (full or short) -> full names
+    sites: tuple[Site, ...] = ()  # what the dead-code check follows
 
     def signal(self, name: str) -> str:
         """The full name of a signal as the mission may write it; OrccaddError if unknown or ambiguous."""

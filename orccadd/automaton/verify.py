@@ -3,23 +3,42 @@
 - determinism: every reachable instant has exactly one reaction (guaranteed by the compiler,
   which refuses non-causal programs and instantaneous loops);
 - deadlock and non-progress: no state that nothing can move (no active task, no operator input
-  awaited), no cycle the program runs through on its own without a task or an operator input;
+  that changes its reaction), no cycle the program runs through on its own without a task or an
+  operator input; judged per state, so the inputs of the safe procedure (tested in every instant
+  of the main one, in case it is entered) do not keep a stuck main procedure alive;
 - safety: in every reachable state, a type 3 exception of any active Robot-Task enters the safe
   procedure in the same instant (or, inside the safe procedure, ends the mission as failed);
 - liveness: with no exceptions (no T2, no T3), success stays reachable from every reachable state
   of the main procedure (the end of the safe procedure from every state of it);
+- strong liveness: every run of each procedure ends (the main one in success or the safe
+  procedure, the safe one done or failed), assuming every active task eventually ends and that
+  operator inputs may never come; a counterexample is a lasso (a prefix, then a loop forever). An
+  error only where the program spins or halts with nothing running and no way out, otherwise a
+  note (waiting for the operator forever is legitimate);
 - conflicts: no reachable state has two active tasks claiming the same resource or joints;
-- the mission's own properties (observers): `never E`, `A -> eventually B`, `A and B alternate`.
+- the mission's own properties (observers): `never E`, `A -> eventually B`, `A and B alternate`;
+- dead code: every task activation, `emit` and branch is executed by some reachable reaction (a
+  warning, an error in a strict report).
+
+A failed check has a level: "error" refuses the mission, "warning" refuses it only when the
+report is strict (`orccadctl check --strict`), "note" never does.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Set
 from dataclasses import dataclass, field
+from functools import partial
 
 from orccadd.automaton import ast as A
 from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
+from orccadd.automaton.coverage import CoverageError, executed_sites
+from orccadd.automaton.program import Site
+from orccadd.types import TASK_TIMEOUT
+
+ERROR, WARNING, NOTE = "error", "warning", "note"
+_TAGS = {ERROR: "FAIL", WARNING: "warn", NOTE: "note"}
 
 
 @dataclass(frozen=True)
@@ -31,10 +50,12 @@ class Step:
 @dataclass
 class CheckResult:
     name: str
-    ok: bool
+    ok: bool  # the property holds
     summary: str
     counterexample: list[Step] = field(default_factory=list)
     explanation: str = ""
+    level: str = ERROR  # what a failure means: ERROR refuses the mission, WARNING if strict, NOTE never
+    loop_start: int | None = None  # a lasso: counterexample[loop_start:] repeats forever
 
 
 @dataclass
@@ -42,10 +63,15 @@ class Report:
     automaton: Automaton
     results: list[CheckResult]
     warnings: list[str]
+    strict: bool = False  # warnings are errors (`orccadctl check --strict`)
+
+    def level(self, r: CheckResult) -> str:
+        return ERROR if self.strict and r.level == WARNING else r.level
 
     @property
     def ok(self) -> bool:
-        return all(r.ok for r in self.results)
+        """No check failed at the error level: what `load` and `check` accept."""
+        return not any(not r.ok and self.level(r) == ERROR for r in self.results)
 
     def failed(self, name: str) -> bool:
         return any(r.name == name and not r.ok for r in self.results)
@@ -54,22 +80,26 @@ class Report:
         a = self.automaton
         lines = [f"mission {a.program.name}: {a.n_states} states, {a.n_transitions} transitions"]
         for r in self.results:
-            lines.append(f"  {'ok  ' if r.ok else 'FAIL'} {r.name}: {r.summary}")
+            lines.append(f"  {'ok  ' if r.ok else _TAGS[self.level(r)]} {r.name}: {r.summary}")
             if not r.ok and r.counterexample:
                 lines.append("       counterexample:")
-                lines.extend("         " + s for s in format_trace(a, r.counterexample))
+                lines.extend("         " + s for s in format_trace(a, r.counterexample, r.loop_start))
             if not r.ok and r.explanation:
-                lines.append(f"       {r.explanation}")
+                lines.extend(f"       {line}" for line in r.explanation.splitlines())
         lines.extend(f"  note: {w}" for w in self.warnings)
         return "\n".join(lines)
 
 
-def format_trace(a: Automaton, trace: list[Step]) -> list[str]:
+def format_trace(a: Automaton, trace: list[Step], loop_start: int | None = None) -> list[str]:
+    """One line per instant; a lasso (`loop_start`) marks where its loop starts and ends."""
     p = a.program
     out = []
     for i, st in enumerate(trace, start=1):
         acts = ", ".join(a.describe_actions(st.actions)) or "-"
-        out.append(f"instant {i}: inputs {p.describe_inputs(st.inputs)} -> {acts}")
+        mark = " (loop start)" if loop_start == i - 1 else ""
+        out.append(f"instant {i}{mark}: inputs {p.describe_inputs(st.inputs)} -> {acts}")
+    if loop_start is not None:
+        out.append(f"... then from instant {loop_start + 1} again, forever")
     return out
 
 
@@ -119,11 +149,13 @@ def verify(a: Automaton, *, one_task_at_a_time: bool = False) -> Report:
         _check_progress(a, g),
         _check_safety(a, g),
         _check_liveness(a, g),
+        _check_strong_liveness(a, g),
         _check_conflicts(a, g),
     ]
     if one_task_at_a_time:
         results.append(_check_one_task(a, g))
     results.extend(_check_property(a, g, prop) for prop in a.program.properties)
+    results.append(_check_dead_code(a))
     return Report(a, results, _warnings(a, g))
 
 
@@ -207,9 +239,16 @@ def _check_liveness(a: Automaton, g: _Graph) -> CheckResult:
     return CheckResult("liveness", True, "success stays reachable from every state, assuming no exceptions")
 
 
+def _operator_moves(a: Automaton, s: int) -> bool:
+    """Some operator input changes the reaction of this state (with no task active, its row holds
+    operator inputs only). An input the state tests without effect does not count: in the main
+    procedure, the safe procedure's inputs are tested in every instant in case it is entered."""
+    return len(set(a.table[s].values())) > 1
+
+
 def _idle(a: Automaton, s: int) -> bool:
-    """Nothing outside can move this state: no active task, no operator input it reacts to."""
-    return a.phase[s] != END and not a.active[s] and not (a.relevant[s] & a.program.operator_mask)
+    """Nothing outside can move this state: no active task, no operator input that changes it."""
+    return a.phase[s] != END and not a.active[s] and not _operator_moves(a, s)
 
 
 def _check_progress(a: Automaton, g: _Graph) -> CheckResult:
@@ -268,11 +307,256 @@ def _check_one_task(a: Automaton, g: _Graph) -> CheckResult:
 def _warnings(a: Automaton, g: _Graph) -> list[str]:
     out = []
     for s in sorted(g.parent):
-        if a.phase[s] == MAIN and not a.active[s] and (a.relevant[s] & a.program.operator_mask) and s != 0:
+        if a.phase[s] == MAIN and not a.active[s] and _operator_moves(a, s) and s != 0:
             trace = format_trace(a, g.path(s))
             out.append(f"nothing runs and only an operator input can move the mission at: {a.where[s]} "
                        f"(reached by: {'; '.join(trace)})")  # fmt: skip
     return out[:5]
+
+
+# strong liveness ----------------------------------------------------------------------------------
+
+_ASSUMED = (
+    "every active task ends (its postcondition, a type 2 or a type 3 exception: tasks time out); "
+    "operator inputs may never come"
+)
+
+Edge = tuple[int, int, int, int]  # (state, inputs, next state, actions)
+
+
+@dataclass
+class _Loop:
+    """A cycle a procedure can run through forever under the environment assumptions."""
+
+    states: set[int]
+    entry: int  # its state reached first from the initial state
+    error: bool  # nothing runs in it and nothing can leave it: the program spins or halts
+    summary: str
+
+
+def _check_strong_liveness(a: Automaton, g: _Graph) -> CheckResult:
+    loops = [loop for phase in (MAIN, SAFE) if (loop := _endless_loop(a, g, phase)) is not None]
+    if not loops:
+        return CheckResult(
+            "strong liveness", True,
+            "every run of each procedure ends (main: success or safe; safe: done or failed), assuming "
+            + _ASSUMED,
+        )  # fmt: skip
+    worst = next((loop for loop in loops if loop.error), loops[0])
+    prefix, cycle = g.path(worst.entry), _fair_cycle(a, worst)
+    others = [loop.summary for loop in loops if loop is not worst]
+    why = (
+        "the program spins or halts: nothing runs in the loop and no input leads out of it"
+        if worst.error
+        else "a note, not a failure: in the loop a task runs or an input can lead out"
+    )
+    explanation = "\n".join([why, f"assumed: {_ASSUMED}", *(f"also: {o}" for o in others)])
+    return CheckResult(
+        "strong liveness", False, worst.summary, [*prefix, *cycle], explanation,
+        level=ERROR if worst.error else NOTE, loop_start=len(prefix),
+    )  # fmt: skip
+
+
+def _must_end(a: Automaton, t: int) -> bool:
+    """The fairness assumption covers task t: it ends within its timeout. A task from a task file
+    without the type 3 `Timeout` (`timeout_s = inf`) may run forever."""
+    info = a.program.tasks[t]
+    return not info.source or any(full.endswith(f".T3.{TASK_TIMEOUT}") for _, full, _ in info.events)
+
+
+def _inside(a: Automaton, states: set[int], s: int) -> list[Edge]:
+    return [(s, inputs, n, act) for inputs, (n, act) in a.table[s].items() if n in states]
+
+
+def _endless_loop(a: Automaton, g: _Graph, phase: int) -> _Loop | None:
+    """The worst fair cycle of one procedure that never ends it (an error first), the one reached
+    first from the initial state; None if every run of the procedure ends."""
+    order = {s: i for i, s in enumerate(g.parent)}
+    nodes = [s for s in g.parent if a.phase[s] == phase]
+
+    def succ(s: int) -> list[int]:
+        return [n for n, _ in a.table[s].values() if a.phase[n] == phase]
+
+    found: list[_Loop] = []
+    for comp in _sccs(nodes, succ):
+        states = set(comp)
+        if _is_fair_cycle(a, states):
+            found.append(_describe_loop(a, states, min(states, key=order.__getitem__), phase))
+    if not found:
+        return None
+    return min(found, key=lambda loop: (not loop.error, order[loop.entry]))
+
+
+def _is_fair_cycle(a: Automaton, states: set[int]) -> bool:
+    """The strongly connected `states` hold a cycle along which every task that must end does:
+    each task active in all of them is stopped by some transition among them."""
+    edges = [e for s in states for e in _inside(a, states, s)]
+    if not edges:
+        return False  # a single state without a loop on itself
+    always = set.intersection(*(set(a.active[s]) for s in states))
+    stopped = 0
+    for _, _, _, act in edges:
+        stopped |= a.stops(act)
+    return all(stopped >> t & 1 for t in always if _must_end(a, t))
+
+
+def _describe_loop(a: Automaton, states: set[int], entry: int, phase: int) -> _Loop:
+    p = a.program
+    proc = next(d.name for d in p.ast.procedures if d.role == ("main" if phase == MAIN else "safe"))
+    who = f"the {'main' if phase == MAIN else 'safe'} procedure {proc}"
+    exits = [(inputs, act) for s in states for inputs, (n, act) in a.table[s].items() if n not in states]
+    busy = any(a.active[s] for s in states)
+    if not exits and not busy:
+        return _Loop(states, entry, True, f"{who} can run forever with nothing running and no way out")
+    if not exits:
+        return _Loop(states, entry, False, f"{who} never ends: it runs tasks in a loop with no way out")
+    if any(inputs == 0 for inputs, _ in exits):
+        kept = f"{who} may run forever: inputs can keep it in a loop it leaves when none comes"
+        return _Loop(states, entry, False, kept)
+    ways = _exit_inputs(a, exits)
+    operator = [n for n in ways if p.input_kind[p.inputs.index(n)] == "operator"]
+    if operator:
+        waits = f"{who} may wait forever for an operator input ({', '.join(operator)})"
+        return _Loop(states, entry, False, waits)
+    if ways:
+        return _Loop(states, entry, False, f"{who} may run forever: it loops until {' or '.join(ways)}")
+    return _Loop(states, entry, False, f"{who} may run forever: only a type 3 exception leaves its loop")
+
+
+def _exit_inputs(a: Automaton, exits: list[tuple[int, int]]) -> list[str]:
+    """The inputs (other than type 3 exceptions) that leave a loop: those that do alone, or else
+    every input of a leaving combination."""
+    p = a.program
+    alone = {inputs for inputs, _ in exits if inputs & (inputs - 1) == 0}
+    masks = alone or {inputs for inputs, _ in exits}
+    bits = 0
+    for m in masks:
+        bits |= m
+    return [n for i, n in enumerate(p.inputs) if bits >> i & 1 and p.input_kind[i] != "T3"]
+
+
+def _fair_cycle(a: Automaton, loop: _Loop) -> list[Step]:
+    """A cycle from the loop's entry back to it along which every task active at the entry that
+    must end is stopped or seen inactive: shortest paths, one obligation after the other."""
+    pending = {t for t in a.active[loop.entry] if _must_end(a, t)}
+    cur, path = loop.entry, []
+    while pending:
+        leg = _shortest(a, loop.states, cur, partial(_discharges, a, tasks=frozenset(pending)))
+        for e in leg:
+            pending -= {t for t in pending if _discharges(a, e, {t})}
+        path.extend(leg)
+        cur = leg[-1][2]
+    if cur != loop.entry or not path:
+        path.extend(_shortest(a, loop.states, cur, lambda e: e[2] == loop.entry))
+    return [Step(inputs, act) for _, inputs, _, act in path]
+
+
+def _discharges(a: Automaton, e: Edge, tasks: Set[int]) -> bool:
+    """Transition e stops one of `tasks`, or leads to a state where one of them is not active."""
+    return any(a.stops(e[3]) >> t & 1 or t not in a.active[e[2]] for t in tasks)
+
+
+def _shortest(a: Automaton, states: set[int], start: int, goal: Callable[[Edge], bool]) -> list[Edge]:
+    """The shortest path inside `states` from `start` whose last transition satisfies `goal`
+    (transitions tried in input order: the empty input first)."""
+    came: dict[int, Edge | None] = {start: None}
+    queue = deque([start])
+    while queue:
+        s = queue.popleft()
+        for e in _inside(a, states, s):
+            if goal(e):
+                path = [e]
+                while (back := came[path[-1][0]]) is not None:
+                    path.append(back)
+                return path[::-1]
+            if e[2] not in came:
+                came[e[2]] = e
+                queue.append(e[2])
+    raise AssertionError("a strongly connected set has a path between any two of its states")
+
+
+def _sccs(nodes: list[int], succ: Callable[[int], list[int]]) -> list[list[int]]:
+    """Strongly connected components (Tarjan's algorithm, iterative: no recursion limit)."""
+    index: dict[int, int] = {}
+    low: dict[int, int] = {}
+    stack: list[int] = []
+    on_stack: set[int] = set()
+    out: list[list[int]] = []
+    for root in nodes:
+        if root in index:
+            continue
+        work = [(root, iter(succ(root)))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            v, it = work[-1]
+            w = next((w for w in it if w not in index or w in on_stack), None)
+            if w is not None and w not in index:
+                index[w] = low[w] = len(index)
+                stack.append(w)
+                on_stack.add(w)
+                work.append((w, iter(succ(w))))
+                continue
+            if w is not None:
+                low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp: list[int] = []
+                while not comp or comp[-1] != v:
+                    comp.append(stack.pop())
+                    on_stack.discard(comp[-1])
+                out.append(comp)
+    return out
+
+
+# dead code ----------------------------------------------------------------------------------------
+
+
+def _check_dead_code(a: Automaton) -> CheckResult:
+    p = a.program
+    try:
+        executed = executed_sites(a)
+    except CoverageError as e:
+        return CheckResult("dead code", False, f"not checked: {e}", level=WARNING)
+    items = [(site.loc, f"{site.what} {_NEVER[site.kind]}") for site in _dead_sites(p.sites, executed)]
+    run = {site.what for site in p.sites if site.kind == "task"}
+    unused = [t for t in p.tasks if f"task {t.name}" not in run]
+    items += [(t.loc, f"task {t.name} is declared but never run") for t in unused]
+    if not items:
+        return CheckResult("dead code", True, "every task activation, emit and branch can run")
+    items.sort(key=lambda item: (item[0].line, item[0].col))
+    noun = "statement" if len(items) == 1 else "statements"
+    return CheckResult(
+        "dead code", False, f"{len(items)} {noun} no reachable state can start or emit",
+        explanation="\n".join(f"{loc}: {text}" for loc, text in items), level=WARNING,
+    )  # fmt: skip
+
+
+_NEVER = {
+    "task": "never starts",
+    "emit": "is never executed",
+    "branch": "never runs",
+    "safe": "is never entered",
+}
+
+
+def _dead_sites(sites: tuple[Site, ...], executed: set[int]) -> list[Site]:
+    """The sites to report: every copy of the statement (a procedure is expanded at each call) is
+    dead, and some copy is not inside a dead branch (else that branch is reported instead)."""
+    copies: dict[tuple[str, str, A.Loc], list[int]] = {}
+    for i, site in enumerate(sites):
+        copies.setdefault((site.kind, site.what, site.loc), []).append(i)
+    out = []
+    for group in copies.values():
+        if any(i in executed for i in group):
+            continue
+        if any(sites[i].parent < 0 or sites[i].parent in executed for i in group):
+            out.append(sites[group[0]])
+    return out
 
 
 # observers ----------------------------------------------------------------------------------------

@@ -23,6 +23,11 @@ def add_parsers(sub: Any) -> None:
     p = sub.add_parser("check", help="compile a mission and run every check (no daemon needed)")
     p.add_argument("file")
     p.add_argument("--json", action="store_true", help="machine-readable verdicts")
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="warnings (dead code) fail the check too (the daemon's load keeps them warnings)",
+    )
     p.add_argument("--max-states", type=int, default=200_000)
     p.add_argument(
         "--language-only",
@@ -95,6 +100,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         else:
             print(error_line(str(e)), file=sys.stderr)
         return EXIT_FAILED
+    report.strict = args.strict
     if args.json:
         print(json.dumps({
             "ok": report.ok,
@@ -102,8 +108,10 @@ def cmd_check(args: argparse.Namespace) -> int:
             "states": a.n_states,
             "transitions": a.n_transitions,
             "checks": [
-                {"name": r.name, "ok": r.ok, "summary": r.summary, "explanation": r.explanation,
-                 "counterexample": format_trace(a, r.counterexample) if not r.ok else []}
+                {"name": r.name, "ok": r.ok, "level": report.level(r), "summary": r.summary,
+                 "explanation": r.explanation,
+                 "counterexample": format_trace(a, r.counterexample, r.loop_start) if not r.ok else [],
+                 "loop_start": None if r.ok or r.loop_start is None else r.loop_start + 1}
                 for r in report.results
             ],
             "notes": report.warnings,

@@ -33,7 +33,7 @@ end
 
 LEAVES = [
     "A", "B", "C", "pause", "nothing", "emit S", "emit U", "await I", "await immediate J", "await A.done",
-    "await B.Half", "safe", "halt",
+    "await B.Half", "safe", "halt", "await 2 I", "await 3 A.done or J",
 ]  # fmt: skip
 
 
@@ -49,6 +49,10 @@ def statements(depth: int) -> st.SearchStrategy[str]:
         st.tuples(sub, sub).map(lambda t: f"par({t[0]} || {t[1]})"),
         st.tuples(sub, cond).map(lambda t: f"do {t[0]} until {t[1]}"),
         st.tuples(sub, cond).map(lambda t: f"weak do {t[0]} until {t[1]}"),
+        st.tuples(sub, cond).map(lambda t: f"do {t[0]} until immediate {t[1]}"),
+        st.tuples(sub, cond).map(lambda t: f"weak do {t[0]} until immediate {t[1]}"),
+        st.tuples(sub, cond).map(lambda t: f"loop {t[0]} each {t[1]}"),
+        st.tuples(st.integers(1, 3), sub).map(lambda t: f"repeat {t[0]} times {t[1]} end"),
         sub.map(lambda s: f"loop {s}; pause end"),
         st.tuples(cond, sub, sub).map(lambda t: f"present {t[0]} then {t[1]} else {t[2]} end"),
         st.tuples(cond, sub).map(lambda t: f"when {t[0]} do {t[1]} end"),
