@@ -333,12 +333,12 @@ class _Builder:
         if k == "loop":
             return A.Loop(self.block(c[1]), loc)
         if k == "loop_each":  # Esterel: loop (do P; halt until S) — P restarts at each S
-            body = A.Seq((self.block(c[1]), A.Halt(loc)), loc)
-            return A.Loop(A.DoUntil(body, self.sexpr(c[3]), False, loc), loc)
+            then_halt = A.Seq((self.block(c[1]), A.Halt(loc)), loc)
+            return A.Loop(A.DoUntil(then_halt, self.sexpr(c[3]), False, loc), loc)
         if k == "repeat":  # P, N times in sequence
             n = self.count(c[1], "repeat", f"repeat {c[1]} times")
-            body = self.block(c[3])
-            return body if n == 1 else A.Seq((body,) * n, loc)
+            once = self.block(c[3])
+            return once if n == 1 else A.Seq((once,) * n, loc)
         if k == "seq":
             return self.block(c[1])
         if k == "par":

@@ -58,7 +58,14 @@ def add_parsers(sub: Any) -> None:
     e.add_argument(
         "--property",
         action="append",
-        help="assertions to include: safety, conflicts (default: both)",
+        help="assertions to include: safety, conflicts, properties (the mission's; default: all)",
+    )
+    e.add_argument(
+        "--model",
+        choices=("structure", "table", "lockstep"),
+        default="structure",
+        help="structure: written from the program's statements (default); table: replays the compiled "
+        "automaton; lockstep: both, spin asserts they react alike",
     )
     e.set_defaults(func=cmd_export)
     m = sub.add_parser("modules", help="the module catalogue: ports, parameters, defaults and bounds")
@@ -148,14 +155,14 @@ def cmd_graph(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     from orccadd.automaton import compile_file
-    from orccadd.automaton.promela import PROPERTIES, export_promela
+    from orccadd.automaton.promela import PROPERTIES, export_model
     from orccadd.task.spec import read_task_interface
 
     unknown = sorted(set(args.property or ()) - set(PROPERTIES))
     if unknown:
         raise OrccaddError(f"--property {', '.join(unknown)}: unknown (properties: {', '.join(PROPERTIES)})")
-    a = compile_file(args.file, task_files=read_task_interface)
-    model = export_promela(a, tuple(args.property) if args.property else PROPERTIES)
+    a = compile_file(args.file, task_files=read_task_interface)  # refuses what `check` refuses
+    model = export_model(a, args.model, tuple(args.property) if args.property else PROPERTIES)
     if args.output == "-":
         sys.stdout.write(model)
     else:

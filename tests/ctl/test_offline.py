@@ -65,13 +65,17 @@ def test_export_promela_writes_a_model(tmp_path: Path) -> None:
     out = tmp_path / "ks.pml"
     r = ctl("export-promela", str(KEEPSTABLE), "-o", str(out))
     assert r.returncode == 0, r.stderr
-    assert "active proctype mission()" in out.read_text()
+    assert "the structural model" in out.read_text()  # the default
+    assert "active proctype b1()" in out.read_text()  # a process per parallel branch
+    table = tmp_path / "table.pml"
+    assert ctl("export-promela", str(KEEPSTABLE), "--model", "table", "-o", str(table)).returncode == 0
+    assert "The table-replay model" in table.read_text()
 
 
 def test_export_promela_refuses_an_unknown_property(tmp_path: Path) -> None:
     r = ctl("export-promela", str(KEEPSTABLE), "--property", "liveness", "-o", str(tmp_path / "x.pml"))
     assert r.returncode == 2
-    assert "liveness: unknown (properties: safety, conflicts)" in r.stderr
+    assert "liveness: unknown (properties: safety, conflicts, properties)" in r.stderr
     assert not (tmp_path / "x.pml").exists()
 
 
