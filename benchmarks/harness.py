@@ -57,6 +57,18 @@ def running_daemon(config: Path = UR5E, *extra: str, new_session: bool = False) 
                 proc.wait()
 
 
+def config_with(config: Path, tmp: Path, daemon_lines: str) -> Path:
+    """A copy of `config` in `tmp` with lines added to its [daemon] table (its relative paths
+    made absolute, so they still name the shipped files)."""
+    text = config.read_text().replace('"../', f'"{config.parent.parent}/')
+    if "hold_task" not in text:  # the default is relative to the config too
+        daemon_lines += f'\nhold_task = "{config.parent.parent}/tasks/hold.toml"'
+    text = text.replace("\n[daemon]\n", f"\n[daemon]\n{daemon_lines}\n", 1)
+    out = tmp / config.name
+    out.write_text(text)
+    return out
+
+
 def figures(values: np.ndarray | list[float], unit: str, digits: int = 1) -> str:
     """`median … p99 … max …` of `values` in `unit`."""
     v = np.asarray(values, dtype=float)
