@@ -69,6 +69,13 @@ def config_with(config: Path, tmp: Path, daemon_lines: str) -> Path:
     return out
 
 
+def targets_for(lo: np.ndarray, hi: np.ndarray, home: np.ndarray) -> list[list[float]]:
+    """Three goals well inside the limits: home, and an eighth of the range either side of it."""
+    span = np.minimum(hi - lo, 2 * np.pi) / 8
+    lo, hi = lo + span / 2, hi - span / 2
+    return [home.tolist(), np.clip(home + span, lo, hi).tolist(), np.clip(home - span, lo, hi).tolist()]
+
+
 def figures(values: np.ndarray | list[float], unit: str, digits: int = 1) -> str:
     """`median … p99 … max …` of `values` in `unit`."""
     v = np.asarray(values, dtype=float)

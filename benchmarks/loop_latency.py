@@ -20,8 +20,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from harness import cyclictest
+from harness import cyclictest, targets_for
 
+from orccadd.config.shipped import robot_config_path
 from orccadd.robot import load_robot_config, with_backend
 from orccadd.runtime import Summary, WallClock, enter_realtime, leave_realtime
 from orccadd.session import Session
@@ -36,15 +37,18 @@ TARGETS = [
 
 
 def run_ours(
-    period_s: float, duration_s: float, priority: int, spin_us: float, backend: str, cpu: int
-) -> dict[str, object]:
-    cfg = load_robot_config(ROOT / "configs/robots/sim-ur5e.toml")
+    period_s: float, duration_s: float, priority: int, spin_us: float, backend: str, cpu: int, robot: str,
+    task_file: Path,
+) -> dict[str, object]:  # fmt: skip
+    cfg = load_robot_config(robot_config_path(robot))
     cfg = dataclasses.replace(cfg, control_period_s=period_s)
     plant_cpu = {"plant_cpu": 0 if cpu == 1 else -1} if backend == "sim_process" else {}
     cfg = with_backend(cfg, backend, **plant_cpu)
     s = Session.from_config(cfg)
-    task = s.task(ROOT / "configs/tasks/move_joints.toml")
-    traj = next(m for m in task.modules if m.name == "traj")
+    task = s.task(task_file)
+    traj = next(m for m in task.modules if "target_rad" in m.parameters)
+    m = s.resource.model
+    goals = TARGETS if cfg.name == "ur5e" else targets_for(m.q_min_rad, m.q_max_rad, m.home_rad)
     loop = s.loop(WallClock(spin_margin_s=spin_us * 1e-6), overrun_limit=10**9)
     n_ticks = int(duration_s / period_s)
     plant_ns = np.zeros(n_ticks + 10, dtype=np.int64)
@@ -66,12 +70,12 @@ def run_ours(
     def step(t_s: float) -> None:
         task.tick(t_s)
         if task.phase is Phase.DONE:  # next target, re-armed inside the tick (cheap, no alloc)
-            target_i[0] = (target_i[0] + 1) % len(TARGETS)
-            task.tune("traj.target_rad", TARGETS[target_i[0]])
+            target_i[0] = (target_i[0] + 1) % len(goals)
+            task.tune(f"{traj.name}.target_rad", goals[target_i[0]])
             task.activate()
 
     loop.executor.step = step
-    traj.configure({"target_rad": TARGETS[0]})
+    traj.configure({"target_rad": goals[0]})
     loop.active = task
     task.activate()
     rt = enter_realtime(priority, cpus={cpu} if cpu >= 0 else None)
@@ -105,6 +109,8 @@ def run_cyclictest(period_s: float, duration_s: float, priority: int) -> np.ndar
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--duration-s", type=float, default=60.0)
+    ap.add_argument("--robot", default="sim-ur5e", help="a simulated robot config (file or shipped name)")
+    ap.add_argument("--task", type=Path, default=ROOT / "configs/tasks/move_joints.toml")
     ap.add_argument("--period-ms", type=float, default=1.0)
     ap.add_argument("--priority", type=int, default=80)
     ap.add_argument("--spin-us", type=float, default=150.0, help="wake this early and spin (0: pure sleep)")
@@ -124,12 +130,14 @@ def main() -> int:
     args = ap.parse_args()
     period_s = args.period_ms * 1e-3
     before = run_cyclictest(period_s, args.duration_s / 2, args.priority)
-    ours = run_ours(period_s, args.duration_s, args.priority, args.spin_us, args.backend, args.cpu)
+    ours = run_ours(
+        period_s, args.duration_s, args.priority, args.spin_us, args.backend, args.cpu, args.robot, args.task
+    )
     after = run_cyclictest(period_s, args.duration_s / 2, args.priority)
     base = None if before is None or after is None else Summary.of(np.concatenate([before, after]))
     lat: Summary = ours["latency"]  # type: ignore[assignment]
     print(
-        f"loop_latency: sim-ur5e ({args.backend}) Ruckig + computed torque, {args.period_ms:g} ms, "
+        f"loop_latency: {args.robot} ({args.backend}) task {args.task.name}, {args.period_ms:g} ms, "
         f"{args.duration_s:g} s, {ours['rt'].describe()}, spin margin {args.spin_us:g} µs"
     )  # type: ignore[attr-defined]
     print(f"  wake-up latency   {lat.line()}")

@@ -18,6 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from harness import targets_for
 
 from orccadd.config.shipped import robot_config_path
 from orccadd.robot import load_robot_config, with_backend
@@ -25,13 +26,6 @@ from orccadd.session import Session
 from orccadd.types import Phase
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def targets_for(lo: np.ndarray, hi: np.ndarray, home: np.ndarray) -> list[list[float]]:
-    """Three goals well inside the limits: home, and an eighth of the range either side of it."""
-    span = np.minimum(hi - lo, 2 * np.pi) / 8
-    lo, hi = lo + span / 2, hi - span / 2
-    return [home.tolist(), np.clip(home + span, lo, hi).tolist(), np.clip(home - span, lo, hi).tolist()]
 
 
 def row(name: str, ns: np.ndarray) -> str:
