@@ -94,7 +94,11 @@ class RtLink:
                 fut.set_result({"ok": False, "error": "the real-time process is gone"})
         self.waiting.clear()
 
-    async def call(self, cmd: str, args: dict[str, Any], timeout_s: float = RT_TIMEOUT_S) -> dict[str, Any]:
+    async def call(
+        self, cmd: str, args: dict[str, Any], timeout_s: float | None = RT_TIMEOUT_S
+    ) -> dict[str, Any]:
+        """The reply to `cmd`, or an error reply (no answer within `timeout_s`; None: until one
+        comes or the link is lost)."""
         if self.closed:
             return {"ok": False, "error": "the real-time process is gone"}
         loop = asyncio.get_running_loop()
@@ -149,11 +153,11 @@ class CommandDaemon:
         self.dispatch = Dispatcher(self, "cmdd")
         self.readers: dict[asyncio.StreamWriter, asyncio.StreamReader] = {}  # for streams: gone?
 
-    async def refresh(self) -> None:
+    async def refresh(self, timeout_s: float | None = RT_TIMEOUT_S) -> None:
         st = read_status(self.tel)
         mark = (int(st[S.MISSION_GEN]), int(st[S.FAULTED]))
         if not self.desc or mark != self.desc_mark:  # a new mission, a new fault, or one cleared
-            reply = await self.rt.call("describe", {})
+            reply = await self.rt.call("describe", {}, timeout_s)
             if reply.get("ok"):
                 self.desc = reply["result"]
                 self.desc_mark = mark
@@ -184,12 +188,18 @@ class CommandDaemon:
         return s
 
     async def serve(self) -> None:
+        # the real-time process starts this one while its arm is being configured, and answers
+        # once it is held: the public socket is bound only then, so that no client ever reaches
+        # a daemon that cannot answer yet (a start that fails ends this process, or the link)
+        await self.refresh(timeout_s=None)
+        if self.rt.closed:
+            log.info("the real-time process is gone before serving; exiting")
+            return
         sock = self._prepare_socket()
         self.server = await asyncio.start_unix_server(self._client, sock=sock, limit=MAX_LINE)
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, self.done.set)
-        await self.refresh()
         self._resume_log()
         pump = asyncio.create_task(self._pump())
         await self.done.wait()

@@ -111,10 +111,16 @@ class RealtimeProcess:
         check_socket_path(Path(self.socket_path))
         check_socket_path(Path(urgent_socket_path(self.socket_path)))
         hold = load_task_file(cfg.resolve(cfg.daemon.hold_task))  # checked before anything moves
-        self.resource.configure()
-        self.resource.activate(CommandMode[hold.task.command.upper()])  # the Hold task's mode
         ticks = int(TICK_RING_S / cfg.control_period_s)
         self.tel = TelemetryBlock.create(Layout(cfg.dof, ticks, 8192), cfg.control_period_s)
+        self._open_socket()
+        if not self.args.no_command_daemon:
+            # started while the resource configures (it starts up meanwhile, on the other core);
+            # it binds the public socket only once this process answers it (`run`): no client
+            # reaches a daemon that cannot answer yet. A failed start ends it (`abandon`).
+            self._spawn_cmdd()
+        self.resource.configure()
+        self.resource.activate(CommandMode[hold.task.command.upper()])  # the Hold task's mode
         self.wake_r, self.wake_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self.machine = Machine(
             cfg,
@@ -124,7 +130,6 @@ class RealtimeProcess:
             self.wake_w,
             allow_fault_injection=self.args.allow_fault_injection,
         )
-        self._open_socket()
         self.urgent = UrgentSocket(urgent_socket_path(self.socket_path), cfg.daemon, self.gid, self._urgent)
         self.thread = threading.Thread(target=self._control_main, name="control", daemon=True)
         self.thread.start()  # the arm is held (the Hold task) while the startup mission loads
@@ -133,8 +138,6 @@ class RealtimeProcess:
             while isinstance(reply, Pending):  # the automaton thread has not started serving yet
                 reply = reply.poll() or (reply.expire() if time.monotonic_ns() > reply.deadline_ns else reply)
                 time.sleep(0.01)
-        if not self.args.no_command_daemon:
-            self._spawn_cmdd()
 
     def _open_socket(self) -> None:
         with contextlib.suppress(FileNotFoundError):

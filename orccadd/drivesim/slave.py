@@ -36,6 +36,8 @@ import can
 import canopen
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 
+from orccadd.drivers.canopen.capabilities import object_dictionary
+
 # SDO abort codes (CiA 301, 7.2.4.3.17)
 ABORT_TOGGLE = 0x05030000
 ABORT_COMMAND = 0x05040001
@@ -116,7 +118,7 @@ class SlaveNode:
         self.strict_cob_ids = strict_cob_ids
         self.now_s = 0.0  # the time of the frame or poll being handled
         self.eds = eds
-        self.od = canopen.import_od(eds, node_id)
+        self.od = object_dictionary(eds, node_id)
         self.send = send
         self.vars: dict[tuple[int, int], ODVariable] = {}
         for obj in self.od.values():

@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -140,8 +141,8 @@ def test_sd_notify_messages(tmp_path: Path) -> None:
         proc.terminate()
         assert proc.wait(timeout=20) == 0
         sock.settimeout(1)
-        try:
-            while True:
+        try:  # until STOPPING, within the second it was given to come (it was sent before the exit)
+            while "STOPPING=1" not in got:
                 got.extend(sock.recv(4096).decode().split("\n"))
         except TimeoutError:
             pass
@@ -167,8 +168,8 @@ def test_watchdog_pings_stop_while_the_control_loop_stalls(tmp_path: Path) -> No
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     pings: list[float] = []
 
-    def collect(until_s: float) -> None:
-        while time.monotonic() < until_s:
+    def collect(until_s: float, done: Callable[[], bool] = lambda: False) -> None:
+        while time.monotonic() < until_s and not done():
             try:
                 msgs = sock.recv(4096).decode().split("\n")
             except TimeoutError:
@@ -190,8 +191,16 @@ def test_watchdog_pings_stop_while_the_control_loop_stalls(tmp_path: Path) -> No
                 assert time.monotonic() < end
                 time.sleep(0.2)
         t_inject = time.monotonic()
-        collect(t_inject + 5.0)
-        gaps = np.diff([t for t in pings if t > t_inject - 1.0])
+
+        def gaps_s() -> np.ndarray:
+            return np.diff([t for t in pings if t > t_inject - 1.0])
+
+        def paused_and_resumed() -> bool:  # what the asserts below check: more pings change neither
+            gaps = gaps_s()
+            return bool(gaps.size and gaps.max() > 1.5 and pings[-1] > t_inject + 3.0)
+
+        collect(t_inject + 5.0, paused_and_resumed)  # the 5 s: the 2.5 s stall and time to resume
+        gaps = gaps_s()
         # the heartbeat goes stale after watchdog_stale_periods (50 × 2 ms): pings stop for most
         # of the stall, and come back once the loop ticks again
         assert gaps.size and gaps.max() > 1.5, f"pings never paused: gaps {gaps}"

@@ -38,7 +38,7 @@ import canopen
 import numpy as np
 
 from orccadd.drivers.canopen import cia402
-from orccadd.drivers.canopen.capabilities import MODE_CODES
+from orccadd.drivers.canopen.capabilities import MODE_CODES, object_dictionary
 from orccadd.drivers.canopen.settings import CanopenSettings
 from orccadd.drivers.canopen.startup import CONTROLLER_NODE_ID, configure_drive
 from orccadd.errors import ResourceError
@@ -188,7 +188,7 @@ class CanopenMaster:
     def _configure_drives(self, net: canopen.Network, warnings: list[str]) -> None:
         s = self.s
         for i, ax in enumerate(s.axes):
-            node = canopen.RemoteNode(ax.node_id, s.eds_paths[i])
+            node = canopen.RemoteNode(ax.node_id, object_dictionary(s.eds_paths[i], ax.node_id))
             node.sdo.RESPONSE_TIMEOUT = s.sdo_timeout_s
             net.add_node(node)
             self.nodes.append(node)
