@@ -81,8 +81,8 @@ def input_combinations(p: Program, active: tuple[int, ...], relevant: int) -> li
     count = 1
     for c in choices:
         count *= len(c)
-        if count > MAX_INPUT_COMBINATIONS:
-            raise OverflowError(len(set(active)), len(ops))
+    if count > MAX_INPUT_COMBINATIONS:
+        raise OverflowError(count, len(set(active)), len(ops))
     return [sum(combo) for combo in itertools.product(*choices)]
 
 
@@ -215,7 +215,8 @@ def compile_program(
             combos = input_combinations(p, act, rel)
         except OverflowError as e:
             msg = (f"a state reacts to {e.args[0]} input combinations (limit {MAX_INPUT_COMBINATIONS}): "
-                   "too many Robot-Tasks active at once")  # fmt: skip
+                   f"too many Robot-Tasks active at once ({e.args[1]}, with their events, and "
+                   f"{e.args[2]} operator inputs)")  # fmt: skip
             raise MissionError(p.file, 1, 1, msg, p.text) from None
         row: dict[int, tuple[int, int]] = {}
         for inputs in combos:
