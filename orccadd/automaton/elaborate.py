@@ -564,23 +564,9 @@ def _tasks_in(t: K.Term | None) -> set[int]:
     if isinstance(t, K.Run | K.Running | K.Started):
         return {t.task}
     out: set[int] = set()
-    for child in _children(t):
+    for child in K.children(t):
         out |= _tasks_in(child)
     return out
-
-
-def _children(t: K.Term) -> list[K.Term | None]:
-    if isinstance(t, K.Seq):
-        return list(t.items)
-    if isinstance(t, K.Par):
-        return list(t.branches)
-    if isinstance(t, K.Abort | K.Loop | K.Trap):
-        return [t.body]
-    if isinstance(t, K.Present):
-        return [t.then, t.orelse]
-    if isinstance(t, K.Handle):
-        return [t.body, *t.handlers]
-    return []
 
 
 def first_codes(t: K.Term) -> set[int]:

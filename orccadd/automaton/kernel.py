@@ -373,6 +373,21 @@ def settle(t: Term) -> Term:
     return t
 
 
+def children(t: Term | None) -> list[Term | None]:
+    """The sub-terms of a statement (a terminated `par` branch is None)."""
+    if isinstance(t, Seq):
+        return list(t.items)
+    if isinstance(t, Par):
+        return list(t.branches)
+    if isinstance(t, Abort | Loop | Trap):
+        return [t.body]
+    if isinstance(t, Present):
+        return [t.then, t.orelse]
+    if isinstance(t, Handle):
+        return [t.body, *t.handlers]
+    return []
+
+
 def active_tasks(t: Term | None, out: list[int]) -> list[int]:
     """The Robot-Tasks a paused term keeps active."""
     if isinstance(t, Running | Started):

@@ -41,7 +41,7 @@ from orccadd.automaton import kernel as K
 from orccadd.automaton.program import Program
 from orccadd.automaton.promela_props import PROPERTIES, PropCode, check_properties, encode_properties
 from orccadd.automaton.promela_spin import SETTINGS
-from orccadd.automaton.promela_terms import Codegen, children
+from orccadd.automaton.promela_terms import Codegen
 from orccadd.errors import OrccaddError
 
 MAX_PROCESSES = 250  # spin's limit is 255, with the clock and the mission's process
@@ -129,7 +129,7 @@ def _input_masks(p: Program) -> set[int]:
             conds = t.conds
         for c in conds:
             _cond_in_masks(c, out)
-        stack.extend(children(t))
+        stack.extend(K.children(t))
     return out
 
 
@@ -191,7 +191,7 @@ def _ranks(p: Program) -> dict[int, int]:
         t = stack.pop()
         if isinstance(t, K.Exit):
             codes.add(t.code)
-        stack.extend(children(t))
+        stack.extend(K.children(t))
     return {code: 2 + i for i, code in enumerate(sorted(codes))}
 
 

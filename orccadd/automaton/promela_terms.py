@@ -363,23 +363,9 @@ def escapes(t: K.Term | None) -> set[int]:
     if isinstance(t, K.Trap):
         return escapes(t.body) - {t.code}
     out: set[int] = set()
-    for c in children(t):
+    for c in K.children(t):
         out |= escapes(c)
     return out
-
-
-def children(t: K.Term | None) -> list[K.Term | None]:
-    if isinstance(t, K.Seq):
-        return list(t.items)
-    if isinstance(t, K.Par):
-        return list(t.branches)
-    if isinstance(t, K.Abort | K.Loop | K.Trap):
-        return [t.body]
-    if isinstance(t, K.Present):
-        return [t.then, t.orelse]
-    if isinstance(t, K.Handle):
-        return [t.body, *t.handlers]
-    return []
 
 
 def _construct(t: K.Term) -> str:

@@ -155,10 +155,8 @@ def decode_trace(
     command daemon started after it was replaced) keeps its indices as `#i`."""
     kind = Trace(int(rec[R.KIND]))
     gen = int(rec[R.MISSION_GEN])
-    known = dict(missions or {})
-    if desc.get("generation") == gen:
-        known[gen] = desc.get("mission") or {}
-    mission = known.get(gen) or {}
+    current = desc.get("mission") if desc.get("generation") == gen else None
+    mission = current or (missions or {}).get(gen) or {}
     inputs: list[str] = mission.get("inputs", [])
     actions: list[str] = mission.get("actions", [])
     events: list[str] = desc.get("events", [])  # the registry only grows: ids keep their names
