@@ -55,6 +55,9 @@ ROLELESS_MAX = 8  # peers without a role waited for at once (each gets one refus
 ROLELESS_WAIT_S = 2.0
 RT_TIMEOUT_S = 5.0
 LOAD_TIMEOUT_S = 600.0
+# a reset's device work (a protective stop's unlock and script restart, a reconnection to a
+# restarted controller, a servo's reboot) takes seconds: its reply is waited for that long
+RESET_TIMEOUT_S = 30.0
 RT_MAX = 1 << 20
 
 
@@ -323,7 +326,7 @@ class CommandDaemon:
             await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
             return
         if spec.where == "rt":
-            timeout = LOAD_TIMEOUT_S if cmd == "load" else RT_TIMEOUT_S
+            timeout = {"load": LOAD_TIMEOUT_S, "reset": RESET_TIMEOUT_S}.get(cmd, RT_TIMEOUT_S)
             reply = await self.rt.call(cmd, args, timeout)
             reply["id"] = rid
             if cmd == "load" and reply.get("ok"):

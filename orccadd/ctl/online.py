@@ -19,6 +19,7 @@ from orccadd.wire.socketdir import urgent_socket_path
 
 EXIT_OK, EXIT_REFUSED, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
 CALL_WAIT_S, LOAD_WAIT_S = 10.0, 660.0  # a load compiles and verifies for up to 600 s
+RESET_WAIT_S = 40.0  # a reset's device work: the command daemon waits up to 30 s for it
 
 
 def add_parsers(sub: Any) -> None:
@@ -162,7 +163,8 @@ def _online(
     """The reply to `cmd` through the command daemon and, for words, the replies that give it
     context (`human.context_requests`); or an exit status for the streaming commands (monitor,
     events --follow, top)."""
-    with Client(a.socket, timeout_s=LOAD_WAIT_S if cmd == "load" else CALL_WAIT_S) as c:
+    wait_s = {"load": LOAD_WAIT_S, "reset": RESET_WAIT_S}.get(cmd, CALL_WAIT_S)
+    with Client(a.socket, timeout_s=wait_s) as c:
         if cmd == "monitor":
             return _monitor(c, a)
         if cmd == "events" and a.follow:
