@@ -103,12 +103,15 @@ class Runner:
 
     def react(self, inputs: int) -> int:
         """Inputs present in this instant → action bits. Never raises for inputs outside the model."""
-        s = self.state
-        hit = self.table[s].get(inputs & self.relevant[s])
+        self.state, actions = self.peek(self.state, inputs)
+        return actions
+
+    def peek(self, state: int, inputs: int) -> tuple[int, int]:
+        """The reaction of `state` to `inputs`, (next state, action bits), without taking it."""
+        hit = self.table[state].get(inputs & self.relevant[state])
         if hit is None:
-            hit = self.table[s][self.automaton.normalize(s, inputs)]
-        self.state = hit[0]
-        return hit[1]
+            hit = self.table[state][self.automaton.normalize(state, inputs)]
+        return hit
 
 
 def _unpickle(fields: dict[str, Any]) -> Automaton:

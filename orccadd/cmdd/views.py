@@ -70,15 +70,17 @@ class SignalSelection:
         return [float(rec[c]) for c in self.cols]
 
 
+LATEST_BACK = 8  # records looked back for a consistent one
+
+
 def latest_tick(tel: TelemetryBlock) -> np.ndarray | None:
-    """A consistent copy of the newest tick record (or None before the first tick)."""
+    """A consistent copy of the newest tick record the ring holds (None before the first tick).
+    The newest may be being written: then the one before, and so on back a few records."""
     for _ in range(10):
         head = int(tel.header[H.TICK_HEAD])
         if head == 0:
             return None
-        for seq in (head, head - 1):  # the newest, else the one before (the newest being written)
-            if seq <= 0:
-                break
+        for seq in range(head, max(0, head - LATEST_BACK), -1):
             slot = tel.ticks[(seq - 1) % tel.tick_len]
             rec = slot.copy()
             if rec[0] == seq and slot[0] == seq:

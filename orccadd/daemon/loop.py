@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import os
 import time
+from typing import TYPE_CHECKING
 
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
@@ -25,6 +26,9 @@ from orccadd.task.loop import ControlLoop
 from orccadd.task.task import ParameterChange, RobotTask
 from orccadd.wire.schema import H, T
 from orccadd.wire.telemetry import TelemetryBlock
+
+if TYPE_CHECKING:
+    from orccadd.daemon.inline import InlineReactor
 
 NF = len(T)
 
@@ -61,6 +65,9 @@ class SwitchingLoop(ControlLoop):
         self._stop_wanted = False
         self._slack_r, self._slack_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self._slack_wanted = False
+        self.reactor: InlineReactor | None = None  # reacts to a tick's events in that tick
+        self.switches_in_tick = 0
+        self._t_s = 0.0
 
     # ---- the automaton thread's side -------------------------------------------------------
     @property
@@ -111,6 +118,7 @@ class SwitchingLoop(ControlLoop):
 
     # ---- the control thread ---------------------------------------------------------------
     def step(self, t_s: float) -> None:
+        self._t_s = t_s
         if self._stop_wanted:
             self._stop_wanted = False
             self.resource.safe_stop()
@@ -122,7 +130,18 @@ class SwitchingLoop(ControlLoop):
             self._switch(req[1], req[2])
         task = self.active
         assert task is not None
-        task.tick(t_s)
+        first = self.queue.pushed
+        task.compute(t_s)
+        end = self.queue.pushed
+        reactor = self.reactor  # the automaton's reaction to this tick's events, in this tick
+        if (
+            end != first
+            and reactor
+            and reactor.react(t_s, first, end, task, self._requests_applied, self._switch_in_tick)
+        ):
+            task = self.active
+            assert task is not None
+        task.commit(t_s)
         if self._busy_ticks:
             self._busy_ticks -= 1
             end = time.perf_counter_ns() + self._busy_ns
@@ -134,11 +153,23 @@ class SwitchingLoop(ControlLoop):
             with contextlib.suppress(BlockingIOError):  # wake-ups already pending
                 os.write(self.wake_fd, b"e")
 
-    def _switch(self, new: RobotTask, fresh: bool = False) -> None:
+    def _requests_applied(self) -> bool:
+        return self._request[0] == self._applied
+
+    def _switch_in_tick(self, new: RobotTask) -> None:
+        """The automaton reacted in this tick (`InlineReactor`): the new law computes its
+        command from the state this tick has read, and `commit` sends it."""
+        self._switch(new, in_tick=True)
+        self.switches_in_tick += 1
+        new.compute(self._t_s, read=False)
+
+    def _switch(self, new: RobotTask, fresh: bool = False, in_tick: bool = False) -> None:
         old = self.active
         res = self.resource
         mode = new.signature.command
-        continues = not fresh and old is not None and old.wrote and old.signature.command is mode
+        # the outgoing task's command of the last tick (in the tick: `compute` has begun this one)
+        wrote = old is not None and (old.wrote_before if in_tick else old.wrote)
+        continues = not fresh and wrote and old is not None and old.signature.command is mode
         if old is not None and old is not new:
             old.deactivate()
         if mode is not res.mode:

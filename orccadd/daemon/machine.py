@@ -4,6 +4,8 @@ It puts the parts together and routes between them, each found by name:
 
 - `SwitchingLoop` (loop.py): the control thread's side: switch and tune mailboxes, telemetry;
 - `MissionControl` (procedure.py): the mission's lifecycle and the automaton's reactions;
+- `InlineReactor` (inline.py): the same reactions taken by the control thread in the tick of
+  their event, when the automaton thread is idle and up to date;
 - `Supervisor` (supervision.py): type 3 faults, aborts, resets, the command daemon's link;
 - `RtCommands` (commands.py): the operator's commands, bound to the wire's command table;
 - `Publisher` (publisher.py): trace records and the status area of the telemetry block.
@@ -21,6 +23,7 @@ from typing import Any
 
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.commands import RtCommands, describe_resource
+from orccadd.daemon.inline import InlineReactor
 from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.publisher import Publisher
@@ -75,6 +78,8 @@ class Machine:
         self.allow_fault_injection = allow_fault_injection
         self.notes: list[str] = []  # recent notable happenings (bounded), for `describe`
         self.mission = MissionControl(self.loop, self.pub, self.note, self._abort)
+        self.reactor = InlineReactor(self.mission, self.registry, self.queue)
+        self.loop.reactor = self.reactor
         self.supervisor = Supervisor(cfg, resource, self.loop, self.mission, self.note)
         self.commands = Dispatcher(RtCommands(self), "rt")
         self.publish()
@@ -137,18 +142,25 @@ class Machine:
 
     # ---- events from the control thread ---------------------------------------------------
     def on_events(self) -> None:
+        """The control thread's events: type 3 to the supervisor, the rest to the automaton,
+        but for those it reacted to in their tick (`InlineReactor`: booked here)."""
+        self.reactor.book()
         mc = self.mission
         mission = mc.mission
         inputs = 0
         t_last = 0.0
+        index, upto = self.queue.tail, self.reactor.upto
         for t_s, eid in self.queue.drain():
             info = self.registry.info(eid)
             if info.kind is EventKind.T3:
                 self.supervisor.on_t3(info.name)
             bit = mission.event_bits.get(eid, 0) if mission is not None and mc.running else 0
+            reacted = index < upto
+            index += 1
             if bit:
-                inputs |= bit
-                t_last = t_s
+                if not reacted:
+                    inputs |= bit
+                    t_last = t_s
             else:
                 self.pub.trace(Trace.EVENT, t_s, code=eid)
         if inputs:

@@ -9,6 +9,7 @@ through `SwitchingLoop.request_switch` only.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 from orccadd.automaton import Runner
 from orccadd.daemon.loop import SwitchingLoop
@@ -17,6 +18,16 @@ from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError
 from orccadd.task import RobotTask
 from orccadd.wire.schema import MachineState, MissionResult, Trace
+
+
+class Instant(NamedTuple):
+    """One reaction of the automaton: from state s0 to s1 on `inputs`, with `actions`."""
+
+    s0: int
+    s1: int
+    inputs: int
+    actions: int
+
 
 REACTIONS_PER_INSTANT = 64  # instants the automaton may take on its own (`pause`) in one go
 MISSIONS_KEPT = 8  # missions whose names `describe` keeps for the trace
@@ -137,24 +148,47 @@ class MissionControl:
             self.loop.request_switch(self.hold)
 
     # ---- reactions ----------------------------------------------------------------------------
-    def react(self, t_s: float, inputs: int) -> None:
-        """One instant of the automaton, then the instants it takes on its own (`pause`)."""
+    def plan(self, inputs: int) -> list[Instant]:
+        """The instants a reaction to `inputs` takes, without taking them: the first, then those
+        the automaton takes on its own (`pause`), up to the end of the run. Pure: the control
+        thread calls it too (`InlineReactor`), under the automaton's lock."""
         runner, mission = self.runner, self.mission
         assert runner is not None and mission is not None
+        a = mission.automaton
+        ends = a.success_bit | a.failed_bit | a.safe_done_bit
+        s0 = runner.state
+        out = []
         for _ in range(REACTIONS_PER_INSTANT):
-            s0 = runner.state
-            actions = runner.react(inputs)
-            self.instants += 1
-            self.pub.trace(Trace.INSTANT, t_s, 0, s0, runner.state, _bits(inputs), _bits(actions))
-            self._apply(actions)
+            s1, actions = runner.peek(s0, inputs)
+            out.append(Instant(s0, s1, inputs, actions))
+            if actions & ends:
+                break
+            nxt = runner.table[s1].get(0)
+            if nxt is None or (nxt[0] == s1 and nxt[1] == 0):
+                break
+            s0, inputs = s1, 0
+        return out
+
+    def react(self, t_s: float, inputs: int) -> None:
+        """One instant of the automaton, then the instants it takes on its own (`pause`)."""
+        runner = self.runner
+        assert runner is not None
+        for instant in self.plan(inputs):
+            runner.state = instant.s1
+            self.book(t_s, instant, request=True)
             if not self.running:
                 return
-            nxt = runner.table[runner.state].get(0)
-            if nxt is None or (nxt[0] == runner.state and nxt[1] == 0):
-                return
-            inputs = 0
 
-    def _apply(self, actions: int) -> None:
+    def book(self, t_s: float, instant: Instant, request: bool) -> None:
+        """An instant taken: its trace record, notes, the task it makes active (`request`:
+        asked of the control thread; else the control thread switched already, in the tick)."""
+        self.instants += 1
+        self.pub.trace(
+            Trace.INSTANT, t_s, 0, instant.s0, instant.s1, _bits(instant.inputs), _bits(instant.actions)
+        )
+        self._apply(instant.actions, request)
+
+    def _apply(self, actions: int, request: bool = True) -> None:
         mission, runner = self.mission, self.runner
         assert mission is not None and runner is not None
         a = mission.automaton
@@ -172,7 +206,7 @@ class MissionControl:
         if actions & a.safe_bit:
             self.note("entering the safe procedure")
         self.current = target
-        if self.state is not MachineState.HOLDING:
+        if request and self.state is not MachineState.HOLDING:
             want = target if target is not None else self.hold
             if want is not self.loop.active or restart:
                 self.loop.request_switch(want)

@@ -223,24 +223,8 @@ class RealtimeProcess:
                 registered = fds
                 busy = bool(self.inbox or self.pending)
                 ready = poller.poll(max(1, int(self.cfg.control_period_s * 1e3)) if busy else 100)
-                for fd, _ in ready:
-                    if fd == self.wake_r:
-                        with contextlib.suppress(BlockingIOError):
-                            os.read(self.wake_r, 4096)
-                        self.machine.on_events()
-                    elif fd == sig_r:
-                        with contextlib.suppress(BlockingIOError):
-                            os.read(sig_r, 64)
-                    elif self.listener is not None and fd == self.listener.fileno():
-                        self._accept()
-                    elif self.conn is not None and fd == self.conn.fileno():
-                        self._receive()
-                    elif fd == self.cmdd_pidfd:
-                        self._cmdd_exited()
-                    elif self.urgent is not None:
-                        self.urgent.on_readable(fd)
-                self._serve_inbox()
-                self._complete_pending()
+                with self.machine.reactor.held():  # the control thread reacts to nothing meanwhile
+                    self._work(ready, sig_r)
                 if self.cmdd is None and self.respawn_at and time.monotonic() >= self.respawn_at:
                     self.respawn_at = 0.0
                     self._spawn_cmdd()
@@ -253,6 +237,28 @@ class RealtimeProcess:
             code = self.shutdown()
             leave_realtime(rt)
         return code
+
+    def _work(self, ready: list[tuple[int, int]], sig_r: int) -> None:
+        """What woke the automaton thread: the control thread's events, signals, the command
+        daemon's link and commands, the urgent channel; then the commands' replies."""
+        for fd, _ in ready:
+            if fd == self.wake_r:
+                with contextlib.suppress(BlockingIOError):
+                    os.read(self.wake_r, 4096)
+                self.machine.on_events()
+            elif fd == sig_r:
+                with contextlib.suppress(BlockingIOError):
+                    os.read(sig_r, 64)
+            elif self.listener is not None and fd == self.listener.fileno():
+                self._accept()
+            elif self.conn is not None and fd == self.conn.fileno():
+                self._receive()
+            elif fd == self.cmdd_pidfd:
+                self._cmdd_exited()
+            elif self.urgent is not None:
+                self.urgent.on_readable(fd)
+        self._serve_inbox()
+        self._complete_pending()
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         self.stop_requested = signal.Signals(signum).name

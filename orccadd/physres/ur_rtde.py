@@ -407,13 +407,18 @@ class UrRtdeArm(PhysicalResource):
         if not self._control_ready():
             return int(Status.COMM_LOST)
         s = self.settings
-        if mode is CommandMode.POSITION:
-            np.subtract(command, self._hold, out=self._cmd_v)
-            self._cmd_v /= self.period_s
-            self._hold[:] = command
-            ok = self.control.servoJ(command.tolist(), 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
-        else:
-            ok = self.control.speedJ(command.tolist(), s.speedj_acceleration_rad_s2, self.period_s)
+        try:  # the link may die between the check above and the send: ur_rtde then raises
+            if mode is CommandMode.POSITION:
+                np.subtract(command, self._hold, out=self._cmd_v)
+                self._cmd_v /= self.period_s
+                self._hold[:] = command
+                q = command.tolist()
+                ok = self.control.servoJ(q, 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
+            else:
+                ok = self.control.speedJ(command.tolist(), s.speedj_acceleration_rad_s2, self.period_s)
+        except RuntimeError as e:  # after its own reconnection attempt failed (ur_rtde's)
+            self._lose(f"the RTDE connection is closed ({e})")
+            return int(Status.COMM_LOST)
         if ok:
             return 0
         if not self.fault_message:  # the type 3 says why, even when this comes before the read
@@ -437,6 +442,8 @@ class UrRtdeArm(PhysicalResource):
             return
         try:
             self._keep_alive_locked(t_s)
+        except RuntimeError as e:  # the link died under the stop's ramp (ur_rtde raises)
+            self._lose(f"the RTDE connection is closed ({e})")
         finally:
             self._io.release()
 

@@ -109,6 +109,15 @@ class EventQueue:
         """How many events were ever pushed (the producer's counter)."""
         return self._head
 
+    @property
+    def tail(self) -> int:
+        """The index of the next event `drain` returns (the events before it are consumed)."""
+        return self._tail
+
+    def event_at(self, index: int) -> int:
+        """The id of event `index` (`tail` ≤ index < `pushed`), left in the queue."""
+        return int(self._id[index % self._cap])
+
     def drain(self) -> list[tuple[float, int]]:
         out = []
         while self._tail < self._head:

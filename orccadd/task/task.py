@@ -1,8 +1,10 @@
 """A built Robot-Task: a flat schedule of module updates inside its reactive shell.
 
 One `tick(t_s)` is the hot path: read the resource, check preconditions or run the schedule,
-evaluate the shell's events, write the command. It allocates no buffers and raises nothing;
-a type 3 exception calls `resource.safe_stop()` right there, before anyone else hears of it.
+evaluate the shell's events (`compute`), write the command (`commit`): the daemon's loop may
+switch to another task between the two halves, whose law then commands this very tick. It
+allocates no buffers and raises nothing; a type 3 exception calls `resource.safe_stop()` right
+there, before anyone else hears of it.
 """
 
 from __future__ import annotations
@@ -141,11 +143,13 @@ class RobotTask:
         # bumpless transfer: the first command continues the previous task's last one
         self.sent = np.zeros_like(command)  # the last command sent (after blending)
         self.wrote = False  # a command was sent in the last tick
+        self.wrote_before = False  # the same, of the tick before (while `compute` runs)
         self._offset = np.zeros_like(command)
         self._blended = np.zeros_like(command)
         self._blend_ticks = 0
         self._blend_left = 0
         self._holding_previous = False
+        self._out: npt.NDArray[np.float64] | None = None  # compute's command, for commit
 
     # ---- control (not for a tick unless said) ---------------------------------------------
     def activate(self) -> None:
@@ -211,10 +215,29 @@ class RobotTask:
         """One period: read → preconditions or law → shell events → write (or keep_alive).
         An exception (a module's or a backend's bug) is the type 3 `LawError`: the arm is
         safe-stopped in this tick, the loop goes on."""
+        self.compute(t_s)
+        self.commit(t_s)
+
+    def compute(self, t_s: float, read: bool = True) -> None:
+        """The first half of a tick: read the resource (`read=False`: take the state this tick
+        has read already, for a task switched to within the tick), check the preconditions or
+        run the law, raise the shell's events. The command waits for `commit`."""
+        self._out = None
+        self.wrote_before, self.wrote = self.wrote, False
         try:
-            self._tick(t_s)
+            self._compute(t_s, read)
         except Exception as e:
             self._law_error(t_s, e)
+
+    def commit(self, t_s: float) -> None:
+        """The second half: send the command `compute` prepared (or keep the device alive)."""
+        out = self._out
+        if out is not None:
+            self._out = None
+            try:
+                self._send(t_s, out)
+            except Exception as e:
+                self._law_error(t_s, e)
         if not self.wrote:
             self.resource.keep_alive(t_s)
 
@@ -231,10 +254,9 @@ class RobotTask:
         self.fault_reason = f"LawError: {where}: {type(error).__name__}: {error}"
         log.error("%s (at t = %.3f s): the arm is safe-stopped", self.fault_reason, t_s, exc_info=error)
 
-    def _tick(self, t_s: float) -> None:
+    def _compute(self, t_s: float, read: bool) -> None:
         res = self.resource
-        self.wrote = False
-        st = res.read(t_s)
+        st = res.read(t_s) if read else res.state
         if st.status & T3_MASK:
             self._resource_t3(t_s, st.status)
             return
@@ -245,7 +267,7 @@ class RobotTask:
                 self.t_started_s = t_s
             if not self._preconditions_hold(t_s):
                 if self._holding_previous and self.phase is Phase.PRE:
-                    self._send(t_s, self.sent)  # the outgoing command, until the law starts
+                    self._out = self.sent  # the outgoing command, until the law starts
                 return
             for m in self.modules:
                 m.start(st)
@@ -262,7 +284,7 @@ class RobotTask:
         self.ticks += 1
         if self.decimation > 1 and (self.ticks - 1) % self.decimation:
             if self._holding_previous:
-                self._send(t_s, self.sent)
+                self._out = self.sent
             return
         for update in self.schedule:
             update(t_s)
@@ -283,7 +305,7 @@ class RobotTask:
             np.add(self._blended, cmd, out=self._blended)
             cmd = self._blended
             self._blend_left -= 1
-        self._send(t_s, cmd)
+        self._out = cmd
 
     def _send(self, t_s: float, cmd: npt.NDArray[np.float64]) -> None:
         flags = self.resource.write(t_s, cmd)

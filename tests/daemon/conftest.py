@@ -8,11 +8,18 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from orccadd.ctl.client import Client, ClientError
+from orccadd.daemon.machine import Machine
+from orccadd.robot import create_resource, load_robot_config, with_backend
+from orccadd.runtime import WallClock
+from orccadd.types import CommandMode
+from orccadd.wire.schema import Layout
+from orccadd.wire.telemetry import TelemetryBlock
 
 ROOT = Path(__file__).resolve().parents[2]
 ROBOT = ROOT / "configs/robots/sim-ur5e.toml"
@@ -128,3 +135,26 @@ def daemon(tmp_path: Path) -> Iterator[Daemon]:
         yield d
     finally:
         d.stop()
+
+
+@pytest.fixture
+def machine(tmp_path: Path) -> Iterator[Machine]:
+    """The real-time process's machine on sim-ur5e in this process, without its threads: a
+    test ticks the loop (`loop.executor.run`) and plays the automaton thread itself. Missions
+    load from `tmp_path` too."""
+    cfg = with_backend(load_robot_config(ROBOT), "sim")
+    dirs = (*cfg.daemon.mission_dirs, str(tmp_path))
+    cfg = replace(cfg, daemon=replace(cfg.daemon, mission_dirs=dirs))
+    res = create_resource(cfg)
+    res.configure()
+    res.activate(CommandMode.TORQUE)
+    tel = TelemetryBlock.create(Layout(cfg.dof, 8000, 1000), cfg.control_period_s)
+    r, w = os.pipe2(os.O_NONBLOCK)
+    m = Machine(cfg, res, WallClock(), tel, w)
+    try:
+        yield m
+    finally:
+        tel.close()
+        res.shutdown()
+        os.close(r)
+        os.close(w)

@@ -7,37 +7,13 @@ import os
 import select
 import threading
 import time
-from collections.abc import Iterator
 
 import numpy as np
-import pytest
 
 from orccadd.daemon.machine import Machine
 from orccadd.daemon.replies import Pending
-from orccadd.robot import create_resource, load_robot_config, with_backend
-from orccadd.runtime import WallClock
-from orccadd.types import CommandMode, Status
-from orccadd.wire.schema import H, Layout
-from orccadd.wire.telemetry import TelemetryBlock
-from tests.daemon.conftest import ROBOT
-
-
-@pytest.fixture
-def machine() -> Iterator[Machine]:
-    cfg = with_backend(load_robot_config(ROBOT), "sim")
-    res = create_resource(cfg)
-    res.configure()
-    res.activate(CommandMode.TORQUE)
-    tel = TelemetryBlock.create(Layout(cfg.dof, 1000, 100), cfg.control_period_s)
-    r, w = os.pipe2(os.O_NONBLOCK)
-    m = Machine(cfg, res, WallClock(), tel, w)
-    try:
-        yield m
-    finally:
-        tel.close()
-        res.shutdown()
-        os.close(r)
-        os.close(w)
+from orccadd.types import Status
+from orccadd.wire.schema import H
 
 
 def test_slack_fd_becomes_readable_only_after_a_tick_ends(machine: Machine) -> None:

@@ -1,0 +1,130 @@
+"""The law switch in the tick of its event: the control thread takes the automaton's reaction.
+
+A tick's law raises an event the mission listens to (a postcondition, a type 2 exception, a
+synchronisation signal). The automaton's reaction to it is a table lookup, so the control thread
+takes it itself, between the law's `compute` and the command's `commit`, switches to the task the
+automaton makes active, and that law computes this tick's command from this tick's measurement:
+the switch takes effect in the tick of the event (0 periods, where the automaton thread's path
+takes 1: it hears the event after the tick has written its command).
+
+Only when that is the same as what the automaton thread would do:
+
+- the automaton thread is idle: it holds `lock` whenever it works (`held()`); the control thread
+  only tries it, never waits;
+- it is up to date: every earlier event consumed, every earlier switch request applied, every
+  earlier inline reaction booked;
+- the mission is running (not held), and no event of the tick is a type 3 exception (the safe
+  stop and the supervisor's fault are the automaton thread's), and no instant would activate two
+  tasks (the supervisor's abort).
+
+Otherwise nothing happens here and the automaton thread reacts as before (the switch one tick
+later). Afterwards the automaton thread books what was taken here (trace records, notes, the end
+of the run, `MissionControl.book`) and leaves the events reacted to out of its own reactions
+(`upto`).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+from orccadd.daemon.procedure import Instant, MissionControl
+from orccadd.task import RobotTask
+from orccadd.task.events import EventKind, EventQueue, EventRegistry
+from orccadd.wire.schema import MachineState
+
+Switch = Callable[[RobotTask], None]
+
+
+class InlineReactor:
+    def __init__(self, mission: MissionControl, registry: EventRegistry, queue: EventQueue) -> None:
+        self.lock = threading.Lock()
+        self.mission = mission
+        self.registry = registry
+        self.queue = queue
+        self.taken: list[tuple[float, Instant]] = []  # reacted in a tick, not booked yet
+        self.upto = 0  # the events before this queue index were reacted to in their tick
+        self.inline = 0  # reactions taken in the tick of their event
+        self.deferred = 0  # left to the automaton thread (busy or behind)
+
+    # ---- the automaton thread -------------------------------------------------------------
+    @contextmanager
+    def held(self) -> Iterator[None]:
+        """The automaton thread at work: the control thread reacts to nothing meanwhile. What
+        it took before is booked first, so the work starts from the automaton's true state."""
+        with self.lock:
+            self.book()
+            yield
+
+    def book(self) -> None:
+        """Book the instants taken in a tick (lock held)."""
+        taken, self.taken = self.taken, []
+        for t_s, instant in taken:
+            self.mission.book(t_s, instant, request=False)
+
+    # ---- the control thread (tick-safe: a try-lock, table lookups) --------------------------
+    def react(
+        self,
+        t_s: float,
+        first: int,
+        end: int,
+        active: RobotTask,
+        requests_applied: Callable[[], bool],
+        switch: Switch,
+    ) -> bool:
+        """React to the events `first` ≤ index < `end` of this tick, if it can be done here (see
+        the module's docstring); `switch(task)` makes `task` active (under the lock, before the
+        automaton thread can look). True if the reaction was taken."""
+        if not self.lock.acquire(blocking=False):
+            self.deferred += 1
+            return False
+        try:
+            if self.taken or self.queue.tail != first or not requests_applied():
+                self.deferred += 1
+                return False
+            decision = self._decide(first, end, active)
+            if decision is None:
+                return False
+            plan, want = decision
+            runner = self.mission.runner
+            assert runner is not None
+            runner.state = plan[-1].s1
+            self.taken.extend((t_s, instant) for instant in plan)
+            self.upto = end
+            self.inline += 1
+            if want is not None:
+                switch(want)
+            return True
+        finally:
+            self.lock.release()
+
+    def _decide(
+        self, first: int, end: int, active: RobotTask
+    ) -> tuple[list[Instant], RobotTask | None] | None:
+        mc = self.mission
+        mission = mc.mission
+        if mission is None or mc.runner is None or mc.state is not MachineState.RUNNING:
+            return None
+        inputs = 0
+        for i in range(first, end):
+            eid = self.queue.event_at(i)
+            if self.registry.info(eid).kind is EventKind.T3:
+                return None
+            inputs |= mission.event_bits.get(eid, 0)
+        if not inputs:
+            return None
+        a = mission.automaton
+        ends = a.success_bit | a.failed_bit | a.safe_done_bit
+        plan = mc.plan(inputs)
+        want: RobotTask | None = None  # as `MissionControl._apply` would request, the last wins
+        for instant in plan:
+            act = a.active[instant.s1]
+            if len(act) > 1:
+                return None
+            target = mission.tasks[act[0]] if act and not instant.actions & ends else None
+            restart = target is not None and bool(a.starts(instant.actions) >> act[0] & 1)
+            task = target if target is not None else mc.hold
+            if task is not active or restart:
+                want = task
+        return plan, want
