@@ -60,6 +60,7 @@ class UrController:
         self.unlock_delay_s = unlock_delay_s
         self.boot_running = boot_running
         self.lock = threading.RLock()
+        self.clock: Callable[[], float] = time.monotonic  # the cycle's time base (tests: simulated)
         self.state = RobotState()
         self.fields = FieldTable(self.state)
         self.v_max_rad_s = arm.v_max_rad_s
@@ -287,10 +288,13 @@ class UrController:
         self._watch_last_s = self.now_s()
 
     def inputs_written(self, names: tuple[str, ...]) -> None:
-        """An RTDE data package wrote these inputs (feeds the RTDE watchdog)."""
+        """An RTDE data package wrote these inputs (feeds the RTDE watchdog). Stamped when it
+        arrived, as a controller's receiver does, not with the last cycle's time: a cycle late
+        on a loaded machine must not make inputs that kept coming look stale."""
         self.input_packages += 1
         if self.watchdog is not None and self.watchdog[0] in names:
-            self._watch_last_s = self.now_s()
+            t0 = self._t0_s
+            self._watch_last_s = self.now_s() if t0 is None else self.clock() - t0
 
     def _check_watchdog(self, now_s: float) -> None:
         if self.watchdog is None or self.runtime_state is not RuntimeState.PLAYING:

@@ -166,6 +166,20 @@ def test_the_rtde_watchdog_stops_the_program_when_its_register_goes_unwritten(cl
     assert ctl.runtime_state is RuntimeState.STOPPED
 
 
+def test_inputs_that_kept_coming_through_a_late_cycle_feed_the_watchdog(clocked: Clocked) -> None:
+    ctl = clocked.ctl
+    start_script(ctl)
+    command(ctl, SET_WATCHDOG, [10.0])
+    clocked.run(0.05)
+    command(ctl, 0)
+    for _ in range(6):  # the cycle is 0.3 s late (a loaded machine); inputs come every 50 ms
+        clocked.t_s += 0.05
+        with ctl.lock:
+            ctl.inputs_written(("input_int_register_0",))
+    clocked.run(0.01)
+    assert ctl.runtime_state is RuntimeState.PLAYING
+
+
 def test_power_sequence_follows_the_table(ur5e: RobotConfig) -> None:
     clocked = Clocked(make_controller(ur5e))
     ctl = clocked.ctl
