@@ -6,11 +6,12 @@ send), so drives that watch it never starve while the startup and then the daemo
 keep the loop from running; NMT reset, wait for every boot-up, configure each drive
 (`startup.configure_drive`: modes, PDO mapping, heartbeats, COB-IDs, mode of operation shown);
 NMT start; SYNC production through python-can's periodic send on SocketCAN (the kernel's
-broadcast manager), else by the control loop itself once per tick (python-can would use a
-thread in the real-time process). The resource then walks the drives to SWITCHED ON (the power
-stage still off) and leaves Enable Operation to the loop's first ticks, once SYNC runs; the
-first tick of the loop takes the heartbeat over (`loop_started`), so a stalled loop is one the
-drives notice.
+broadcast manager), else by the control loop itself once per tick, right after the RPDOs
+(python-can would use a thread in the real-time process). Each bus (`port.BusPort`; one or
+more, `settings.buses`) has its own drives, SYNC and heartbeat; the axes stay in joint order.
+The resource then walks the drives to SWITCHED ON (the power stage still off) and leaves Enable
+Operation to the loop's first ticks, once SYNC runs; the first tick of the loop takes the
+heartbeat over (`loop_started`), so a stalled loop is one the drives notice.
 
     RPDO (0x200 + id):  controlword 0x6040 | target of the mode (0x607A or 0x60FF, 4 bytes)
                         | target torque 0x6071 (2 bytes) when the drive has CST, so the tasks
@@ -19,15 +20,16 @@ drives notice.
 
 Velocity is not mapped (it would not fit the 8 bytes): it is estimated from successive
 positions. Cyclic part (`receive` at the start of a tick, `transmit` at its end; no thread, no
-blocking call): frames already on the bus are drained and decoded (TPDOs, EMCY, heartbeats,
+blocking call): frames already on every bus are drained and decoded (TPDOs, EMCY, heartbeats,
 boot-ups, answers to our non-blocking SDO requests), watchdogs are checked (a TPDO missing for
 `missed_tpdo_periods`, a heartbeat silent for 3 × `heartbeat_ms`, a drive that rebooted, a bus
-error), and each axis's RPDO goes out with the controlword that the resource's state asks for.
+error), and each axis's RPDO goes out with the controlword that the resource's state asks for,
+then each bus's SYNC (the drives apply the RPDOs at once and sample for the next tick's read), a
+tick's frames in one write per bus where the bus allows it (`port`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import struct
 import time
@@ -39,6 +41,7 @@ import numpy as np
 
 from orccadd.drivers.canopen import cia402
 from orccadd.drivers.canopen.capabilities import MODE_CODES, object_dictionary
+from orccadd.drivers.canopen.port import BusPort
 from orccadd.drivers.canopen.settings import CanopenSettings
 from orccadd.drivers.canopen.startup import CONTROLLER_NODE_ID, configure_drive
 from orccadd.errors import ResourceError
@@ -57,6 +60,7 @@ class AxisLink:
 
     node_id: int
     name: str
+    port: int  # index of its bus in `CanopenMaster.ports`
     counts_per_rad: float
     nm_per_mille: float
     has_torque_actual: bool
@@ -88,9 +92,7 @@ class AxisLink:
         """Modes this axis can be switched to at run time (its RPDO carries their targets)."""
         return frozenset(code for code, target in _TARGET_OF.items() if target in self.rx_objects)
 
-    @property
-    def state(self) -> cia402.State:
-        return cia402.decode_state(self.statusword)
+    state: cia402.State = cia402.State.NOT_READY_TO_SWITCH_ON  # decoded from each statusword
 
 
 @dataclass
@@ -108,102 +110,96 @@ class CanopenMaster:
         self.s = settings
         self.period_s = period_s
         self.names = joint_names
-        self.bus: can.BusABC | None = None
-        self.network: canopen.Network | None = None
-        self.nodes: list[canopen.RemoteNode] = []
+        self.ports = [BusPort(bus) for bus in settings.bus_list()]
         self.axes: list[AxisLink] = []
-        self.sync_task: can.broadcastmanager.CyclicSendTaskABC | None = None
         self.tick = 0
-        self.bus_error = ""
         self._next_heartbeat_s = 0.0
-        self._rx_tpdo: dict[int, AxisLink] = {}
-        self._by_id: dict[int, AxisLink] = {}
+        self._rx_tpdo: list[dict[int, AxisLink]] = [{} for _ in self.ports]  # per port: COB-ID -> axis
+        self._by_id: list[dict[int, AxisLink]] = [{} for _ in self.ports]  # per port: node id -> axis
         self._sync_msg = can.Message(arbitration_id=0x80, data=b"", is_extended_id=False)
         self._heartbeat_msg = can.Message(
             arbitration_id=0x700 + CONTROLLER_NODE_ID, data=b"\x05", is_extended_id=False
         )
-        self.startup_heartbeat: can.broadcastmanager.CyclicSendTaskABC | None = None
-        # SocketCAN: the kernel's broadcast manager produces SYNC, jitter-free and independent
-        # of the loop. Elsewhere python-can would need a thread in the real-time process for it:
-        # the control loop sends SYNC itself, once per tick, after draining the bus.
-        self.sync_by_kernel = settings.interface == "socketcan"
-        self.syncs_sent = 0
+        self._heartbeat_on_startup = False
+
+    @property
+    def sync_by_kernel(self) -> bool:
+        return all(p.sync_by_kernel for p in self.ports)
+
+    @property
+    def bus_error(self) -> str:
+        return next((p.error for p in self.ports if p.error), "")
+
+    @property
+    def syncs_sent(self) -> int:
+        """SYNCs the loop sent on the first bus (every bus gets one per tick)."""
+        return self.ports[0].syncs_sent
 
     # ---- startup (blocking, before the loop) ------------------------------------------------
     def start(self) -> list[str]:
-        """Open the bus and bring every drive to OPERATIONAL in its mode; warnings returned."""
-        s = self.s
+        """Open every bus and bring every drive to OPERATIONAL in its mode; warnings returned."""
         warnings: list[str] = []
         try:
-            self.bus = can.Bus(**s.bus_kwargs())
-        except (can.CanError, OSError, ValueError) as e:
-            raise ResourceError(f"CAN bus {_where(s)}: cannot open: {e}") from None
-        self._start_startup_heartbeat()
-        net = canopen.Network(self.bus)
-        net.NOTIFIER_CYCLE = 0.05
-        net.connect()
-        self.network = net
-        try:
-            self._configure_drives(net, warnings)
+            for port in self.ports:
+                port.open()
+                port.start_heartbeat(self._heartbeat_msg, self.s.controller_heartbeat_ms / 1000)
+            self._heartbeat_on_startup = True
+            self.axes = [None] * len(self.s.axes)  # type: ignore[list-item]  # filled per bus
+            for port in self.ports:
+                self._configure_drives(port, warnings)
         except (canopen.SdoAbortedError, canopen.SdoCommunicationError) as e:
+            where = next((p.where for p in self.ports if p.nodes and p.network), self.ports[0].where)
             self.close()
-            raise ResourceError(f"CAN bus {_where(s)}: SDO configuration failed: {e}") from None
+            raise ResourceError(f"CAN bus {where}: SDO configuration failed: {e}") from None
         except ResourceError:
             self.close()
             raise
-        self._by_id = {a.node_id: a for a in self.axes}
-        self._rx_tpdo = {0x180 + a.node_id: a for a in self.axes}
-        if net.notifier is not None:  # from now on the control thread reads the bus itself
-            net.notifier.stop(1.0)
-            net.notifier = None
         now = time.monotonic()
+        for k, port in enumerate(self.ports):
+            self._by_id[k] = {self.axes[i].node_id: self.axes[i] for i in port.axes}
+            self._rx_tpdo[k] = {0x180 + self.axes[i].node_id: self.axes[i] for i in port.axes}
+            port.cyclic(self._sync_msg, self.period_s)
         for a in self.axes:
             a.heartbeat_s = now
-        if self.sync_by_kernel:
-            self.sync_task = self.bus.send_periodic(self._sync_msg, self.period_s)
         return warnings
-
-    def _start_startup_heartbeat(self) -> None:
-        """Our heartbeat from the moment the bus is open until the loop's first tick: python-can's
-        periodic send (the kernel's broadcast manager on SocketCAN, a thread elsewhere)."""
-        assert self.bus is not None
-        period_s = self.s.controller_heartbeat_ms / 1000
-        try:
-            self.startup_heartbeat = self.bus.send_periodic(self._heartbeat_msg, period_s)
-        except (can.CanError, OSError) as e:
-            self.close()
-            raise ResourceError(f"CAN bus {_where(self.s)}: cannot send our heartbeat: {e}") from None
 
     def loop_started(self) -> None:
         """The control loop ticks: from now on `transmit` produces our heartbeat, and the startup
-        producer stops (a loop that stalls must go unheard by the drives). Tick-safe (stopping the
+        producers stop (a loop that stalls must go unheard by the drives). Tick-safe (stopping a
         task only raises its flag, or is one system call), idempotent."""
-        task = self.startup_heartbeat
-        if task is not None:
-            self.startup_heartbeat = None
+        if self._heartbeat_on_startup:
+            self._heartbeat_on_startup = False
             self._next_heartbeat_s = 0.0  # the loop's first transmit sends one
-            with contextlib.suppress(can.CanError, OSError):
-                task.stop()
+            for port in self.ports:
+                port.stop_heartbeat()
 
-    def _configure_drives(self, net: canopen.Network, warnings: list[str]) -> None:
-        s = self.s
-        for i, ax in enumerate(s.axes):
-            node = canopen.RemoteNode(ax.node_id, object_dictionary(s.eds_paths[i], ax.node_id))
+    @property
+    def startup_heartbeat(self) -> bool:
+        """Our heartbeat still comes from the startup producers (the loop has not ticked)."""
+        return self._heartbeat_on_startup
+
+    def _configure_drives(self, port: BusPort, warnings: list[str]) -> None:
+        s, net = self.s, port.network
+        assert net is not None
+        for i in port.axes:
+            node = canopen.RemoteNode(s.axes[i].node_id, object_dictionary(s.eds_paths[i], s.axes[i].node_id))
             node.sdo.RESPONSE_TIMEOUT = s.sdo_timeout_s
             net.add_node(node)
-            self.nodes.append(node)
-        self._reset_and_wait_for_bootups(net)
-        for i, node in enumerate(self.nodes):
+            port.nodes.append(node)
+        self._reset_and_wait_for_bootups(port)
+        k = self.ports.index(port)
+        for i, node in zip(port.axes, port.nodes, strict=True):
             setup = configure_drive(node, s, i, self.names[i], self.period_s, warnings)
-            self.axes.append(self._link(i, setup.has_torque_actual, setup.consumer_ok, setup.rx_objects))
-        for node in self.nodes:
+            self.axes[i] = self._link(i, k, setup.has_torque_actual, setup.consumer_ok, setup.rx_objects)
+        for node in port.nodes:
             node.nmt.send_command(0x01)  # start: OPERATIONAL
 
-    def _link(self, i: int, has_tq: bool, consumer_ok: bool, rx: tuple[int, ...]) -> AxisLink:
+    def _link(self, i: int, port: int, has_tq: bool, consumer_ok: bool, rx: tuple[int, ...]) -> AxisLink:
         ax, code = self.s.axes[i], MODE_CODES[self.s.mode]
         return AxisLink(
             node_id=ax.node_id,
             name=self.names[i],
+            port=port,
             counts_per_rad=ax.counts_per_rev * ax.gear_ratio / (2 * np.pi),
             nm_per_mille=ax.gear_ratio * ax.rated_torque_nm / 1000.0,
             has_torque_actual=has_tq,
@@ -214,19 +210,22 @@ class CanopenMaster:
             rx_format="<H" + "".join(_TARGET_FMT[index] for index in rx),
         )
 
-    def _reset_and_wait_for_bootups(self, net: canopen.Network) -> None:
-        """NMT reset node on every drive; every boot-up message seen (in any order) or an error."""
+    def _reset_and_wait_for_bootups(self, port: BusPort) -> None:
+        """NMT reset node on every drive of `port`; every boot-up message seen (in any order) or
+        an error."""
+        net = port.network
+        assert net is not None
         booted: set[int] = set()
 
         def on_boot(can_id: int, data: bytearray, timestamp: float) -> None:
             if len(data) >= 1 and data[0] == 0:
                 booted.add(can_id - 0x700)
 
-        ids = [ax.node_id for ax in self.s.axes]
+        ids = [self.s.axes[i].node_id for i in port.axes]
         for i in ids:
             net.subscribe(0x700 + i, on_boot)
         try:
-            for node in self.nodes:
+            for node in port.nodes:
                 node.nmt.send_command(0x81)
             end = time.monotonic() + self.s.startup_timeout_s
             while not booted.issuperset(ids) and time.monotonic() < end:
@@ -234,39 +233,38 @@ class CanopenMaster:
         finally:
             for i in ids:
                 net.unsubscribe(0x700 + i, on_boot)
-        missing = [f"{i} ({self.names[k]})" for k, i in enumerate(ids) if i not in booted]
+        missing = [f"{n} ({self.names[i]})" for i, n in zip(port.axes, ids, strict=True) if n not in booted]
         if missing:
             raise ResourceError(
-                f"CAN bus {_where(self.s)}: node {', '.join(missing)} did not boot within "
+                f"CAN bus {port.where}: node {', '.join(missing)} did not boot within "
                 f"{self.s.startup_timeout_s:g} s after NMT reset (wrong node id, bus, or power?)"
             )
 
     # ---- cyclic part (tick-safe: no blocking call, no allocation beyond frames) --------------
     def receive(self, now_s: float) -> CycleReport:
-        """Drain the bus and check the watchdogs (start of a tick); then SYNC, when the loop
-        produces it: the cycle boundary at which the drives sample their TPDOs and take the RPDO
-        targets sent in the previous tick. (SYNC right after the RPDOs instead, the other usual
-        layout, measured no better here: 30 s A/B at 500 Hz, 40 against 19 skipped periods and
-        1.4 % against 1.0 % late TPDOs, within this VM's run-to-run noise.)"""
+        """Drain every bus and check the watchdogs (start of a tick): the TPDOs the drives sent
+        for the previous tick's SYNC, on every bus, are in before the tick computes."""
         self.tick += 1
         rep = CycleReport()
-        bus = self.bus
-        if bus is None:
-            rep.comm_lost = f"CAN bus {_where(self.s)}: closed"
+        for k, port in enumerate(self.ports):
+            bus = port.bus
+            if bus is None:
+                rep.comm_lost = rep.comm_lost or f"CAN bus {port.where}: closed"
+                continue
+            rx_tpdo, by_id = self._rx_tpdo[k], self._by_id[k]
+            try:
+                while True:
+                    msg = bus.recv(0.0)
+                    if msg is None:
+                        break
+                    self._frame(msg, now_s, port, rx_tpdo, by_id)
+            except (can.CanError, OSError) as e:
+                port.error = port.error or f"CAN bus {port.where}: {e}"
+        if rep.comm_lost:
             return rep
-        try:
-            while True:
-                msg = bus.recv(0.0)
-                if msg is None:
-                    break
-                self._frame(msg, now_s)
-            if not self.sync_by_kernel and self.network is not None and self.network.notifier is None:
-                bus.send(self._sync_msg)
-                self.syncs_sent += 1
-        except (can.CanError, OSError) as e:
-            self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
-        if self.bus_error:
-            rep.comm_lost = self.bus_error
+        bus_error = self.bus_error
+        if bus_error:
+            rep.comm_lost = bus_error
         hb_timeout = 3 * self.s.heartbeat_ms / 1000
         tpdo_timeout = self.s.missed_tpdo_periods * self.period_s
         for a in self.axes:
@@ -282,7 +280,9 @@ class CanopenMaster:
                     f"node {a.node_id} ({a.name}): heartbeat lost ({(now_s - a.heartbeat_s) * 1e3:.0f} ms "
                     f"> 3 × {self.s.heartbeat_ms} ms)"
                 )
-            if a.state in (cia402.State.FAULT, cia402.State.FAULT_REACTION_ACTIVE) and not rep.fault:
+            if (
+                a.state is cia402.State.FAULT or a.state is cia402.State.FAULT_REACTION_ACTIVE
+            ) and not rep.fault:
                 code = a.emcy_code
                 rep.fault = f"node {a.node_id} ({a.name}): drive fault" + (
                     f", EMCY 0x{code:04X} {a.emcy_text}" if code else ""
@@ -300,30 +300,40 @@ class CanopenMaster:
     def _tpdo_missing(self, a: AxisLink, now_s: float, timeout_s: float) -> bool:
         """Kernel SYNC: by time. Loop SYNC: by SYNCs sent since (a stalled loop sent none, and
         its drives owe nothing)."""
-        if self.sync_by_kernel:
+        port = self.ports[a.port]
+        if port.sync_by_kernel:
             return now_s - a.tpdo_seen_s > timeout_s
-        return self.syncs_sent - a.tpdo_seen_sync > self.s.missed_tpdo_periods
+        return port.syncs_sent - a.tpdo_seen_sync > self.s.missed_tpdo_periods
 
-    def _frame(self, msg: can.Message, now_s: float) -> None:
+    def _frame(
+        self,
+        msg: can.Message,
+        now_s: float,
+        port: BusPort,
+        rx_tpdo: dict[int, AxisLink],
+        by_id: dict[int, AxisLink],
+    ) -> None:
         cob = msg.arbitration_id
         if msg.is_extended_id or msg.is_error_frame:
             return
-        a = self._rx_tpdo.get(cob)
+        a = rx_tpdo.get(cob)
         data = msg.data
         if a is not None:
             if len(data) >= 6:
                 a.prev_position_counts, a.prev_position_time_s = a.position_counts, a.position_time_s
-                a.statusword, a.position_counts = struct.unpack_from("<Hi", data, 0)
+                statusword, a.position_counts = struct.unpack_from("<Hi", data, 0)
+                if statusword != a.statusword:
+                    a.statusword = statusword
+                    a.state = cia402.decode_state(statusword)
                 a.position_time_s = msg.timestamp
                 a.fresh = True
                 a.tpdo_count += 1
                 if a.has_torque_actual and len(data) >= 8:
                     a.torque_per_mille = struct.unpack_from("<h", data, 6)[0]
                 a.tpdo_seen_s = now_s
-                a.tpdo_seen_sync = self.syncs_sent
+                a.tpdo_seen_sync = port.syncs_sent
             return
-        node_id = cob & 0x7F
-        a = self._by_id.get(node_id)
+        a = by_id.get(cob & 0x7F)
         if a is None:
             return
         kind = cob & 0x780
@@ -357,27 +367,32 @@ class CanopenMaster:
     ) -> None:
         """One RPDO per axis (end of a tick): its controlword and every target it carries, the
         active mode's from the command and the others holding (consistent while a mode switch
-        is under way)."""
-        bus = self.bus
-        if bus is None:
-            return
-        try:
-            for j, a in enumerate(self.axes):
-                values = []
-                for index in a.rx_objects:
-                    if index == 0x607A:
-                        values.append(round(float(position_rad[j]) * a.counts_per_rad))
-                    elif index == 0x60FF:
-                        values.append(round(float(velocity_rad_s[j]) * a.counts_per_rad))
-                    else:
-                        values.append(_per_mille(float(torque_nm[j]), a))
-                body = struct.pack(a.rx_format, a.controlword, *values)
-                bus.send(can.Message(arbitration_id=0x200 + a.node_id, data=body, is_extended_id=False))
-            if now_s >= self._next_heartbeat_s and self.startup_heartbeat is None:
-                self._next_heartbeat_s = now_s + self.s.controller_heartbeat_ms / 1000
-                bus.send(self._heartbeat_msg)
-        except (can.CanError, OSError) as e:
-            self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
+        is under way); then each bus's SYNC (when the loop produces it) and our heartbeat when
+        due; a bus's frames in one write where it allows (`BusPort.flush`)."""
+        ports = self.ports
+        for j, a in enumerate(self.axes):
+            values = []
+            for index in a.rx_objects:
+                if index == 0x607A:
+                    values.append(round(float(position_rad[j]) * a.counts_per_rad))
+                elif index == 0x60FF:
+                    values.append(round(float(velocity_rad_s[j]) * a.counts_per_rad))
+                else:
+                    values.append(_per_mille(float(torque_nm[j]), a))
+            body = struct.pack(a.rx_format, a.controlword, *values)
+            ports[a.port].queue(
+                can.Message(arbitration_id=0x200 + a.node_id, data=body, is_extended_id=False)
+            )
+        heartbeat = now_s >= self._next_heartbeat_s and not self._heartbeat_on_startup
+        if heartbeat:
+            self._next_heartbeat_s = now_s + self.s.controller_heartbeat_ms / 1000
+        for port in ports:
+            if not port.sync_by_kernel and port.cyclic_started:
+                port.queue(self._sync_msg)
+                port.syncs_sent += 1
+            if heartbeat:
+                port.queue(self._heartbeat_msg)
+            port.flush()
 
     # ---- controlwords (the CiA 402 state machine, driven one step per cycle) ---------------------
     def set_controlword(self, cw: int) -> None:
@@ -433,69 +448,50 @@ class CanopenMaster:
     def write_mode(self, code: int) -> None:
         """Ask every drive for mode `code` (0x6060) by a non-blocking SDO write; answers are
         matched in `receive`, a refusal or silence becomes a communication fault."""
-        if self.bus is None:
-            return
         deadline = time.monotonic() + self.s.sdo_timeout_s
+        req = struct.pack("<BHBb3x", 0x2F, 0x6060, 0, code)
         for a in self.axes:
             a.sdo_pending = (0x6060, 0, deadline)
             a.mode_code = code
-            req = struct.pack("<BHBb3x", 0x2F, 0x6060, 0, code)
-            try:
-                self.bus.send(can.Message(arbitration_id=0x600 + a.node_id, data=req, is_extended_id=False))
-            except (can.CanError, OSError) as e:
-                self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
+            self.ports[a.port].queue(
+                can.Message(arbitration_id=0x600 + a.node_id, data=req, is_extended_id=False)
+            )
+        for port in self.ports:
+            port.flush()
 
     def request_mode_display(self) -> None:
         """Ask every drive for its modes of operation display (0x6061) by a non-blocking SDO
         upload; `AxisLink.mode_shown` gets the answer in `receive` (None until then)."""
-        if self.bus is None:
-            return
         deadline = time.monotonic() + self.s.sdo_timeout_s
         req = struct.pack("<BHB4x", 0x40, 0x6061, 0)
         for a in self.axes:
             a.sdo_pending = (0x6061, 0, deadline)
             a.mode_shown = None
-            try:
-                self.bus.send(can.Message(arbitration_id=0x600 + a.node_id, data=req, is_extended_id=False))
-            except (can.CanError, OSError) as e:
-                self.bus_error = self.bus_error or f"CAN bus {_where(self.s)}: {e}"
+            self.ports[a.port].queue(
+                can.Message(arbitration_id=0x600 + a.node_id, data=req, is_extended_id=False)
+            )
+        for port in self.ports:
+            port.flush()
 
     # ---- shutdown ------------------------------------------------------------------------------
     def close(self) -> None:
-        if self.startup_heartbeat is not None:
-            with contextlib.suppress(can.CanError, OSError):
-                self.startup_heartbeat.stop()
-            self.startup_heartbeat = None
-        if self.sync_task is not None:
-            self.sync_task.stop()
-            self.sync_task = None
-        if self.bus is not None:
-            for a in self.axes or []:
-                try:  # disable voltage: the drives switch their power stage off, brakes on
-                    body = struct.pack(a.rx_format, 0, *(0 for _ in a.rx_objects))
-                    self.bus.send(
-                        can.Message(arbitration_id=0x200 + a.node_id, data=body, is_extended_id=False)
-                    )
-                except (can.CanError, OSError):
-                    break
-        net = self.network
-        if net is not None:
-            if net.notifier is not None:
-                net.notifier.stop(1.0)
-                net.notifier = None
-            self.network = None
-        if self.bus is not None:
-            with contextlib.suppress(can.CanError, OSError):
-                self.bus.shutdown()
-            self.bus = None
+        """Disable voltage on every drive (power stage off, brakes on), then close every bus."""
+        for k, port in enumerate(self.ports):
+            last = [
+                can.Message(
+                    arbitration_id=0x200 + a.node_id,
+                    data=struct.pack(a.rx_format, 0, *(0 for _ in a.rx_objects)),
+                    is_extended_id=False,
+                )
+                for a in self.axes
+                if a is not None and a.port == k
+            ]
+            port.close(last)
+        self._heartbeat_on_startup = False
 
 
 def _per_mille(tau_nm: float, a: AxisLink) -> int:
     return max(-32768, min(32767, round(tau_nm / a.nm_per_mille)))
-
-
-def _where(s: CanopenSettings) -> str:
-    return f"{s.channel} (socketcand {s.host}:{s.port})" if s.interface == "socketcand" else s.channel
 
 
 EMCY_TEXTS = {

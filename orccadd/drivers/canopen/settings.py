@@ -13,12 +13,22 @@
     counts_per_rev = 4096
     gear_ratio = 100.0
     rated_torque_nm = 0.5          # the motor's rated torque (0x6076): torques are per mille of it
+    # bus = "can1"                 # the bus it is on (default: the one above, `channel`)
 
-One RPDO (controlword + the mode's target + the torque or position target it may switch
-with) and one TPDO (statusword + position actual + torque actual) per axis, 8 bytes each, both
-synchronous: the layout the bus load is computed for (see `master`). Every check happens here,
-before anything starts: axes per joint, unique node ids, descriptions found and able to do the
-mode, the bus load within 90 %.
+More buses (a robot PC: one CAN interface each, can0 + can1; each carries its own SYNC, and its
+own bus load is checked): a table per further bus, naming its channel and what differs from
+the first bus (interface, host, port, bitrate_bit_s); axes name it by `bus`:
+
+    [[resource.settings.buses]]
+    channel = "can1"
+    port = 29537                   # socketcand: a second host or port; SocketCAN: not needed
+
+Node ids are unique per bus. One RPDO (controlword + the mode's target + the torque or position
+target it may switch with) and one TPDO (statusword + position actual + torque actual) per axis,
+8 bytes each, both synchronous: the layout the bus load is computed for (see `master`). Every
+check happens here, before anything starts: axes per joint, node ids unique per bus, every axis
+on a bus and every bus with an axis, descriptions found and able to do the mode, each bus's load
+within 90 % (a refusal names the bus).
 """
 
 from __future__ import annotations
@@ -43,6 +53,45 @@ class AxisConfig:
     counts_per_rev: int = field(default=4096, bounds=(1, 2**31 - 1))
     gear_ratio: float = field(default=100.0, bounds=(0.0, 1e6), open_lo=True)
     rated_torque_nm: float = field(default=1.0, bounds=(0.0, 1e4), open_lo=True)
+    bus: str = field(default="")  # the channel of the bus it is on; "": the first bus
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """A further bus: its channel and what differs from the first bus's settings."""
+
+    channel: str = field()
+    interface: Literal["socketcan", "socketcand"] | None = field(default=None)
+    host: str | None = field(default=None)
+    port: int | None = field(default=None, bounds=(1, 65535))
+    bitrate_bit_s: int | None = field(default=None, bounds=(10_000, 1_000_000))
+
+
+@dataclass(frozen=True)
+class Bus:
+    """One bus, resolved: how to open it and which axes (indices in joint order) it carries."""
+
+    interface: str
+    channel: str
+    host: str
+    port: int
+    bitrate_bit_s: int
+    axes: tuple[int, ...]
+
+    def bus_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of python-can's `can.Bus` for this bus."""
+        if self.interface == "socketcand":
+            # tcp_tune (TCP_NODELAY): a tick's SYNC and RPDOs leave at once, not held by Nagle's
+            # algorithm until the server acknowledges the first frame
+            tcp = {"host": self.host, "port": self.port, "tcp_tune": True}
+            return {"interface": "socketcand", "channel": self.channel, **tcp}
+        return {"interface": "socketcan", "channel": self.channel, "bitrate": self.bitrate_bit_s}
+
+    def where(self) -> str:
+        """The bus in messages: `can0`, or `can0 (socketcand 127.0.0.1:29536)`."""
+        if self.interface == "socketcand":
+            return f"{self.channel} (socketcand {self.host}:{self.port})"
+        return self.channel
 
 
 @dataclass(frozen=True)
@@ -64,19 +113,35 @@ class CanopenSettings:
     mode_display_timeout_s: float = field(default=0.5, bounds=(0.01, 10.0))
     startup_timeout_s: float = field(default=5.0, bounds=(0.1, 120.0))
     emcy_type2_codes: tuple[int, ...] = field(default=(), bounds=(0, 0xFFFF))
+    buses: tuple[BusConfig, ...] = field(default=())  # further buses (the first: the keys above)
     eds_paths: tuple[str, ...] = field(default=())  # resolved (absolute) by the loader
 
-    def bus_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of python-can's `can.Bus` for this bus."""
-        if self.interface == "socketcand":
-            # tcp_tune (TCP_NODELAY): a tick's SYNC and RPDOs leave at once, not held by Nagle's
-            # algorithm until the server acknowledges the first frame
-            tcp = {"host": self.host, "port": self.port, "tcp_tune": True}
-            return {"interface": "socketcand", "channel": self.channel, **tcp}
-        return {"interface": "socketcan", "channel": self.channel, "bitrate": self.bitrate_bit_s}
+    def bus_list(self) -> list[Bus]:
+        """Every bus, the first (this table's own keys) first, each with its axes."""
+        out = [Bus(self.interface, self.channel, self.host, self.port, self.bitrate_bit_s, ())]
+        for b in self.buses:
+            out.append(
+                Bus(
+                    b.interface or self.interface,
+                    b.channel,
+                    self.host if b.host is None else b.host,
+                    self.port if b.port is None else b.port,
+                    b.bitrate_bit_s or self.bitrate_bit_s,
+                    (),
+                )
+            )
+        on: dict[str, list[int]] = {bus.channel: [] for bus in out}
+        for i, ax in enumerate(self.axes):
+            on.setdefault(ax.bus or self.channel, []).append(i)
+        return [replace(bus, axes=tuple(on[bus.channel])) for bus in out]
 
-    def traffic(self) -> list[Traffic]:
-        n = len(self.axes)
+    def bus_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of python-can's `can.Bus` for the first bus."""
+        return self.bus_list()[0].bus_kwargs()
+
+    def traffic(self, n: int | None = None) -> list[Traffic]:
+        """One bus's frames with `n` axes on it (default: every axis)."""
+        n = len(self.axes) if n is None else n
         return [
             Traffic("SYNC", 0),
             Traffic("RPDO", 8, per_cycle=n),  # controlword + the mode's target + its partner's
@@ -106,14 +171,8 @@ def load_canopen_settings(raw: Any, cfg: RobotConfig, file: str) -> CanopenSetti
     key = "resource.settings.axes"
     if len(s.axes) != cfg.dof:
         raise ConfigError(file, key, f"has {len(s.axes)} entries, must have one per joint ({cfg.dof})")
-    seen: dict[int, int] = {}
     paths = []
     for i, ax in enumerate(s.axes):
-        if ax.node_id in seen:
-            raise ConfigError(
-                file, f"{key}[{i}].node_id", f"(={ax.node_id}) is also axes[{seen[ax.node_id]}]'s"
-            )
-        seen[ax.node_id] = i
         path = find_eds(ax.eds, Path(file).parent)
         if path is None:
             raise ConfigError(
@@ -136,10 +195,41 @@ def load_canopen_settings(raw: Any, cfg: RobotConfig, file: str) -> CanopenSetti
                 file=sys.stderr,
             )
         paths.append(str(path))
-    load = bus_load(s.traffic(), cfg.control_period_s, s.bitrate_bit_s)
-    verdict, message = load.verdict()
-    if verdict == "refuse":
-        raise ConfigError(file, "control_period_s", f"(={cfg.control_period_s:g}): {message}")
-    if verdict == "warn":
-        print(f"{file}: warning: {message}", file=sys.stderr)
+    _check_buses(s, file)
+    for bus in s.bus_list():
+        load = bus_load(s.traffic(len(bus.axes)), cfg.control_period_s, bus.bitrate_bit_s)
+        verdict, message = load.verdict()
+        named = f"bus {bus.channel}: {message}"
+        if verdict == "refuse":
+            raise ConfigError(file, "control_period_s", f"(={cfg.control_period_s:g}): {named}")
+        if verdict == "warn":
+            print(f"{file}: warning: {named}", file=sys.stderr)
     return replace(s, eds_paths=tuple(paths))
+
+
+def _check_buses(s: CanopenSettings, file: str) -> None:
+    """Channels unique, every axis on a known bus, every bus with an axis, node ids unique per bus."""
+    key = "resource.settings"
+    channels = [s.channel]
+    for i, b in enumerate(s.buses):
+        if b.channel in channels:
+            raise ConfigError(file, f"{key}.buses[{i}].channel", f"(={b.channel!r}) names a bus twice")
+        channels.append(b.channel)
+    seen: dict[tuple[str, int], int] = {}
+    for i, ax in enumerate(s.axes):
+        bus = ax.bus or s.channel
+        if bus not in channels:
+            raise ConfigError(
+                file, f"{key}.axes[{i}].bus", f"(={ax.bus!r}) is no bus here (buses: {', '.join(channels)})"
+            )
+        if (bus, ax.node_id) in seen:
+            other = seen[(bus, ax.node_id)]
+            raise ConfigError(
+                file, f"{key}.axes[{i}].node_id", f"(={ax.node_id}) is also axes[{other}]'s (bus {bus})"
+            )
+        seen[(bus, ax.node_id)] = i
+    for carried in s.bus_list():
+        if not carried.axes:
+            raise ConfigError(
+                file, f"{key}.buses", f"bus {carried.channel!r} carries no axis (set axes[].bus)"
+            )

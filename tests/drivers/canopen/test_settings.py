@@ -35,13 +35,13 @@ def test_six_axes_at_500_hz_are_accepted_with_a_bus_load_warning(capsys: pytest.
         "tcp_tune": True,  # TCP_NODELAY: a tick's frames are not held back by Nagle's algorithm
         "channel": "can0",
     }
-    assert "warning: bus load" in capsys.readouterr().err
+    assert "warning: bus can0: bus load" in capsys.readouterr().err
 
 
 def test_1_khz_is_refused_with_the_shortest_period_that_fits() -> None:
     with pytest.raises(ConfigError) as e:
         load_canopen_settings(raw(), ur5e(0.001), FILE)
-    assert str(e.value).startswith("robot.toml: control_period_s (=0.001): bus load")
+    assert str(e.value).startswith("robot.toml: control_period_s (=0.001): bus can0: bus load")
     # worst case per cycle 55 + 12 × 135 = 1,675 bits; heartbeats 80/s × 65 bits
     # 1,675 / (0.9 × 1e6 - 5,200) = 1.872 ms
     assert "shortest period that fits is 1.88 ms" in str(e.value)
