@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 from harness import targets_for
 
+from orccadd.config.robot import RobotConfig
 from orccadd.config.shipped import robot_config_path
 from orccadd.robot import load_robot_config, with_backend
 from orccadd.session import Session
@@ -65,6 +66,7 @@ def main() -> None:
 
         return run
 
+    task.compiled = None  # the interpreted path: each module's update timed on its own
     task.schedule = tuple(timed(mod.name, mod.update) for mod in task.modules)
     res = s.resource
     inner_read, inner_write = res.read, res.write
@@ -111,6 +113,47 @@ def main() -> None:
     print(row("  write", write_ns))
     print(row("  shell (pre, events, blend)", shell_ns))
     print(row("tick", tick_ns))
+    runs = [(c, law_times(cfg, Path(args.task), goals, n // 2, c)) for c in (False, True, False, True)]
+    law = {c: np.concatenate([ns for cc, ns in runs if cc is c]) for c in (False, True)}
+    print("the law (modules and shell events), interpreted against compiled, alternating runs:")
+    print(row("  interpreted", law[False]))
+    print(row("  compiled", law[True]))
+    ratio = np.median(law[True]) / np.median(law[False])
+    p99 = np.percentile(law[True], 99) / np.percentile(law[False], 99)
+    print(f"  compiled / interpreted: median {ratio:.2f}, p99 {p99:.2f} (target ≤ 0.5)")
+
+
+def law_times(
+    cfg: RobotConfig, task_file: Path, goals: list[list[float]], n: int, compiled: bool
+) -> np.ndarray:
+    """`run_law`'s time per tick (ns) over `n` ticks of a fresh session, compiled or not."""
+    s = Session.from_config(cfg)
+    task = s.task(task_file)
+    if not compiled:
+        task.compiled = None
+    traj = next((mod for mod in task.modules if "target_rad" in mod.parameters), None)
+    out = np.zeros(n, dtype=np.int64)
+    perf, inner, k = time.perf_counter_ns, task.run_law, [0]
+
+    def run_law(t_s: float) -> None:
+        t0 = perf()
+        inner(t_s)
+        out[k[0]] = perf() - t0
+
+    task.run_law = run_law  # type: ignore[method-assign]
+    if traj is not None:
+        traj.configure({"target_rad": goals[0]})
+    task.activate()
+    goal = 0
+    for i in range(n):
+        k[0] = i
+        task.tick(i * cfg.control_period_s)
+        if task.phase is Phase.DONE and traj is not None:
+            goal = (goal + 1) % len(goals)
+            task.tune(f"{traj.name}.target_rad", goals[goal])
+            task.activate()
+    s.close()
+    return out[out > 0]
 
 
 if __name__ == "__main__":

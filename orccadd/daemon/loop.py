@@ -16,7 +16,8 @@ from __future__ import annotations
 import contextlib
 import os
 import time
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import Protocol
 
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
@@ -27,10 +28,21 @@ from orccadd.task.task import ParameterChange, RobotTask
 from orccadd.wire.schema import H, T
 from orccadd.wire.telemetry import TelemetryBlock
 
-if TYPE_CHECKING:
-    from orccadd.daemon.inline import InlineReactor
-
 NF = len(T)
+
+
+class TickReactor(Protocol):
+    """Reacts to a tick's events within the tick (`orccadd.daemon.inline.InlineReactor`)."""
+
+    def react(
+        self,
+        t_s: float,
+        first: int,
+        end: int,
+        active: RobotTask,
+        requests_applied: Callable[[], bool],
+        switch: Callable[[RobotTask], None],
+    ) -> bool: ...
 
 
 class SwitchingLoop(ControlLoop):
@@ -65,7 +77,7 @@ class SwitchingLoop(ControlLoop):
         self._stop_wanted = False
         self._slack_r, self._slack_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self._slack_wanted = False
-        self.reactor: InlineReactor | None = None  # reacts to a tick's events in that tick
+        self.reactor: TickReactor | None = None  # reacts to a tick's events in that tick
         self.switches_in_tick = 0
         self._t_s = 0.0
 

@@ -14,6 +14,7 @@ checked when it is asked for and applied in place at a tick boundary.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -25,6 +26,9 @@ from orccadd.model import RobotModel
 from orccadd.state import JointState
 
 FloatArray = npt.NDArray[np.float64]
+# (t_s, one value per input) -> one value per output; a vector is a list of floats, a scalar a
+# bool or a float (see `Module.kernel`)
+Kernel = Callable[..., tuple[Any, ...]]
 
 
 @dataclass(frozen=True)
@@ -212,12 +216,58 @@ class Module(ABC):
     def start(self, state: JointState) -> None:
         """Initialise from the measured state when the task starts (no jump in the command)."""
 
+    def begin(self, state: JointState) -> None:
+        """What the task calls when its law starts: `start` (and the base's own resets)."""
+        self.start(state)
+
     @abstractmethod
     def update(self, t_s: float) -> None:
         """One tick: read inputs, write outputs in place. No allocation of buffers, no raise."""
 
     def on_parameter_change(self, name: str) -> None:
         """Called (at a tick boundary) after parameter `name` took a new value."""
+
+    def kernel(self) -> Kernel | None:
+        """The update as a function of plain values, for the compiled tick (orccadd/task/
+        compiled.py): called with t_s and one value per input in declaration order (a list of
+        floats for a vector, a bool or a float for a scalar), it returns one value per output in
+        declaration order, in the same form, and keeps the module's state as `update` does. It
+        never changes a list after returning it (it may return the same list again: unchanged).
+        A module without one (the default) is called through `update` and its ports."""
+        return None
+
+
+class KernelModule(Module):
+    """A module written as a kernel: `update` applies it to the ports, so the interpreted and
+    the compiled tick run the same code (bit-identical outputs by construction)."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        self._k: Kernel | None = None
+        self._in_ports: tuple[Port, ...] = ()
+        self._out_ports: tuple[Port, ...] = ()
+        self._last_outs: tuple[Any, ...] | None = None
+
+    @abstractmethod
+    def kernel(self) -> Kernel: ...
+
+    def begin(self, state: JointState) -> None:
+        self._last_outs = None  # `start` may have written the ports: every output written again
+        self.start(state)
+
+    def update(self, t_s: float) -> None:
+        k = self._k
+        if k is None:  # the ports are all declared by now
+            k = self._k = self.kernel()
+            self._in_ports, self._out_ports = tuple(self.inputs.values()), tuple(self.outputs.values())
+        outs = k(t_s, *[p.value.tolist() for p in self._in_ports])
+        last, self._last_outs = self._last_outs, outs
+        for i, port in enumerate(self._out_ports):
+            value = outs[i]
+            # a list returned again is in the port already (scalars are always written: `start`
+            # may have reset the port meanwhile)
+            if last is None or value is not last[i] or not isinstance(value, list):
+                port.value[...] = value
 
 
 MODULES: dict[str, type[Module]] = {}

@@ -7,13 +7,15 @@ from operator import add, mul, sub
 import numpy as np
 import pinocchio as pin
 
-from orccadd.modules.base import Module, ModuleContext, register
+from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
 from orccadd.state import JointState
 from orccadd.vec import clamped
 
 
-class JointController(Module):
-    """Base of joint-space laws: measured q, dq and desired q_des, dq_des in; torque out."""
+class JointController(KernelModule):
+    """Base of joint-space laws: measured q, dq and desired q_des, dq_des in; torque out.
+    Written as kernels (`Module.kernel`): the laws compute on lists of floats, Pinocchio on
+    the arrays `_qa`, `_dqa` filled from them."""
 
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
@@ -25,7 +27,8 @@ class JointController(Module):
         self.tau = self.add_output("tau", (n,), "N.m")
         self._model = ctx.model.model
         self._data = ctx.model.new_data()
-        self._e = np.zeros(n)
+        self._qa = np.zeros(n)
+        self._dqa = np.zeros(n)
 
 
 @register("computed_torque")
@@ -69,19 +72,30 @@ class ComputedTorque(JointController):
     def start(self, state: JointState) -> None:
         self._e_sum = [0.0] * self.ctx.dof
 
-    def update(self, t_s: float) -> None:
-        q, dq = self.q.value, self.dq.value
-        e = list(map(sub, self.q_des.value.tolist(), q.tolist()))
-        de = map(sub, self.dq_des.value.tolist(), dq.tolist())
-        ddq_des = self.ddq_des.value.tolist()
-        terms = zip(ddq_des, self._kp, e, self._kd, de)  # noqa: B905 (see orccadd.vec.clamped)
-        a = [ddq + kp * e_i + kd * de_i for ddq, kp, e_i, kd, de_i in terms]
-        if self._integral:
-            hi, lo = self._sum_max_list, self._sum_min_list
-            self._e_sum = e_sum = clamped(list(map(add, self._e_sum, e)), lo, hi)
-            a = list(map(add, a, map(mul, self._ki_dt, e_sum)))
-        self._a[:] = a
-        self.tau.value[:] = pin.rnea(self._model, self._data, q, dq, self._a)
+    def kernel(self) -> Kernel:
+        model, data, qa, dqa, acc = self._model, self._data, self._qa, self._dqa, self._a
+        rnea = pin.rnea
+
+        def computed_torque(
+            t_s: float,
+            q: list[float],
+            dq: list[float],
+            q_des: list[float],
+            dq_des: list[float],
+            ddq_des: list[float],
+        ) -> tuple[list[float]]:
+            e = list(map(sub, q_des, q))
+            de = map(sub, dq_des, dq)
+            terms = zip(ddq_des, self._kp, e, self._kd, de)  # noqa: B905 (see orccadd.vec.clamped)
+            a = [ddq + kp * e_i + kd * de_i for ddq, kp, e_i, kd, de_i in terms]
+            if self._integral:
+                hi, lo = self._sum_max_list, self._sum_min_list
+                self._e_sum = e_sum = clamped(list(map(add, self._e_sum, e)), lo, hi)
+                a = list(map(add, a, map(mul, self._ki_dt, e_sum)))
+            qa[:], dqa[:], acc[:] = q, dq, a
+            return (rnea(model, data, qa, dqa, acc).tolist(),)
+
+        return computed_torque
 
 
 @register("joint_pd_gravity")
@@ -99,19 +113,23 @@ class JointPDGravity(JointController):
             "kd", 20.0, bounds=(0.0, 1e4), unit="N.m.s/rad", tunable=True, shape=(n,), required=True
         )
 
-    def update(self, t_s: float) -> None:
-        tau, e = self.tau.value, self._e
-        tau[:] = pin.computeGeneralizedGravity(self._model, self._data, self.q.value)
-        np.subtract(self.q_des.value, self.q.value, out=e)
-        e *= self.kp.value
-        tau += e
-        np.subtract(self.dq_des.value, self.dq.value, out=e)
-        e *= self.kd.value
-        tau += e
+    def kernel(self) -> Kernel:
+        model, data, qa = self._model, self._data, self._qa
+        kp, kd, gravity = self.kp.value, self.kd.value, pin.computeGeneralizedGravity
+
+        def pd_gravity(
+            t_s: float, q: list[float], dq: list[float], q_des: list[float], dq_des: list[float]
+        ) -> tuple[list[float]]:
+            qa[:] = q
+            g = gravity(model, data, qa).tolist()
+            terms = zip(g, kp.tolist(), q_des, q, kd.tolist(), dq_des, dq)  # noqa: B905
+            return ([g_i + p * (qd - q_i) + d * (dqd - dq_i) for g_i, p, qd, q_i, d, dqd, dq_i in terms],)
+
+        return pd_gravity
 
 
 @register("gravity_compensation")
-class GravityCompensation(Module):
+class GravityCompensation(KernelModule):
     """tau = g(q): the arm floats where it is, held by its own friction (a "hold" law)."""
 
     def __init__(self, name: str, ctx: ModuleContext) -> None:
@@ -121,13 +139,20 @@ class GravityCompensation(Module):
         self.tau = self.add_output("tau", (n,), "N.m")
         self._model = ctx.model.model
         self._data = ctx.model.new_data()
+        self._qa = np.zeros(n)
 
-    def update(self, t_s: float) -> None:
-        self.tau.value[:] = pin.computeGeneralizedGravity(self._model, self._data, self.q.value)
+    def kernel(self) -> Kernel:
+        model, data, qa, gravity = self._model, self._data, self._qa, pin.computeGeneralizedGravity
+
+        def gravity_only(t_s: float, q: list[float]) -> tuple[list[float]]:
+            qa[:] = q
+            return (gravity(model, data, qa).tolist(),)
+
+        return gravity_only
 
 
 @register("hold_position")
-class HoldPosition(Module):
+class HoldPosition(KernelModule):
     """Setpoint source: the measured position when the task starts, zero velocity."""
 
     def __init__(self, name: str, ctx: ModuleContext) -> None:
@@ -136,11 +161,17 @@ class HoldPosition(Module):
         self.q_des = self.add_output("q_des", (n,), "rad")
         self.dq_des = self.add_output("dq_des", (n,), "rad/s")
         self.ddq_des = self.add_output("ddq_des", (n,), "rad/s^2")
+        self._outs: tuple[list[float], list[float], list[float]] = ([0.0] * n, [0.0] * n, [0.0] * n)
 
     def start(self, state: JointState) -> None:
+        n = self.ctx.dof
+        self._outs = (state.q_rad.tolist(), [0.0] * n, [0.0] * n)
         self.q_des.value[:] = state.q_rad
         self.dq_des.value[:] = 0.0
         self.ddq_des.value[:] = 0.0
 
-    def update(self, t_s: float) -> None:
-        pass
+    def kernel(self) -> Kernel:
+        def hold(t_s: float) -> tuple[list[float], list[float], list[float]]:
+            return self._outs
+
+        return hold

@@ -5,12 +5,14 @@ from __future__ import annotations
 import numpy as np
 from ruckig import InputParameter, OutputParameter, Result, Ruckig
 
-from orccadd.modules.base import Module, ModuleContext, register
+from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
 from orccadd.state import JointState
+
+Outputs = tuple[list[float], list[float], list[float], list[float], bool]  # the outputs, in order
 
 
 @register("ruckig_trajectory")
-class RuckigTrajectory(Module):
+class RuckigTrajectory(KernelModule):
     """Jerk-limited trajectory to `target_rad`, within the robot's limits times `speed_scale`.
 
     Starts from the *measured* position and velocity. A new `target_rad` (or `speed_scale`)
@@ -46,6 +48,9 @@ class RuckigTrajectory(Module):
         self._settled = False  # at the target, exactly: nothing left to compute
         self._apply_limits()
         self.q_goal.value[:] = self.target.value
+        zeros = [0.0] * n
+        self._zeros = zeros
+        self._outs: Outputs = (zeros, zeros, zeros, self.target.value.tolist(), False)
 
     def _apply_limits(self) -> None:
         m, s = self.ctx.model, float(self.speed_scale.value)
@@ -61,11 +66,7 @@ class RuckigTrajectory(Module):
         inp.target_position = self.target.value.tolist()
         inp.target_velocity = [0.0] * self.ctx.dof
         inp.target_acceleration = [0.0] * self.ctx.dof
-        self.q_des.value[:] = state.q_rad
-        self.dq_des.value[:] = state.dq_rad_s
-        self.ddq_des.value[:] = 0.0
-        self.q_goal.value[:] = self.target.value
-        self.finished.value[...] = False
+        self._outs = (state.q_rad.tolist(), state.dq_rad_s.tolist(), self._zeros, inp.target_position, False)
         self._settled = False
 
     def on_parameter_change(self, name: str) -> None:
@@ -73,27 +74,32 @@ class RuckigTrajectory(Module):
             self._apply_limits()
         else:
             self._settled = False
-            self._inp.target_position = self.target.value.tolist()
-            self.q_goal.value[:] = self.target.value
-            self.finished.value[...] = False
+            goal = self.target.value.tolist()
+            self._inp.target_position = goal
+            q_des, dq_des, ddq_des = self._outs[:3]
+            self._outs = (q_des, dq_des, ddq_des, goal, False)
 
-    def update(self, t_s: float) -> None:
-        if self._settled:  # holds the target; Ruckig is not asked again until it changes
-            return
-        result = self._otg.update(self._inp, self._out)
-        self.last_result = result
-        if result == Result.Working or result == Result.Finished:
-            out = self._out
-            self.q_des.value[:] = out.new_position
-            self.dq_des.value[:] = out.new_velocity
-            self.ddq_des.value[:] = out.new_acceleration
-            out.pass_to_input(self._inp)
-            self.finished.value[...] = result == Result.Finished
-            if result == Result.Finished:
-                self._settle()
-        else:  # invalid input or calculation error: hold the last desired position
-            self.dq_des.value[:] = 0.0
-            self.ddq_des.value[:] = 0.0
+    def kernel(self) -> Kernel:
+        otg, inp, out = self._otg, self._inp, self._out
+        working, finished = Result.Working, Result.Finished
+
+        def trajectory(t_s: float, q: list[float], dq: list[float]) -> Outputs:
+            if self._settled:  # holds the target; Ruckig is not asked again until it changes
+                return self._outs
+            result = otg.update(inp, out)
+            self.last_result = result
+            goal = self._outs[3]
+            if result in (working, finished):
+                done = result == finished
+                self._outs = (out.new_position, out.new_velocity, out.new_acceleration, goal, done)
+                out.pass_to_input(inp)
+                if done:
+                    self._settle()
+            else:  # invalid input or calculation error: hold the last desired position
+                self._outs = (self._outs[0], self._zeros, self._zeros, goal, self._outs[4])
+            return self._outs
+
+        return trajectory
 
     def _settle(self) -> None:
         """Finished: the state becomes the target exactly. Ruckig's last step leaves velocities and
@@ -103,7 +109,6 @@ class RuckigTrajectory(Module):
         inp.current_position = self.target.value.tolist()
         inp.current_velocity = [0.0] * n
         inp.current_acceleration = [0.0] * n
-        self.q_des.value[:] = self.target.value
-        self.dq_des.value[:] = 0.0
-        self.ddq_des.value[:] = 0.0
+        goal = self.target.value.tolist()
+        self._outs = (goal, self._zeros, self._zeros, goal, True)
         self._settled = True

@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from orccadd.modules.base import Module, ModuleContext, register
+from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
 from orccadd.state import JointState
 from orccadd.vec import max_abs, max_abs_diff, outside
 
 
-class Watcher(Module):
-    """Base of watchers: a `fired` output and a debounce (`ticks` in a row before firing)."""
+class Watcher(KernelModule):
+    """Base of watchers: a `fired` output and a debounce (`ticks` in a row before firing).
+    Written as kernels (`Module.kernel`): a condition on plain values, debounced."""
 
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
@@ -32,9 +33,9 @@ class Watcher(Module):
     def on_parameter_change(self, name: str) -> None:
         self._ticks_needed = int(self.ticks.value)
 
-    def _debounce(self, condition: bool) -> None:
-        self._count = self._count + 1 if condition else 0
-        self.fired.value[...] = self._count >= self._ticks_needed
+    def _debounce(self, condition: bool) -> tuple[bool]:
+        self._count = count = self._count + 1 if condition else 0
+        return (count >= self._ticks_needed,)
 
 
 @register("tracking_error_watch")
@@ -50,9 +51,13 @@ class TrackingErrorWatch(Watcher):
             "threshold_rad", 0.05, bounds=(1e-6, 10.0), unit="rad", tunable=True
         )
 
-    def update(self, t_s: float) -> None:
-        error_rad = max_abs_diff(self.q_des.value.tolist(), self.q.value.tolist())
-        self._debounce(error_rad > float(self.threshold.value))
+    def kernel(self) -> Kernel:
+        threshold, debounce = self.threshold.value, self._debounce
+
+        def tracking_error(t_s: float, q: list[float], q_des: list[float]) -> tuple[bool]:
+            return debounce(max_abs_diff(q_des, q) > float(threshold))
+
+        return tracking_error
 
 
 @register("joint_limit_watch")
@@ -83,9 +88,14 @@ class JointLimitWatch(Watcher):
         self._dq_hi = (self._vmax * float(self.vfrac.value)).tolist()
         self._dq_lo = [-v for v in self._dq_hi]
 
-    def update(self, t_s: float) -> None:
-        near = outside(self.q.value.tolist(), self._q_lo, self._q_hi)
-        self._debounce(near or outside(self.dq.value.tolist(), self._dq_lo, self._dq_hi))
+    def kernel(self) -> Kernel:
+        debounce = self._debounce
+
+        def joint_limit(t_s: float, q: list[float], dq: list[float]) -> tuple[bool]:
+            near = outside(q, self._q_lo, self._q_hi)
+            return debounce(near or outside(dq, self._dq_lo, self._dq_hi))
+
+        return joint_limit
 
 
 @register("target_reached")
@@ -103,9 +113,14 @@ class TargetReached(Watcher):
             "velocity_tolerance_rad_s", 0.01, bounds=(1e-6, 10.0), unit="rad/s", tunable=True
         )
 
-    def update(self, t_s: float) -> None:
-        ok = max_abs_diff(self.q_goal.value.tolist(), self.q.value.tolist()) < float(self.tol.value)
-        self._debounce(ok and max_abs(self.dq.value.tolist()) < float(self.vtol.value))
+    def kernel(self) -> Kernel:
+        tol, vtol, debounce = self.tol.value, self.vtol.value, self._debounce
+
+        def reached(t_s: float, q: list[float], dq: list[float], q_goal: list[float]) -> tuple[bool]:
+            ok = max_abs_diff(q_goal, q) < float(tol)
+            return debounce(ok and max_abs(dq) < float(vtol))
+
+        return reached
 
 
 @register("timeout_watch")
@@ -121,5 +136,10 @@ class TimeoutWatch(Watcher):
         super().start(state)
         self._t0 = state.t_s
 
-    def update(self, t_s: float) -> None:
-        self._debounce(t_s - self._t0 >= float(self.timeout.value) - 1e-9)
+    def kernel(self) -> Kernel:
+        timeout, debounce = self.timeout.value, self._debounce
+
+        def timed_out(t_s: float) -> tuple[bool]:
+            return debounce(t_s - self._t0 >= float(timeout) - 1e-9)
+
+        return timed_out

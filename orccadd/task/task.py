@@ -20,6 +20,7 @@ import numpy.typing as npt
 from orccadd.errors import ParameterError
 from orccadd.modules.base import Module, Parameter
 from orccadd.physres.base import PhysicalResource
+from orccadd.task.compiled import CompiledTick, compile_schedule
 from orccadd.task.events import EventKind, EventQueue
 from orccadd.types import T3_MASK, TASK_TIMEOUT, CommandMode, Phase, Status
 from orccadd.vec import max_of, min_of
@@ -150,8 +151,17 @@ class RobotTask:
         self._blend_left = 0
         self._holding_previous = False
         self._out: npt.NDArray[np.float64] | None = None  # compute's command, for commit
+        # the schedule and the shell's events as one generated function (None: interpreted)
+        self.compiled: Callable[[float], None] | None = None
+        self.compiled_tick: CompiledTick | None = None
+        self.recompile()
 
     # ---- control (not for a tick unless said) ---------------------------------------------
+    def recompile(self) -> None:
+        """Generate the compiled tick again (after a module's kernel was replaced)."""
+        self.compiled_tick = compile_schedule(self)
+        self.compiled = self.compiled_tick.run
+
     def activate(self) -> None:
         """Arm the task: the next tick checks preconditions (or starts the law at once)."""
         self.phase = Phase.PRE
@@ -229,6 +239,21 @@ class RobotTask:
         except Exception as e:
             self._law_error(t_s, e)
 
+    def run_law(self, t_s: float) -> None:
+        """The law's modules in schedule order, then the shell's events: compiled, or
+        interpreted (`compiled = None`: each module's update on its ports)."""
+        compiled = self.compiled
+        if compiled is not None:
+            compiled(t_s)
+            return
+        for update in self.schedule:
+            update(t_s)
+        for ev in self.events:
+            fired = bool(ev.flag)
+            if fired and not ev.prev:
+                self.emit_event(t_s, ev)
+            ev.prev = fired
+
     def commit(self, t_s: float) -> None:
         """The second half: send the command `compute` prepared (or keep the device alive)."""
         out = self._out
@@ -244,10 +269,14 @@ class RobotTask:
     def _law_error(self, t_s: float, error: Exception) -> None:
         where = self.name
         tb = error.__traceback__
+        compiled = self.compiled_tick
         while tb is not None:  # the innermost module the exception came through
-            obj = tb.tb_frame.f_locals.get("self")
+            frame = tb.tb_frame
+            obj = frame.f_locals.get("self")
             if isinstance(obj, Module):
                 where = f"{self.name}.{obj.name}"
+            elif compiled is not None and frame.f_code is compiled.run.__code__:
+                where = f"{self.name}.{compiled.module_at.get(tb.tb_lineno, '')}".rstrip(".")
             tb = tb.tb_next
         self.wrote = False
         self.raise_t3(t_s, "LawError")
@@ -270,7 +299,7 @@ class RobotTask:
                     self._out = self.sent  # the outgoing command, until the law starts
                 return
             for m in self.modules:
-                m.start(st)
+                m.begin(st)
             self.phase = phase = Phase.RUN
             self.t_started_s = t_s
             if self.preconditions:
@@ -286,13 +315,7 @@ class RobotTask:
             if self._holding_previous:
                 self._out = self.sent
             return
-        for update in self.schedule:
-            update(t_s)
-        for ev in self.events:
-            fired = bool(ev.flag)
-            if fired and not ev.prev:
-                self._emit(t_s, ev)
-            ev.prev = fired
+        self.run_law(t_s)
         if self.phase is Phase.FAULT:
             return
         cmd = self.command
@@ -328,7 +351,8 @@ class RobotTask:
                     return False
         return ok
 
-    def _emit(self, t_s: float, ev: ShellEvent) -> None:
+    def emit_event(self, t_s: float, ev: ShellEvent) -> None:
+        """A shell event rose in this tick (tick-safe)."""
         self.queue.push(t_s, ev.event_id)
         kind = ev.kind
         if kind is EventKind.T1:

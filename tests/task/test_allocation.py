@@ -55,7 +55,9 @@ def test_no_tick_keeps_memory_in_the_steady_state() -> None:
         f"per tick: kept max {max(kept)} B, sum {sum(kept)} B; transient peak median {np.median(peaks):.0f} B"
     )
     assert numpy_after == numpy_before  # no array data kept by any tick
-    assert max(kept) <= 64, kept  # one 6-joint array alone would keep more than 150 bytes
+    # one 6-joint array alone would keep more than 150 bytes; below that, the float free list's
+    # churn (floats of one tick freed in the next) shows up to 88 B in a tick, never in the sum
+    assert max(kept) <= 128, kept
     assert abs(sum(kept)) <= 256, sum(kept)  # 1 byte a tick kept would show here
     assert np.median(peaks) < 64_000  # order of magnitude: temporaries, not buffers
 

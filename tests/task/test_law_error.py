@@ -7,6 +7,7 @@ from __future__ import annotations
 import types
 
 import numpy as np
+import pytest
 
 from orccadd.runtime import SimClock
 from orccadd.session import Session
@@ -16,7 +17,8 @@ from tests.conftest import MOVE_TASK, UR5E
 FAR = [0.8, -1.2, 1.2, -1.6, -1.2, 0.4]
 
 
-def test_an_exception_in_a_module_is_a_type_3_that_safe_stops_and_the_loop_goes_on() -> None:
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
+def test_an_exception_in_a_module_is_a_type_3_that_safe_stops_and_the_loop_goes_on(compiled: bool) -> None:
     s = Session.open(UR5E)
     task = s.task(MOVE_TASK)
     loop = s.loop(SimClock())
@@ -31,7 +33,16 @@ def test_an_exception_in_a_module_is_a_type_3_that_safe_stops_and_the_loop_goes_
         raise ZeroDivisionError("a user's module divided by zero")
 
     bound = types.MethodType(broken, ct)
-    task.schedule = tuple(bound if getattr(u, "__self__", None) is ct else u for u in task.schedule)
+    if compiled:  # the module's kernel raises, in the generated tick
+
+        def broken_kernel(*args: object) -> tuple[object]:
+            raise ZeroDivisionError("a user's module divided by zero")
+
+        ct.kernel = lambda: broken_kernel  # type: ignore[method-assign]
+        task.recompile()
+    else:
+        task.compiled = None
+        task.schedule = tuple(bound if getattr(u, "__self__", None) is ct else u for u in task.schedule)
     ticks = loop.stats.ticks
     loop.run_for(0.5)  # the loop keeps ticking: the stop runs
     assert loop.stats.ticks > ticks + 100

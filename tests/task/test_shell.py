@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -115,7 +117,8 @@ def test_tune_is_checked_before_anything_changes() -> None:
     assert (ct.kp.value == 500.0).all()
 
 
-def test_a_law_that_outputs_nan_is_a_type_3_and_nothing_is_sent() -> None:
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
+def test_a_law_that_outputs_nan_is_a_type_3_and_nothing_is_sent(compiled: bool) -> None:
     s, task, loop = open_task()
     ct = next(m for m in task.modules if m.name == "ct")
     next(m for m in task.modules if m.name == "traj").configure({"target_rad": FAR})
@@ -123,12 +126,23 @@ def test_a_law_that_outputs_nan_is_a_type_3_and_nothing_is_sent() -> None:
     loop.active = task
     loop.run_for(0.3)
     law = ct.update
+    if compiled:  # the module's kernel outputs the NaN, in the generated tick
+        kernel = ct.kernel()
 
-    def broken_law(t_s: float) -> None:  # a module bug: a NaN in the torque it outputs
-        law(t_s)
-        ct.tau.value[2] = np.nan
+        def broken_kernel(*args: Any) -> tuple[list[float]]:
+            (tau,) = kernel(*args)
+            return ([*tau[:2], float("nan"), *tau[3:]],)
 
-    task.schedule = tuple(broken_law if u == law else u for u in task.schedule)
+        ct.kernel = lambda: broken_kernel  # type: ignore[method-assign]
+        task.recompile()
+    else:
+
+        def broken_law(t_s: float) -> None:  # a module bug: a NaN in the torque it outputs
+            law(t_s)
+            ct.tau.value[2] = np.nan
+
+        task.compiled = None
+        task.schedule = tuple(broken_law if u == law else u for u in task.schedule)
     loop.run_for(0.01)
     assert task.phase is Phase.FAULT
     assert "MoveJoints.T3.LimitViolation" in s.event_names()
