@@ -20,6 +20,9 @@ from tests.conftest import ROOT, eds
 from tools.virtual_can.process import HOST, HubProcess, vcan_available
 
 CANOPEN_6AXIS = ROOT / "configs/robots/canopen-6axis.toml"
+CANOPEN_2BUS = ROOT / "configs/robots/canopen-2bus.toml"  # six axes on two buses, 1 kHz
+BUS_PORTS = (29536, 29537)  # the shipped configs' socketcand ports, one per bus (a hub each here)
+BUS_CHANNELS = ("can0", "can1")
 ELMO = "ros_canopen/Elmo.dcf"
 CONSUMING_ELMO = "consuming Elmo"  # `consuming_elmo`: the rig's default drives
 
@@ -27,8 +30,9 @@ CONSUMING_ELMO = "consuming Elmo"  # `consuming_elmo`: the rig's default drives
 @dataclass
 class Rig:
     config: Path
-    hub: HubProcess | None
+    hub: HubProcess | None  # the first bus's
     drives: DriveSimProcess
+    hubs: tuple[HubProcess, ...] = ()  # one per bus (none on vcan)
 
 
 def edit_dcf(source: Path, dest: Path, edits: dict[str, dict[str, str]]) -> Path:
@@ -56,20 +60,33 @@ def consuming_elmo(tmp: Path) -> Path:
     return edit_dcf(eds(ELMO), tmp / "Elmo-consuming.dcf", caps)
 
 
+def bus_count(robot: Path) -> int:
+    """How many buses a shipped canopen config has (its socketcand ports)."""
+    text = robot.read_text()
+    return sum(1 for port in BUS_PORTS if f"port = {port}" in text)
+
+
 def rig_config(
-    tmp: Path, eds_file: str | Path, port: int | None, extra: str = "", settings_extra: str = ""
+    tmp: Path,
+    eds_file: str | Path,
+    port: int | list[int] | None,
+    extra: str = "",
+    settings_extra: str = "",
+    robot: Path = CANOPEN_6AXIS,
 ) -> Path:
-    """canopen-6axis.toml on this rig: the bus, the URDF path, every axis on `eds_file` (a path,
-    or a name under testdata/eds/), `settings_extra` lines in [resource.settings]."""
+    """`robot` (canopen-6axis.toml, or canopen-2bus.toml) on this rig: the buses (a hub's port
+    each, or None: vcan), the URDF path, every axis on `eds_file` (a path, or a name under
+    testdata/eds/), `settings_extra` lines in [resource.settings]."""
     path = eds_file if isinstance(eds_file, Path) else eds(eds_file)
-    text = CANOPEN_6AXIS.read_text().replace('urdf = "../urdf/', f'urdf = "{ROOT}/configs/urdf/')
+    text = robot.read_text().replace('urdf = "../urdf/', f'urdf = "{ROOT}/configs/urdf/')
     text = text.replace('eds = "Elmo.dcf"', f'eds = "{path}"')
     if port is None:  # the kernel's virtual CAN
-        text = text.replace('interface = "socketcand"', 'interface = "socketcan"').replace(
-            'channel = "can0"', 'channel = "vcan0"'
-        )
+        text = text.replace('interface = "socketcand"', 'interface = "socketcan"')
+        for channel in BUS_CHANNELS:
+            text = text.replace(f'"{channel}"', f'"v{channel}"')
     else:
-        text = text.replace("port = 29536", f"port = {port}")
+        for default, hub_port in zip(BUS_PORTS, [port] if isinstance(port, int) else port, strict=False):
+            text = text.replace(f"port = {default}", f"port = {hub_port}")
     text = text.replace('hold_task = "../tasks/', f'hold_task = "{ROOT}/configs/tasks/')
     # this VM stalls processes for up to ~0.3 s now and then: heartbeats every 250 ms (a lost
     # drive is still reported within 3 × 250 ms), ours every 100 ms (the drives that watch it
@@ -79,7 +96,11 @@ def rig_config(
     # and the drive simulator (a Python process beside the controller on 2 cores) now and then
     # answers nothing for ~0.1-0.15 s while the controller keeps sending SYNCs (measured with its
     # `longest_loop_gap_ms`): a node is silent after 150 SYNCs (0.3 s) here
-    text = text.replace("missed_tpdo_periods = 50", "missed_tpdo_periods = 150")
+    # (0.3 s whatever the period: 150 at 500 Hz, 300 at 1 kHz)
+    period = re.search(r"^control_period_s = ([0-9.e-]+)", text, re.MULTILINE)
+    assert period is not None, robot
+    period_s = float(period.group(1))
+    text = re.sub(r"missed_tpdo_periods = \d+", f"missed_tpdo_periods = {round(0.3 / period_s)}", text)
     text = text.replace("[resource.settings]\n", f"[resource.settings]\n{settings_extra}\n")
     dirs = ", ".join(f'"{d}"' for d in (ROOT / "configs/missions", ROOT / "tests/daemon/missions", tmp))
     text = text.replace("[daemon]\n", f"[daemon]\nmission_dirs = [{dirs}]\n{extra}\n")
@@ -95,25 +116,33 @@ def canopen_rig(
     daemon_extra: str = "",
     settings_extra: str = "",
     drivesim_args: tuple[str, ...] = (),
+    robot: Path = CANOPEN_6AXIS,
 ) -> Iterator[Rig]:
-    """The bus and six simulated drives (strict, see `orccadd.drivesim.axis.Strictness`; relaxed
-    by `drivesim_args` such as `--lenient heartbeat_consumer`), every one described by
-    `eds_file` (by default Elmo drives that watch our heartbeat)."""
+    """The bus (a hub per bus of `robot`) and six simulated drives (strict, see
+    `orccadd.drivesim.axis.Strictness`; relaxed by `drivesim_args` such as `--lenient
+    heartbeat_consumer`), every one described by `eds_file` (by default Elmo drives that watch
+    our heartbeat). Every process it starts is stopped on exit."""
     # The bus and the drives are hardware on a robot: their timing must not depend on the
     # controller's load. The hub (light) runs at real-time priority below the controller's; the
     # drives (a Pinocchio simulation, ~40 % of a core here) at a high weight but normal policy:
     # at SCHED_FIFO they made the kernel throttle real-time tasks on this 2-core machine.
     description = consuming_elmo(tmp) if eds_file == CONSUMING_ELMO else eds_file
-    hub = None if vcan_available() else HubProcess("--priority", "70")
+    n = bus_count(robot)
+    vcan = all(vcan_available(f"v{c}") for c in BUS_CHANNELS[:n])
+    hubs: list[HubProcess] = []
     try:
-        config = rig_config(tmp, description, hub.port if hub else None, daemon_extra, settings_extra)
+        if not vcan:
+            for _ in range(n):
+                hubs.append(HubProcess("--priority", "70"))
+        ports = [h.port for h in hubs] if hubs else None
+        config = rig_config(tmp, description, ports, daemon_extra, settings_extra, robot)
         drives = DriveSimProcess(config, "--priority", "70", *drivesim_args)
         try:
-            yield Rig(config, hub, drives)
+            yield Rig(config, hubs[0] if hubs else None, drives, tuple(hubs))
         finally:
             drives.stop()
     finally:
-        if hub is not None:
+        for hub in hubs:
             hub.stop()
 
 
@@ -121,11 +150,11 @@ class BusRecorder:
     """Every frame on the rig's bus, stamped by the bus itself (the hub as it forwards a frame,
     or the kernel), kept by a thread of the test process from `start` to `stop`."""
 
-    def __init__(self, rig: Rig) -> None:
+    def __init__(self, rig: Rig, bus: int = 0) -> None:
         self.bus: can.BusABC = (
-            QueuedSocketcandBus("can0", HOST, rig.hub.port)
-            if rig.hub is not None
-            else can.Bus(interface="socketcan", channel="vcan0")
+            QueuedSocketcandBus(BUS_CHANNELS[bus], HOST, rig.hubs[bus].port)
+            if rig.hubs
+            else can.Bus(interface="socketcan", channel=f"v{BUS_CHANNELS[bus]}")
         )
         self.frames: list[can.Message] = []
         self._stop = threading.Event()

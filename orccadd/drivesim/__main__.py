@@ -5,7 +5,11 @@ units; the URDF for the arm), joins the bus, boots every node and answers like t
 would. A control port on 127.0.0.1 takes one JSON object per line, for tests:
 
     {"inject": "overcurrent" | "following_error" | "heartbeat_silence" | "node_silence" | "clear", "node": 3}
-    {"status": true}   -> positions (rad), CiA 402 states, SYNCs seen
+    {"inject": ..., "node": 1, "bus": "can1"}   (the bus's channel, when node ids repeat across buses)
+    {"status": true}   -> positions (rad), CiA 402 states, SYNCs seen (in all and per bus)
+
+A config with several buses (`[[resource.settings.buses]]`) gets one simulator on all of them:
+the drives of every bus move the one arm.
 
 It prints `drivesim: ready, control 127.0.0.1:PORT` once the nodes have booted.
 
@@ -73,7 +77,7 @@ def _client(sim: DriveSimulator, conn: socket.socket) -> None:
             try:
                 req = json.loads(line)
                 if "inject" in req:
-                    sim.inject(int(req["node"]), str(req["inject"]))
+                    sim.inject(int(req["node"]), str(req["inject"]), str(req.get("bus", "")))
                     reply: dict[str, Any] = {"ok": True}
                 else:
                     with sim.lock:
@@ -82,6 +86,7 @@ def _client(sim: DriveSimulator, conn: socket.socket) -> None:
                             "q_rad": [float(x) for x in sim.arm.q],
                             "states": [ax.sm.state.name for ax in sim.axes],
                             "syncs": sim.syncs,
+                            "bus_syncs": dict(zip(sim.bus_names, sim.bus_syncs, strict=True)),
                             "bus_error": sim.bus_error,
                             "frame_age_ms": _figures_ms(list(sim.frame_age_s)),
                             "longest_loop_gap_ms": sim.longest_gap_s * 1e3,
@@ -143,16 +148,22 @@ def main(argv: list[str] | None = None) -> int:
         s = cfg.backend_settings
         if not isinstance(s, CanopenSettings):
             raise OrccaddError(f"{args.config}: resource.backend must be canopen402 for simulated drives")
+        buses = s.bus_list()
+        on_bus = {i: k for k, b in enumerate(buses) for i in b.axes}
         specs = [
-            AxisSpec(ax.node_id, path, AxisUnits(ax.counts_per_rev, ax.gear_ratio, ax.rated_torque_nm))
-            for ax, path in zip(s.axes, s.eds_paths, strict=True)
+            AxisSpec(
+                ax.node_id, path, AxisUnits(ax.counts_per_rev, ax.gear_ratio, ax.rated_torque_nm), on_bus[i]
+            )
+            for i, (ax, path) in enumerate(zip(s.axes, s.eds_paths, strict=True))
         ]
-        bus = (
-            QueuedSocketcandBus(s.channel, s.host, s.port)  # one write per cycle, not per frame
-            if s.interface == "socketcand"
-            else can.Bus(**s.bus_kwargs())
-        )
-        sim = DriveSimulator(plant_config(cfg, args.plant), specs, bus, strict)
+        opened = [
+            QueuedSocketcandBus(b.channel, b.host, b.port)  # one write per cycle, not per frame
+            if b.interface == "socketcand"
+            else can.Bus(**b.bus_kwargs())
+            for b in buses
+        ]
+        names = [b.channel for b in buses]
+        sim = DriveSimulator(plant_config(cfg, args.plant), specs, opened, strict, names)
     except (OrccaddError, can.CanError, OSError) as e:
         log.error("%s", e)
         return 1
@@ -182,7 +193,8 @@ def main(argv: list[str] | None = None) -> int:
     stop.set()
     runner.join(5)
     srv.close()
-    bus.shutdown()
+    for bus in opened:
+        bus.shutdown()
     log.info("stopped after %d SYNCs", sim.syncs)
     return 0
 

@@ -32,8 +32,9 @@ class DriveSimProcess(ChildProcess):
             raise RuntimeError(f"drive simulator: {reply.get('error')}")
         return reply
 
-    def inject(self, node: int, fault: str) -> None:
-        self.request({"inject": fault, "node": node})
+    def inject(self, node: int, fault: str, bus: str = "") -> None:
+        """`fault` on drive `node` (of `bus`, a channel, when node ids repeat across buses)."""
+        self.request({"inject": fault, "node": node, **({"bus": bus} if bus else {})})
 
     def status(self) -> dict[str, Any]:
         return self.request({"status": True})

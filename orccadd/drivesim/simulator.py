@@ -1,20 +1,26 @@
-"""N simulated CiA 402 drives on one bus, moving one simulated arm.
+"""N simulated CiA 402 drives on one or more buses, moving one simulated arm.
 
-`DriveSimulator.run()` is the drives' side of the bus in one loop: every frame is handed to
-the nodes, a SYNC runs every drive's cycle (synchronous RPDOs applied, references to the arm,
-actual values sampled, TPDOs sent), and the arm integrates on the wall clock in between, so it
-keeps moving (or falls, braked) whatever the bus does. Faults are injected with `inject`. The
-drives are as strict as real ones (`Strictness`: heartbeat consumer, COB-ID valid bit, a mode
-display that lags) unless told otherwise.
+`DriveSimulator.run()` is the drives' side of the buses in one loop: every frame is handed to
+the nodes of its bus, a SYNC runs the cycle of every drive on its bus (synchronous RPDOs
+applied, references to the arm, actual values sampled, TPDOs sent), and the arm integrates on
+the wall clock in between, so it keeps moving (or falls, braked) whatever the bus does. Faults
+are injected with `inject`. The drives are as strict as real ones (`Strictness`: heartbeat
+consumer, COB-ID valid bit, a mode display that lags) unless told otherwise.
+
+Drives on several buses (`AxisSpec.bus`) share the one arm, so one process serves them all: the
+joints are coupled by the arm's dynamics, and one integration in one process keeps them so
+(one process per bus would have to share the plant's state and step it in lockstep). Each bus
+has its own SYNC: a SYNC on one bus cycles only that bus's drives.
 """
 
 from __future__ import annotations
 
 import logging
+import select
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import can
@@ -43,50 +49,73 @@ class AxisSpec:
     node_id: int
     eds: str
     units: AxisUnits
+    bus: int = 0  # index of its bus in the simulator's `buses`
 
 
 class DriveSimulator:
     def __init__(
-        self, cfg: RobotConfig, axes: list[AxisSpec], bus: can.BusABC, strict: Strictness = STRICT
+        self,
+        cfg: RobotConfig,
+        axes: list[AxisSpec],
+        bus: can.BusABC | Sequence[can.BusABC],
+        strict: Strictness = STRICT,
+        bus_names: Sequence[str] = (),
     ) -> None:
         if len(axes) != cfg.dof:
             raise ValueError(f"{len(axes)} drives for a {cfg.dof}-joint arm")
         self.cfg = cfg
-        self.bus = bus
+        self.buses = [bus] if isinstance(bus, can.BusABC) else list(bus)
+        self.bus = self.buses[0]
+        self.bus_names = list(bus_names) or [f"bus {k}" for k in range(len(self.buses))]
         self.strict = strict
         self.arm = DriveTrainArm(cfg, RobotModel.from_config(cfg))
         self.lock = threading.Lock()  # held while frames, SYNCs, timers or injections run
-        self.nodes = [SlaveNode(a.node_id, a.eds, self._send, strict.cob_id_valid_bit) for a in axes]
+        self.nodes = [
+            SlaveNode(a.node_id, a.eds, self._sender(self.buses[a.bus]), strict.cob_id_valid_bit)
+            for a in axes
+        ]
         self.axes = [
             Axis(node, j, self.arm, a.units, strict)
             for j, (node, a) in enumerate(zip(self.nodes, axes, strict=True))
         ]
-        self.by_id = {a.node_id: ax for a, ax in zip(axes, self.axes, strict=True)}
+        self.specs = list(axes)
+        # per bus: its nodes and axes (a frame reaches only the nodes of its bus)
+        self.bus_nodes = [
+            [n for n, a in zip(self.nodes, axes, strict=True) if a.bus == k] for k in range(len(self.buses))
+        ]
+        self.bus_axes = [
+            [x for x, a in zip(self.axes, axes, strict=True) if a.bus == k] for k in range(len(self.buses))
+        ]
         self.syncs = 0
+        self.bus_syncs = [0] * len(self.buses)
         self.period_s = cfg.control_period_s  # the drives' cycle when their dictionary has none
         self.bus_error = ""
         self._errors_logged: set[str] = set()
         # how long frames waited between the bus and this loop (the hub stamps each frame with
         # the wall clock as it forwards it): a drive on a real bus reads its frames within µs
         self.frame_age_s: deque[float] = deque(maxlen=10_000)
-        self._routes: dict[int, list[SlaveNode]] = {}  # COB-ID -> the nodes that consume it
+        self._routes: list[dict[int, list[SlaveNode]]] = [{} for _ in self.buses]  # per bus: COB-ID -> nodes
         self._routes_generation = -1
         self.longest_gap_s = 0.0  # longest time between two passes of the loop once SYNCs flow
 
-    def _send(self, msg: can.Message) -> None:
-        try:
-            self.bus.send(msg)
-        except (can.CanError, OSError) as e:  # the bus is gone: the drives' own watchdogs act
-            self._bus_failed(e)
+    def _sender(self, bus: can.BusABC) -> Callable[[can.Message], None]:
+        def send(msg: can.Message) -> None:
+            try:
+                bus.send(msg)
+            except (can.CanError, OSError) as e:  # the bus is gone: the drives' own watchdogs act
+                self._bus_failed(e)
+
+        return send
 
     def _send_queued(self) -> None:
-        """Hand frames queued by a batching bus (`QueuedSocketcandBus`) to the bus, in order."""
-        send_queued = getattr(self.bus, "send_queued", None)
-        if send_queued is not None:
-            try:
-                send_queued()
-            except (can.CanError, OSError) as e:
-                self._bus_failed(e)
+        """Hand frames queued by a batching bus (`QueuedSocketcandBus`) to each bus, in order."""
+        for bus in self.buses:
+            send_queued = getattr(bus, "send_queued", None)
+            if send_queued is not None:
+                try:
+                    send_queued()
+                except (can.CanError, OSError) as e:
+                    self._bus_failed(e)
 
     def _bus_failed(self, e: Exception) -> None:
         """Record a bus error; each distinct message logged once (a dead bus fails every call)."""
@@ -110,68 +139,103 @@ class DriveSimulator:
         the frames handled in order (a real drive reads a frame within microseconds: this loop
         must keep up with ~4,000 frames/s at 500 Hz on a shared core)."""
         self.boot()
-        batch: list[can.Message] = []
+        batches: list[list[can.Message]] = [[] for _ in self.buses]
         last = time.monotonic()
         while not stop():
             t = time.monotonic()
             if self.syncs:  # (before, resets of whole dictionaries take their time)
                 self.longest_gap_s = max(self.longest_gap_s, t - last)
             last = t
-            batch.clear()
             try:
-                msg = self.bus.recv(poll_s)
-                while msg is not None:
-                    batch.append(msg)
-                    msg = self.bus.recv(0.0)
-            except (can.CanError, OSError) as e:
+                self._take(batches, poll_s)
+            except (can.CanError, OSError, ValueError) as e:
                 self._bus_failed(e)
                 time.sleep(poll_s)
             now = time.monotonic()
             wall = time.time()
-            for msg in batch:
-                if msg.timestamp:
-                    self.frame_age_s.append(wall - msg.timestamp)
+            for batch in batches:
+                for msg in batch:
+                    if msg.timestamp:
+                        self.frame_age_s.append(wall - msg.timestamp)
             with self.lock:
                 self.arm.step_to(now)
-                for msg in batch:
-                    self._dispatch(msg, now)
+                for k, batch in enumerate(batches):
+                    for msg in batch:
+                        self._dispatch(msg, now, k)
                 for node, axis in zip(self.nodes, self.axes, strict=True):
                     node.poll(now)
                     axis.poll(now)
                 self._send_queued()
 
-    def _dispatch(self, msg: can.Message, now_s: float) -> None:
+    def _take(self, batches: list[list[can.Message]], poll_s: float) -> None:
+        """Every frame already queued on every bus, waiting up to `poll_s` for the first."""
+        for batch in batches:
+            batch.clear()
+        buses = self.buses
+        if len(buses) == 1:
+            ready = [0]
+            msg = buses[0].recv(poll_s)
+            if msg is None:
+                return
+            batches[0].append(msg)
+        else:  # several buses: whichever has frames (a bus's file descriptor is readable)
+            readable, _, _ = select.select([b.fileno() for b in buses], [], [], poll_s)
+            ready = [k for k, b in enumerate(buses) if b.fileno() in readable]
+        for k in ready:
+            msg = buses[k].recv(0.0)
+            while msg is not None:
+                batches[k].append(msg)
+                msg = buses[k].recv(0.0)
+
+    def _dispatch(self, msg: can.Message, now_s: float, bus: int = 0) -> None:
         cob = msg.arbitration_id
         if msg.is_extended_id:
             return
         if cob == COB_SYNC:
-            self._sync(now_s)
+            self._sync(now_s, bus)
             return
         generation = sum(node.pdo_generation for node in self.nodes)
         if generation != self._routes_generation:
-            self._routes = {}
-            for node in self.nodes:  # descriptions may give several nodes one COB-ID (e35's)
-                for c in node.unicast_cobs():
-                    self._routes.setdefault(c, []).append(node)
+            for k, nodes in enumerate(self.bus_nodes):
+                routes: dict[int, list[SlaveNode]] = {}
+                for node in nodes:  # descriptions may give several nodes one COB-ID (e35's)
+                    for c in node.unicast_cobs():
+                        routes.setdefault(c, []).append(node)
+                self._routes[k] = routes
             self._routes_generation = generation
-        for node in self._routes.get(cob, self.nodes):
+        for node in self._routes[bus].get(cob, self.bus_nodes[bus]):
             node.on_frame(msg, now_s)
 
-    def _sync(self, now_s: float) -> None:
+    def _sync(self, now_s: float, bus: int = 0) -> None:
         self.syncs += 1
-        for node in self.nodes:
+        self.bus_syncs[bus] += 1
+        for node in self.bus_nodes[bus]:
             node.on_sync(now_s)
-        for axis in self.axes:
+        for axis in self.bus_axes[bus]:
             axis.cycle(now_s, self.period_s)
-        for node in self.nodes:
+        for node in self.bus_nodes[bus]:
             node.transmit_sync_pdos()
 
-    def inject(self, node_id: int, fault: str) -> None:
+    def axis_of(self, node_id: int, bus: str = "") -> Axis:
+        """The drive with `node_id` (on `bus`, by name, when node ids repeat across buses)."""
+        found = [
+            ax
+            for ax, spec in zip(self.axes, self.specs, strict=True)
+            if spec.node_id == node_id and bus in ("", self.bus_names[spec.bus])
+        ]
+        if len(found) == 1:
+            return found[0]
+        if not found:
+            nodes = sorted(f"{self.bus_names[s.bus]}:{s.node_id}" for s in self.specs)
+            raise ValueError(
+                f"no drive with node id {node_id}{f' on {bus}' if bus else ''} (nodes: {', '.join(nodes)})"
+            )
+        raise ValueError(f"node id {node_id} is on several buses: name the bus")
+
+    def inject(self, node_id: int, fault: str, bus: str = "") -> None:
         """Fault injection: overcurrent / following_error (EMCY, fault reaction), heartbeat_silence
         (no more heartbeats), node_silence (nothing at all), clear (silences end)."""
-        axis = self.by_id.get(node_id)
-        if axis is None:
-            raise ValueError(f"no drive with node id {node_id} (nodes: {sorted(self.by_id)})")
+        axis = self.axis_of(node_id, bus)
         with self.lock:
             if fault == "overcurrent":
                 axis.fault(EMCY_OVERCURRENT, ERR_REG_CURRENT)

@@ -46,6 +46,11 @@ class QueuedSocketcandBus(can.BusABC):
         if got != word:
             raise can.CanOperationError(f"socketcand handshake: expected {word!r}, got {got!r}")
 
+    def fileno(self) -> int:
+        """The connection's descriptor, readable when frames (or the server's close) are there;
+        frames already read and parsed are not counted: drain with `recv(0.0)` before waiting."""
+        return self._sock.fileno()
+
     # ---- receive ------------------------------------------------------------------------------
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         if not self._rx:

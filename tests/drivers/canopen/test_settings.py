@@ -83,3 +83,62 @@ def test_bad_settings(edit: Any, message: str) -> None:
     with pytest.raises(ConfigError) as e:
         load_canopen_settings(r, ur5e(), FILE)
     assert message in str(e.value)
+
+
+# ---- several buses ---------------------------------------------------------------------------------
+def two_buses(on_can1: int = 3, **over: Any) -> dict[str, Any]:
+    """Six axes, the last `on_can1` on a second bus (node ids 1.. again there)."""
+    r = raw(**over)
+    for k, ax in enumerate(r["axes"][6 - on_can1 :]):
+        ax.update(bus="can1", node_id=k + 1)
+    r["buses"] = [{"channel": "can1", "port": 29537}]
+    return r
+
+
+def test_one_bus_configs_are_one_bus_with_every_axis() -> None:
+    s = load_canopen_settings(raw(), ur5e(), FILE)
+    (bus,) = s.bus_list()
+    assert (bus.channel, bus.port, bus.axes) == ("can0", 29536, (0, 1, 2, 3, 4, 5))
+
+
+def test_two_buses_at_1_khz_are_checked_and_accepted_per_bus(capsys: pytest.CaptureFixture[str]) -> None:
+    s = load_canopen_settings(two_buses(), ur5e(0.001), FILE)
+    can0, can1 = s.bus_list()
+    assert (can0.channel, can0.port, can0.axes) == ("can0", 29536, (0, 1, 2))
+    assert (can1.channel, can1.port, can1.axes) == ("can1", 29537, (3, 4, 5))
+    assert can1.bus_kwargs()["port"] == 29537 and can1.interface == "socketcand"
+    err = capsys.readouterr().err
+    # 3 axes: worst case 55 + 6 × 135 = 865 bits per ms, 86.5 % + heartbeats: warned, not refused
+    assert "warning: bus can0: bus load 72%-87%" in err and "warning: bus can1: bus load 72%-87%" in err
+
+
+def test_an_overloaded_bus_is_refused_naming_it() -> None:
+    with pytest.raises(ConfigError) as e:
+        load_canopen_settings(two_buses(on_can1=5), ur5e(0.001), FILE)  # 1 axis on can0, 5 on can1
+    assert str(e.value).startswith("robot.toml: control_period_s (=0.001): bus can1: bus load")
+    assert "above 90%" in str(e.value)
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda r: r["axes"][4].update(bus="can2"), "axes[4].bus (='can2') is no bus here (buses: can0"),
+        (lambda r: r["axes"][4].update(node_id=1), "axes[4].node_id (=1) is also axes[3]'s (bus can1)"),
+        (lambda r: r["buses"].append({"channel": "can0"}), "buses[1].channel (='can0') names a bus twice"),
+        (
+            lambda r: [ax.pop("bus") for ax in r["axes"][3:]],
+            "resource.settings.axes[3].node_id (=1) is also axes[0]'s (bus can0)",
+        ),
+        (
+            lambda r: r["buses"].append({"channel": "can2", "port": 29538}),
+            "resource.settings.buses bus 'can2' carries no axis",
+        ),
+        (lambda r: r["buses"][0].update(baud=1), "resource.settings.buses[0].baud is not a known key"),
+    ],
+)
+def test_bad_buses(edit: Any, message: str) -> None:
+    r = two_buses()
+    edit(r)
+    with pytest.raises(ConfigError) as e:
+        load_canopen_settings(r, ur5e(0.001), FILE)
+    assert message in str(e.value)
