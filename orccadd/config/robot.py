@@ -114,6 +114,11 @@ class DaemonConfig:
     # a mission's task that runs longer than this (its task file's `[task] timeout_s`, 0: this)
     # raises the type 3 `Timeout`: nothing waits forever unless its task file says `inf`
     task_timeout_s: float = field(default=300.0, bounds=(0.1, 86400.0))
+    # how a task's law runs each tick: "compiled" (one generated function per task: the modules'
+    # kernels with their values as locals, orccadd/task/compiled.py) or "interpreted" (each
+    # module's update on its ports: for stepping through a module in a debugger); the commands
+    # are the same, bit for bit
+    tick: Literal["compiled", "interpreted"] = field(default="compiled")
 
 
 @dataclass(frozen=True)

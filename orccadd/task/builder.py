@@ -173,7 +173,7 @@ def build_task(
         t3=tuple(e.name for e in spec.events.T3) + t3_builtin,
         sync=tuple(e.name for e in spec.events.sync),
     )
-    return RobotTask(
+    task = RobotTask(
         sig,
         resource,
         [modules[n] for n in order],
@@ -186,6 +186,9 @@ def build_task(
         period,
         timeout_s,
     )
+    if resource.config.daemon.tick == "interpreted":  # the robot's [daemon] tick
+        task.compiled = None
+    return task
 
 
 def _find_port(spec: TaskSpec, nodes: dict[str, _Node], ref: str, key: str, *, output: bool) -> Port:

@@ -168,8 +168,9 @@ def test_command_daemon_killed_mid_log_the_next_one_carries_the_log_on_without_a
     period_s = float(np.median(np.diff(t)))
     assert info["rows"] == len(t)
     # ~2 s at the control rate, every tick once: none twice, no hole (the dead daemon's downtime
-    # was ≥ 0.5 s, hundreds of periods); a skipped period of an overrun is a few at most
-    assert np.all(np.diff(t) > 0) and np.diff(t).max() < 5 * period_s, np.diff(t).max()
+    # was ≥ 0.5 s, 250+ periods). The loop's own skipped periods (an overrun, a stall of this
+    # shared VM: 36 ms seen under load) stay an order of magnitude below that
+    assert np.all(np.diff(t) > 0) and np.diff(t).max() < 50 * period_s, np.diff(t).max()
     assert len(t) > 1.5 / period_s
     assert 0 < t[0] < 5 * period_s  # seconds since the log started, the same origin after the resume
     assert [Path(p).name for p in info["mcap"]] == ["run.mcap", "run-2.mcap"]  # MCAP: a new part

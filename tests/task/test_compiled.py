@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from orccadd.errors import ConfigError
 from orccadd.runtime import SimClock
 from orccadd.session import Session
 from orccadd.task import RobotTask
@@ -69,3 +70,13 @@ def test_a_module_without_a_kernel_runs_through_its_ports_in_the_compiled_tick(t
     source = task.compiled_tick.source
     assert "update" in source and source.count("kernel") == len(task.modules) - 1, source
     check_same(UR5E, path, 1500)
+
+
+def test_the_robot_config_chooses_the_interpreted_tick(robot_variant) -> None:  # type: ignore[no-untyped-def]
+    path = robot_variant(("\n[daemon]\n", '\n[daemon]\ntick = "interpreted"\n'))
+    assert Session.open(path).task(MOVE_TASK).compiled is None
+    assert Session.open(UR5E).task(MOVE_TASK).compiled is not None
+    bad = robot_variant(("\n[daemon]\n", '\n[daemon]\ntick = "jit"\n'))
+    with pytest.raises(ConfigError) as e:
+        Session.open(bad)
+    assert "daemon.tick" in str(e.value) and "'jit'" in str(e.value) and "interpreted" in str(e.value)
