@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -54,6 +55,14 @@ from orccadd.types import CommandMode
 from tests.canopen_rig import CANOPEN_2BUS, CANOPEN_6AXIS, canopen_rig
 
 PRIORITY = 80
+CLOCK_TICKS_PER_S = os.sysconf("SC_CLK_TCK")
+
+
+def cpu_s(pid: int) -> float:
+    """User + system CPU time of process `pid` so far (s)."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS_PER_S
 
 
 def sdo_client(config: str, duration_s: float) -> None:
@@ -113,12 +122,15 @@ def run_rate(robot: Path, rate_hz: float, duration_s: float) -> None:
         first_of = [p.axes[0] for p in ports]  # an axis per bus, for the SYNC -> TPDO time
         n = int(duration_s * rate_hz)
         rec = np.zeros((n, 4), dtype=np.int64)  # release, woke, read done, write done (ns)
-        switches = np.zeros((n, 2), dtype=np.int64)  # voluntary, involuntary context switches
+        switches = np.zeros((n, 3), dtype=np.int64)  # voluntary, involuntary switches; TPDOs read
         round_trip_s: list[list[float]] = [[] for _ in ports]
         late = np.zeros(len(axes), dtype=np.int64)
         count0 = np.array([a.tpdo_count for a in axes])
         syncs0 = np.array([p.syncs_sent for p in ports])
         clock = WallClock()
+        pids = {"controller": os.getpid(), "drive simulator": rig.drives.proc.pid, "SDO client": sdo.pid}
+        pids |= {f"hub {p.conf.channel}": hub.proc.pid for p, hub in zip(ports, rig.hubs, strict=False)}
+        cpu0 = {name: cpu_s(pid) for name, pid in pids.items()}
         rt = enter_realtime(PRIORITY, cpus=None)
         t0 = time.monotonic()
         release = time.monotonic_ns() + period_ns
@@ -144,7 +156,8 @@ def run_rate(robot: Path, rate_hz: float, duration_s: float) -> None:
                 done = time.monotonic_ns()
                 ru1 = resource.getrusage(thread)
                 rec[k] = (release, woke, read_done, done)
-                switches[k] = (ru1.ru_nvcsw - ru0.ru_nvcsw, ru1.ru_nivcsw - ru0.ru_nivcsw)
+                tpdos_read = sum(a.tpdo_count for a in axes) - sum(seen)
+                switches[k] = (ru1.ru_nvcsw - ru0.ru_nvcsw, ru1.ru_nivcsw - ru0.ru_nivcsw, tpdos_read)
                 ticks += 1
                 release += period_ns
                 if release < done:
@@ -155,6 +168,7 @@ def run_rate(robot: Path, rate_hz: float, duration_s: float) -> None:
         finally:
             leave_realtime(rt)
             elapsed = time.monotonic() - t0
+            cpu = {name: (cpu_s(pid) - cpu0[name]) / elapsed for name, pid in pids.items()}
             time.sleep(0.05)  # the last SYNC's TPDOs are on their way: read them (no SYNC sent)
             arm.read(time.monotonic())
             syncs = np.array([p.syncs_sent for p in ports]) - syncs0
@@ -180,6 +194,7 @@ def run_rate(robot: Path, rate_hz: float, duration_s: float) -> None:
         f"    drive simulator: longest gap between its loop's passes {status['longest_loop_gap_ms']:.1f} ms"
     )
     print(f"    SDO round trip (upload 0x1000 from a second client process) {figures(rtts, 'ms', 2)}")
+    print("    CPU (share of one core) " + ", ".join(f"{name} {share:.0%}" for name, share in cpu.items()))
 
 
 def report(
@@ -195,6 +210,7 @@ def report(
 ) -> None:
     ticks = len(rec)
     period_us = period_ns / 1e3
+    n_axes = int(np.median(switches[:, 2])) or 1
     wake = (rec[:, 1] - rec[:, 0]) / 1e3
     read = (rec[:, 2] - rec[:, 1]) / 1e3
     write = (rec[:, 3] - rec[:, 2]) / 1e3
@@ -216,17 +232,27 @@ def report(
     print(f"    write()         {figures(write, 'µs')}")
     print(f"    release -> end  {figures(end, 'µs')}")
     causes: Counter[str] = Counter()
-    for k in np.flatnonzero(rec[:, 3] - rec[:, 0] > period_ns):
+    over = np.flatnonzero(rec[:, 3] - rec[:, 0] > period_ns)
+    for k in over[:5]:
+        print(
+            f"    overrun at tick {k}: wake-up {wake[k]:.0f} µs, read() {read[k]:.0f} µs "
+            f"({switches[k, 2]} TPDOs), write() {write[k]:.0f} µs"
+        )
+    for k in over:
         if wake[k] >= period_us / 2:
             causes["wake-up late"] += 1
         elif switches[k, 0]:
             causes["blocked in the tick"] += 1
         elif switches[k, 1]:
             causes["preempted in the tick"] += 1
+        elif read[k] >= write[k]:
+            burst = switches[k, 2] > 2 * n_axes  # the TPDOs of more than two SYNCs at once
+            causes["read() of a burst of TPDOs" if burst else "read() long"] += 1
         else:
-            causes["read() long" if read[k] >= write[k] else "write() long"] += 1
+            causes["write() long"] += 1
     blocked = int((switches[:, 0] > 0).sum())
     print(f"    overrun causes: {dict(causes) or 'none'}; ticks with a voluntary switch {blocked}")
+    print(f"    TPDOs read per tick {figures(switches[:, 2], 'frames', 0)}")
 
 
 def main() -> int:

@@ -23,14 +23,16 @@ positions. Cyclic part (`receive` at the start of a tick, `transmit` at its end;
 blocking call): frames already on every bus are drained and decoded (TPDOs, EMCY, heartbeats,
 boot-ups, answers to our non-blocking SDO requests), watchdogs are checked (a TPDO missing for
 `missed_tpdo_periods`, a heartbeat silent for 3 × `heartbeat_ms`, a drive that rebooted, a bus
-error), and each axis's RPDO goes out with the controlword that the resource's state asks for,
-then each bus's SYNC (the drives apply the RPDOs at once and sample for the next tick's read), a
-tick's frames in one write per bus where the bus allows it (`port`).
+error; with `tpdo_wait_us`, a tick first waits that long at most from its release for the TPDOs
+answering each bus's last SYNC), and each axis's RPDO goes out with the controlword that the
+resource's state asks for, then each bus's SYNC (the drives apply the RPDOs at once and sample
+for the next tick's read), a tick's frames in one write per bus where the bus allows it (`port`).
 """
 
 from __future__ import annotations
 
 import logging
+import select
 import struct
 import time
 from dataclasses import dataclass, field
@@ -121,6 +123,7 @@ class CanopenMaster:
             arbitration_id=0x700 + CONTROLLER_NODE_ID, data=b"\x05", is_extended_id=False
         )
         self._heartbeat_on_startup = False
+        self._wait_s = settings.tpdo_wait_us * 1e-6
 
     @property
     def sync_by_kernel(self) -> bool:
@@ -247,21 +250,14 @@ class CanopenMaster:
         self.tick += 1
         rep = CycleReport()
         for k, port in enumerate(self.ports):
-            bus = port.bus
-            if bus is None:
+            if port.bus is None:
                 rep.comm_lost = rep.comm_lost or f"CAN bus {port.where}: closed"
                 continue
-            rx_tpdo, by_id = self._rx_tpdo[k], self._by_id[k]
-            try:
-                while True:
-                    msg = bus.recv(0.0)
-                    if msg is None:
-                        break
-                    self._frame(msg, now_s, port, rx_tpdo, by_id)
-            except (can.CanError, OSError) as e:
-                port.error = port.error or f"CAN bus {port.where}: {e}"
+            self._drain(k, now_s)
         if rep.comm_lost:
             return rep
+        if self._wait_s:
+            self._gather(now_s)
         bus_error = self.bus_error
         if bus_error:
             rep.comm_lost = bus_error
@@ -296,6 +292,47 @@ class CanopenMaster:
             if a.sdo_error and not rep.comm_lost:
                 rep.comm_lost = a.sdo_error
         return rep
+
+    def _drain(self, k: int, now_s: float) -> None:
+        """Every frame already received on bus `k`, decoded."""
+        port = self.ports[k]
+        bus, rx_tpdo, by_id = port.bus, self._rx_tpdo[k], self._by_id[k]
+        assert bus is not None
+        try:
+            while True:
+                msg = bus.recv(0.0)
+                if msg is None:
+                    break
+                self._frame(msg, now_s, port, rx_tpdo, by_id)
+        except (can.CanError, OSError) as e:
+            port.error = port.error or f"CAN bus {port.where}: {e}"
+
+    def _gather(self, now_s: float) -> None:
+        """Wait, until `tpdo_wait_us` after the tick's release at most, for the TPDOs that answer
+        the SYNC each bus got last (loop SYNC only; a bus that fails stops the wait)."""
+        deadline_s = now_s + self._wait_s
+        while True:
+            waiting = [
+                k
+                for k, port in enumerate(self.ports)
+                if port.cyclic_started
+                and port.fileno >= 0
+                and not port.sync_by_kernel
+                and port.syncs_sent
+                and not port.error
+                and any(self.axes[i].tpdo_seen_sync < port.syncs_sent for i in port.axes)
+            ]
+            timeout_s = deadline_s - time.monotonic()
+            if not waiting or timeout_s <= 0:
+                return
+            try:
+                ready, _, _ = select.select([self.ports[k].fileno for k in waiting], [], [], timeout_s)
+            except (OSError, ValueError) as e:
+                self.ports[waiting[0]].error = f"CAN bus {self.ports[waiting[0]].where}: {e}"
+                return
+            for k in waiting:
+                if self.ports[k].fileno in ready:
+                    self._drain(k, now_s)
 
     def _tpdo_missing(self, a: AxisLink, now_s: float, timeout_s: float) -> bool:
         """Kernel SYNC: by time. Loop SYNC: by SYNCs sent since (a stalled loop sent none, and

@@ -6,8 +6,8 @@ them over with `flush`. On SocketCAN a frame is one `write` system call to the k
 python-can makes at once (`queue` is `send`). Over socketcand, python-can's client makes a TCP
 write (and a setsockopt) per frame, each waking the server: `BatchingSocketcandBus` is that
 client with its receive path and message text unchanged, whose `queue` keeps the frame's text
-and whose `flush` writes a tick's frames to the server in one TCP write (measured at 500 Hz:
-`write()` of the resource median 224 -> see the README's Benchmarks for the figures after).
+and whose `flush` writes a tick's frames to the server in one TCP write (six axes at 500 Hz:
+the resource's `write()` median 224 µs with a write per frame, 95-102 µs batched).
 """
 
 from __future__ import annotations
@@ -39,6 +39,11 @@ class BatchingSocketcandBus(SocketCanDaemonBus):  # type: ignore[misc]
             )
         self._tcp = sock
         self._queued: list[str] = []
+
+    def fileno(self) -> int:
+        """The connection's descriptor, readable when frames are there (drain with `recv(0.0)`
+        before waiting on it: frames already parsed are not counted)."""
+        return self._tcp.fileno()
 
     def queue(self, msg: can.Message) -> None:
         """Keep `msg` (as python-can would send it) for the next `flush`. Tick-safe."""
@@ -83,6 +88,7 @@ class BusPort:
         # control loop sends SYNC itself, once per tick, after the RPDOs.
         self.sync_by_kernel = bus.interface == "socketcan"
         self._queue: Any = None
+        self.fileno = -1  # the bus's file descriptor once open (-1: none to wait on)
 
     def open(self) -> canopen.Network:
         try:
@@ -90,6 +96,10 @@ class BusPort:
         except (can.CanError, OSError, ValueError) as e:
             raise ResourceError(f"CAN bus {self.where}: cannot open: {e}") from None
         self._queue = getattr(self.bus, "queue", self.bus.send)
+        try:  # to wait for frames (`tpdo_wait_us`): SocketCAN's socket, socketcand's connection
+            self.fileno = self.bus.fileno()
+        except NotImplementedError:
+            self.fileno = -1
         net = canopen.Network(self.bus)
         net.NOTIFIER_CYCLE = 0.05
         net.connect()

@@ -106,6 +106,10 @@ class CanopenSettings:
     heartbeat_ms: int = field(default=100, bounds=(10, 10_000))
     controller_heartbeat_ms: int = field(default=50, bounds=(10, 10_000))
     missed_tpdo_periods: int = field(default=3, bounds=(1, 1000))
+    # how long a tick may wait, from its release, for the TPDOs of the SYNC it sent last (every
+    # bus's, gathered before it computes); 0: read what is there. Real drives answer within the
+    # period (nothing to wait for); slow ones (simulated, behind a userspace bus) may need it
+    tpdo_wait_us: int = field(default=0, bounds=(0, 100_000))
     following_error_rad: float = field(default=0.1, bounds=(0.0, 10.0), open_lo=True)  # CSP, 0x6065
     following_error_timeout_ms: int = field(default=100, bounds=(0, 65535))  # 0x6066
     sdo_timeout_s: float = field(default=0.5, bounds=(0.01, 10.0))
@@ -196,6 +200,12 @@ def load_canopen_settings(raw: Any, cfg: RobotConfig, file: str) -> CanopenSetti
             )
         paths.append(str(path))
     _check_buses(s, file)
+    if s.tpdo_wait_us * 1e-6 >= cfg.control_period_s / 2:
+        raise ConfigError(
+            file,
+            "resource.settings.tpdo_wait_us",
+            f"(={s.tpdo_wait_us}) must be below half the control period ({cfg.control_period_s * 5e5:g} µs)",
+        )
     for bus in s.bus_list():
         load = bus_load(s.traffic(len(bus.axes)), cfg.control_period_s, bus.bitrate_bit_s)
         verdict, message = load.verdict()

@@ -142,3 +142,12 @@ def test_bad_buses(edit: Any, message: str) -> None:
     with pytest.raises(ConfigError) as e:
         load_canopen_settings(r, ur5e(0.001), FILE)
     assert message in str(e.value)
+
+
+def test_the_tpdo_wait_is_below_half_a_period() -> None:
+    assert load_canopen_settings(two_buses(tpdo_wait_us=300), ur5e(0.001), FILE).tpdo_wait_us == 300
+    with pytest.raises(ConfigError) as e:
+        load_canopen_settings(two_buses(tpdo_wait_us=500), ur5e(0.001), FILE)
+    assert "resource.settings.tpdo_wait_us (=500) must be below half the control period (500 µs)" in str(
+        e.value
+    )
