@@ -188,7 +188,7 @@ def reaction_times(a: Automaton, n: int, seed: int = 1) -> tuple[np.ndarray, np.
     names = p.inputs
     set_table = [
         {frozenset(nm for i, nm in enumerate(names) if k >> i & 1): (nx, frozenset(a.describe_actions(act)))
-         for k, (nx, act) in row.items()}
+         for key, (nx, act) in row.items() for k in a.stands_for(key)}
         for row in a.table
     ]  # fmt: skip
     ours = np.empty(n)

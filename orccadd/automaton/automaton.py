@@ -38,6 +38,9 @@ class Automaton:
     safe_bit: int
     failed_bit: int
     safe_done_bit: int
+    # per input index, the input bit standing for it in the table: its event class's representative
+    # (orccadd/automaton/classes.py; an operator input stands for itself)
+    event_rep: tuple[int, ...] = ()
 
     @property
     def n_states(self) -> int:
@@ -55,8 +58,24 @@ class Automaton:
         return sum(len(t) for t in self.table)
 
     def react(self, state: int, inputs: int) -> tuple[int, int]:
-        """(next state, action bits) for the inputs present in this instant (environment-model inputs)."""
-        return self.table[state][inputs & self.relevant[state]]
+        """(next state, action bits) for the inputs present in this instant (any inputs: reduced to
+        the environment model by `normalize` when they are not a row of the table as they are)."""
+        row = self.table[state]
+        hit = row.get(inputs & self.relevant[state])
+        return hit if hit is not None else row[self.normalize(state, inputs)]
+
+    def stands_for(self, inputs: int) -> list[int]:
+        """The input sets a row's inputs stand for: each class representative replaced by each
+        event of its class (`event_rep`), in every combination."""
+        out = [0]
+        i = 0
+        while inputs >> i:
+            if inputs >> i & 1:
+                rep = 1 << i
+                members = [1 << j for j, r in enumerate(self.event_rep) if r == rep] or [rep]
+                out = [x | m for x in out for m in members]
+            i += 1
+        return out
 
     def describe_actions(self, actions: int) -> list[str]:
         return [self.action_names[i] for i in range(len(self.action_names)) if actions >> i & 1]
@@ -71,7 +90,8 @@ class Automaton:
 
     def normalize(self, state: int, inputs: int) -> int:
         """Reduce raw inputs to the environment model the table was built for: operator inputs kept,
-        events only from active tasks, at most one per task (T3 > T2 > post > pre > sync)."""
+        events only from active tasks, at most one per task (T3 > T2 > post > pre > sync), each
+        event standing as its class's representative (`event_rep`)."""
         from orccadd.automaton.program import PRIORITY
 
         p = self.program
@@ -84,7 +104,8 @@ class Automaton:
                 (ev for ev in p.tasks[t].events if ev[2] & present),
                 key=lambda ev: PRIORITY[ev[0]],
             )
-            out |= best[2]
+            bit = best[2]
+            out |= self.event_rep[bit.bit_length() - 1] if self.event_rep else bit
         return out & self.relevant[state]
 
 
@@ -96,8 +117,11 @@ class Runner:
     def __init__(self, automaton: Automaton) -> None:
         self.automaton = automaton
         # a private plain-dict copy: the automaton's rows are read-only views, a lookup through one
-        # costs about 50 ns more; built once when the mission is loaded, never in a tick
-        self.table = tuple(dict(row) for row in automaton.table)
+        # costs about 50 ns more; each row also under every input set it stands for (a class's
+        # other events: one lookup, no `normalize`); built once when the mission is loaded
+        self.table = tuple(
+            {x: hit for key, hit in row.items() for x in automaton.stands_for(key)} for row in automaton.table
+        )
         self.relevant = automaton.relevant
         self.state = 0
 

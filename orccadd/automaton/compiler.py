@@ -3,7 +3,9 @@ combination the environment can produce (synchronous semantics, one reaction per
 
 Environment model, shared with the verifier: operator inputs may come in any combination; a
 Robot-Task raises events only while active, at most one per instant (the runtime keeps the most
-severe of one tick's events: T3 > T2 > post > pre > sync).
+severe of one tick's events: T3 > T2 > post > pre > sync). Events the program cannot tell apart
+are explored once, through their class's representative (`classes.py`: e.g. a task's built-in
+type 3 exceptions under one `on fatal`).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from orccadd.automaton import ast as A
 from orccadd.automaton import kernel as K
 from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
 from orccadd.automaton.causality import dependencies, find_cycle
+from orccadd.automaton.classes import event_classes, event_reps
 from orccadd.automaton.program import Program
 from orccadd.errors import MissionError
 
@@ -73,9 +76,10 @@ class ActionLayout:
         )
 
 
-def input_combinations(p: Program, active: tuple[int, ...], relevant: int) -> list[int]:
-    """Every input set the environment can present in a state (see the module docstring)."""
-    choices: list[list[int]] = [[0, *bits_of(p.event_masks[t] & relevant)] for t in sorted(set(active))]
+def input_combinations(p: Program, active: tuple[int, ...], relevant: int, reps: list[int]) -> list[int]:
+    """Every input set the environment can present in a state (see the module docstring), one
+    event per class of each active task (`reps[t]`: the bits of task t's class representatives)."""
+    choices: list[list[int]] = [[0, *bits_of(reps[t] & relevant)] for t in sorted(set(active))]
     ops = bits_of(relevant & p.operator_mask)
     choices.extend([0, b] for b in ops)
     count = 1
@@ -174,6 +178,8 @@ def compile_program(
     """Explore every reachable state (breadth first, so counterexamples are shortest).
     `progress` is told the count every `PROGRESS_EVERY_S` (a long compilation on a terminal)."""
     layout = ActionLayout(p)
+    classes = event_classes(p)
+    reps = [sum(c.rep for c in task) for task in classes]
     t0 = last = time.monotonic()
     n_transitions = 0
     reactor = Reactor(p, layout)
@@ -212,7 +218,7 @@ def compile_program(
         ins, internal = reactor.mentions(top)
         rel = ins & possible
         try:
-            combos = input_combinations(p, act, rel)
+            combos = input_combinations(p, act, rel, reps)
         except OverflowError as e:
             msg = (f"a state reacts to {e.args[0]} input combinations (limit {MAX_INPUT_COMBINATIONS}): "
                    f"too many Robot-Tasks active at once ({e.args[1]}, with their events, and "
@@ -256,6 +262,7 @@ def compile_program(
         safe_bit=layout.safe_bit,
         failed_bit=layout.failed_bit,
         safe_done_bit=layout.safe_done_bit,
+        event_rep=event_reps(p, classes),
     )
 
 

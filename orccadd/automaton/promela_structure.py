@@ -34,10 +34,10 @@ active tasks claim the same resource or joints), the mission's `never` and `alte
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 from orccadd.automaton import ast as A
 from orccadd.automaton import kernel as K
+from orccadd.automaton.classes import EventClass, input_masks, task_classes
 from orccadd.automaton.program import Program
 from orccadd.automaton.promela_props import PROPERTIES, PropCode, check_properties, encode_properties
 from orccadd.automaton.promela_spin import SETTINGS
@@ -47,27 +47,17 @@ from orccadd.errors import OrccaddError
 MAX_PROCESSES = 250  # spin's limit is 255, with the clock and the mission's process
 
 
-@dataclass(frozen=True)
-class EventClass:
-    task: int
-    value: int  # ev_T == value in the instants the task raises it
-    kind: str
-    bits: int  # every input bit of the class
-    rep: int  # the input bit of its first event, the one the environment raises
-    name: str  # the first event's full name
-
-
 class Names:
     """The model's variables for the program's inputs, events, tasks and internal signals."""
 
     def __init__(self, p: Program) -> None:
         self.p = p
-        masks = sorted(_input_masks(p))
+        masks = sorted(input_masks(p))
         tested = 0
         for m in masks:
             tested |= m
         self.operators = [i for i in range(len(p.inputs)) if p.input_task[i] < 0 and tested >> i & 1]
-        self.classes: list[list[EventClass]] = [_classes(p, t, masks) for t in range(len(p.tasks))]
+        self.classes: list[list[EventClass]] = [task_classes(p, t, masks) for t in range(len(p.tasks))]
 
     def task(self, t: int) -> str:
         return self.p.tasks[t].name
@@ -114,48 +104,6 @@ class Names:
             f"it mentions the input {name}: the structural model offers inputs the program does not "
             "listen to, which the verifier does not count; export with `--model table`"
         )
-
-
-def _input_masks(p: Program) -> set[int]:
-    """Every input mask a statement tests (conditions, and what ends each task)."""
-    out = set(p.end_masks)
-    stack: list[K.Term | None] = [p.main, p.safe]
-    while stack:
-        t = stack.pop()
-        conds: tuple[K.Cond, ...] = ()
-        if isinstance(t, K.Await | K.Abort | K.Present):
-            conds = (t.cond,)
-        elif isinstance(t, K.Handle):
-            conds = t.conds
-        for c in conds:
-            _cond_in_masks(c, out)
-        stack.extend(K.children(t))
-    return out
-
-
-def _cond_in_masks(c: K.Cond, out: set[int]) -> None:
-    if c[0] == K.IN:
-        out.add(int(c[1]))
-    elif c[0] in (K.AND, K.OR, K.NOT):
-        for sub in c[1:]:
-            _cond_in_masks(sub, out)
-
-
-def _classes(p: Program, t: int, masks: list[int]) -> list[EventClass]:
-    """A task's events grouped by what the program can tell of them (kind, the masks holding them);
-    an event in no mask changes no reaction and is left out."""
-    groups: dict[tuple[str, tuple[bool, ...]], list[tuple[str, int]]] = {}
-    for kind, name, bit in p.tasks[t].events:
-        where = tuple(bool(m & bit) for m in masks)
-        if any(where):
-            groups.setdefault((kind, where), []).append((name, bit))
-    out = []
-    for value, ((kind, _), events) in enumerate(groups.items(), start=1):
-        bits = 0
-        for _, b in events:
-            bits |= b
-        out.append(EventClass(t, value, kind, bits, events[0][1], events[0][0]))
-    return out
 
 
 def export_structure(

@@ -187,7 +187,7 @@ def full_view(a: Automaton, *, faults: bool = False) -> Lts:
                 continue
             if n == s and not actions:
                 continue
-            groups.setdefault((s, n, actions), []).append(inputs)
+            groups.setdefault((s, n, actions), []).extend(a.stands_for(inputs))
     edges = set()
     for (s, n, actions), sets in groups.items():
         least = [x for x in sets if not any(y != x and y & x == y for y in sets)]
