@@ -23,11 +23,13 @@ Definitions (the loop releases tick k at t0 + k·period, absolute):
 - where the time goes, per tick: wake-up latency, `read()` (drain every bus, decode, watchdogs),
   `write()` (the RPDOs, SYNC and heartbeat of every bus); SYNC → TPDO at the hub (the hub's time
   stamp of each bus's first TPDO after our SYNC left); the cause of each overrun: the wake-up
-  (≥ half a period late), the tick blocked (a voluntary context switch inside it: a socket or
-  another thread's lock), preempted (an involuntary one), else the longer of read and write.
+  (≥ half a period late), a read() of a burst (the TPDOs of more than two SYNCs at once, after a
+  stall of the drive simulator), write() blocked (a voluntary context switch in it: a socket or
+  another thread's lock), preempted (an involuntary switch), else the longer of read() (which
+  includes the wait for late TPDOs, `tpdo_wait_us`) and write().
 
-Usage: `python benchmarks/canopen_cycle.py [--buses 1|2] [--rates 250,500,1000] [--duration-s 60]`
-(root for SCHED_FIFO; `make bench`).
+Usage: `python benchmarks/canopen_cycle.py [--buses 1|2] [--rates 250,500,1000] [--duration-s 60]
+[--tpdo-wait-us N]` (root for SCHED_FIFO; `make bench`).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import resource
 import subprocess
 import sys
@@ -88,24 +91,31 @@ def sdo_client(config: str, duration_s: float) -> None:
     print(json.dumps(rtts), flush=True)
 
 
-def with_period(rig_config: Path, period_s: float) -> None:
+def with_period(rig_config: Path, period_s: float, tpdo_wait_us: int | None) -> None:
+    """The rig's config at `period_s`, waiting `tpdo_wait_us` for late TPDOs (None: as shipped)."""
     text = rig_config.read_text()
     for old in ("control_period_s = 0.002", "control_period_s = 0.001"):
         text = text.replace(old, f"control_period_s = {period_s:g}")
+    if tpdo_wait_us is not None:
+        text = re.sub(r"\ntpdo_wait_us = \d+", "", text)
+        text = text.replace(
+            "[resource.settings]\n", f"[resource.settings]\ntpdo_wait_us = {tpdo_wait_us}\n", 1
+        )
     rig_config.write_text(text)
 
 
-def run_rate(robot: Path, rate_hz: float, duration_s: float) -> None:
+def run_rate(robot: Path, rate_hz: float, duration_s: float, tpdo_wait_us: int | None) -> None:
     period_s = 1.0 / rate_hz
     period_ns = round(period_s * 1e9)
     with tempfile.TemporaryDirectory() as tmp, canopen_rig(Path(tmp), robot=robot) as rig:
-        with_period(rig.config, period_s)
+        with_period(rig.config, period_s, tpdo_wait_us)
         try:
             cfg = load_robot_config(rig.config)
         except ConfigError as e:
             print(f"  {rate_hz:g} Hz: refused by the configuration check: {e.detail}")
             return
         before = cyclictest(period_s, duration_s / 2, PRIORITY)
+        print(f"    tpdo_wait_us = {cfg.backend_settings.tpdo_wait_us}")
         arm = create_resource(cfg)
         assert isinstance(arm, Canopen402Arm)
         arm.configure()
@@ -122,7 +132,8 @@ def run_rate(robot: Path, rate_hz: float, duration_s: float) -> None:
         first_of = [p.axes[0] for p in ports]  # an axis per bus, for the SYNC -> TPDO time
         n = int(duration_s * rate_hz)
         rec = np.zeros((n, 4), dtype=np.int64)  # release, woke, read done, write done (ns)
-        switches = np.zeros((n, 3), dtype=np.int64)  # voluntary, involuntary switches; TPDOs read
+        # voluntary context switches in write(), involuntary in the tick, TPDOs read, voluntary in read()
+        switches = np.zeros((n, 4), dtype=np.int64)
         round_trip_s: list[list[float]] = [[] for _ in ports]
         late = np.zeros(len(axes), dtype=np.int64)
         count0 = np.array([a.tpdo_count for a in axes])
@@ -145,6 +156,7 @@ def run_rate(robot: Path, rate_hz: float, duration_s: float) -> None:
                 seen = [a.tpdo_count for a in axes]
                 st = arm.read(release * 1e-9)
                 read_done = time.monotonic_ns()
+                ru_read = resource.getrusage(thread)
                 for j, a in enumerate(axes):
                     late[j] += a.tpdo_count == seen[j]
                 for b, j in enumerate(first_of):
@@ -157,7 +169,12 @@ def run_rate(robot: Path, rate_hz: float, duration_s: float) -> None:
                 ru1 = resource.getrusage(thread)
                 rec[k] = (release, woke, read_done, done)
                 tpdos_read = sum(a.tpdo_count for a in axes) - sum(seen)
-                switches[k] = (ru1.ru_nvcsw - ru0.ru_nvcsw, ru1.ru_nivcsw - ru0.ru_nivcsw, tpdos_read)
+                switches[k] = (
+                    ru1.ru_nvcsw - ru_read.ru_nvcsw,
+                    ru1.ru_nivcsw - ru0.ru_nivcsw,
+                    tpdos_read,
+                    ru_read.ru_nvcsw - ru0.ru_nvcsw,
+                )
                 ticks += 1
                 release += period_ns
                 if release < done:
@@ -241,17 +258,19 @@ def report(
     for k in over:
         if wake[k] >= period_us / 2:
             causes["wake-up late"] += 1
+        elif read[k] >= write[k] and switches[k, 2] > 2 * n_axes:  # the TPDOs of > 2 SYNCs at once
+            causes["read() of a burst of TPDOs"] += 1
         elif switches[k, 0]:
-            causes["blocked in the tick"] += 1
+            causes["write() blocked"] += 1
         elif switches[k, 1]:
             causes["preempted in the tick"] += 1
-        elif read[k] >= write[k]:
-            burst = switches[k, 2] > 2 * n_axes  # the TPDOs of more than two SYNCs at once
-            causes["read() of a burst of TPDOs" if burst else "read() long"] += 1
         else:
-            causes["write() long"] += 1
-    blocked = int((switches[:, 0] > 0).sum())
-    print(f"    overrun causes: {dict(causes) or 'none'}; ticks with a voluntary switch {blocked}")
+            causes["read() long" if read[k] >= write[k] else "write() long"] += 1
+    waited, blocked = int((switches[:, 3] > 0).sum()), int((switches[:, 0] > 0).sum())
+    print(
+        f"    overrun causes: {dict(causes) or 'none'}; ticks that slept in read() (waiting for TPDOs) "
+        f"{waited}, in write() {blocked}"
+    )
     print(f"    TPDOs read per tick {figures(switches[:, 2], 'frames', 0)}")
 
 
@@ -260,6 +279,7 @@ def main() -> int:
     ap.add_argument("--buses", type=int, choices=(1, 2), default=1)
     ap.add_argument("--rates", default="")
     ap.add_argument("--duration-s", type=float, default=60.0)
+    ap.add_argument("--tpdo-wait-us", type=int, default=None, help="override the config's tpdo_wait_us")
     ap.add_argument("--sdo-client", metavar="CONFIG", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.sdo_client:
@@ -276,7 +296,7 @@ def main() -> int:
         per_bus = [3, 3] if args.buses == 2 else [6]
         loads = [bus_load(CanopenSettings(axes=()).traffic(n), 1.0 / rate, 1_000_000) for n in per_bus]
         print(f"  {rate:g} Hz: " + "; ".join(f"can{b}: {ld.describe()}" for b, ld in enumerate(loads)))
-        run_rate(robot, rate, args.duration_s)
+        run_rate(robot, rate, args.duration_s, args.tpdo_wait_us)
     return 0
 
 

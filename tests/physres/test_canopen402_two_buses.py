@@ -20,9 +20,10 @@ from tests.physres.test_canopen402 import run, wait_for
 WRISTS = slice(3, 6)  # on can1
 
 
-@pytest.fixture
-def rig(tmp_path: Path) -> Iterator[Rig]:
-    with canopen_rig(tmp_path, robot=CANOPEN_2BUS) as r:
+@pytest.fixture(params=[0, 300], ids=["read", "wait"])
+def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Rig]:
+    """The 2-bus rig; its ticks read the TPDOs there, or wait up to 0.3 ms for late ones."""
+    with canopen_rig(tmp_path, robot=CANOPEN_2BUS, settings_extra=f"tpdo_wait_us = {request.param}") as r:
         yield r
 
 
