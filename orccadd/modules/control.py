@@ -128,6 +128,29 @@ class JointPDGravity(JointController):
         return pd_gravity
 
 
+@register("torque_blend")
+class TorqueBlend(KernelModule):
+    """tau = tau_a + weight·(tau_b − tau_a): two laws' torques cross-faded by a tunable weight
+    (0: law a alone, 1: law b alone), e.g. a stiff law handing over to a compliant one."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        n = ctx.dof
+        self.tau_a = self.add_input("tau_a", (n,), "N.m")
+        self.tau_b = self.add_input("tau_b", (n,), "N.m")
+        self.tau = self.add_output("tau", (n,), "N.m")
+        self.weight = self.add_parameter("weight", 0.0, bounds=(0.0, 1.0), unit="1", tunable=True)
+
+    def kernel(self) -> Kernel:
+        weight = self.weight.value
+
+        def blend(t_s: float, tau_a: list[float], tau_b: list[float]) -> tuple[list[float]]:
+            w = float(weight)
+            return ([a + w * (b - a) for a, b in zip(tau_a, tau_b)],)  # noqa: B905 (dof by construction)
+
+        return blend
+
+
 @register("gravity_compensation")
 class GravityCompensation(KernelModule):
     """tau = g(q): the arm floats where it is, held by its own friction (a "hold" law)."""

@@ -13,7 +13,7 @@ from orccadd.errors import ConfigError
 from orccadd.runtime import SimClock
 from orccadd.session import Session
 from orccadd.task import RobotTask
-from tests.conftest import MOVE_TASK, PANDA, UR5E
+from tests.conftest import MOVE_TASK, PANDA, ROOT, UR5E
 
 FRACTIONS = (0.45, 0.55)  # two targets, as fractions of each joint's range
 LOW_PASS = (
@@ -80,3 +80,7 @@ def test_the_robot_config_chooses_the_interpreted_tick(robot_variant) -> None:  
     with pytest.raises(ConfigError) as e:
         Session.open(bad)
     assert "daemon.tick" in str(e.value) and "'jit'" in str(e.value) and "interpreted" in str(e.value)
+
+
+def test_the_benchmarks_two_laws_ten_watchers_task_is_the_same_compiled() -> None:
+    check_same(UR5E, ROOT / "benchmarks/tasks/two_laws_ten_watchers.toml", 1000)
