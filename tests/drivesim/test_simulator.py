@@ -269,3 +269,41 @@ def test_a_stall_of_the_simulator_pauses_the_arm_instead_of_integrating_stale_re
     assert stalled.paused_s > 0.25
     fell = float(abs(running.dq).max())
     assert float(abs(stalled.dq).max()) < fell * 2 * PAUSE_AFTER_S / 0.3, (stalled.dq, running.dq)
+
+
+# ---- drives on two buses, one arm ---------------------------------------------------------------
+def test_two_buses_keep_their_frames_and_their_sync_apart() -> None:
+    """Node ids 1-3 on each of two buses: a frame reaches only the nodes of its bus, a SYNC cycles
+    only its bus's drives, and injection names the bus when an id repeats."""
+    cfg = with_backend(load_robot_config(UR5E), "sim")
+    names = [f"drivesim2-{id(cfg)}-{k}" for k in range(2)]
+    sim_buses = [can.Bus(interface="virtual", channel=n, receive_own_messages=False) for n in names]
+    peers = [can.Bus(interface="virtual", channel=n, receive_own_messages=False) for n in names]
+    elmo = str(eds("ros_canopen/Elmo.dcf"))
+    specs = [AxisSpec(j % 3 + 1, elmo, UNITS, bus=j // 3) for j in range(cfg.dof)]
+    try:
+        sim = DriveSimulator(cfg, specs, sim_buses, bus_names=["can0", "can1"])
+        sim.boot()
+        for peer in peers:  # the boot-up messages: three per bus, node ids 1-3 on each
+            boots = sorted(m.arbitration_id for m in iter(lambda p=peer: p.recv(0.2), None))
+            assert boots == [0x701, 0x702, 0x703]
+        upload = can.Message(
+            arbitration_id=0x602, data=b"\x40\x00\x10\x00\x00\x00\x00\x00", is_extended_id=False
+        )
+        with sim.lock:
+            sim._dispatch(upload, time.monotonic(), bus=1)  # SDO upload of 0x1000 from node 2 of can1
+            sim._dispatch(
+                can.Message(arbitration_id=0x80, data=b"", is_extended_id=False), time.monotonic(), bus=1
+            )
+        (answer,) = list(iter(lambda: peers[1].recv(0.2), None))
+        assert answer.arbitration_id == 0x582 and answer.data[0] == 0x43  # from can1's node 2 only
+        assert peers[0].recv(0.1) is None
+        assert sim.bus_syncs == [0, 1]
+        assert sim.axis_of(2, "can1") is sim.axes[4]
+        with pytest.raises(ValueError, match="node id 2 is on several buses: name the bus"):
+            sim.axis_of(2)
+        with pytest.raises(ValueError, match=r"no drive with node id 4 \(nodes: can0:1, can0:2"):
+            sim.axis_of(4)
+    finally:
+        for b in (*sim_buses, *peers):
+            b.shutdown()
