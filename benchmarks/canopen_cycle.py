@@ -19,14 +19,16 @@ Definitions (the loop releases tick k at t0 + k·period, absolute):
   both count the periods a stall swallows. Target: skipped periods ≤ cyclictest's misses.
 - lost PDOs per axis: SYNCs sent on its bus minus TPDOs received (at the end of the run);
 - a tick without a fresh TPDO: an axis whose TPDO for the previous tick's SYNC had not arrived
-  when the tick read the bus (the value of the SYNC before is used);
+  when the tick's read() returned (an older value is used): the axis had received fewer TPDOs
+  than its bus had got SYNCs before the tick (exact while no TPDO is lost, which the run checks);
 - where the time goes, per tick: wake-up latency, `read()` (drain every bus, decode, watchdogs),
-  `write()` (the RPDOs, SYNC and heartbeat of every bus); SYNC → TPDO at the hub (the hub's time
-  stamp of each bus's first TPDO after our SYNC left); the cause of each overrun: the wake-up
-  (≥ half a period late), a read() of a burst (the TPDOs of more than two SYNCs at once, after a
-  stall of the drive simulator), write() blocked (a voluntary context switch in it: a socket or
-  another thread's lock), preempted (an involuntary switch), else the longer of read() (which
-  includes the wait for late TPDOs, `tpdo_wait_us`) and write().
+  `write()` (the RPDOs, SYNC and heartbeat of every bus); SYNC → its answer at the hub (the
+  hub's time stamp of a bus's newest TPDO read minus when the SYNC it answers left us); the
+  cause of each overrun: the wake-up (≥ half a period late), a read() of a burst (the TPDOs of
+  more than two SYNCs at once, after a stall of the drive simulator), write() blocked (a
+  voluntary context switch in it: a socket or another thread's lock), preempted (an involuntary
+  switch), else the longer of read() (which includes the wait for late TPDOs, `tpdo_wait_us`)
+  and write().
 
 Usage: `python benchmarks/canopen_cycle.py [--buses 1|2] [--rates 250,500,1000] [--duration-s 60]
 [--tpdo-wait-us N]` (root for SCHED_FIFO; `make bench`).
@@ -146,7 +148,7 @@ def run_rate(robot: Path, rate_hz: float, duration_s: float, tpdo_wait_us: int |
         t0 = time.monotonic()
         release = time.monotonic_ns() + period_ns
         ticks = overruns = skipped = comm_lost = 0
-        sync_wall_s = 0.0
+        sync_wall_s = np.zeros(n + 1)  # when our k-th SYNC left (wall clock, as the hub stamps)
         thread = resource.RUSAGE_THREAD
         try:
             for k in range(n):
@@ -157,14 +159,15 @@ def run_rate(robot: Path, rate_hz: float, duration_s: float, tpdo_wait_us: int |
                 st = arm.read(release * 1e-9)
                 read_done = time.monotonic_ns()
                 ru_read = resource.getrusage(thread)
-                for j, a in enumerate(axes):
-                    late[j] += a.tpdo_count == seen[j]
+                for j, a in enumerate(axes):  # the k-th TPDO answers the k-th SYNC (none lost)
+                    late[j] += a.tpdo_count - count0[j] < ports[a.port].syncs_sent - syncs0[a.port]
                 for b, j in enumerate(first_of):
-                    if axes[j].tpdo_count != seen[j] and sync_wall_s:
-                        round_trip_s[b].append(axes[j].position_time_s - sync_wall_s)
+                    answered = axes[j].tpdo_count - count0[j]  # the newest answers SYNC number `answered`
+                    if axes[j].tpdo_count != seen[j] and 0 < answered <= k:
+                        round_trip_s[b].append(axes[j].position_time_s - sync_wall_s[answered - 1])
                 comm_lost += bool(st.status & 8)
                 arm.write(release * 1e-9, hold)
-                sync_wall_s = time.time()
+                sync_wall_s[k] = time.time()
                 done = time.monotonic_ns()
                 ru1 = resource.getrusage(thread)
                 rec[k] = (release, woke, read_done, done)
@@ -201,7 +204,7 @@ def run_rate(robot: Path, rate_hz: float, duration_s: float, tpdo_wait_us: int |
     print(f"    ticks without a fresh TPDO per axis: {late.tolist()} of {ticks}; comm-lost ticks {comm_lost}")
     for b, port in enumerate(ports):
         trip_ms = np.array(round_trip_s[b]) * 1e3
-        print(f"    {port.conf.channel}: SYNC -> first TPDO at the hub {figures(trip_ms, 'ms', 2)}")
+        print(f"    {port.conf.channel}: SYNC -> its answer (TPDO) at the hub {figures(trip_ms, 'ms', 2)}")
     ages = status["frame_age_ms"]
     print(
         "    frame age at the drives (hub -> drive simulator): "

@@ -309,7 +309,9 @@ class CanopenMaster:
 
     def _gather(self, now_s: float) -> None:
         """Wait, until `tpdo_wait_us` after the tick's release at most, for the TPDOs that answer
-        the SYNC each bus got last (loop SYNC only; a bus that fails stops the wait)."""
+        the SYNC each bus got last (loop SYNC only; a bus that fails stops the wait): an axis is
+        behind while its newest TPDO is time-stamped (by the kernel, or the socketcand server:
+        this host's clock) before that SYNC left. A lost TPDO costs one tick its wait."""
         deadline_s = now_s + self._wait_s
         while True:
             waiting = [
@@ -318,9 +320,8 @@ class CanopenMaster:
                 if port.cyclic_started
                 and port.fileno >= 0
                 and not port.sync_by_kernel
-                and port.syncs_sent
                 and not port.error
-                and any(self.axes[i].tpdo_seen_sync < port.syncs_sent for i in port.axes)
+                and any(self.axes[i].position_time_s < port.sync_wall_s for i in port.axes)
             ]
             timeout_s = deadline_s - time.monotonic()
             if not waiting or timeout_s <= 0:
@@ -427,6 +428,7 @@ class CanopenMaster:
             if not port.sync_by_kernel and port.cyclic_started:
                 port.queue(self._sync_msg)
                 port.syncs_sent += 1
+                port.sync_wall_s = time.time()  # (before it leaves: its answers are stamped later)
             if heartbeat:
                 port.queue(self._heartbeat_msg)
             port.flush()

@@ -82,6 +82,7 @@ class BusPort:
         self.sync_task: can.broadcastmanager.CyclicSendTaskABC | None = None
         self.startup_heartbeat: can.broadcastmanager.CyclicSendTaskABC | None = None
         self.syncs_sent = 0
+        self.sync_wall_s = 0.0  # wall-clock time (s) when the loop last queued SYNC
         self.error = ""
         # SocketCAN: the kernel's broadcast manager produces SYNC, jitter-free and independent of
         # the loop. Elsewhere python-can would need a thread in the real-time process for it: the

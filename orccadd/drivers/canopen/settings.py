@@ -108,7 +108,8 @@ class CanopenSettings:
     missed_tpdo_periods: int = field(default=3, bounds=(1, 1000))
     # how long a tick may wait, from its release, for the TPDOs of the SYNC it sent last (every
     # bus's, gathered before it computes); 0: read what is there. Real drives answer within the
-    # period (nothing to wait for); slow ones (simulated, behind a userspace bus) may need it
+    # period (nothing to wait for); slow ones (simulated, behind a userspace bus) may need it.
+    # Judged by the frames' time stamps: SocketCAN, or a socketcand server on this host
     tpdo_wait_us: int = field(default=0, bounds=(0, 100_000))
     following_error_rad: float = field(default=0.1, bounds=(0.0, 10.0), open_lo=True)  # CSP, 0x6065
     following_error_timeout_ms: int = field(default=100, bounds=(0, 65535))  # 0x6066
