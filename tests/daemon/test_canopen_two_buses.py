@@ -1,0 +1,57 @@
+"""orccadd on canopen-2bus (six CiA 402 axes on two buses at 1 kHz), everything in its own
+process: a hub per bus, one drive simulator on both, orccadd and orccadctl."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.canopen_rig import CANOPEN_2BUS, Rig, canopen_rig
+from tests.daemon.conftest import Daemon, start_daemon_with
+
+MISSION = str(Path(__file__).resolve().parent / "missions/canopen.mission")
+
+
+@pytest.fixture
+def rig_daemon(tmp_path: Path) -> Iterator[tuple[Rig, Daemon]]:
+    with canopen_rig(tmp_path, robot=CANOPEN_2BUS) as rig:
+        d = start_daemon_with(tmp_path, rig.config)
+        try:
+            yield rig, d
+        finally:
+            d.stop()
+
+
+def test_a_mission_with_csp_and_cst_motions_completes_on_two_buses(rig_daemon: tuple[Rig, Daemon]) -> None:
+    rig, d = rig_daemon
+    r = d.ctl("load", MISSION)
+    assert r.returncode == 0, r.stderr
+    d.call("start")
+    s = d.wait(lambda s: s["state"] != "running", timeout_s=90)
+    assert s["result"] == "success" and not s["faulted"], s
+    q = [j["q_rad"] for j in s["joints"]]
+    assert q == pytest.approx([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0], abs=0.01)
+    assert rig.drives.status()["q_rad"] == pytest.approx(q, abs=0.01)  # the drives of both buses agree
+    syncs = rig.drives.status()["bus_syncs"]
+    assert syncs["can0"] > 0 and syncs["can1"] > 0
+
+
+def test_a_drive_fault_on_one_bus_stops_every_axis_then_reset(rig_daemon: tuple[Rig, Daemon]) -> None:
+    rig, d = rig_daemon
+    d.call("load", path=MISSION)
+    d.call("start")
+    d.wait(lambda s: s["active_task"] == "Reach")
+    rig.drives.inject(3, "overcurrent", bus="can1")  # wrist_3_joint
+    d.wait(lambda s: s["faulted"] and "stopped" in s.get("resource_status", []), timeout_s=30)
+    states = rig.drives.status()["states"]
+    assert states[5] == "FAULT" and states[:5] == ["SWITCH_ON_DISABLED"] * 5  # can0's too
+    d.call("stop")  # the safe procedure awaits the operator's Stop
+    d.wait(lambda s: s["state"] == "ready")
+    r = d.ctl("reset")
+    assert r.returncode == 0, r.stdout + r.stderr
+    d.wait(lambda s: not s["faulted"])
+    time.sleep(0.2)
+    assert rig.drives.status()["states"] == ["OPERATION_ENABLED"] * 6
