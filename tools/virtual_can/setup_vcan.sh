@@ -1,6 +1,7 @@
 #!/bin/sh
 # Create and bring up a kernel virtual CAN interface (default vcan0) where the kernel has vcan.
-# Tests use it when it exists and the userspace hub (python -m tools.virtual_can.hub) otherwise.
+# Tests use it when it exists and the userspace hub (python -m tools.virtual_can.hub) otherwise;
+# the two-bus rig (canopen-2bus) uses vcan0 and vcan1 when both exist: run it once for each.
 # Needs root (or CAP_NET_ADMIN). Exit 0: the interface is up; 1: this kernel has no vcan.
 set -eu
 IFACE="${1:-vcan0}"
