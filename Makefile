@@ -49,11 +49,13 @@ test: lint typecheck unit
 # Timing scripts (run as root for SCHED_FIFO); each prints median / p99 / max and its targets.
 bench: setup
 	$(PY) benchmarks/loop_latency.py
+	$(PY) benchmarks/loop_latency.py --task benchmarks/tasks/two_laws_ten_watchers.toml
 	$(PY) benchmarks/tick_profile.py
 	$(PY) benchmarks/switching.py
 	$(PY) benchmarks/isolation.py
 	$(PY) benchmarks/automaton.py --skip-large
 	$(PY) benchmarks/canopen_cycle.py
+	$(PY) benchmarks/canopen_cycle.py --buses 2 --rates 1000
 	$(PY) benchmarks/ur_rtde_cycle.py
 
 clean:
