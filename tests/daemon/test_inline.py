@@ -78,16 +78,16 @@ def run(machine: Machine, ticks: int, busy: bool) -> None:
 
 def test_the_new_law_commands_the_tick_of_the_event(machine: Machine, tmp_path: Path) -> None:
     load_and_start(machine, tmp_path)
-    run(machine, 1500, busy=False)
+    run(machine, 600, busy=False)
     seen = switches(machine)
-    assert len(seen) >= 6, f"only {len(seen)} switches in 1500 ticks"
+    assert len(seen) >= 6, f"only {len(seen)} switches in 600 ticks"
     assert all(s.tick == s.event_tick for s in seen), [(s.tick, s.event_tick) for s in seen]
     assert all(s.wrote for s in seen)  # the new law's command went out in the event's tick
     ticks_t = machine.tel.ticks[: int(machine.tel.header[H.TICK_HEAD]), T.T_S]
     instants = set(instant_times(machine))
     # the automaton's instant is recorded at the event's tick, which the new task commanded
     kept = [float(ticks_t[s.tick]) for s in seen if ticks_t[s.tick] >= min(instants)]  # the trace ring's
-    assert len(kept) > 100 and set(kept) <= instants
+    assert len(kept) > 50 and set(kept) <= instants
     assert machine.reactor.inline >= len(seen)
     assert machine.mission.instants >= len(seen)  # booked by the automaton thread afterwards
 
@@ -96,9 +96,9 @@ def test_with_the_automaton_thread_busy_the_switch_comes_one_tick_later(
     machine: Machine, tmp_path: Path
 ) -> None:
     load_and_start(machine, tmp_path)
-    run(machine, 1500, busy=True)
+    run(machine, 600, busy=True)
     seen = switches(machine)
-    assert len(seen) >= 6, f"only {len(seen)} switches in 1500 ticks"
+    assert len(seen) >= 6, f"only {len(seen)} switches in 600 ticks"
     assert all(s.tick == s.event_tick + 1 for s in seen), [(s.tick, s.event_tick) for s in seen]
     assert all(s.wrote for s in seen)  # the outgoing law held its last command meanwhile
     assert machine.reactor.inline == 0
