@@ -16,6 +16,7 @@ from typing import Any
 from orccadd.automaton.program import Program
 
 MAIN, SAFE, END = 0, 1, 2  # phases of a state
+STANDS_FOR_LIMIT = 64  # input sets a row is copied under at most (see `Automaton.stands_for`)
 PHASE_NAMES = ("main", "safe", "end")
 
 
@@ -64,15 +65,18 @@ class Automaton:
         hit = row.get(inputs & self.relevant[state])
         return hit if hit is not None else row[self.normalize(state, inputs)]
 
-    def stands_for(self, inputs: int) -> list[int]:
+    def stands_for(self, inputs: int, limit: int = STANDS_FOR_LIMIT) -> list[int]:
         """The input sets a row's inputs stand for: each class representative replaced by each
-        event of its class (`event_rep`), in every combination."""
+        event of its class (`event_rep`), in every combination; just `[inputs]` when there would
+        be more than `limit` (events of several tasks in one instant: `normalize` maps them)."""
         out = [0]
         i = 0
         while inputs >> i:
             if inputs >> i & 1:
                 rep = 1 << i
                 members = [1 << j for j, r in enumerate(self.event_rep) if r == rep] or [rep]
+                if len(out) * len(members) > limit:
+                    return [inputs]
                 out = [x | m for x in out for m in members]
             i += 1
         return out

@@ -68,3 +68,18 @@ def test_grouping_shrinks_the_table() -> None:
     # one row per class of the active task (none, done, T2 class, T3 class) and the operator's Go
     # when it is listened to: not one per event
     assert len(a.table[s]) <= 4, sorted(a.table[s])
+
+
+def test_a_row_with_events_of_many_classes_is_not_multiplied_out() -> None:
+    body = "handle par(Move || Retry) on Move.T2.Slipped do nothing end"
+    a = compile_text(MISSION.format(body=body), "m.mission")
+    t3 = 0
+    for m in a.program.t3_masks:
+        t3 |= m
+    s, _ = a.react(0, 0)
+    both = next(k for k in a.table[s] if bin(k & t3).count("1") == 2)  # a type 3 of each task
+    assert len(a.stands_for(both)) >= 16  # every pair of members: a handful, expanded
+    assert a.stands_for(both, limit=8) == [both]  # over the limit: the row as it is
+    runner = Runner(a)
+    runner.react(0)
+    assert runner.react(both) == a.table[s][both][1]
