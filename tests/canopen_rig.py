@@ -7,6 +7,7 @@ import bisect
 import re
 import struct
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -178,6 +179,17 @@ class BusRecorder:
 
 # ---- reading a recording -------------------------------------------------------------------------
 COB_SYNC, COB_HEARTBEAT_OURS = 0x080, 0x77F
+
+
+def receive(bus: can.BusABC, n: int, timeout_s: float = 10.0) -> list[can.Message]:
+    """Up to `n` frames from `bus`, waiting `timeout_s` at most for them."""
+    got: list[can.Message] = []
+    end = time.monotonic() + timeout_s
+    while len(got) < n and time.monotonic() < end:
+        m = bus.recv(0.2)
+        if m is not None:
+            got.append(m)
+    return got
 
 
 def until(frames: list[can.Message], end_s: float) -> list[can.Message]:

@@ -114,16 +114,13 @@ class InlineReactor:
             inputs |= mission.event_bits.get(eid, 0)
         if not inputs:
             return None
-        a = mission.automaton
-        ends = a.success_bit | a.failed_bit | a.safe_done_bit
         plan = mc.plan(inputs)
         want: RobotTask | None = None  # as `MissionControl._apply` would request, the last wins
         for instant in plan:
-            act = a.active[instant.s1]
-            if len(act) > 1:
+            decided = mc.target_of(instant.s1, instant.actions)
+            if decided is None:
                 return None
-            target = mission.tasks[act[0]] if act and not instant.actions & ends else None
-            restart = target is not None and bool(a.starts(instant.actions) >> act[0] & 1)
+            target, restart = decided
             task = target if target is not None else mc.hold
             if task is not active or restart:
                 want = task

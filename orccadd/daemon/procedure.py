@@ -188,20 +188,32 @@ class MissionControl:
         )
         self._apply(instant.actions, request)
 
+    def target_of(self, state: int, actions: int) -> tuple[RobotTask | None, bool] | None:
+        """The mission task the automaton makes active in `state`, reached with `actions` (None
+        once the run ends), and whether it (re)starts; None if two tasks would be active. Pure:
+        the control thread calls it too (`InlineReactor`)."""
+        mission = self.mission
+        assert mission is not None
+        a = mission.automaton
+        active = a.active[state]
+        if len(set(active)) > 1:
+            return None
+        if not active or actions & (a.success_bit | a.failed_bit | a.safe_done_bit):
+            return None, False
+        return mission.tasks[active[0]], bool(a.starts(actions) >> active[0] & 1)
+
     def _apply(self, actions: int, request: bool = True) -> None:
         mission, runner = self.mission, self.runner
         assert mission is not None and runner is not None
         a = mission.automaton
-        stops, starts = a.stops(actions), a.starts(actions)
-        active = set(a.active[runner.state])
-        if len(active) > 1:  # the verifier excludes it; activation asserts it again
-            names = ", ".join(mission.tasks[i].name for i in sorted(active))
+        decided = self.target_of(runner.state, actions)
+        if decided is None:  # the verifier excludes it; activation asserts it again
+            names = ", ".join(mission.tasks[i].name for i in sorted(set(a.active[runner.state])))
             self._abort(f"activation refused: {names} would be active at once")
             return
+        target, restart = decided
         ended = actions & (a.success_bit | a.failed_bit | a.safe_done_bit)
-        target = mission.tasks[next(iter(active))] if active and not ended else None
-        restart = target is not None and bool(starts >> mission.tasks.index(target) & 1)
-        if stops or starts:
+        if a.stops(actions) or a.starts(actions):
             self.note(", ".join(a.describe_actions(actions)))
         if actions & a.safe_bit:
             self.note("entering the safe procedure")

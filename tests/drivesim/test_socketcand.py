@@ -10,6 +10,7 @@ import can
 import pytest
 
 from orccadd.drivesim.socketcand import QueuedSocketcandBus
+from tests.canopen_rig import receive
 from tools.virtual_can.hub import HOLD_OFF_S
 from tools.virtual_can.process import HOST, HubProcess
 
@@ -27,16 +28,6 @@ def buses() -> Iterator[tuple[QueuedSocketcandBus, can.BusABC]]:
         finally:
             ours.shutdown()
             stock.shutdown()
-
-
-def receive(bus: can.BusABC, n: int) -> list[can.Message]:
-    got: list[can.Message] = []
-    end = time.monotonic() + 10.0
-    while len(got) < n and time.monotonic() < end:
-        m = bus.recv(0.2)
-        if m is not None:
-            got.append(m)
-    return got
 
 
 def test_queued_frames_leave_on_send_queued_in_order(buses: tuple[QueuedSocketcandBus, can.BusABC]) -> None:

@@ -13,6 +13,7 @@ import pytest
 
 from orccadd.drivers.canopen.port import BatchingSocketcandBus, BusPort
 from orccadd.drivers.canopen.settings import Bus
+from tests.canopen_rig import receive
 from tools.virtual_can.hub import HOLD_OFF_S
 from tools.virtual_can.process import HOST, HubProcess
 
@@ -35,16 +36,6 @@ def buses(hub: HubProcess) -> Iterator[tuple[BatchingSocketcandBus, can.BusABC]]
     finally:
         ours.shutdown()
         stock.shutdown()
-
-
-def receive(bus: can.BusABC, n: int) -> list[can.Message]:
-    got: list[can.Message] = []
-    end = time.monotonic() + 10.0
-    while len(got) < n and time.monotonic() < end:
-        m = bus.recv(0.2)
-        if m is not None:
-            got.append(m)
-    return got
 
 
 def frames(n: int) -> list[can.Message]:
