@@ -376,14 +376,15 @@ class DynamixelArm(PhysicalResource):
             tau = [c * k for c, k in zip(ch.present_current, g.nm_per_unit, strict=True)]
             state.vector[:] = q + dq + tau
             for j, err in enumerate(ch.error_byte):
-                if err & ALERT and not self._hw_error[j] and ch.active[j]:
+                if err & ALERT and self._hw_error[j] in (0, ALERT) and ch.active[j]:  # ALERT: not read yet
                     self._hardware_error(j)
         elif ch.in_a_row >= self.settings.comm_errors_in_a_row:
             self._comm_errors()
         return self._flags(state)
 
     def _hardware_error(self, j: int) -> None:
-        """Servo j's alert bit: its Hardware Error Status, read once (one transaction)."""
+        """Servo j's alert bit: its Hardware Error Status, read (one transaction). A read that
+        fails leaves ALERT (bit 7, which the register never sets) and is tried again next tick."""
         try:
             bits = self.chain.read(j, T.HARDWARE_ERROR_STATUS, patient=False) or ALERT
         except (ChainError, OSError):
@@ -430,8 +431,9 @@ class DynamixelArm(PhysicalResource):
         ch = self.chain
         for j, bits in enumerate(self._hw_error):
             if bits:
-                parts.append(f"{self.name}: {ch.labels[j]}: hardware error: {hardware_error_text(bits)}")
-                if not state.fault_code:
+                what = "not read yet (alert)" if bits == ALERT else hardware_error_text(bits)
+                parts.append(f"{self.name}: {ch.labels[j]}: hardware error: {what}")
+                if not state.fault_code or state.fault_code & 0xFF == ALERT:  # the real bits, once read
                     state.fault_code = ch.ids[j] << 8 | bits
         if parts:
             self.fault_message = "; ".join(parts)
