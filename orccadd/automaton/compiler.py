@@ -14,6 +14,7 @@ import itertools
 import time
 from collections import deque
 from collections.abc import Callable
+from typing import TypeVar
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -90,6 +91,39 @@ def input_combinations(p: Program, active: tuple[int, ...], relevant: int, reps:
     return [sum(combo) for combo in itertools.product(*choices)]
 
 
+R = TypeVar("R")
+
+
+def resolve(p: Program, inputs: int, internal: int, run: Callable[[K.Instant], R]) -> R:
+    """The one consistent outcome of an instant (`run` evaluates it under guessed statuses of the
+    internal signals it may test). Raises K.InstantaneousLoopError or _CausalityError."""
+    solutions: dict[tuple[int, int], R] = {}
+    candidates = bits_of(internal)
+    for n in range(len(candidates) + 1):
+        for subset in itertools.combinations(candidates, n):
+            assumed = sum(subset)
+            r = K.Instant(inputs, assumed, p.end_masks)
+            out = run(r)
+            if (r.emitted & r.reads) == (assumed & r.reads):
+                solutions[(assumed & r.reads, r.emitted)] = out
+    if len(solutions) != 1:
+        raise _CausalityError(internal, len(solutions))
+    return next(iter(solutions.values()))
+
+
+def instant_actions(lay: ActionLayout, r: K.Instant) -> int:
+    """The action bits of an evaluated instant: emits, tasks started (not cancelled), stopped."""
+    actions = r.emitted << lay.emit_base
+    started = list(r.started)
+    for t in r.cancelled:
+        started.remove(t)
+    for t in started:
+        actions |= 1 << (lay.start_base + t)
+    for t in r.stopped:
+        actions |= 1 << (lay.stop_base + t)
+    return actions
+
+
 class Reactor:
     """One instant of a whole mission (main, then the safe procedure), causality resolved."""
 
@@ -111,25 +145,13 @@ class Reactor:
 
     def react(self, top: Top, inputs: int, internal: int) -> tuple[Top, int]:
         """(next state, action bits). Raises K.InstantaneousLoopError or _CausalityError."""
-        if top.phase == END:
-            return top, 0
-        p = self.p
-        solutions: dict[tuple[int, int], tuple[Top, int]] = {}
-        candidates = bits_of(internal)
-        for n in range(len(candidates) + 1):
-            for subset in itertools.combinations(candidates, n):
-                assumed = sum(subset)
-                r = K.Instant(inputs, assumed, p.end_masks)
-                nxt, actions = self._run(top, r)
-                if (r.emitted & r.reads) == (assumed & r.reads):
-                    solutions[(assumed & r.reads, r.emitted)] = (nxt, actions)
-        if len(solutions) != 1:
-            raise _CausalityError(internal, len(solutions))
-        return next(iter(solutions.values()))
+        return resolve(self.p, inputs, internal, lambda r: self._run(top, r))
 
     def _run(self, top: Top, r: K.Instant) -> tuple[Top, int]:
         lay = self.layout
         flags = 0
+        if top.phase == END:
+            return top, 0
         if top.phase == MAIN:
             code, res = K.step(top.term, r)
             if code == K.PAUSED:
@@ -142,15 +164,7 @@ class Reactor:
                 flags |= more
         else:
             nxt, flags = self._safe(top.term, r)
-        actions = flags | (r.emitted << lay.emit_base)
-        started = list(r.started)
-        for t in r.cancelled:
-            started.remove(t)
-        for t in started:
-            actions |= 1 << (lay.start_base + t)
-        for t in r.stopped:
-            actions |= 1 << (lay.stop_base + t)
-        return nxt, actions
+        return nxt, flags | instant_actions(lay, r)
 
     def _safe(self, term: K.Term, r: K.Instant) -> tuple[Top, int]:
         code, res = K.step(term, r)
@@ -312,6 +326,8 @@ def _waits(p: Program, t: K.Term | None, out: list[str]) -> None:
         out.append(f"{p.tasks[t.task].name} running (line {t.loc.line})")
     elif isinstance(t, K.Await):
         out.append(f"await at line {t.loc.line}")
+    elif isinstance(t, K.Hole):
+        out.append(f"the par at line {t.loc.line} {'running' if t.alive else 'about to start'}")
     elif isinstance(t, K.Halt):
         out.append(f"halt at line {t.loc.line}")
     elif isinstance(t, K.Seq):

@@ -150,6 +150,18 @@ class Handle:
     _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
+@dataclass(frozen=True, slots=True)
+class Hole:
+    """A `par` compiled apart as a network of branch automata (`network.py`). Its completion code
+    in an instant is given to the context's compilation like an input (`Instant.hole_code`), and
+    the instant records whether the context steps it and whether it kills it. `alive`: started in
+    an earlier instant. At most one per mission, never inside a loop (stepped once per instant)."""
+
+    loc: Loc
+    alive: bool
+    _h: int = field(default=0, init=False, repr=False, compare=False)
+
+
 Term = (
     Nothing
     | Pause
@@ -167,6 +179,7 @@ Term = (
     | Running
     | Started
     | Handle
+    | Hole
 )
 NOTHING = Nothing()
 
@@ -214,6 +227,7 @@ for _cls in (
     Running,
     Started,
     Handle,
+    Hole,
 ):
     _cache_hash(_cls)
 
@@ -229,7 +243,19 @@ class InstantaneousLoopError(Exception):
 class Instant:
     """What one evaluation of one instant reads and does."""
 
-    __slots__ = ("assumed", "cancelled", "emitted", "end_masks", "inputs", "reads", "started", "stopped")
+    __slots__ = (
+        "assumed",
+        "cancelled",
+        "emitted",
+        "end_masks",
+        "hole_code",
+        "hole_killed",
+        "hole_stepped",
+        "inputs",
+        "reads",
+        "started",
+        "stopped",
+    )
 
     def __init__(self, inputs: int, assumed: int, end_masks: tuple[int, ...]) -> None:
         self.inputs = inputs
@@ -240,6 +266,9 @@ class Instant:
         self.started: list[int] = []
         self.stopped: list[int] = []
         self.cancelled: list[int] = []
+        self.hole_code = PAUSED  # a `Hole`'s completion code in this instant (network.py)
+        self.hole_stepped = False
+        self.hole_killed = False
 
     def test(self, c: Cond) -> bool:
         op = c[0]
@@ -271,6 +300,8 @@ class Instant:
                 self.kill(b)
         elif isinstance(t, Abort | Trap | Handle):
             self.kill(t.body)
+        elif isinstance(t, Hole):
+            self.hole_killed = True
 
 
 def step(t: Term, r: Instant) -> tuple[int, Term]:
@@ -344,6 +375,10 @@ def step(t: Term, r: Instant) -> tuple[int, Term]:
         return PAUSED, Started(t.task, t.loc)
     if isinstance(t, Present):
         return step(t.then if r.test(t.cond) else t.orelse, r)
+    if isinstance(t, Hole):
+        r.hole_stepped = True
+        k = r.hole_code
+        return k, (Hole(t.loc, True) if k == PAUSED else NOTHING)
     if isinstance(t, Emit):
         r.emitted |= t.bit
         return DONE, NOTHING

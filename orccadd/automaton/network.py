@@ -1,0 +1,494 @@
+"""A `par` of independent branches compiled apart: a network of explicit automata, not their product.
+
+Ten branches of five tasks make ~6^10 product states: no explicit table holds them. When a `par`
+in the main procedure has *independent* branches (`find_split`: no two branches share a task's
+resource, an input or an internal signal, and no signal crosses the par's boundary) and the
+product of the branches' own automata would be large, the mission compiles to
+
+- one automaton per branch (`compile_branch`), whose transitions also give the branch's
+  completion code (Esterel's: paused, done, or the exit of an enclosing trap; the `par`'s code is
+  the max of its branches');
+- the automaton of the *context* (the main procedure with the par replaced by a `Hole`, the safe
+  procedure), for which the par's code in an instant is one more input; the branch tasks' events
+  the context tests (its `on fatal`) enter as classes (`hole_classes`: events the context cannot
+  tell apart), and its actions say whether the instant steps the par and whether it kills it.
+
+An instant a component cannot react to (not causal, a loop restarting within the instant) is left
+out of its table rather than refused: a component is explored on its own, beyond what the whole
+mission can reach; the verifier's products (explicit, exact for the context and the branch they
+hold) refuse the mission where it can get there, with the path.
+
+`NetworkRunner` steps them together: one lookup in the context, and one per branch an input of
+the instant concerns (or that moves on its own); the others stay paused at no cost. The verifier
+(`network_verify.py`) checks products of the context with one branch at a time.
+
+Not split: a par inside a loop (it could end and restart in one instant), inside the safe
+procedure, or whose branches interact; those compile as one product as before.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import deque
+from collections.abc import Iterator
+from dataclasses import dataclass
+from types import MappingProxyType
+
+from orccadd.automaton import kernel as K
+from orccadd.automaton.ast import Loc
+from orccadd.automaton.automaton import END, MAIN, Automaton
+from orccadd.automaton.classes import event_classes, event_reps
+from orccadd.automaton.compiler import (
+    DEFAULT_MAX_STATES,
+    ActionLayout,
+    Reactor,
+    Top,
+    _CausalityError,
+    bits_of,
+    compile_program,
+    describe_state,
+    input_combinations,
+    instant_actions,
+    resolve,
+)
+from orccadd.automaton.program import Program, Site
+from orccadd.errors import MissionError
+
+# A par is compiled apart when its branches' state counts multiplied exceed this (below, the
+# product is small and one explicit automaton is simpler to check, draw and export).
+NETWORK_THRESHOLD = 4096
+
+
+@dataclass(frozen=True)
+class Split:
+    """Where the main procedure splits: the par, its branches and what each may react to."""
+
+    par: K.Par
+    loc: Loc
+    branches: tuple[K.Term, ...]
+    inputs: tuple[int, ...]  # per branch: every input bit it may react to (its tasks' events, its tests)
+    tasks: tuple[frozenset[int], ...]  # per branch: the tasks it runs
+
+
+def find_split(p: Program) -> Split | None:
+    """The outermost `par` of the main procedure, outside any loop, whose branches are
+    independent (see the module docstring); None if there is none."""
+    for par in _pars(p.main, in_loop=False):
+        split = _independent(p, par)
+        if split is not None:
+            return split
+    return None
+
+
+def _pars(t: K.Term | None, in_loop: bool) -> Iterator[K.Par]:
+    stack: list[tuple[K.Term | None, bool]] = [(t, in_loop)]
+    while stack:
+        t, in_loop = stack.pop()
+        if isinstance(t, K.Par) and not in_loop:
+            yield t
+        inner = in_loop or isinstance(t, K.Loop)
+        stack.extend((c, inner) for c in reversed(K.children(t)))
+
+
+def _walk(t: K.Term | None) -> Iterator[K.Term]:
+    stack = [t]
+    while stack:
+        t = stack.pop()
+        if t is not None:
+            yield t
+            stack.extend(K.children(t))
+
+
+def _emits(t: K.Term | None) -> int:
+    return sum({x.bit for x in _walk(t) if isinstance(x, K.Emit)})
+
+
+def _independent(p: Program, par: K.Par) -> Split | None:
+    branches = [b for b in par.branches if b is not None]
+    if len(branches) < 2:
+        return None
+    tasks, ins, tested, emitted = [], [], [], []
+    for b in branches:
+        run = frozenset(x.task for x in _walk(b) if isinstance(x, K.Run))
+        b_ins, b_tested = K.mentions(b, p.end_masks)
+        for t in run:
+            b_ins |= p.event_masks[t]
+        tasks.append(run)
+        ins.append(b_ins)
+        tested.append(b_tested)
+        emitted.append(_emits(b))
+    context = substitute(p.main, par, K.Hole(_loc_of(par), False))[0]
+    ctx_tested = K.mentions(context, p.end_masks)[1] | K.mentions(p.safe, p.end_masks)[1]
+    ctx_emitted = _emits(context) | _emits(p.safe)
+    for i in range(len(branches)):
+        others_tested = ctx_tested | sum(tested[j] for j in range(len(branches)) if j != i)
+        others_emitted = ctx_emitted | sum(emitted[j] for j in range(len(branches)) if j != i)
+        if emitted[i] & others_tested or tested[i] & others_emitted:
+            return None
+        for j in range(i + 1, len(branches)):
+            if ins[i] & ins[j]:
+                return None
+            if any(p.tasks[a].claims_overlap(p.tasks[b]) for a in tasks[i] for b in tasks[j]):
+                return None
+    return Split(par, _loc_of(par), tuple(branches), tuple(ins), tuple(tasks))
+
+
+def _loc_of(t: K.Term) -> Loc:
+    """Where a term was written: its first statement that carries a location."""
+    for x in _walk(t):
+        loc = getattr(x, "loc", None)
+        if isinstance(loc, Loc):
+            return loc
+    return Loc("<mission>", 1, 1)
+
+
+def substitute(t: K.Term, target: K.Term, new: K.Term) -> tuple[K.Term, dict[int, K.Term]]:
+    """`t` with the sub-term `target` (found by identity) replaced by `new`, and the rebuilt
+    ancestors (id of the old term → the new one); every other sub-term is kept as it is."""
+    rebuilt: dict[int, K.Term] = {}
+
+    def go(x: K.Term | None) -> K.Term | None:
+        if x is target:
+            return new
+        kids = K.children(x)
+        if not kids:
+            return x
+        new_kids = [go(c) for c in kids]
+        if all(a is b for a, b in zip(kids, new_kids, strict=True)):
+            return x
+        assert x is not None
+        y = _with_children(x, new_kids)
+        rebuilt[id(x)] = y
+        return y
+
+    out = go(t)
+    assert out is not None
+    return out, rebuilt
+
+
+def _with_children(t: K.Term, kids: list[K.Term | None]) -> K.Term:
+    if isinstance(t, K.Seq):
+        return K.Seq(tuple(k for k in kids if k is not None))
+    if isinstance(t, K.Par):
+        return K.Par(tuple(kids))
+    if isinstance(t, K.Present):
+        assert kids[0] is not None and kids[1] is not None
+        return K.Present(t.cond, kids[0], kids[1])
+    if isinstance(t, K.Handle):
+        assert kids[0] is not None
+        return K.Handle(kids[0], t.conds, tuple(k for k in kids[1:] if k is not None))
+    assert kids[0] is not None
+    return dataclasses.replace(t, body=kids[0])  # type: ignore[call-arg]
+
+
+def remap_sites(sites: tuple[Site, ...], rebuilt: dict[int, K.Term]) -> tuple[Site, ...]:
+    """The dead-code sites of a program whose ancestors of one sub-term were rebuilt."""
+    return tuple(
+        dataclasses.replace(s, term=rebuilt[id(s.term)]) if id(s.term) in rebuilt else s for s in sites
+    )
+
+
+# the network ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Network:
+    """A mission compiled as a network (see the module docstring). Never mutated."""
+
+    program: Program
+    split: Split
+    context: Automaton  # keys: inputs | code index << code_shift; actions: + step_bit, kill_bit
+    branches: tuple[Automaton, ...]  # actions: + code index << code_shift; state `ended` = last
+    codes: tuple[int, ...]  # the par's possible completion codes (PAUSED, DONE, exits), indexed
+    hole_classes: tuple[tuple[int, int], ...]  # (event bits of branch tasks, their representative)
+    code_shift: int
+    step_bit: int
+    kill_bit: int
+    hole_alive: tuple[bool, ...]  # per context state: the par runs (started in an earlier instant)
+
+    @property
+    def n_states(self) -> int:
+        return self.context.n_states + sum(b.n_states for b in self.branches)
+
+    @property
+    def n_transitions(self) -> int:
+        return self.context.n_transitions + sum(b.n_transitions for b in self.branches)
+
+    @property
+    def product_states(self) -> int:
+        """How many states the branches' product would have (their counts multiplied)."""
+        return math.prod(b.n_states for b in self.branches)
+
+    def describe(self) -> str:
+        sizes = ", ".join(str(b.n_states) for b in self.branches)
+        return (
+            f"a network: the context ({self.context.n_states} states) and the {len(self.branches)} "
+            f"branches of the par at line {self.split.loc.line} ({sizes} states; their product "
+            f"would have {self.product_states:.3g})"
+        )
+
+
+def compile_mission(
+    p: Program, max_states: int = DEFAULT_MAX_STATES, threshold: int = NETWORK_THRESHOLD
+) -> Automaton | Network:
+    """A network when the main procedure splits and the branches' product would be large
+    (> `threshold` states), else the one explicit automaton (`compile_program`)."""
+    split = find_split(p)
+    if split is not None:
+        layout = ActionLayout(p)
+        code_shift = (layout.safe_done_bit << 3).bit_length()
+        branches = [compile_branch(p, b, code_shift, max_states) for b in split.branches]
+        if math.prod(len(b.table) for b, _ in branches) > threshold:
+            return _network(p, split, branches, layout, code_shift, max_states)
+    return compile_program(p, max_states)
+
+
+def compile_branch(
+    p: Program, branch: K.Term, code_shift: int, max_states: int
+) -> tuple[Automaton, frozenset[int]]:
+    """A branch on its own: state 0 is the branch about to start, the last state `ended`; each
+    transition's actions carry its completion code (`code << code_shift`, the raw code here:
+    `_network` renumbers them). Also the codes its transitions end with."""
+    layout = ActionLayout(p)
+    classes = event_classes(p)
+    reps = [sum(c.rep for c in task) for task in classes]
+    index: dict[K.Term, int] = {branch: 0}
+    terms: list[K.Term] = [branch]
+    parent: list[tuple[int, int]] = [(-1, 0)]
+    relevant, table, active = [], [], []
+    codes: set[int] = set()
+    queue = deque([0])
+    ended = -1  # patched below: the index of the `ended` state
+    while queue:
+        s = queue.popleft()
+        term = terms[s]
+        act = tuple(sorted(K.active_tasks(term, [])))
+        possible = p.operator_mask
+        for t in act:
+            possible |= p.event_masks[t]
+        ins, internal = K.mentions(term, p.end_masks)
+        rel = ins & possible
+        row: dict[int, tuple[int, int]] = {}
+        for inputs in _combinations(p, act, rel, reps):
+
+            def run(r: K.Instant, term: K.Term = term) -> tuple[int, K.Term | None, int]:
+                code, res = K.step(term, r)
+                return code, (K.settle(res) if code == K.PAUSED else None), instant_actions(layout, r)
+
+            try:
+                code, nxt, actions = resolve(p, inputs, internal, run)
+            except (K.InstantaneousLoopError, _CausalityError):
+                continue  # no reaction: the verifier's products refuse it if the mission can get here
+            if nxt is None:
+                codes.add(code)
+                row[inputs] = (ended, actions | code << code_shift)
+                continue
+            j = index.get(nxt)
+            if j is None:
+                if len(terms) >= max_states:
+                    raise MissionError(p.file, 1, 1, f"a branch's automaton exceeds {max_states} states", p.text)
+                j = index[nxt] = len(terms)
+                terms.append(nxt)
+                parent.append((s, inputs))
+                queue.append(j)
+            row[inputs] = (j, actions | K.PAUSED << code_shift)
+        relevant.append(rel)
+        table.append(row)
+        active.append(act)
+    n = len(terms)
+    table = [{k: (n if j == ended else j, a) for k, (j, a) in row.items()} for row in table]
+    a = Automaton(
+        program=p,
+        relevant=(*relevant, 0),
+        table=(*(MappingProxyType(row) for row in table), MappingProxyType({0: (n, 0)})),
+        active=(*active, ()),
+        phase=(*(MAIN for _ in terms), END),
+        where=(*(describe_state(p, Top(MAIN, t)) for t in terms), "ended"),
+        action_names=layout.names,
+        stop_base=layout.stop_base,
+        start_base=layout.start_base,
+        emit_base=layout.emit_base,
+        success_bit=layout.success_bit,
+        safe_bit=layout.safe_bit,
+        failed_bit=layout.failed_bit,
+        safe_done_bit=layout.safe_done_bit,
+        event_rep=event_reps(p, classes),
+    )
+    return a, frozenset(codes)
+
+
+def _combinations(p: Program, act: tuple[int, ...], rel: int, reps: list[int]) -> list[int]:
+    try:
+        return input_combinations(p, act, rel, reps)
+    except OverflowError as e:
+        msg = f"a state of a branch reacts to {e.args[0]} input combinations: too many tasks active at once"
+        raise MissionError(p.file, 1, 1, msg, p.text) from None
+
+
+class _ContextReactor(Reactor):
+    """The context's instant, given the par's completion code; marks stepping and killing it."""
+
+    def __init__(self, p: Program, layout: ActionLayout, step_bit: int, kill_bit: int) -> None:
+        super().__init__(p, layout)
+        self.code = K.PAUSED
+        self.step_bit, self.kill_bit = step_bit, kill_bit
+
+    def _run(self, top: Top, r: K.Instant) -> tuple[Top, int]:
+        r.hole_code = self.code
+        nxt, actions = super()._run(top, r)
+        if r.hole_stepped:
+            actions |= self.step_bit
+        if r.hole_killed:
+            actions |= self.kill_bit
+        return nxt, actions
+
+
+def _has_hole(t: K.Term | None) -> bool:
+    return any(isinstance(x, K.Hole) for x in _walk(t))
+
+
+def _hole_alive(t: K.Term | None) -> bool:
+    return any(isinstance(x, K.Hole) and x.alive for x in _walk(t))
+
+
+def hole_classes(p: Program, context: K.Term, split: Split) -> list[tuple[int, int]]:
+    """The branch tasks' events the context tests, grouped by the masks that hold them (the
+    context reacts to a group's presence, not to which of its events came): (bits, rep)."""
+    hole_tasks = set().union(*split.tasks)
+    masks: set[int] = set()
+    for t in (context, p.safe):
+        for x in _walk(t):
+            conds = (x.cond,) if isinstance(x, K.Await | K.Abort | K.Present) else ()
+            conds = x.conds if isinstance(x, K.Handle) else conds
+            for c in conds:
+                masks.add(K.cond_masks(c)[0])
+    masks |= {m for t, m in enumerate(p.end_masks) if t not in hole_tasks}
+    hole_events = 0
+    for t in hole_tasks:
+        hole_events |= p.event_masks[t]
+    groups: dict[tuple[int, ...], int] = {}
+    for bit in bits_of(hole_events):
+        where = tuple(sorted(m for m in masks if m & bit))
+        if where:
+            groups[where] = groups.get(where, 0) | bit
+    return [(bits, bits & -bits) for bits in groups.values()]
+
+
+def _network(
+    p: Program,
+    split: Split,
+    branches: list[tuple[Automaton, frozenset[int]]],
+    layout: ActionLayout,
+    code_shift: int,
+    max_states: int,
+) -> Network:
+    raw_codes = set().union(*(c for _, c in branches))
+    codes = (K.DONE, K.PAUSED, *sorted(c for c in raw_codes if c > K.PAUSED))
+    number = {c: i for i, c in enumerate(codes)}
+    renumbered = tuple(_renumber(a, code_shift, number) for a, _ in branches)
+    context_term, rebuilt = substitute(p.main, split.par, K.Hole(split.loc, False))
+    q = dataclasses.replace(p, main=context_term, sites=remap_sites(p.sites, rebuilt))
+    step_bit, kill_bit = layout.safe_done_bit << 1, layout.safe_done_bit << 2
+    classes = hole_classes(p, context_term, split)
+    context, alive = _compile_context(q, layout, classes, codes, step_bit, kill_bit, max_states)
+    context = dataclasses.replace(
+        context, action_names=(*layout.names, f"step the par at line {split.loc.line}", "kill it")
+    )
+    return Network(
+        p, split, context, renumbered, codes, tuple(classes), code_shift, step_bit, kill_bit, alive
+    )
+
+
+def _renumber(a: Automaton, shift: int, number: dict[int, int]) -> Automaton:
+    low = (1 << shift) - 1
+    rows = tuple(
+        MappingProxyType({k: (j, (act & low) | number[act >> shift] << shift) for k, (j, act) in row.items()})
+        for row in a.table
+    )
+    return dataclasses.replace(a, table=rows)
+
+
+def _compile_context(
+    q: Program,
+    layout: ActionLayout,
+    classes: list[tuple[int, int]],
+    codes: tuple[int, ...],
+    step_bit: int,
+    kill_bit: int,
+    max_states: int,
+) -> tuple[Automaton, tuple[bool, ...]]:
+    """The context's automaton: inputs are its own, the branch-event classes' representatives and,
+    where the par is present (started or about to), the par's code index above the inputs."""
+    code_base = len(q.inputs)
+    code_mask = ((1 << max(1, (len(codes) - 1).bit_length())) - 1) << code_base
+    ev_classes = event_classes(q)
+    reps = [sum(c.rep for c in task) for task in ev_classes]
+    hole_reps = [rep for _, rep in classes]
+    hole_events = sum(bits for bits, _ in classes)
+    reactor = _ContextReactor(q, layout, step_bit, kill_bit)
+    index: dict[Top, int] = {}
+    states: list[Top] = []
+    parent: list[tuple[int, int]] = []
+    relevant, table, active = [], [], []
+
+    def add(top: Top, via: tuple[int, int]) -> int:
+        i = index.get(top)
+        if i is None:
+            if len(states) >= max_states:
+                raise MissionError(q.file, 1, 1, f"the context's automaton exceeds {max_states} states", q.text)
+            i = index[top] = len(states)
+            states.append(top)
+            parent.append(via)
+            queue.append(i)
+        return i
+
+    queue: deque[int] = deque()
+    add(Top(MAIN, q.main), (-1, 0))
+    while queue:
+        s = queue.popleft()
+        top = states[s]
+        act = tuple(sorted(K.active_tasks(top.term, [])))
+        possible = q.operator_mask
+        for t in act:
+            possible |= q.event_masks[t]
+        ins, internal = reactor.mentions(top)
+        rel = ins & possible & ~hole_events
+        plain = _combinations(q, act, rel, reps)
+        hole = top.phase == MAIN and _has_hole(top.term)
+        extra = [0]
+        if hole:
+            rel |= sum(hole_reps) | code_mask
+            for rep in hole_reps:
+                extra = [x | y for x in extra for y in (0, rep)]
+            extra = [x | i << code_base for x in extra for i in range(len(codes))]
+        row: dict[int, tuple[int, int]] = {}
+        for inputs in (x | y for x in plain for y in extra):
+            reactor.code = codes[inputs >> code_base] if hole else K.PAUSED
+            real = inputs & ((1 << code_base) - 1)
+            try:
+                nxt, actions = reactor.react(top, real, internal)
+            except (K.InstantaneousLoopError, _CausalityError):
+                continue  # as in a branch (the par's codes here include some it may never give)
+            row[inputs] = (add(nxt, (s, real)), actions)
+        relevant.append(rel)
+        table.append(row)
+        active.append(act)
+    automaton = Automaton(
+        program=q,
+        relevant=tuple(relevant),
+        table=tuple(MappingProxyType(row) for row in table),
+        active=tuple(active),
+        phase=tuple(t.phase for t in states),
+        where=tuple(describe_state(q, t) for t in states),
+        action_names=layout.names,
+        stop_base=layout.stop_base,
+        start_base=layout.start_base,
+        emit_base=layout.emit_base,
+        success_bit=layout.success_bit,
+        safe_bit=layout.safe_bit,
+        failed_bit=layout.failed_bit,
+        safe_done_bit=layout.safe_done_bit,
+        event_rep=event_reps(q, ev_classes),
+    )
+    return automaton, tuple(t.phase == MAIN and _hole_alive(t.term) for t in states)
