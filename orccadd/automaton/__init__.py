@@ -3,17 +3,25 @@
     text -parse-> syntax tree -elaborate-> Program (kernel terms) -compile-> Automaton -verify-> Report
 
 The automaton that passed `verify` is exactly what the execution machine steps (`Runner`).
+
+With `allow_network=True`, a mission whose main procedure runs a `par` of independent branches
+that would multiply out compiles to a `Network` instead (network.py: an automaton per branch and
+one for the context), checked by `verify_network` and stepped by `NetworkRunner`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import Literal, overload
 
 from orccadd.automaton import ast as A
 from orccadd.automaton.automaton import Automaton, Runner
 from orccadd.automaton.compiler import DEFAULT_MAX_STATES, Progress, compile_program
 from orccadd.automaton.elaborate import elaborate
+from orccadd.automaton.network import Network, compile_mission, find_split
+from orccadd.automaton.network_runner import NetworkRunner
+from orccadd.automaton.network_verify import verify_network
 from orccadd.automaton.parser import load_mission_file, parse_mission
 from orccadd.automaton.program import Program
 from orccadd.automaton.verify import Report, verify
@@ -22,6 +30,8 @@ from orccadd.types import TaskFileReader
 
 __all__ = [
     "Automaton",
+    "Network",
+    "NetworkRunner",
     "Program",
     "Report",
     "Runner",
@@ -31,29 +41,73 @@ __all__ = [
     "load_mission_file",
     "parse_mission",
     "verify",
+    "verify_network",
 ]
 
 
+@overload
+def compile_text(
+    text: str,
+    file: str = ...,
+    max_states: int = ...,
+    task_files: TaskFileReader | None = ...,
+    progress: Progress | None = ...,
+    allow_network: Literal[False] = ...,
+) -> Automaton: ...
+@overload
+def compile_text(
+    text: str,
+    file: str = ...,
+    max_states: int = ...,
+    task_files: TaskFileReader | None = ...,
+    progress: Progress | None = ...,
+    *,
+    allow_network: Literal[True],
+) -> Automaton | Network: ...
 def compile_text(
     text: str,
     file: str = "<mission>",
     max_states: int = DEFAULT_MAX_STATES,
     task_files: TaskFileReader | None = None,
     progress: Progress | None = None,
-) -> Automaton:
+    allow_network: bool = False,
+) -> Automaton | Network:
     """Parse, check and compile a mission; `MissionError` on any problem. `task_files` reads
     the interface of tasks declared `from "file"` (see `elaborate`); `progress` is told how far
-    a long compilation has come. Not for a tick."""
-    return _compile(lambda: parse_mission(text, file), str(file), max_states, task_files, progress)
+    a long compilation has come; `allow_network`: a `Network` where the main procedure splits
+    (see the module docstring). Not for a tick."""
+    return _compile(
+        lambda: parse_mission(text, file), str(file), max_states, task_files, progress, allow_network
+    )
 
 
+@overload
+def compile_file(
+    path: str | Path,
+    max_states: int = ...,
+    task_files: TaskFileReader | None = ...,
+    progress: Progress | None = ...,
+    allow_network: Literal[False] = ...,
+) -> Automaton: ...
+@overload
+def compile_file(
+    path: str | Path,
+    max_states: int = ...,
+    task_files: TaskFileReader | None = ...,
+    progress: Progress | None = ...,
+    *,
+    allow_network: Literal[True],
+) -> Automaton | Network: ...
 def compile_file(
     path: str | Path,
     max_states: int = DEFAULT_MAX_STATES,
     task_files: TaskFileReader | None = None,
     progress: Progress | None = None,
-) -> Automaton:
-    return _compile(lambda: load_mission_file(path), str(path), max_states, task_files, progress)
+    allow_network: bool = False,
+) -> Automaton | Network:
+    return _compile(
+        lambda: load_mission_file(path), str(path), max_states, task_files, progress, allow_network
+    )
 
 
 def _compile(
@@ -62,10 +116,24 @@ def _compile(
     max_states: int,
     task_files: TaskFileReader | None,
     progress: Progress | None = None,
-) -> Automaton:
+    allow_network: bool = False,
+) -> Automaton | Network:
     """The parser and the elaborator bound nesting and size (`parser.MAX_NESTING`, ...); should a
     pass still run out of stack, the mission is refused like any other, never with a traceback."""
     try:
-        return compile_program(elaborate(parse(), task_files), max_states, progress)
+        p = elaborate(parse(), task_files)
+        if allow_network:
+            return compile_mission(p, max_states, progress=progress)
+        try:
+            return compile_program(p, max_states, progress)
+        except MissionError as e:
+            if find_split(p) is None or ("exceeds" not in e.detail and "input combinations" not in e.detail):
+                raise
+            hint = (
+                "; its main procedure runs a `par` of independent branches: `orccadctl check "
+                "--language-only` verifies it as a network of one automaton per branch (the daemon "
+                "runs one Robot-Task at a time)"
+            )
+            raise MissionError(e.file, e.line, e.col, e.detail + hint, p.text) from None
     except RecursionError:
         raise MissionError(file, 0, 0, "the mission is nested too deeply to compile") from None

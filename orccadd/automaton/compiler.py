@@ -14,9 +14,9 @@ import itertools
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import TypeVar
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import TypeVar
 
 from orccadd.automaton import ast as A
 from orccadd.automaton import kernel as K

@@ -42,6 +42,7 @@ from orccadd.automaton.classes import event_classes, event_reps
 from orccadd.automaton.compiler import (
     DEFAULT_MAX_STATES,
     ActionLayout,
+    Progress,
     Reactor,
     Top,
     _CausalityError,
@@ -178,8 +179,8 @@ def _with_children(t: K.Term, kids: list[K.Term | None]) -> K.Term:
     if isinstance(t, K.Handle):
         assert kids[0] is not None
         return K.Handle(kids[0], t.conds, tuple(k for k in kids[1:] if k is not None))
-    assert kids[0] is not None
-    return dataclasses.replace(t, body=kids[0])  # type: ignore[call-arg]
+    assert kids[0] is not None and isinstance(t, K.Abort | K.Loop | K.Trap)
+    return dataclasses.replace(t, body=kids[0])
 
 
 def remap_sites(sites: tuple[Site, ...], rebuilt: dict[int, K.Term]) -> tuple[Site, ...]:
@@ -230,7 +231,10 @@ class Network:
 
 
 def compile_mission(
-    p: Program, max_states: int = DEFAULT_MAX_STATES, threshold: int = NETWORK_THRESHOLD
+    p: Program,
+    max_states: int = DEFAULT_MAX_STATES,
+    threshold: int = NETWORK_THRESHOLD,
+    progress: Progress | None = None,
 ) -> Automaton | Network:
     """A network when the main procedure splits and the branches' product would be large
     (> `threshold` states), else the one explicit automaton (`compile_program`)."""
@@ -241,7 +245,7 @@ def compile_mission(
         branches = [compile_branch(p, b, code_shift, max_states) for b in split.branches]
         if math.prod(len(b.table) for b, _ in branches) > threshold:
             return _network(p, split, branches, layout, code_shift, max_states)
-    return compile_program(p, max_states)
+    return compile_program(p, max_states, progress)
 
 
 def compile_branch(
@@ -287,7 +291,8 @@ def compile_branch(
             j = index.get(nxt)
             if j is None:
                 if len(terms) >= max_states:
-                    raise MissionError(p.file, 1, 1, f"a branch's automaton exceeds {max_states} states", p.text)
+                    msg = f"a branch's automaton exceeds {max_states} states"
+                    raise MissionError(p.file, 1, 1, msg, p.text)
                 j = index[nxt] = len(terms)
                 terms.append(nxt)
                 parent.append((s, inputs))
@@ -357,16 +362,16 @@ def hole_classes(p: Program, context: K.Term, split: Split) -> list[tuple[int, i
     context reacts to a group's presence, not to which of its events came): (bits, rep)."""
     hole_tasks = set().union(*split.tasks)
     masks: set[int] = set()
-    for t in (context, p.safe):
-        for x in _walk(t):
-            conds = (x.cond,) if isinstance(x, K.Await | K.Abort | K.Present) else ()
+    for root in (context, p.safe):
+        for x in _walk(root):
+            conds: tuple[K.Cond, ...] = (x.cond,) if isinstance(x, K.Await | K.Abort | K.Present) else ()
             conds = x.conds if isinstance(x, K.Handle) else conds
             for c in conds:
                 masks.add(K.cond_masks(c)[0])
     masks |= {m for t, m in enumerate(p.end_masks) if t not in hole_tasks}
     hole_events = 0
-    for t in hole_tasks:
-        hole_events |= p.event_masks[t]
+    for task in hole_tasks:
+        hole_events |= p.event_masks[task]
     groups: dict[tuple[int, ...], int] = {}
     for bit in bits_of(hole_events):
         where = tuple(sorted(m for m in masks if m & bit))
@@ -436,7 +441,8 @@ def _compile_context(
         i = index.get(top)
         if i is None:
             if len(states) >= max_states:
-                raise MissionError(q.file, 1, 1, f"the context's automaton exceeds {max_states} states", q.text)
+                msg = f"the context's automaton exceeds {max_states} states"
+                raise MissionError(q.file, 1, 1, msg, q.text)
             i = index[top] = len(states)
             states.append(top)
             parent.append(via)

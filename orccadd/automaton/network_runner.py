@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from orccadd.automaton.automaton import Automaton
 from orccadd.automaton.network import Network
 
 DONE_I, PAUSED_I = 0, 1  # code indices (`Network.codes` is ordered: done, paused, the exits)
@@ -26,6 +27,7 @@ class NetworkRunner:
 
     __slots__ = (
         "alive",
+        "binputs",
         "branch_mask",
         "brel",
         "brows",
@@ -43,11 +45,18 @@ class NetworkRunner:
         "orows",
         "ostate",
         "owner",
+        "plain",
+        "running",
         "shift",
+        "st",
+        "start_actions",
+        "start_after",
         "start_base",
+        "start_code",
+        "start_moves",
         "step_bit",
         "stop_base",
-        "st",
+        "task_mask",
     )
 
     def __init__(self, net: Network) -> None:
@@ -57,13 +66,17 @@ class NetworkRunner:
         real = (1 << code_base) - 1
         self.orel = tuple(r & real for r in ctx.relevant)
         par_bits = net.step_bit | net.kill_bit
-        self.orows = tuple(_context_row(ctx.stands_for, row, code_base, len(net.codes), par_bits) for row in ctx.table)
+        n_codes = len(net.codes)
+        self.orows = tuple(
+            _context_row(ctx.stands_for, row, code_base, n_codes, par_bits) for row in ctx.table
+        )
         self.alive = net.hole_alive
         self.hole_classes = net.hole_classes
         self.hole_mask = sum(bits for bits, _ in net.hole_classes)
         self.shift = net.code_shift
         self.low = (1 << net.code_shift) - 1
         self.step_bit, self.kill_bit = net.step_bit, net.kill_bit
+        self.plain = ~(net.step_bit | net.kill_bit)
         self.start_base, self.stop_base = ctx.start_base, ctx.stop_base
         self.brows = tuple(
             tuple({x: hit for key, hit in row.items() for x in b.stands_for(key)} for row in b.table)
@@ -72,10 +85,7 @@ class NetworkRunner:
         self.brel = tuple(b.relevant for b in net.branches)
         self.btasks = tuple(b.active for b in net.branches)
         self.ended = tuple(b.n_states - 1 for b in net.branches)
-        self.busy_states = tuple(
-            frozenset(s for s, row in enumerate(b.table) if s and row.get(0, (s, PAUSED_I << self.shift)) != (s, PAUSED_I << self.shift))
-            for b in net.branches
-        )
+        self.busy_states = tuple(_busy_states(b, self.shift) for b in net.branches)
         self.owner: dict[int, int] = {}
         for i, bits in enumerate(net.split.inputs):
             while bits:
@@ -83,14 +93,43 @@ class NetworkRunner:
                 self.owner[low] = i
                 bits ^= low
         self.branch_mask = sum(net.split.inputs)
+        self.binputs = net.split.inputs
+        self.task_mask = tuple(tuple(sum(1 << t for t in act) for act in b.active) for b in net.branches)
         self.ostate = 0
         self.st = [0] * len(net.branches)
         self.n_alive = 0
+        self.running = 0  # the tasks the branches run (bit t: task t)
         self.busy: set[int] = set()
+        self.start_moves: list[tuple[int, int, int]] | None = None
+        if not any(rel[0] for rel in self.brel):  # each branch starts the same whatever the inputs
+            self.start_code, moves = self._par(0, alive=False)
+            self.start_actions = self._take(moves, 0, PAUSED_I) if self.start_code == PAUSED_I else 0
+            after = (list(self.st), self.n_alive, self.running, set(self.busy))
+            self._reset()
+            self.start_after = lambda: (list(after[0]), after[1], after[2], set(after[3]))
+            self.start_moves = moves if self.start_code == PAUSED_I else None
+
+    def restart(self) -> None:
+        """Back to the initial state (a new run of the mission; the tables are kept)."""
+        self.ostate = 0
+        self._reset()
 
     @property
     def state(self) -> tuple[int, ...]:
+        """The context's state, then each branch's (0 before the par starts and after it ends)."""
         return (self.ostate, *self.st)
+
+    @property
+    def phase(self) -> int:
+        return self.net.context.phase[self.ostate]
+
+    def active(self) -> tuple[int, ...]:
+        """The Robot-Tasks active now (the context's and the branches'), sorted."""
+        out = list(self.net.context.active[self.ostate])
+        if self.alive[self.ostate]:
+            for b, s in enumerate(self.st):
+                out.extend(self.btasks[b][s])
+        return tuple(sorted(out))
 
     def react(self, inputs: int) -> int:
         """Inputs present in this instant → action bits. Never raises for inputs outside the model."""
@@ -98,19 +137,60 @@ class NetworkRunner:
         key = inputs & self.orel[os]
         h = inputs & self.hole_mask
         if h:
-            for bits, rep in self.hole_classes:
-                if h & bits:
-                    key |= rep
+            key |= _hole_part(self.hole_classes, h)
         row = self.orows[os]
         hit = row.get(key)
         if hit is None:  # inputs outside the environment model: reduced to it
-            hit = row[self.net.context.normalize(os, inputs) & self.orel[os] | _hole_part(self.hole_classes, h)]
+            key = self.net.context.normalize(os, inputs) & self.orel[os]
+            hit = row[key | _hole_part(self.hole_classes, h)]
         if type(hit) is not list:
             self.ostate = hit[0]
-            return int(hit[1])
+            return hit[1]  # type: ignore[no-any-return]
+        if self.alive[os] and not self.busy:
+            x = inputs & self.branch_mask
+            if not x:  # nothing concerns the branches: each stays paused as it is (one at least)
+                self.ostate, actions = hit[PAUSED_I]
+                out: int = actions & self.plain
+                return self._kill_all(out) if actions & self.kill_bit else out
+            b = self.owner[x & -x]
+            if not x & ~self.binputs[b]:  # one branch concerned: its lookup, inline
+                return self._one(b, inputs, hit)
         code, moves = self._par(inputs, self.alive[os])
         self.ostate, actions = hit[code]
-        out = actions & ~(self.step_bit | self.kill_bit)
+        out = actions & self.plain
+        if actions & self.step_bit:
+            out = self._take(moves, out, code)
+        if actions & self.kill_bit:
+            out = self._kill_all(out)
+        return out
+
+    def _one(self, b: int, inputs: int, hit: list[tuple[int, int]]) -> int:
+        """The instant when the inputs concern branch b alone (the others stay paused): the
+        common case (a task of one branch ends), written out."""
+        st = self.st
+        s = st[b]
+        bhit = self.brows[b][s].get(inputs & self.brel[b][s])
+        if bhit is None or s == self.ended[b]:
+            code, moves = self._par(inputs, True)
+        else:
+            nxt, bact = bhit
+            ci = bact >> self.shift
+            if ci == PAUSED_I or (ci == DONE_I and self.n_alive > 1):
+                self.ostate, actions = hit[PAUSED_I]
+                out: int = actions & self.plain
+                if actions & self.step_bit:
+                    tasks = self.task_mask[b]
+                    self.running = self.running & ~tasks[s] | tasks[nxt]
+                    st[b] = nxt
+                    out |= bact & self.low
+                    if ci == DONE_I:
+                        self.n_alive -= 1
+                    elif nxt in self.busy_states[b]:
+                        self.busy.add(b)
+                return self._kill_all(out) if actions & self.kill_bit else out
+            code, moves = ci, [(b, nxt, bact & self.low)]
+        self.ostate, actions = hit[code]
+        out = actions & self.plain
         if actions & self.step_bit:
             out = self._take(moves, out, code)
         if actions & self.kill_bit:
@@ -119,16 +199,20 @@ class NetworkRunner:
 
     def _par(self, inputs: int, alive: bool) -> tuple[int, list[tuple[int, int, int]]]:
         """The par's code index in this instant, and each reacting branch's (index, next, actions)."""
-        st = self.st
+        st, ended = self.st, self.ended
         if alive:
-            touched = set(self.busy)
+            touched = list(self.busy)
             x = inputs & self.branch_mask
             while x:
                 low = x & -x
-                touched.add(self.owner[low])
+                b = self.owner[low]
+                if b not in touched:
+                    touched.append(b)
                 x ^= low
-            states = [(b, st[b]) for b in touched if st[b] != self.ended[b]]
+            states = [(b, st[b]) for b in touched if st[b] != ended[b]]
             top = PAUSED_I if self.n_alive > len(states) else DONE_I
+        elif self.start_moves is not None:
+            return self.start_code, self.start_moves
         else:
             states = [(b, 0) for b in range(len(st))]
             top = DONE_I
@@ -145,17 +229,25 @@ class NetworkRunner:
         return top, moves
 
     def _take(self, moves: list[tuple[int, int, int]], out: int, code: int) -> int:
-        st = self.st
-        for b, nxt, actions in moves:
-            if nxt < 0:  # the verifier refuses a mission that can get here (network.py)
-                raise RuntimeError(f"branch {b} of the par has no reaction in state {st[b]}")
-            st[b] = nxt
-            out |= actions
-            if nxt in self.busy_states[b]:
-                self.busy.add(b)
-            else:
-                self.busy.discard(b)
-        self.n_alive = sum(1 for b, s in enumerate(st) if s != self.ended[b])
+        st, ended, tasks = self.st, self.ended, self.task_mask
+        if moves is self.start_moves:  # the par starts as always: the outcome is precomputed
+            self.st, self.n_alive, self.running, self.busy = self.start_after()
+            out |= self.start_actions
+        else:
+            if not self.n_alive:  # the par starts: every branch moves from its first state
+                self.n_alive = len(st)
+            for b, nxt, actions in moves:
+                if nxt < 0:  # the verifier refuses a mission that can get here (network.py)
+                    raise RuntimeError(f"branch {b} of the par has no reaction in state {st[b]}")
+                self.running = self.running & ~tasks[b][st[b]] | tasks[b][nxt]
+                st[b] = nxt
+                out |= actions
+                if nxt == ended[b]:
+                    self.n_alive -= 1
+                if nxt in self.busy_states[b]:
+                    self.busy.add(b)
+                else:
+                    self.busy.discard(b)
         if code == PAUSED_I:
             return out
         if code > PAUSED_I:  # a branch exits: the others are killed
@@ -164,17 +256,29 @@ class NetworkRunner:
         return out
 
     def _kill_all(self, out: int) -> int:
-        for b, s in enumerate(self.st):
-            for t in self.btasks[b][s]:
-                started = 1 << (self.start_base + t)
-                out = out & ~started if out & started else out | 1 << (self.stop_base + t)
+        """Every branch is killed: its running tasks stop; one started in this instant is not started."""
+        running = self.running
+        started = out >> self.start_base & running
+        out &= ~(started << self.start_base)
+        out |= (running & ~started) << self.stop_base
         self._reset()
         return out
 
     def _reset(self) -> None:
         self.st = [0] * len(self.st)
         self.n_alive = 0
+        self.running = 0
         self.busy.clear()
+
+
+def _busy_states(b: Automaton, shift: int) -> frozenset[int]:
+    """A branch's states that move on their own: with no input they do not stay paused as they are."""
+    out = set()
+    for s, row in enumerate(b.table[:-1]):  # not the first (not started) nor the last (ended)
+        idle = (s, PAUSED_I << shift)
+        if s and row.get(0, idle) != idle:
+            out.add(s)
+    return frozenset(out)
 
 
 def _hole_part(classes: tuple[tuple[int, int], ...], h: int) -> int:

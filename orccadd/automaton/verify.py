@@ -34,7 +34,7 @@ from functools import partial
 from orccadd.automaton import ast as A
 from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
 from orccadd.automaton.coverage import CoverageError, executed_sites
-from orccadd.automaton.program import Site
+from orccadd.automaton.program import Program, Site
 from orccadd.types import TASK_TIMEOUT
 
 ERROR, WARNING, NOTE = "error", "warning", "note"
@@ -56,6 +56,7 @@ class CheckResult:
     explanation: str = ""
     level: str = ERROR  # what a failure means: ERROR refuses the mission, WARNING if strict, NOTE never
     loop_start: int | None = None  # a lasso: counterexample[loop_start:] repeats forever
+    automaton: Automaton | None = None  # the counterexample's, when not the report's (a network's product)
 
 
 @dataclass
@@ -64,6 +65,7 @@ class Report:
     results: list[CheckResult]
     warnings: list[str]
     strict: bool = False  # warnings are errors (`orccadctl check --strict`)
+    title: str = ""  # the first line, when not the automaton's size (a network)
 
     def level(self, r: CheckResult) -> str:
         return ERROR if self.strict and r.level == WARNING else r.level
@@ -78,12 +80,14 @@ class Report:
 
     def format(self) -> str:
         a = self.automaton
-        lines = [f"mission {a.program.name}: {a.n_states} states, {a.n_transitions} transitions"]
+        head = self.title or f"{a.n_states} states, {a.n_transitions} transitions"
+        lines = [f"mission {a.program.name}: {head}"]
         for r in self.results:
             lines.append(f"  {'ok  ' if r.ok else _TAGS[self.level(r)]} {r.name}: {r.summary}")
             if not r.ok and r.counterexample:
                 lines.append("       counterexample:")
-                lines.extend("         " + s for s in format_trace(a, r.counterexample, r.loop_start))
+                trace = format_trace(r.automaton or a, r.counterexample, r.loop_start)
+                lines.extend("         " + s for s in trace)
             if not r.ok and r.explanation:
                 lines.extend(f"       {line}" for line in r.explanation.splitlines())
         lines.extend(f"  note: {w}" for w in self.warnings)
@@ -138,9 +142,10 @@ class _Graph:
                 yield s, inputs, n, actions
 
 
-def verify(a: Automaton, *, one_task_at_a_time: bool = False) -> Report:
+def verify(a: Automaton, *, one_task_at_a_time: bool = False, dead_code: bool = True) -> Report:
     """Every check; `one_task_at_a_time` adds the execution machine's own need (the daemon runs
-    one Robot-Task at a time on its robot: `orccadd.mission.check_mission`)."""
+    one Robot-Task at a time on its robot: `orccadd.mission.check_mission`). `dead_code=False`
+    leaves that check to the caller (a network's, over all its products)."""
     g = _Graph(a)
     results = [
         CheckResult(
@@ -155,7 +160,8 @@ def verify(a: Automaton, *, one_task_at_a_time: bool = False) -> Report:
     if one_task_at_a_time:
         results.append(_check_one_task(a, g))
     results.extend(_check_property(a, g, prop) for prop in a.program.properties)
-    results.append(_check_dead_code(a))
+    if dead_code:
+        results.append(_check_dead_code(a))
     return Report(a, results, _warnings(a, g))
 
 
@@ -517,11 +523,15 @@ def _sccs(nodes: list[int], succ: Callable[[int], list[int]]) -> list[list[int]]
 
 
 def _check_dead_code(a: Automaton) -> CheckResult:
-    p = a.program
     try:
         executed = executed_sites(a)
     except CoverageError as e:
         return CheckResult("dead code", False, f"not checked: {e}", level=WARNING)
+    return dead_code_result(a.program, executed)
+
+
+def dead_code_result(p: Program, executed: set[int]) -> CheckResult:
+    """The dead-code check given the sites (indices in `p.sites`) some reachable reaction executes."""
     items = [(site.loc, f"{site.what} {_NEVER[site.kind]}") for site in _dead_sites(p.sites, executed)]
     run = {site.what for site in p.sites if site.kind == "task"}
     unused = [t for t in p.tasks if f"task {t.name}" not in run]

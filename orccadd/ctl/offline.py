@@ -32,7 +32,8 @@ def add_parsers(sub: Any) -> None:
     p.add_argument(
         "--language-only",
         action="store_true",
-        help="the language's checks only, not whether this daemon can load it (another platform's mission)",
+        help="the language's checks only, not whether this daemon can load it (another platform's mission); "
+        "a `par` of independent branches too large for one automaton is verified as a network",
     )
     p.add_argument(
         "--config",
@@ -81,15 +82,15 @@ def cmd_modules(args: argparse.Namespace) -> int:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from orccadd.automaton import compile_file, verify
+    from orccadd.automaton import Network, compile_file, verify, verify_network
     from orccadd.automaton.verify import format_trace
     from orccadd.mission import check_mission
     from orccadd.task.spec import read_task_interface
 
     try:
         if args.language_only:
-            a = compile_file(args.file, args.max_states, read_task_interface, _progress())
-            report = verify(a)
+            a = compile_file(args.file, args.max_states, read_task_interface, _progress(), allow_network=True)
+            report = verify_network(a) if isinstance(a, Network) else verify(a)
         else:
             a, report = check_mission(args.file, args.max_states, _progress())
             if args.config:
@@ -114,10 +115,12 @@ def cmd_check(args: argparse.Namespace) -> int:
             "mission": a.program.name,
             "states": a.n_states,
             "transitions": a.n_transitions,
+            "network": report.title,
             "checks": [
                 {"name": r.name, "ok": r.ok, "level": report.level(r), "summary": r.summary,
                  "explanation": r.explanation,
-                 "counterexample": format_trace(a, r.counterexample, r.loop_start) if not r.ok else [],
+                 "counterexample": format_trace(r.automaton or report.automaton, r.counterexample,
+                                                r.loop_start) if not r.ok else [],
                  "loop_start": None if r.ok or r.loop_start is None else r.loop_start + 1}
                 for r in report.results
             ],
