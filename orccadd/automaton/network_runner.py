@@ -104,9 +104,8 @@ class NetworkRunner:
         if not any(rel[0] for rel in self.brel):  # each branch starts the same whatever the inputs
             self.start_code, moves = self._par(0, alive=False)
             self.start_actions = self._take(moves, 0, PAUSED_I) if self.start_code == PAUSED_I else 0
-            after = (list(self.st), self.n_alive, self.running, set(self.busy))
+            self.start_after = (tuple(self.st), self.n_alive, self.running, frozenset(self.busy))
             self._reset()
-            self.start_after = lambda: (list(after[0]), after[1], after[2], set(after[3]))
             self.start_moves = moves if self.start_code == PAUSED_I else None
 
     def restart(self) -> None:
@@ -231,7 +230,8 @@ class NetworkRunner:
     def _take(self, moves: list[tuple[int, int, int]], out: int, code: int) -> int:
         st, ended, tasks = self.st, self.ended, self.task_mask
         if moves is self.start_moves:  # the par starts as always: the outcome is precomputed
-            self.st, self.n_alive, self.running, self.busy = self.start_after()
+            after, self.n_alive, self.running, busy = self.start_after
+            self.st, self.busy = list(after), set(busy)
             out |= self.start_actions
         else:
             if not self.n_alive:  # the par starts: every branch moves from its first state
