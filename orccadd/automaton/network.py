@@ -58,7 +58,7 @@ from orccadd.errors import MissionError
 
 # A par is compiled apart when its branches' state counts multiplied exceed this (below, the
 # product is small and one explicit automaton is simpler to check, draw and export).
-NETWORK_THRESHOLD = 4096
+NETWORK_THRESHOLD = 1000
 
 
 @dataclass(frozen=True)

@@ -65,10 +65,9 @@ class NetworkRunner:
         code_base = len(net.program.inputs)
         real = (1 << code_base) - 1
         self.orel = tuple(r & real for r in ctx.relevant)
-        par_bits = net.step_bit | net.kill_bit
         n_codes = len(net.codes)
         self.orows = tuple(
-            _context_row(ctx.stands_for, row, code_base, n_codes, par_bits) for row in ctx.table
+            _context_row(ctx.stands_for, row, code_base, n_codes, net.step_bit) for row in ctx.table
         )
         self.alive = net.hole_alive
         self.hole_classes = net.hole_classes
@@ -142,9 +141,9 @@ class NetworkRunner:
         if hit is None:  # inputs outside the environment model: reduced to it
             key = self.net.context.normalize(os, inputs) & self.orel[os]
             hit = row[key | _hole_part(self.hole_classes, h)]
-        if type(hit) is not list:
-            self.ostate = hit[0]
-            return hit[1]  # type: ignore[no-any-return]
+        if type(hit) is not list:  # the par's code does not matter (the par may be killed)
+            self.ostate, actions = hit
+            return self._kill_all(actions & self.plain) if actions & self.kill_bit else actions  # type: ignore[no-any-return]
         if self.alive[os] and not self.busy:
             x = inputs & self.branch_mask
             if not x:  # nothing concerns the branches: each stays paused as it is (one at least)
@@ -289,9 +288,9 @@ def _hole_part(classes: tuple[tuple[int, int], ...], h: int) -> int:
     return key
 
 
-def _context_row(stands_for: Any, row: Any, code_base: int, n_codes: int, par_bits: int) -> dict[int, Any]:
+def _context_row(stands_for: Any, row: Any, code_base: int, n_codes: int, step_bit: int) -> dict[int, Any]:
     """A context row keyed by its real inputs: (next, actions), or a list of them indexed by the
-    par's code where they differ or touch the par; each key also under every input set it stands
+    par's code where they differ or step the par; each key also under every input set it stands
     for."""
     real = (1 << code_base) - 1
     by_real: dict[int, dict[int, tuple[int, int]]] = {}
@@ -301,7 +300,7 @@ def _context_row(stands_for: Any, row: Any, code_base: int, n_codes: int, par_bi
     for key, hits in by_real.items():
         values = set(hits.values())
         one = next(iter(values))
-        plain = len(values) == 1 and not one[1] & par_bits
+        plain = len(values) == 1 and not one[1] & step_bit
         merged: Any = one if plain else [hits.get(i, one) for i in range(n_codes)]
         for x in stands_for(key):
             out[x] = merged
