@@ -73,13 +73,18 @@ class Split:
 
 
 def find_split(p: Program) -> Split | None:
-    """The outermost `par` of the main procedure, outside any loop, whose branches are
-    independent (see the module docstring); None if there is none."""
+    """The `par` of the main procedure, outside any loop, whose branches are independent (see the
+    module docstring), with the most branches (then the most statements; then the outermost);
+    None if there is none."""
+    best: tuple[int, int] = (0, 0)
+    found = None
     for par in _pars(p.main, in_loop=False):
         split = _independent(p, par)
         if split is not None:
-            return split
-    return None
+            size = (len(split.branches), sum(1 for _ in _walk(par)))
+            if size > best:
+                best, found = size, split
+    return found
 
 
 def _pars(t: K.Term | None, in_loop: bool) -> Iterator[K.Par]:

@@ -147,3 +147,13 @@ def test_check_config_builds_every_task_on_the_robot(tmp_path: Path) -> None:
     mission.write_text(text.replace(home_goal, ""))
     r = ctl("check", str(mission), "--config", "sim-ur5e")
     assert r.returncode == 1 and "task Home: traj.target_rad required" in r.stdout, r.stdout
+
+
+def test_check_verifies_a_large_par_as_a_network() -> None:
+    ten = ROOT / "benchmarks" / "missions" / "concurrent10.mission"
+    r = ctl("check", "--language-only", "--json", str(ten))
+    assert r.returncode == 0, r.stdout + r.stderr
+    out = json.loads(r.stdout)
+    assert out["ok"] and "a network" in out["network"] and "10 branches" in out["network"]
+    refused = ctl("check", str(ten))  # the daemon's check: one automaton, refused with the way out
+    assert refused.returncode == 1 and "--language-only" in refused.stderr

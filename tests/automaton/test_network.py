@@ -1,0 +1,149 @@
+"""A `par` of independent branches compiled as a network (network.py): it reacts as the one
+explicit automaton does, its verdicts are never laxer, and the scale target compiles."""
+
+from __future__ import annotations
+
+import random
+from pathlib import Path
+
+import pytest
+
+from orccadd.automaton import (
+    Network,
+    NetworkRunner,
+    Runner,
+    compile_file,
+    compile_text,
+    elaborate,
+    parse_mission,
+    verify,
+    verify_network,
+)
+from orccadd.automaton.compiler import compile_program
+from orccadd.automaton.network import compile_mission, find_split
+from orccadd.automaton.program import Program
+from orccadd.errors import MissionError
+from tests.automaton.random_par import random_mission
+
+ROOT = Path(__file__).resolve().parents[2]
+TEN = ROOT / "benchmarks" / "missions" / "concurrent10.mission"
+SEVERITY = {"note": 1, "warning": 2, "error": 3}
+
+
+def programs(seeds: range, branches: int = 3, depth: int = 3) -> list[tuple[int, Program]]:
+    out = []
+    for seed in seeds:
+        try:
+            out.append((seed, elaborate(parse_mission(random_mission(seed, branches, depth), "r.mission"))))
+        except MissionError:
+            continue  # the generator writes some missions the elaborator refuses (`on fatal` with no task)
+    return out
+
+
+def random_inputs(rng: random.Random, p: Program, active: tuple[int, ...]) -> int:
+    inputs = 0
+    for t in set(active):
+        if rng.random() < 0.35:
+            inputs |= rng.choice(p.tasks[t].events)[2]
+    for i, kind in enumerate(p.input_kind):
+        if kind == "operator" and rng.random() < 0.25:
+            inputs |= 1 << i
+    return inputs
+
+
+@pytest.mark.parametrize(("branches", "depth", "seeds"), [(3, 3, 40), (2, 5, 40), (4, 2, 12)])
+def test_the_network_reacts_as_the_product(branches: int, depth: int, seeds: int) -> None:
+    compared = 0
+    for seed, p in programs(range(seeds), branches, depth):
+        try:
+            a = compile_program(p, max_states=20_000)
+        except MissionError:
+            continue
+        net = compile_mission(p, threshold=0)  # a network whenever the par splits
+        assert isinstance(net, Network), seed
+        rng = random.Random(seed)
+        for _ in range(20):
+            explicit, network = Runner(a), NetworkRunner(net)
+            for instant in range(12):
+                assert sorted(set(network.active())) == sorted(set(a.active[explicit.state]))
+                inputs = random_inputs(rng, p, a.active[explicit.state])
+                want, got = explicit.react(inputs), network.react(inputs)
+                assert got == want, (seed, instant, a.describe_actions(want), a.describe_actions(got))
+        compared += 1
+    assert compared >= seeds * 2 // 3
+
+
+def _worst(report_results: list, name: str) -> int:  # type: ignore[type-arg]
+    return max((SEVERITY[r.level] for r in report_results if r.name == name and not r.ok), default=0)
+
+
+def test_network_verdicts_are_never_laxer_than_the_products() -> None:
+    """Every check fails in the network at least as severely as in the one automaton, and the
+    mission's verdict (accepted or refused) is the same on these missions."""
+    compared = 0
+    for seed, p in programs(range(60)):
+        try:
+            explicit = verify(compile_program(p, max_states=20_000))
+        except MissionError:
+            with pytest.raises(MissionError):  # not causal where the mission gets: refused too
+                net = compile_mission(p, threshold=0)
+                assert isinstance(net, Network)
+                verify_network(net)
+            continue
+        net = compile_mission(p, threshold=0)
+        assert isinstance(net, Network)
+        network = verify_network(net)
+        for r in explicit.results:
+            assert _worst(network.results, r.name) >= _worst(explicit.results, r.name), (seed, r.name)
+        assert network.ok == explicit.ok, seed
+        compared += 1
+    assert compared >= 40
+
+
+def test_the_scale_target_compiles_and_verifies_as_a_network() -> None:
+    net = compile_file(TEN, allow_network=True)
+    assert isinstance(net, Network)
+    assert len(net.branches) == 10 and net.product_states > 10**8
+    assert net.n_states < 100  # ten automata of 7 states and the context's 4
+    report = verify_network(net)
+    assert report.ok, report.format()
+    assert "a network" in report.format()
+    # not allowed a network, the one automaton is refused, naming the way out
+    with pytest.raises(MissionError, match="--language-only"):
+        compile_file(TEN)
+
+
+def test_a_failure_in_one_branch_names_its_product_and_replays_as_a_run() -> None:
+    bare = TEN.read_text().replace("  on fatal do\n    safe\n", "  on T0_0.E0 do\n    safe\n")
+    net = compile_text(bare, "c.mission", allow_network=True)
+    assert isinstance(net, Network)
+    report = verify_network(net)
+    safety = next(r for r in report.results if r.name == "safety")
+    assert not safety.ok and "branch" in safety.summary and safety.automaton is not None
+    # the counterexample is a run of the mission: the network reaches the unhandled exception
+    runner = NetworkRunner(net)
+    p, ctx = net.program, net.context
+    actions = 0
+    for step in safety.counterexample:
+        actions = runner.react(step.inputs & ((1 << len(p.inputs)) - 1))  # the stand-in's inputs left out
+    last = safety.counterexample[-1].inputs
+    assert last & p.t3_masks[p.tasks.index(next(t for t in p.tasks if t.name == "T0_0"))]
+    assert ctx.stops(actions) & 1 and not actions & ctx.safe_bit  # T0_0 stopped, no safe procedure
+    assert not report.ok
+
+
+def test_what_does_not_split() -> None:
+    def split(main: str, decls: str = "") -> object:
+        text = (
+            "mission M\nresource R1, R2\ninput I, J\nsignal S\n"
+            "task A on R1\n  post\nend\ntask B on R2\n  post\nend\ntask C on R1\n  post\nend\n"
+            f"{decls}safe procedure Safe1\n  nothing\nend\nmain procedure P\n  {main}\nend\n"
+        )
+        return find_split(elaborate(parse_mission(text, "m.mission")))
+
+    assert split("par(A || B)") is not None
+    assert split("par(A || await I; C)") is None  # A and C claim R1
+    assert split("par(await I; A || await I; B)") is None  # both react to I
+    assert split("par(A; emit S || await S; B)") is None  # a signal crosses
+    assert split("loop par(A || B) end") is None  # could end and restart in one instant
+    assert split("par(A || B); present S then nothing end") is not None
