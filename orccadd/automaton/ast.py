@@ -128,6 +128,18 @@ class DoUntil:
 
 
 @dataclass(frozen=True)
+class Suspend:
+    """`suspend P when C` (Esterel): in an instant where C holds, P does not react at all (its
+    state is kept, its tasks' events in that instant are not seen); from the next instant on, or
+    in the instant it starts too with `immediate`."""
+
+    body: Stmt
+    cond: SigExpr
+    loc: Loc
+    immediate: bool = False
+
+
+@dataclass(frozen=True)
 class Loop:
     body: Stmt
     loc: Loc
@@ -200,6 +212,7 @@ Stmt = (
     | Await
     | When
     | DoUntil
+    | Suspend
     | Loop
     | Seq
     | Par
@@ -286,7 +299,7 @@ def substatements(s: Stmt) -> list[Stmt]:
         return list(s.items)
     if isinstance(s, Par):
         return list(s.branches)
-    if isinstance(s, When | DoUntil | Loop | Trap | Every):
+    if isinstance(s, When | DoUntil | Suspend | Loop | Trap | Every):
         return [s.body]
     if isinstance(s, Present):
         return [s.then] if s.orelse is None else [s.then, s.orelse]

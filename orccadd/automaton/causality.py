@@ -53,6 +53,8 @@ def dependencies(m: A.MissionAst, internals: tuple[str, ...]) -> list[Dependency
             walk(s.body, g, stack)
         elif isinstance(s, A.DoUntil):
             walk(s.body, guards if s.weak else guards + signals(s.cond), stack)
+        elif isinstance(s, A.Suspend):
+            walk(s.body, guards + signals(s.cond), stack)
         elif isinstance(s, A.Handle):
             conds = [x for h in s.handlers for x in signals(h.cond)]
             walk(s.body, guards + conds, stack)

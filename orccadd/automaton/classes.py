@@ -33,7 +33,7 @@ def input_masks(p: Program) -> set[int]:
     while stack:
         t = stack.pop()
         conds: tuple[K.Cond, ...] = ()
-        if isinstance(t, K.Await | K.Abort | K.Present):
+        if isinstance(t, K.Await | K.Abort | K.Present | K.Suspend):
             conds = (t.cond,)
         elif isinstance(t, K.Handle):
             conds = t.conds

@@ -335,5 +335,5 @@ def _waits(p: Program, t: K.Term | None, out: list[str]) -> None:
     elif isinstance(t, K.Par):
         for b in t.branches:
             _waits(p, b, out)
-    elif isinstance(t, K.Abort | K.Trap | K.Handle):
+    elif isinstance(t, K.Abort | K.Trap | K.Handle | K.Suspend):
         _waits(p, t.body, out)

@@ -98,7 +98,7 @@ def _running(t: K.Term | None, out: set[tuple[int, Loc]]) -> None:
     elif isinstance(t, K.Par):
         for b in t.branches:
             _running(b, out)
-    elif isinstance(t, K.Abort | K.Trap | K.Handle):
+    elif isinstance(t, K.Abort | K.Trap | K.Handle | K.Suspend):
         _running(t.body, out)
 
 
@@ -131,6 +131,8 @@ def _map_children(t: K.Term, probes: dict[int, int]) -> K.Term:
         return K.Loop(_probed(t.body, probes), t.loc)
     if isinstance(t, K.Abort):
         return K.Abort(_probed(t.body, probes), t.cond, t.weak, t.armed)
+    if isinstance(t, K.Suspend):
+        return K.Suspend(_probed(t.body, probes), t.cond, t.armed)
     if isinstance(t, K.Trap):
         return K.Trap(t.code, _probed(t.body, probes))
     if isinstance(t, K.Present):

@@ -470,6 +470,8 @@ class _Elaborator:
             return K.seq((wait, body))
         if isinstance(s, A.DoUntil):
             return K.Abort(self.stmt(s.body, sc), self.cond(s.cond), s.weak, s.immediate)
+        if isinstance(s, A.Suspend):
+            return K.Suspend(self.stmt(s.body, sc), self.cond(s.cond), s.immediate)
         if isinstance(s, A.Loop):
             body = self.stmt(s.body, sc)
             if K.DONE in first_codes(body):
@@ -600,6 +602,9 @@ def first_codes(t: K.Term) -> set[int]:
     if isinstance(t, K.Abort):
         codes = first_codes(t.body)
         return codes | {K.DONE} if t.armed else codes
+    if isinstance(t, K.Suspend):
+        codes = first_codes(t.body)
+        return codes | {K.PAUSED} if t.armed else codes
     if isinstance(t, K.Trap):
         return {K.DONE if c == t.code else c for c in first_codes(t.body)}
     if isinstance(t, K.Handle):

@@ -200,6 +200,31 @@ class AbortN(Node):
         self.body.kill(c)
 
 
+class SuspendN(Node):
+    """`suspend P when C`: in an instant where C holds (from the next instant, or this one too if
+    immediate), P does not react; an immediate one that holds at once starts P later."""
+
+    def __init__(self, body: Node, test: Callable[[Ctx], bool], immediate: bool) -> None:
+        self.body, self.test, self.immediate = body, test, immediate
+        self.started = False
+
+    def start(self, c: Ctx) -> int:
+        self.started = not (self.immediate and self.test(c))
+        return self.body.start(c) if self.started else PAUSED
+
+    def resume(self, c: Ctx) -> int:
+        if self.test(c):
+            return PAUSED
+        if not self.started:
+            self.started = True
+            return self.body.start(c)
+        return self.body.resume(c)
+
+    def kill(self, c: Ctx) -> None:
+        if self.started:
+            self.body.kill(c)
+
+
 class PresentN(Node):
     def __init__(self, test: Callable[[Ctx], bool], then: Node, orelse: Node) -> None:
         self.test, self.then, self.orelse = test, then, orelse
@@ -390,6 +415,8 @@ class Interpreter:
             return SeqN([AwaitN(self.test(s.cond), immediate=True), body])
         if isinstance(s, A.DoUntil):
             return AbortN(self.node(s.body, depth, traps), self.test(s.cond), s.weak, s.immediate)
+        if isinstance(s, A.Suspend):
+            return SuspendN(self.node(s.body, depth, traps), self.test(s.cond), s.immediate)
         if isinstance(s, A.Loop):
             return LoopN(self.node(s.body, depth, traps))
         if isinstance(s, A.Par):

@@ -94,6 +94,16 @@ class Abort:
 
 
 @dataclass(frozen=True, slots=True)
+class Suspend:
+    """`suspend P when C`: when C holds (from the instant `armed`), P does not react."""
+
+    body: Term
+    cond: Cond
+    armed: bool
+    _h: int = field(default=0, init=False, repr=False, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
 class Await:
     cond: Cond
     armed: bool
@@ -172,6 +182,7 @@ Term = (
     | Par
     | Loop
     | Abort
+    | Suspend
     | Await
     | Trap
     | Exit
@@ -220,6 +231,7 @@ for _cls in (
     Par,
     Loop,
     Abort,
+    Suspend,
     Await,
     Trap,
     Exit,
@@ -298,7 +310,7 @@ class Instant:
         elif isinstance(t, Par):
             for b in t.branches:
                 self.kill(b)
-        elif isinstance(t, Abort | Trap | Handle):
+        elif isinstance(t, Abort | Trap | Handle | Suspend):
             self.kill(t.body)
         elif isinstance(t, Hole):
             self.hole_killed = True
@@ -349,6 +361,11 @@ def step(t: Term, r: Instant) -> tuple[int, Term]:
             r.kill(body)
             return DONE, NOTHING
         return PAUSED, Abort(body, t.cond, t.weak, True)
+    if isinstance(t, Suspend):
+        if t.armed and r.test(t.cond):
+            return PAUSED, t  # frozen: the body does not react in this instant
+        k, body = step(t.body, r)
+        return (PAUSED, Suspend(body, t.cond, True)) if k == PAUSED else (k, NOTHING)
     if isinstance(t, Await):
         if t.armed and r.test(t.cond):
             return DONE, NOTHING
@@ -401,6 +418,8 @@ def settle(t: Term) -> Term:
         return Par(tuple(None if b is None else settle(b) for b in t.branches))
     if isinstance(t, Abort):
         return Abort(settle(t.body), t.cond, t.weak, t.armed)
+    if isinstance(t, Suspend):
+        return Suspend(settle(t.body), t.cond, t.armed)
     if isinstance(t, Trap):
         return Trap(t.code, settle(t.body))
     if isinstance(t, Handle):
@@ -414,7 +433,7 @@ def children(t: Term | None) -> list[Term | None]:
         return list(t.items)
     if isinstance(t, Par):
         return list(t.branches)
-    if isinstance(t, Abort | Loop | Trap):
+    if isinstance(t, Abort | Loop | Trap | Suspend):
         return [t.body]
     if isinstance(t, Present):
         return [t.then, t.orelse]
@@ -432,7 +451,7 @@ def active_tasks(t: Term | None, out: list[int]) -> list[int]:
     elif isinstance(t, Par):
         for b in t.branches:
             active_tasks(b, out)
-    elif isinstance(t, Abort | Trap | Handle):
+    elif isinstance(t, Abort | Trap | Handle | Suspend):
         active_tasks(t.body, out)
     return out
 
@@ -471,7 +490,7 @@ def mentions(t: Term | None, end_masks: tuple[int, ...]) -> tuple[int, int]:
         for b in t.branches:
             acc = _union(acc, mentions(b, end_masks))
         return acc
-    if isinstance(t, Abort):
+    if isinstance(t, Abort | Suspend):
         return _union(cond_masks(t.cond), mentions(t.body, end_masks))
     if isinstance(t, Loop | Trap):
         return mentions(t.body, end_masks)

@@ -184,7 +184,7 @@ def _with_children(t: K.Term, kids: list[K.Term | None]) -> K.Term:
     if isinstance(t, K.Handle):
         assert kids[0] is not None
         return K.Handle(kids[0], t.conds, tuple(k for k in kids[1:] if k is not None))
-    assert kids[0] is not None and isinstance(t, K.Abort | K.Loop | K.Trap)
+    assert kids[0] is not None and isinstance(t, K.Abort | K.Loop | K.Trap | K.Suspend)
     return dataclasses.replace(t, body=kids[0])
 
 
@@ -369,7 +369,9 @@ def hole_classes(p: Program, context: K.Term, split: Split) -> list[tuple[int, i
     masks: set[int] = set()
     for root in (context, p.safe):
         for x in _walk(root):
-            conds: tuple[K.Cond, ...] = (x.cond,) if isinstance(x, K.Await | K.Abort | K.Present) else ()
+            conds: tuple[K.Cond, ...] = (
+                (x.cond,) if isinstance(x, K.Await | K.Abort | K.Present | K.Suspend) else ()
+            )
             conds = x.conds if isinstance(x, K.Handle) else conds
             for c in conds:
                 masks.add(K.cond_masks(c)[0])

@@ -330,6 +330,8 @@ class _Builder:
             return A.DoUntil(self.block(c[1]), self.sexpr(c[4]), False, loc, c[3] is not None)
         if k == "weak_do_until":
             return A.DoUntil(self.block(c[2]), self.sexpr(c[5]), True, loc, c[4] is not None)
+        if k == "suspend":
+            return A.Suspend(self.block(c[1]), self.sexpr(c[4]), loc, c[3] is not None)
         if k == "loop":
             return A.Loop(self.block(c[1]), loc)
         if k == "loop_each":  # Esterel: loop (do P; halt until S) — P restarts at each S

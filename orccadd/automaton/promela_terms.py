@@ -45,7 +45,7 @@ class Naming(Protocol):
 class Frame:
     """An enclosing preemption: a strong or weak abort, or a `handle` with its handlers."""
 
-    kind: str  # "abort", "weak" or "handle"
+    kind: str  # "abort", "weak", "handle" or "suspend"
     conds: tuple[K.Cond, ...]
     targets: tuple[str, ...]  # the labels a preemption jumps to
     armed: str = ""  # weak: the process's bit "tested from this instant on"
@@ -148,6 +148,7 @@ class Codegen:
             K.Trap: self._trap,
             K.Exit: self._exit,
             K.Abort: self._abort,
+            K.Suspend: self._suspend,
             K.Handle: self._handle,
             K.Par: self._par,
         }
@@ -271,6 +272,22 @@ class Codegen:
         self.term(t.body, ctx.push(frame), p)
         p.label(after)
 
+    def _suspend(self, t: K.Term, ctx: Ctx, p: Proc) -> None:
+        """Every pause point inside tests C when resumed (after the enclosing preemptions outside
+        the suspend) and, if it holds, pauses again right there without reacting."""
+        assert isinstance(t, K.Suspend)
+        if t.armed:  # immediate: while C holds, the body does not start
+            top, go = self.fresh("s"), self.fresh("sb")
+            p.label(top)
+            p.add(
+                *self.names.resolve(t.cond),
+                f"if :: {self.names.cond(t.cond)} -> skip :: else -> goto {go} fi;",
+            )
+            self.pause(ctx, p, [])
+            p.add(f"goto {top};")
+            p.label(go)
+        self.term(t.body, ctx.push(Frame("suspend", (t.cond,), ())), p)
+
     def _handle(self, t: K.Term, ctx: Ctx, p: Proc) -> None:
         assert isinstance(t, K.Handle)
         after = self.fresh("h")
@@ -306,13 +323,21 @@ class Codegen:
                 test = "".join(f"{r} " for r in self.names.resolve(f.conds[0]))
                 fire = f"if :: {self.names.cond(f.conds[0])} -> {clean}goto {f.targets[0]} :: else -> skip fi"
                 p.add(f"if :: {f.armed} -> {test}{fire} :: else -> skip fi;")
+        frozen = self.fresh("z")  # a suspended instant pauses again here, past the weak aborts
+        if any(f.kind == "suspend" for f in ctx.frames):
+            p.label(frozen)
         p.add(WeakReset(frozenset(f.armed for f in ctx.frames if f.kind == "weak")))
         p.add(f"{p.res} = 1; {p.cmd} = 0;" if p.child else f"{p.cmd} = 0;")
         p.add(f"end_{lab}: ({p.cmd} != 0);")
         if p.child:
             p.add(f"if :: {p.cmd} == {KILL} -> {clean}{p.res} = 0; goto {p.fin} :: else -> skip fi;")
         for f in ctx.frames:
-            if f.kind != "weak":
+            if f.kind == "suspend":
+                c = f.conds[0]
+                p.add(
+                    *self.names.resolve(c), f"if :: {self.names.cond(c)} -> goto {frozen} :: else -> skip fi;"
+                )
+            elif f.kind != "weak":
                 p.add(*self.preempt(f, cleanup))
         return lab
 

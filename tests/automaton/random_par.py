@@ -45,6 +45,7 @@ class _Gen:
             f"weak do {x} until I{b}",
             f"do {x} until {r.choice(self.tasks)}.F",
             f"loop await I{b}; {x} end",
+            f"suspend {x} when I{b}",
             f"trap {u} in par({x} || await I{b}; exit {u}) end",
             f"handle {x} on {r.choice(self.tasks)}.E do {y} end",
             f"{x}; emit S{b}",

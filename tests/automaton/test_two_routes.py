@@ -52,6 +52,8 @@ def statements(depth: int) -> st.SearchStrategy[str]:
         st.tuples(sub, cond).map(lambda t: f"do {t[0]} until immediate {t[1]}"),
         st.tuples(sub, cond).map(lambda t: f"weak do {t[0]} until immediate {t[1]}"),
         st.tuples(sub, cond).map(lambda t: f"loop {t[0]} each {t[1]}"),
+        st.tuples(sub, cond).map(lambda t: f"suspend {t[0]} when {t[1]}"),
+        st.tuples(sub, cond).map(lambda t: f"suspend {t[0]} when immediate {t[1]}"),
         st.tuples(st.integers(1, 3), sub).map(lambda t: f"repeat {t[0]} times {t[1]} end"),
         sub.map(lambda s: f"loop {s}; pause end"),
         st.tuples(cond, sub, sub).map(lambda t: f"present {t[0]} then {t[1]} else {t[2]} end"),
