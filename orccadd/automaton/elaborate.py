@@ -33,7 +33,7 @@ from orccadd.types import BUILTIN_T3, TASK_TIMEOUT, TaskFileReader
 # Words that would be read as a keyword where a name can stand (statements, signal expressions).
 _RESERVED = (
     "run nothing pause halt safe emit await immediate when until do weak loop seq par present then else "
-    "trap in exit every handle on end fatal and or not never eventually alternate"
+    "trap in exit every handle on end fatal and or not never eventually alternate suspend"
 )
 KEYWORDS = frozenset(_RESERVED.split())
 PROPERTY_FNS = ("active", "start", "stop")
