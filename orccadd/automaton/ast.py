@@ -26,7 +26,8 @@ class SigRef:
 
 @dataclass(frozen=True)
 class Fn:
-    """A property atom about a task: `active(T)`, `start(T)`, `stop(T)`."""
+    """A property atom about a task: `active(T)`, `start(T)`, `stop(T)`; in a statement's
+    condition, `pre(S)`: S was present in the previous instant."""
 
     fn: str
     arg: str

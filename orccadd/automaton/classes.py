@@ -44,7 +44,7 @@ def input_masks(p: Program) -> set[int]:
 
 
 def _cond_in_masks(c: K.Cond, out: set[int]) -> None:
-    if c[0] == K.IN:
+    if c[0] in (K.IN, K.PIN):
         out.add(int(c[1]))
     elif c[0] in (K.AND, K.OR, K.NOT):
         for sub in c[1:]:

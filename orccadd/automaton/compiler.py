@@ -32,10 +32,13 @@ MAX_INPUT_COMBINATIONS = 1 << 16
 
 @dataclass(frozen=True, slots=True)
 class Top:
-    """A state of the mission: which part runs (main, safe procedure, ended) and its residual term."""
+    """A state of the mission: which part runs (main, safe procedure, ended), its residual term,
+    and what the previous instant had of the signals some `pre(S)` tests."""
 
     phase: int
     term: K.Term
+    prev_in: int = 0
+    prev_int: int = 0
 
 
 class ReactionError(MissionError):
@@ -132,6 +135,7 @@ class Reactor:
         self.layout = layout
         # the safe procedure can start within any instant of the main one: its tests count there too
         self.safe_mentions = K.mentions(p.safe, p.end_masks)
+        self.pin, self.pint = K.pre_masks(p.main, p.safe)
 
     def mentions(self, top: Top) -> tuple[int, int]:
         """(inputs, internal signals) an instant of this state may test; computed once per state."""
@@ -152,6 +156,7 @@ class Reactor:
         flags = 0
         if top.phase == END:
             return top, 0
+        r.prev_in, r.prev_int = top.prev_in, top.prev_int
         if top.phase == MAIN:
             code, res = K.step(top.term, r)
             if code == K.PAUSED:
@@ -164,6 +169,8 @@ class Reactor:
                 flags |= more
         else:
             nxt, flags = self._safe(top.term, r)
+        if (self.pin or self.pint) and nxt.phase != END:
+            nxt = Top(nxt.phase, nxt.term, r.inputs & self.pin, r.emitted & self.pint)
         return nxt, flags | instant_actions(lay, r)
 
     def _safe(self, term: K.Term, r: K.Instant) -> tuple[Top, int]:

@@ -66,6 +66,8 @@ def _replay(a: Automaton, main: K.Term, safe: K.Term, want: _Wanted) -> tuple[in
     """Every internal bit (probes included) emitted by some reachable reaction, and every task
     activation (task, where) running in some reachable state (or as much as shows all of `want`)."""
     internal = (1 << len(a.program.internals)) - 1
+    pin, pint = K.pre_masks(main, safe)
+    prev: dict[int, tuple[int, int]] = {0: (0, 0)}  # what `pre(S)` sees in each state
     terms: dict[int, K.Term] = {0: main}
     fired = 0
     running: set[tuple[int, Loc]] = set()
@@ -77,6 +79,7 @@ def _replay(a: Automaton, main: K.Term, safe: K.Term, want: _Wanted) -> tuple[in
         for inputs, (n, actions) in a.table[s].items():
             emitted = (actions >> a.emit_base) & internal
             r = K.Instant(inputs, emitted, a.program.end_masks)
+            r.prev_in, r.prev_int = prev[s]
             phase, nxt = _react(terms[s], a.phase[s], safe, r)
             if phase != a.phase[n] or r.emitted & internal != emitted:
                 msg = f"the replay of state {s} under inputs {inputs} disagrees with the automaton"
@@ -84,6 +87,7 @@ def _replay(a: Automaton, main: K.Term, safe: K.Term, want: _Wanted) -> tuple[in
             fired |= r.emitted
             if n not in terms and nxt is not None:
                 terms[n] = nxt
+                prev[n] = (inputs & pin, emitted & pint)
                 queue.append(n)
                 _running(nxt, running)
     return fired, running

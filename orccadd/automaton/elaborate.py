@@ -279,7 +279,12 @@ class _Elaborator:
             where, bit = self.resolve(e.name, e.loc)
             return (K.IN, bit) if where == "in" else (K.INT, bit)
         if isinstance(e, A.Fn):
-            raise self.err(e.loc, f"`{e.fn}(...)` may only appear in a property; a statement tests signals")
+            if e.fn.lower() == "pre":
+                where, bit = self.resolve(e.arg, e.loc)
+                return (K.PIN, bit) if where == "in" else (K.PINT, bit)
+            raise self.err(
+                e.loc, f"`{e.fn}(...)` may only appear in a property; a statement tests signals (or `pre(S)`)"
+            )
         if isinstance(e, A.Not):
             return K.NOT, self.cond(e.item)
         op = K.AND if isinstance(e, A.And) else K.OR

@@ -36,6 +36,8 @@ class Ctx:
         self.reads = 0
         self.starts: list[int] = []
         self.stops: list[int] = []
+        self.prev_inputs = 0  # the previous instant's inputs and emitted signals (`pre(S)`)
+        self.prev_emitted = 0
 
 
 class Node:
@@ -312,6 +314,7 @@ class Interpreter:
         self.safe = HandleN(safe_body, failed, immediate=False)  # the entry's type 3 is the main's
         self.phase = "start"
         self.instant = 0
+        self.prev = (0, 0)  # (inputs, emitted) of the previous instant
         self.active: list[int] = []
 
     # building -------------------------------------------------------------------------------------
@@ -331,6 +334,11 @@ class Interpreter:
         return "in", 1 << p.inputs.index(hits[0])
 
     def test(self, e: A.SigExpr) -> Callable[[Ctx], bool]:
+        if isinstance(e, A.Fn):  # `pre(S)`, the only function a statement's condition may use
+            where, bit = self.signal(e.arg)
+            if where == "in":
+                return lambda c: bool(c.prev_inputs & bit)
+            return lambda c: bool(c.prev_emitted & bit)
         if isinstance(e, A.SigRef):
             where, bit = self.signal(e.name)
             if where == "in":
@@ -449,14 +457,16 @@ class Interpreter:
             assumed = sum(b << i for i, b in enumerate(bits))
             trial = copy.deepcopy(self)
             c = Ctx(self.p, inputs, assumed, self.instant)
+            c.prev_inputs, c.prev_emitted = self.prev
             actions = trial._instant(c)
             if (c.emitted & c.reads) == (assumed & c.reads):
                 results[(assumed & c.reads, c.emitted)] = (trial, actions)
         if len(results) != 1:
             raise InterpreterError(f"{len(results)} consistent reactions")
-        trial, actions = next(iter(results.values()))
+        (_, emitted), (trial, actions) = next(iter(results.items()))
         self.__dict__.update(trial.__dict__)
         self.instant += 1
+        self.prev = (inputs, emitted)
         return actions
 
     def _instant(self, c: Ctx) -> int:

@@ -26,7 +26,8 @@ FAILED_CODE = 999_999  # a type 3 exception inside the safe procedure
 # Conditions are small tuples, cheap to hash and to evaluate:
 #   (IN, mask): some input bit of mask present       (INT, mask): some internal bit present
 #   (AND, a, b) (OR, a, b) (NOT, a)                    (TRUE,)
-IN, INT, AND, OR, NOT, TRUE = 0, 1, 2, 3, 4, 5
+#   (PIN, mask): `pre(S)` of an input, present in the previous instant   (PINT, mask): of an internal
+IN, INT, AND, OR, NOT, TRUE, PIN, PINT = 0, 1, 2, 3, 4, 5, 6, 7
 Cond = tuple[Any, ...]
 
 
@@ -264,6 +265,8 @@ class Instant:
         "hole_killed",
         "hole_stepped",
         "inputs",
+        "prev_in",
+        "prev_int",
         "reads",
         "started",
         "stopped",
@@ -278,6 +281,8 @@ class Instant:
         self.started: list[int] = []
         self.stopped: list[int] = []
         self.cancelled: list[int] = []
+        self.prev_in = 0  # the previous instant's inputs and emitted signals that `pre(S)` tests
+        self.prev_int = 0
         self.hole_code = PAUSED  # a `Hole`'s completion code in this instant (network.py)
         self.hole_stepped = False
         self.hole_killed = False
@@ -295,6 +300,10 @@ class Instant:
             return self.test(c[1]) or self.test(c[2])
         if op == NOT:
             return not self.test(c[1])
+        if op == PIN:
+            return (self.prev_in & int(c[1])) != 0
+        if op == PINT:
+            return (self.prev_int & int(c[1])) != 0
         return True
 
     def kill(self, t: Term | None) -> None:
@@ -462,7 +471,9 @@ def cond_masks(c: Cond) -> tuple[int, int]:
         return int(c[1]), 0
     if c[0] == INT:
         return 0, int(c[1])
-    if c[0] == TRUE:
+    if c[0] == PIN:  # this instant's input decides the next instant's pre(S): relevant now
+        return int(c[1]), 0
+    if c[0] in (TRUE, PINT):  # pre of an internal signal: last instant's, not guessed now
         return 0, 0
     ins, ints = 0, 0
     for sub in c[1:]:
@@ -502,6 +513,29 @@ def mentions(t: Term | None, end_masks: tuple[int, ...]) -> tuple[int, int]:
             acc = _union(acc, _union(cond_masks(c), mentions(h, end_masks)))
         return acc
     return 0, 0
+
+
+def pre_masks(*terms: Term | None) -> tuple[int, int]:
+    """(input bits, internal bits) some `pre(S)` of the terms tests: what a state must remember of
+    the instant before."""
+    pin = pint = 0
+    stack: list[Any] = [t for t in terms if t is not None]
+    while stack:
+        x = stack.pop()
+        if isinstance(x, tuple):  # a condition
+            if x and x[0] == PIN:
+                pin |= int(x[1])
+            elif x and x[0] == PINT:
+                pint |= int(x[1])
+            elif x and x[0] in (AND, OR, NOT):
+                stack.extend(x[1:])
+            continue
+        if isinstance(x, Await | Abort | Present | Suspend):
+            stack.append(x.cond)
+        elif isinstance(x, Handle):
+            stack.extend(x.conds)
+        stack.extend(c for c in children(x) if c is not None)
+    return pin, pint
 
 
 def _union(a: tuple[int, int], b: tuple[int, int]) -> tuple[int, int]:

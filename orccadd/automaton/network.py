@@ -78,6 +78,8 @@ def find_split(p: Program) -> Split | None:
     None if there is none."""
     best: tuple[int, int] = (0, 0)
     found = None
+    if any(K.pre_masks(p.main, p.safe)):
+        return None  # `pre(S)` adds memory to the states: not split (yet)
     for par in _pars(p.main, in_loop=False):
         split = _independent(p, par)
         if split is not None:

@@ -368,7 +368,8 @@ class _Builder:
         if k == "sig":
             return A.SigRef(self.qname(e.children[0]), loc)
         if k == "fn":
-            return A.Fn(str(e.children[0]), str(e.children[1]), loc)
+            arg = e.children[1]
+            return A.Fn(str(e.children[0]), self.qname(arg) if isinstance(arg, lark.Tree) else str(arg), loc)
         if k == "not_":
             return A.Not(self.sexpr(e.children[1]), loc)
         items = tuple(self.sexpr(x) for x in e.children if isinstance(x, lark.Tree))

@@ -58,6 +58,9 @@ class Names:
             tested |= m
         self.operators = [i for i in range(len(p.inputs)) if p.input_task[i] < 0 and tested >> i & 1]
         self.classes: list[list[EventClass]] = [task_classes(p, t, masks) for t in range(len(p.tasks))]
+        pin, pint = K.pre_masks(p.main, p.safe)
+        self.pre_inputs = [i for i in range(len(p.inputs)) if pin >> i & 1]
+        self.pre_internals = [s for i, s in enumerate(p.internals) if pint >> i & 1]
 
     def task(self, t: int) -> str:
         return self.p.tasks[t].name
@@ -72,6 +75,13 @@ class Names:
         if op == K.INT:
             names = [self.p.internals[i] for i in range(len(self.p.internals)) if c[1] >> i & 1]
             return "(" + " || ".join(f"gs_{n} == 1" for n in names) + ")"
+        if op == K.PIN:
+            return (
+                "(" + " || ".join(f"pre_in{i} == 1" for i in range(len(self.p.inputs)) if c[1] >> i & 1) + ")"
+            )
+        if op == K.PINT:
+            names = [self.p.internals[i] for i in range(len(self.p.internals)) if c[1] >> i & 1]
+            return "(" + " || ".join(f"pre_{n} == 1" for n in names) + ")"
         if op == K.NOT:
             return f"!{self.cond(c[1])}"
         if op in (K.AND, K.OR):
@@ -169,6 +179,8 @@ def _globals(p: Program, names: Names, kids: list[str], props: PropCode) -> list
         f"bit em_{s}; byte gs_{s};  /* emitted; guessed status 0 none, 1 present, 2 absent */"
         for s in p.internals
     ]
+    out += [f"bit pre_in{i};  /* pre({p.inputs[i]}) */" for i in names.pre_inputs]
+    out += [f"bit pre_{s};  /* pre({s}) */" for s in names.pre_internals]
     out += ["bit t3in, f_success, f_safe, f_failed, f_safe_done;", "bit ok_safety = 1, ok_conflicts = 1;"]
     return [*out, *props.decls, ""]
 
@@ -221,7 +233,10 @@ def _checks(p: Program, properties: tuple[str, ...], props: PropCode) -> list[st
 
 
 def _clear(p: Program, names: Names) -> list[str]:
-    out = [f"in_{p.inputs[i]} = 0;" for i in names.operators]
+    """The end of an instant: what `pre(S)` will see in the next one, then every signal cleared."""
+    out = [f"pre_in{i} = {names.cond((K.IN, 1 << i))};" for i in names.pre_inputs]
+    out += [f"pre_{s} = em_{s};" for s in names.pre_internals]
+    out += [f"in_{p.inputs[i]} = 0;" for i in names.operators]
     out += [f"ev_{t.name} = 0; nst_{t.name} = 0; stp_{t.name} = 0;" for t in p.tasks]
     out += [f"em_{s} = 0; gs_{s} = 0;" for s in p.internals]
     return [*out, "t3in = 0; f_success = 0; f_safe = 0; f_failed = 0; f_safe_done = 0"]

@@ -42,7 +42,10 @@ def statements(depth: int) -> st.SearchStrategy[str]:
     if depth == 0:
         return leaf
     sub = statements(depth - 1)
-    cond = st.sampled_from(["I", "J", "S", "U", "Fail", "A.done", "B.Half", "I or S", "not J", "I and U"])
+    cond = st.sampled_from([
+        "I", "J", "S", "U", "Fail", "A.done", "B.Half", "I or S", "not J", "I and U",
+        "pre(I)", "pre(S)", "pre(A.done) or J", "I and not pre(I)", "pre(U) and U",
+    ])  # fmt: skip
     return st.one_of(
         leaf,
         st.tuples(sub, sub).map(lambda t: f"{t[0]}; {t[1]}"),
