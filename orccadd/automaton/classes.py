@@ -32,12 +32,7 @@ def input_masks(p: Program) -> set[int]:
     stack: list[K.Term | None] = [p.main, p.safe]
     while stack:
         t = stack.pop()
-        conds: tuple[K.Cond, ...] = ()
-        if isinstance(t, K.Await | K.Abort | K.Present | K.Suspend):
-            conds = (t.cond,)
-        elif isinstance(t, K.Handle):
-            conds = t.conds
-        for c in conds:
+        for c in K.conds(t):
             _cond_in_masks(c, out)
         stack.extend(K.children(t))
     return out

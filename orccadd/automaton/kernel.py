@@ -165,8 +165,9 @@ class Handle:
 class Hole:
     """A `par` compiled apart as a network of branch automata (`network.py`). Its completion code
     in an instant is given to the context's compilation like an input (`Instant.hole_code`), and
-    the instant records whether the context steps it and whether it kills it. `alive`: started in
-    an earlier instant. At most one per mission, never inside a loop (stepped once per instant)."""
+    the instant records whether the context steps it (afresh or not), and whether it kills it
+    before or after. `alive`: started in an earlier instant. At most one per mission, stepped at
+    most once per instant (`HoleTwiceError` otherwise: a loop ending and restarting it at once)."""
 
     loc: Loc
     alive: bool
@@ -245,6 +246,14 @@ for _cls in (
     _cache_hash(_cls)
 
 
+class HoleTwiceError(Exception):
+    """A `Hole` stepped twice in one instant (it ended and a loop started it again)."""
+
+    def __init__(self, loc: Loc) -> None:
+        super().__init__(loc)
+        self.loc = loc
+
+
 class InstantaneousLoopError(Exception):
     """A loop body terminated in the instant it started: the reaction would never end."""
 
@@ -262,7 +271,9 @@ class Instant:
         "emitted",
         "end_masks",
         "hole_code",
+        "hole_fresh",
         "hole_killed",
+        "hole_killed_first",
         "hole_stepped",
         "inputs",
         "prev_in",
@@ -285,7 +296,9 @@ class Instant:
         self.prev_int = 0
         self.hole_code = PAUSED  # a `Hole`'s completion code in this instant (network.py)
         self.hole_stepped = False
-        self.hole_killed = False
+        self.hole_fresh = False  # the step started it afresh
+        self.hole_killed = False  # killed after the step, or without one
+        self.hole_killed_first = False  # killed, then started afresh (a loop around an abort)
 
     def test(self, c: Cond) -> bool:
         op = c[0]
@@ -402,7 +415,11 @@ def step(t: Term, r: Instant) -> tuple[int, Term]:
     if isinstance(t, Present):
         return step(t.then if r.test(t.cond) else t.orelse, r)
     if isinstance(t, Hole):
-        r.hole_stepped = True
+        if r.hole_stepped:
+            raise HoleTwiceError(t.loc)
+        r.hole_stepped, r.hole_fresh = True, not t.alive
+        if r.hole_killed:
+            r.hole_killed, r.hole_killed_first = False, True
         k = r.hole_code
         return k, (Hole(t.loc, True) if k == PAUSED else NOTHING)
     if isinstance(t, Emit):
@@ -449,6 +466,15 @@ def children(t: Term | None) -> list[Term | None]:
     if isinstance(t, Handle):
         return [t.body, *t.handlers]
     return []
+
+
+def conds(t: Term | None) -> tuple[Cond, ...]:
+    """The conditions a statement itself tests (not its sub-terms')."""
+    if isinstance(t, Await | Abort | Present | Suspend):
+        return (t.cond,)
+    if isinstance(t, Handle):
+        return t.conds
+    return ()
 
 
 def active_tasks(t: Term | None, out: list[int]) -> list[int]:
@@ -530,10 +556,7 @@ def pre_masks(*terms: Term | None) -> tuple[int, int]:
             elif x and x[0] in (AND, OR, NOT):
                 stack.extend(x[1:])
             continue
-        if isinstance(x, Await | Abort | Present | Suspend):
-            stack.append(x.cond)
-        elif isinstance(x, Handle):
-            stack.extend(x.conds)
+        stack.extend(conds(x))
         stack.extend(c for c in children(x) if c is not None)
     return pin, pint
 

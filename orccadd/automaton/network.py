@@ -22,8 +22,11 @@ hold) refuse the mission where it can get there, with the path.
 the instant concerns (or that moves on its own); the others stay paused at no cost. The verifier
 (`network_verify.py`) checks products of the context with one branch at a time.
 
-Not split: a par inside a loop (it could end and restart in one instant), inside the safe
-procedure, or whose branches interact; those compile as one product as before.
+Not split: a par inside the safe procedure, whose branches interact, or that a loop can end and
+start again within one instant (`loop par(...) end`: the context would step it twice); those
+compile as one product as before. A par in a loop that pauses in between (`loop await Go;
+par(...) end`), or that a preemption kills and the loop restarts at once (`loop do par(...) until
+S end`: killed, then started afresh) is split.
 """
 
 from __future__ import annotations
@@ -70,18 +73,19 @@ class Split:
     branches: tuple[K.Term, ...]
     inputs: tuple[int, ...]  # per branch: every input bit it may react to (its tasks' events, its tests)
     tasks: tuple[frozenset[int], ...]  # per branch: the tasks it runs
+    in_loop: bool  # a loop may start it again in the instant a preemption kills it
 
 
 def find_split(p: Program) -> Split | None:
-    """The `par` of the main procedure, outside any loop, whose branches are independent (see the
-    module docstring), with the most branches (then the most statements; then the outermost);
-    None if there is none."""
-    best: tuple[int, int] = (0, 0)
-    found = None
+    """The `par` of the main procedure whose branches are independent (see the module
+    docstring), with the most branches (then the most statements; then the outermost); None if
+    there is none."""
     if any(K.pre_masks(p.main, p.safe)):
         return None  # `pre(S)` adds memory to the states: not split (yet)
-    for par in _pars(p.main, in_loop=False):
-        split = _independent(p, par)
+    best: tuple[int, int] = (0, 0)
+    found = None
+    for par, in_loop in _pars(p.main):
+        split = _independent(p, par, in_loop)
         if split is not None:
             size = (len(split.branches), sum(1 for _ in _walk(par)))
             if size > best:
@@ -89,14 +93,15 @@ def find_split(p: Program) -> Split | None:
     return found
 
 
-def _pars(t: K.Term | None, in_loop: bool) -> Iterator[K.Par]:
-    stack: list[tuple[K.Term | None, bool]] = [(t, in_loop)]
+def _pars(t: K.Term | None) -> Iterator[tuple[K.Par, bool]]:
+    """Every `par`, and whether a loop encloses it."""
+    stack: list[tuple[K.Term | None, bool]] = [(t, False)]
     while stack:
-        t, in_loop = stack.pop()
-        if isinstance(t, K.Par) and not in_loop:
-            yield t
-        inner = in_loop or isinstance(t, K.Loop)
-        stack.extend((c, inner) for c in reversed(K.children(t)))
+        x, in_loop = stack.pop()
+        if isinstance(x, K.Par):
+            yield x, in_loop
+        inner = in_loop or isinstance(x, K.Loop)
+        stack.extend((c, inner) for c in K.children(x))
 
 
 def _walk(t: K.Term | None) -> Iterator[K.Term]:
@@ -112,7 +117,7 @@ def _emits(t: K.Term | None) -> int:
     return sum({x.bit for x in _walk(t) if isinstance(x, K.Emit)})
 
 
-def _independent(p: Program, par: K.Par) -> Split | None:
+def _independent(p: Program, par: K.Par, in_loop: bool) -> Split | None:
     branches = [b for b in par.branches if b is not None]
     if len(branches) < 2:
         return None
@@ -139,7 +144,7 @@ def _independent(p: Program, par: K.Par) -> Split | None:
                 return None
             if any(p.tasks[a].claims_overlap(p.tasks[b]) for a in tasks[i] for b in tasks[j]):
                 return None
-    return Split(par, _loc_of(par), tuple(branches), tuple(ins), tuple(tasks))
+    return Split(par, _loc_of(par), tuple(branches), tuple(ins), tuple(tasks), in_loop)
 
 
 def _loc_of(t: K.Term) -> Loc:
@@ -206,13 +211,15 @@ class Network:
 
     program: Program
     split: Split
-    context: Automaton  # keys: inputs | code index << code_shift; actions: + step_bit, kill_bit
+    context: Automaton  # keys: inputs | code index above them; actions: + the four flags below
     branches: tuple[Automaton, ...]  # actions: + code index << code_shift; state `ended` = last
     codes: tuple[int, ...]  # the par's possible completion codes (PAUSED, DONE, exits), indexed
     hole_classes: tuple[tuple[int, int], ...]  # (event bits of branch tasks, their representative)
     code_shift: int
-    step_bit: int
-    kill_bit: int
+    step_bit: int  # the instant steps the par (takes its branches' reactions)
+    kill_bit: int  # and kills it afterwards (or without a step)
+    kill_first_bit: int  # kills it, then starts it afresh (a loop around a preemption)
+    fresh_bit: int  # the step starts the par afresh (its code is the branches' first instant's)
     hole_alive: tuple[bool, ...]  # per context state: the par runs (started in an earlier instant)
 
     @property
@@ -248,19 +255,23 @@ def compile_mission(
     split = find_split(p)
     if split is not None:
         layout = ActionLayout(p)
-        code_shift = (layout.safe_done_bit << 3).bit_length()
-        branches = [compile_branch(p, b, code_shift, max_states) for b in split.branches]
+        code_shift = (layout.safe_done_bit << 5).bit_length()  # above the context's four flags
+        branches = [compile_branch(p, b, code_shift, max_states, split.in_loop) for b in split.branches]
         if math.prod(len(b.table) for b, _ in branches) > threshold:
-            return _network(p, split, branches, layout, code_shift, max_states)
+            try:
+                return _network(p, split, branches, layout, code_shift, max_states)
+            except K.HoleTwiceError:
+                pass  # a loop ends the par and starts it again in one instant: one automaton
     return compile_program(p, max_states, progress)
 
 
 def compile_branch(
-    p: Program, branch: K.Term, code_shift: int, max_states: int
+    p: Program, branch: K.Term, code_shift: int, max_states: int, restarts: bool = False
 ) -> tuple[Automaton, frozenset[int]]:
     """A branch on its own: state 0 is the branch about to start, the last state `ended`; each
     transition's actions carry its completion code (`code << code_shift`, the raw code here:
-    `_network` renumbers them). Also the codes its transitions end with."""
+    `_network` renumbers them). Also the codes its transitions end with. `restarts`: a loop may
+    start it again in the instant it is killed (its first instant may see its tasks' events)."""
     layout = ActionLayout(p)
     classes = event_classes(p)
     reps = [sum(c.rep for c in task) for task in classes]
@@ -271,17 +282,26 @@ def compile_branch(
     codes: set[int] = set()
     queue = deque([0])
     ended = -1  # patched below: the index of the `ended` state
+    # started afresh by a loop in the instant it was killed, the branch's first instant may see
+    # events of its tasks' previous activations (raised in that instant, before the kill): those
+    # its conditions test (no task of its own runs yet, so no task's end is tested then)
+    own_events = 0
+    for t in {x.task for x in _walk(branch) if isinstance(x, K.Run)}:
+        own_events |= p.event_masks[t]
+    own_events &= _tested_inputs(branch) if restarts else 0
+    own_tasks = [t for t in range(len(p.tasks)) if p.event_masks[t] & own_events]
     while queue:
         s = queue.popleft()
         term = terms[s]
         act = tuple(sorted(K.active_tasks(term, [])))
-        possible = p.operator_mask
+        possible = p.operator_mask | (own_events if s == 0 else 0)
         for t in act:
             possible |= p.event_masks[t]
         ins, internal = K.mentions(term, p.end_masks)
         rel = ins & possible
         row: dict[int, tuple[int, int]] = {}
-        for inputs in _combinations(p, act, rel, reps):
+        raising = tuple(sorted({*act, *own_tasks})) if s == 0 else act
+        for inputs in _combinations(p, raising, rel, reps):
 
             def run(r: K.Instant, term: K.Term = term) -> tuple[int, K.Term | None, int]:
                 code, res = K.step(term, r)
@@ -330,6 +350,15 @@ def compile_branch(
     return a, frozenset(codes)
 
 
+def _tested_inputs(t: K.Term) -> int:
+    """The input bits the conditions of a term test."""
+    out = 0
+    for x in _walk(t):
+        for c in K.conds(x):
+            out |= K.cond_masks(c)[0]
+    return out
+
+
 def _combinations(p: Program, act: tuple[int, ...], rel: int, reps: list[int]) -> list[int]:
     try:
         return input_combinations(p, act, rel, reps)
@@ -341,18 +370,20 @@ def _combinations(p: Program, act: tuple[int, ...], rel: int, reps: list[int]) -
 class _ContextReactor(Reactor):
     """The context's instant, given the par's completion code; marks stepping and killing it."""
 
-    def __init__(self, p: Program, layout: ActionLayout, step_bit: int, kill_bit: int) -> None:
+    def __init__(self, p: Program, layout: ActionLayout, flags: tuple[int, int, int, int]) -> None:
         super().__init__(p, layout)
         self.code = K.PAUSED
-        self.step_bit, self.kill_bit = step_bit, kill_bit
+        self.flags = flags  # step, kill, kill first, fresh
 
     def _run(self, top: Top, r: K.Instant) -> tuple[Top, int]:
         r.hole_code = self.code
         nxt, actions = super()._run(top, r)
-        if r.hole_stepped:
-            actions |= self.step_bit
-        if r.hole_killed:
-            actions |= self.kill_bit
+        step, kill, kill_first, fresh = self.flags
+        for on, bit in ((r.hole_stepped, step), (r.hole_killed, kill), (r.hole_killed_first, kill_first)):
+            if on:
+                actions |= bit
+        if r.hole_stepped and r.hole_fresh:
+            actions |= fresh
         return nxt, actions
 
 
@@ -371,11 +402,7 @@ def hole_classes(p: Program, context: K.Term, split: Split) -> list[tuple[int, i
     masks: set[int] = set()
     for root in (context, p.safe):
         for x in _walk(root):
-            conds: tuple[K.Cond, ...] = (
-                (x.cond,) if isinstance(x, K.Await | K.Abort | K.Present | K.Suspend) else ()
-            )
-            conds = x.conds if isinstance(x, K.Handle) else conds
-            for c in conds:
+            for c in K.conds(x):
                 masks.add(K.cond_masks(c)[0])
     masks |= {m for t, m in enumerate(p.end_masks) if t not in hole_tasks}
     hole_events = 0
@@ -403,15 +430,18 @@ def _network(
     renumbered = tuple(_renumber(a, code_shift, number) for a, _ in branches)
     context_term, rebuilt = substitute(p.main, split.par, K.Hole(split.loc, False))
     q = dataclasses.replace(p, main=context_term, sites=remap_sites(p.sites, rebuilt))
-    step_bit, kill_bit = layout.safe_done_bit << 1, layout.safe_done_bit << 2
+    flags = (
+        layout.safe_done_bit << 1,
+        layout.safe_done_bit << 2,
+        layout.safe_done_bit << 3,
+        layout.safe_done_bit << 4,
+    )
     classes = hole_classes(p, context_term, split)
-    context, alive = _compile_context(q, layout, classes, codes, step_bit, kill_bit, max_states)
-    context = dataclasses.replace(
-        context, action_names=(*layout.names, f"step the par at line {split.loc.line}", "kill it")
-    )
-    return Network(
-        p, split, context, renumbered, codes, tuple(classes), code_shift, step_bit, kill_bit, alive
-    )
+    context, alive = _compile_context(q, layout, classes, codes, flags, max_states)
+    line = split.loc.line
+    names = (f"step the par at line {line}", "kill it", "kill it, then start it again", "afresh")
+    context = dataclasses.replace(context, action_names=(*layout.names, *names))
+    return Network(p, split, context, renumbered, codes, tuple(classes), code_shift, *flags, alive)
 
 
 def _renumber(a: Automaton, shift: int, number: dict[int, int]) -> Automaton:
@@ -428,8 +458,7 @@ def _compile_context(
     layout: ActionLayout,
     classes: list[tuple[int, int]],
     codes: tuple[int, ...],
-    step_bit: int,
-    kill_bit: int,
+    flags: tuple[int, int, int, int],
     max_states: int,
 ) -> tuple[Automaton, tuple[bool, ...]]:
     """The context's automaton: inputs are its own, the branch-event classes' representatives and,
@@ -440,7 +469,7 @@ def _compile_context(
     reps = [sum(c.rep for c in task) for task in ev_classes]
     hole_reps = [rep for _, rep in classes]
     hole_events = sum(bits for bits, _ in classes)
-    reactor = _ContextReactor(q, layout, step_bit, kill_bit)
+    reactor = _ContextReactor(q, layout, flags)
     index: dict[Top, int] = {}
     states: list[Top] = []
     parent: list[tuple[int, int]] = []

@@ -35,9 +35,11 @@ class NetworkRunner:
         "busy",
         "busy_states",
         "ended",
+        "fresh_bit",
         "hole_classes",
         "hole_mask",
         "kill_bit",
+        "kill_first_bit",
         "low",
         "n_alive",
         "net",
@@ -54,6 +56,7 @@ class NetworkRunner:
         "start_base",
         "start_code",
         "start_moves",
+        "start_rel",
         "step_bit",
         "stop_base",
         "task_mask",
@@ -75,7 +78,8 @@ class NetworkRunner:
         self.shift = net.code_shift
         self.low = (1 << net.code_shift) - 1
         self.step_bit, self.kill_bit = net.step_bit, net.kill_bit
-        self.plain = ~(net.step_bit | net.kill_bit)
+        self.kill_first_bit, self.fresh_bit = net.kill_first_bit, net.fresh_bit
+        self.plain = ~(net.step_bit | net.kill_bit | net.kill_first_bit | net.fresh_bit)
         self.start_base, self.stop_base = ctx.start_base, ctx.stop_base
         self.brows = tuple(
             tuple({x: hit for key, hit in row.items() for x in b.stands_for(key)} for row in b.table)
@@ -100,12 +104,16 @@ class NetworkRunner:
         self.running = 0  # the tasks the branches run (bit t: task t)
         self.busy: set[int] = set()
         self.start_moves: list[tuple[int, int, int]] | None = None
-        if not any(rel[0] for rel in self.brel):  # each branch starts the same whatever the inputs
-            self.start_code, moves = self._par(0, alive=False)
-            self.start_actions = self._take(moves, 0, PAUSED_I) if self.start_code == PAUSED_I else 0
+        self.start_rel = 0  # the inputs the branches' first instants test
+        for rel in self.brel:
+            self.start_rel |= rel[0]
+        # with none of those inputs, the par starts the same way every time: precomputed
+        self.start_code, moves = self._par(0, alive=False)
+        if self.start_code == PAUSED_I:
+            self.start_actions = self._take(moves, 0, PAUSED_I)
             self.start_after = (tuple(self.st), self.n_alive, self.running, frozenset(self.busy))
             self._reset()
-            self.start_moves = moves if self.start_code == PAUSED_I else None
+            self.start_moves = moves
 
     def restart(self) -> None:
         """Back to the initial state (a new run of the mission; the tables are kept)."""
@@ -131,6 +139,7 @@ class NetworkRunner:
 
     def react(self, inputs: int) -> int:
         """Inputs present in this instant → action bits. Never raises for inputs outside the model."""
+        out: int
         os = self.ostate
         key = inputs & self.orel[os]
         h = inputs & self.hole_mask
@@ -144,11 +153,19 @@ class NetworkRunner:
         if type(hit) is not list:  # the par's code does not matter (the par may be killed)
             self.ostate, actions = hit
             return self._kill_all(actions & self.plain) if actions & self.kill_bit else actions  # type: ignore[no-any-return]
+        if hit[0][1] & self.fresh_bit:  # the par starts afresh (perhaps just killed: a loop)
+            code, moves = self._par(inputs, alive=False)
+            self.ostate, actions = hit[code]
+            out = actions & self.plain
+            if actions & self.kill_first_bit:
+                out = self._kill_all(out)
+            out = self._take(moves, out, code)
+            return self._kill_all(out) if actions & self.kill_bit else out
         if self.alive[os] and not self.busy:
             x = inputs & self.branch_mask
             if not x:  # nothing concerns the branches: each stays paused as it is (one at least)
                 self.ostate, actions = hit[PAUSED_I]
-                out: int = actions & self.plain
+                out = actions & self.plain
                 return self._kill_all(out) if actions & self.kill_bit else out
             b = self.owner[x & -x]
             if not x & ~self.binputs[b]:  # one branch concerned: its lookup, inline
@@ -209,7 +226,7 @@ class NetworkRunner:
                 x ^= low
             states = [(b, st[b]) for b in touched if st[b] != ended[b]]
             top = PAUSED_I if self.n_alive > len(states) else DONE_I
-        elif self.start_moves is not None:
+        elif self.start_moves is not None and not inputs & self.start_rel:
             return self.start_code, self.start_moves
         else:
             states = [(b, 0) for b in range(len(st))]

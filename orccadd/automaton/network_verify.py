@@ -61,6 +61,7 @@ class _Others:
     must_exit: int  # the least code the par surely exits with in their first instant (0: none)
     seen: tuple[tuple[str, int], ...]  # (kind, input bit): their tasks' events the context tests
     surely_end: bool  # every run of each ends, assuming its tasks end (no fair cycle on its own)
+    run_tasks: bool  # some of them runs a task at some point
     may_idle: bool  # each can end or get stuck with nothing running and no way out (not surely_end)
 
 
@@ -100,6 +101,7 @@ def _others(net: Network, members: tuple[int, ...]) -> _Others | None:
     stuck = [any(_stuck(net.branches[b], c) for c in ls) for b, ls in zip(rest, loops, strict=True)]
     # all of them idle forever: some stuck, the others stuck or ended
     may_idle = any(stuck) and all(x or K.DONE in _codes(net, b) for b, x in zip(rest, stuck, strict=True))
+    run_tasks = any(act for b in rest for act in net.branches[b].active)
     return _Others(
         rest,
         done,
@@ -109,6 +111,7 @@ def _others(net: Network, members: tuple[int, ...]) -> _Others | None:
         must_exit,
         tuple(seen),
         surely,
+        run_tasks,
         may_idle,
     )
 
@@ -201,7 +204,8 @@ def _stand_in(p: Program, loc: A.Loc, o: _Others, name: str) -> tuple[K.Term, di
     for full in new_inputs:
         names[full] = (full,)
     # assumed to end (the fairness of strong liveness) only if the branches it stands for surely end
-    info = TaskInfo(task, name, name, (), "" if o.surely_end else "(branches)", loc, tuple(events))
+    source = "" if o.surely_end else "(branches)"
+    info = TaskInfo(task, name, name, (), source, loc, tuple(events), runs=o.run_tasks)
     return term, {
         "inputs": (*p.inputs, *new_inputs),
         "input_task": (*p.input_task, *(task for _ in ends), *(-1 for _ in now)),

@@ -36,6 +36,8 @@ class TaskInfo:
     source: str
     loc: Loc
     events: tuple[tuple[str, str, int], ...]  # (kind, full name, input bit)
+    # drives its resource while active (False: a network's stand-in for branches that run no task)
+    runs: bool = True
 
     def mask(self, *kinds: str) -> int:
         m = 0

@@ -411,7 +411,7 @@ def _describe_loop(a: Automaton, states: set[int], entry: int, phase: int) -> _L
     proc = next(d.name for d in p.ast.procedures if d.role == ("main" if phase == MAIN else "safe"))
     who = f"the {'main' if phase == MAIN else 'safe'} procedure {proc}"
     exits = [(inputs, act) for s in states for inputs, (n, act) in a.table[s].items() if n not in states]
-    busy = any(a.active[s] for s in states)
+    busy = any(p.tasks[t].runs for s in states for t in a.active[s])
     if not exits and not busy:
         return _Loop(states, entry, True, f"{who} can run forever with nothing running and no way out")
     if not exits:

@@ -15,6 +15,10 @@ CONTEXTS = [
     "do\n  {par}\nuntil immediate Stop",
     "trap T in\n  par({par} || await Stop; exit T)\nend",
     "handle\n  await Go; {par}\non Stop do\n  nothing\non fatal do\n  safe\nend",
+    "loop\n  await Go;\n  {par}\nend",
+    "loop\n  do\n    {par}\n  until Stop;\n  pause\nend",
+    "loop\n  do\n    {par};\n    await Go\n  until Stop\nend",
+    "handle\n  loop\n    weak do {par} until Go;\n    pause\n  end\non fatal do\n  safe\nend",
 ]
 
 
