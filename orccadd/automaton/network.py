@@ -221,6 +221,7 @@ class Network:
     kill_first_bit: int  # kills it, then starts it afresh (a loop around a preemption)
     fresh_bit: int  # the step starts the par afresh (its code is the branches' first instant's)
     hole_alive: tuple[bool, ...]  # per context state: the par runs (started in an earlier instant)
+    hole_present: tuple[bool, ...]  # per context state: the par runs or may start
 
     @property
     def n_states(self) -> int:
@@ -437,11 +438,11 @@ def _network(
         layout.safe_done_bit << 4,
     )
     classes = hole_classes(p, context_term, split)
-    context, alive = _compile_context(q, layout, classes, codes, flags, max_states)
+    context, alive, present = _compile_context(q, layout, classes, codes, flags, max_states)
     line = split.loc.line
     names = (f"step the par at line {line}", "kill it", "kill it, then start it again", "afresh")
     context = dataclasses.replace(context, action_names=(*layout.names, *names))
-    return Network(p, split, context, renumbered, codes, tuple(classes), code_shift, *flags, alive)
+    return Network(p, split, context, renumbered, codes, tuple(classes), code_shift, *flags, alive, present)
 
 
 def _renumber(a: Automaton, shift: int, number: dict[int, int]) -> Automaton:
@@ -460,7 +461,7 @@ def _compile_context(
     codes: tuple[int, ...],
     flags: tuple[int, int, int, int],
     max_states: int,
-) -> tuple[Automaton, tuple[bool, ...]]:
+) -> tuple[Automaton, tuple[bool, ...], tuple[bool, ...]]:
     """The context's automaton: inputs are its own, the branch-event classes' representatives and,
     where the par is present (started or about to), the par's code index above the inputs."""
     code_base = len(q.inputs)
@@ -497,9 +498,11 @@ def _compile_context(
         for t in act:
             possible |= q.event_masks[t]
         ins, internal = reactor.mentions(top)
-        rel = ins & possible & ~hole_events
-        plain = _combinations(q, act, rel, reps)
         hole = top.phase == MAIN and _has_hole(top.term)
+        # where the par is, its tasks' events count by class (`hole_classes`); elsewhere (the safe
+        # procedure running a task of a branch again) they are the context's own inputs
+        rel = ins & possible & ~hole_events if hole else ins & possible
+        plain = _combinations(q, act, rel, reps)
         extra = [0]
         if hole:
             rel |= sum(hole_reps) | code_mask
@@ -535,4 +538,6 @@ def _compile_context(
         safe_done_bit=layout.safe_done_bit,
         event_rep=event_reps(q, ev_classes),
     )
-    return automaton, tuple(t.phase == MAIN and _hole_alive(t.term) for t in states)
+    alive = tuple(t.phase == MAIN and _hole_alive(t.term) for t in states)
+    present = tuple(t.phase == MAIN and _has_hole(t.term) for t in states)
+    return automaton, alive, present

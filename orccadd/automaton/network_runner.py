@@ -48,6 +48,7 @@ class NetworkRunner:
         "ostate",
         "owner",
         "plain",
+        "present",
         "running",
         "shift",
         "st",
@@ -73,6 +74,7 @@ class NetworkRunner:
             _context_row(ctx.stands_for, row, code_base, n_codes, net.step_bit) for row in ctx.table
         )
         self.alive = net.hole_alive
+        self.present = net.hole_present
         self.hole_classes = net.hole_classes
         self.hole_mask = sum(bits for bits, _ in net.hole_classes)
         self.shift = net.code_shift
@@ -110,7 +112,7 @@ class NetworkRunner:
         # with none of those inputs, the par starts the same way every time: precomputed
         self.start_code, moves = self._par(0, alive=False)
         if self.start_code == PAUSED_I:
-            self.start_actions = self._take(moves, 0, PAUSED_I)
+            self.start_actions = self._take(moves, PAUSED_I)
             self.start_after = (tuple(self.st), self.n_alive, self.running, frozenset(self.busy))
             self._reset()
             self.start_moves = moves
@@ -142,7 +144,7 @@ class NetworkRunner:
         out: int
         os = self.ostate
         key = inputs & self.orel[os]
-        h = inputs & self.hole_mask
+        h = inputs & self.hole_mask if self.present[os] else 0
         if h:
             key |= _hole_part(self.hole_classes, h)
         row = self.orows[os]
@@ -152,32 +154,32 @@ class NetworkRunner:
             hit = row[key | _hole_part(self.hole_classes, h)]
         if type(hit) is not list:  # the par's code does not matter (the par may be killed)
             self.ostate, actions = hit
-            return self._kill_all(actions & self.plain) if actions & self.kill_bit else actions  # type: ignore[no-any-return]
+            if actions & self.kill_bit:
+                return actions & self.plain | self._kill_all(0)  # type: ignore[no-any-return]
+            return actions  # type: ignore[no-any-return]
         if hit[0][1] & self.fresh_bit:  # the par starts afresh (perhaps just killed: a loop)
             code, moves = self._par(inputs, alive=False)
             self.ostate, actions = hit[code]
             out = actions & self.plain
             if actions & self.kill_first_bit:
-                out = self._kill_all(out)
-            out = self._take(moves, out, code)
-            return self._kill_all(out) if actions & self.kill_bit else out
+                out |= self._kill_all(0)
+            branches = self._take(moves, code)
+            return out | (self._kill_all(branches) if actions & self.kill_bit else branches)
         if self.alive[os] and not self.busy:
             x = inputs & self.branch_mask
             if not x:  # nothing concerns the branches: each stays paused as it is (one at least)
                 self.ostate, actions = hit[PAUSED_I]
                 out = actions & self.plain
-                return self._kill_all(out) if actions & self.kill_bit else out
+                return out | self._kill_all(0) if actions & self.kill_bit else out
             b = self.owner[x & -x]
             if not x & ~self.binputs[b]:  # one branch concerned: its lookup, inline
                 return self._one(b, inputs, hit)
         code, moves = self._par(inputs, self.alive[os])
         self.ostate, actions = hit[code]
-        out = actions & self.plain
-        if actions & self.step_bit:
-            out = self._take(moves, out, code)
+        branches = self._take(moves, code) if actions & self.step_bit else 0
         if actions & self.kill_bit:
-            out = self._kill_all(out)
-        return out
+            branches = self._kill_all(branches)
+        return actions & self.plain | branches  # type: ignore[no-any-return]
 
     def _one(self, b: int, inputs: int, hit: list[tuple[int, int]]) -> int:
         """The instant when the inputs concern branch b alone (the others stay paused): the
@@ -192,25 +194,25 @@ class NetworkRunner:
             ci = bact >> self.shift
             if ci == PAUSED_I or (ci == DONE_I and self.n_alive > 1):
                 self.ostate, actions = hit[PAUSED_I]
-                out: int = actions & self.plain
+                branches = 0
                 if actions & self.step_bit:
                     tasks = self.task_mask[b]
                     self.running = self.running & ~tasks[s] | tasks[nxt]
                     st[b] = nxt
-                    out |= bact & self.low
+                    branches = bact & self.low
                     if ci == DONE_I:
                         self.n_alive -= 1
                     elif nxt in self.busy_states[b]:
                         self.busy.add(b)
-                return self._kill_all(out) if actions & self.kill_bit else out
+                if actions & self.kill_bit:
+                    branches = self._kill_all(branches)
+                return actions & self.plain | branches  # type: ignore[no-any-return]
             code, moves = ci, [(b, nxt, bact & self.low)]
         self.ostate, actions = hit[code]
-        out = actions & self.plain
-        if actions & self.step_bit:
-            out = self._take(moves, out, code)
+        branches = self._take(moves, code) if actions & self.step_bit else 0
         if actions & self.kill_bit:
-            out = self._kill_all(out)
-        return out
+            branches = self._kill_all(branches)
+        return actions & self.plain | branches  # type: ignore[no-any-return]
 
     def _par(self, inputs: int, alive: bool) -> tuple[int, list[tuple[int, int, int]]]:
         """The par's code index in this instant, and each reacting branch's (index, next, actions)."""
@@ -243,12 +245,15 @@ class NetworkRunner:
                 top = ci
         return top, moves
 
-    def _take(self, moves: list[tuple[int, int, int]], out: int, code: int) -> int:
+    def _take(self, moves: list[tuple[int, int, int]], code: int) -> int:
+        """The branches take their reactions: their actions (a par that ends or exits is reset;
+        one that exits kills the branches still paused)."""
         st, ended, tasks = self.st, self.ended, self.task_mask
+        branches = 0
         if moves is self.start_moves:  # the par starts as always: the outcome is precomputed
             after, self.n_alive, self.running, busy = self.start_after
             self.st, self.busy = list(after), set(busy)
-            out |= self.start_actions
+            branches = self.start_actions
         else:
             if not self.n_alive:  # the par starts: every branch moves from its first state
                 self.n_alive = len(st)
@@ -257,7 +262,7 @@ class NetworkRunner:
                     raise RuntimeError(f"branch {b} of the par has no reaction in state {st[b]}")
                 self.running = self.running & ~tasks[b][st[b]] | tasks[b][nxt]
                 st[b] = nxt
-                out |= actions
+                branches |= actions
                 if nxt == ended[b]:
                     self.n_alive -= 1
                 if nxt in self.busy_states[b]:
@@ -265,20 +270,21 @@ class NetworkRunner:
                 else:
                     self.busy.discard(b)
         if code == PAUSED_I:
-            return out
+            return branches
         if code > PAUSED_I:  # a branch exits: the others are killed
-            out = self._kill_all(out)
+            return self._kill_all(branches)
         self._reset()
-        return out
+        return branches
 
-    def _kill_all(self, out: int) -> int:
-        """Every branch is killed: its running tasks stop; one started in this instant is not started."""
+    def _kill_all(self, branches: int) -> int:
+        """Every branch is killed: its running tasks stop; one started in this instant (in
+        `branches`, the branches' own actions of this instant) is not started."""
         running = self.running
-        started = out >> self.start_base & running
-        out &= ~(started << self.start_base)
-        out |= (running & ~started) << self.stop_base
+        started = branches >> self.start_base & running
+        branches &= ~(started << self.start_base)
+        branches |= (running & ~started) << self.stop_base
         self._reset()
-        return out
+        return branches
 
     def _reset(self) -> None:
         self.st = [0] * len(self.st)

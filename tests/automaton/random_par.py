@@ -22,6 +22,10 @@ CONTEXTS = [
 ]
 
 
+# the safe procedure, sometimes running a branch's task again (its events are then the context's)
+SAFE = ["await Stop", "A0_0; await Stop", "par(A0_1 || A1_1); await Stop"]
+
+
 class _Gen:
     def __init__(self, rng: random.Random, b: int, traps: tuple[str, ...]) -> None:
         self.rng, self.b, self.traps = rng, b, traps
@@ -59,6 +63,7 @@ class _Gen:
 def random_mission(seed: int, branches: int = 3, depth: int = 3) -> str:
     rng = random.Random(seed)
     context = rng.choice(CONTEXTS)
+    safe = rng.choice(SAFE)
     traps = ("T",) if "trap T" in context else ()
     bodies = [_Gen(rng, b, traps).stmt(depth) for b in range(branches)]
     decls = []
@@ -73,5 +78,5 @@ def random_mission(seed: int, branches: int = 3, depth: int = 3) -> str:
     return (
         f"mission Random{seed}\nresource {resources}\ninput {inputs}\nsignal {signals}\n"
         + "\n".join(decls)
-        + f"\nsafe procedure Rescue\n  await Stop\nend\nmain procedure Main\n{main}\nend\n"
+        + f"\nsafe procedure Rescue\n  {safe}\nend\nmain procedure Main\n{main}\nend\n"
     )

@@ -20,6 +20,7 @@ from orccadd.automaton import (
     verify_network,
 )
 from orccadd.automaton.compiler import compile_program
+from orccadd.automaton.interpreter import Interpreter
 from orccadd.automaton.network import compile_mission, find_split
 from orccadd.automaton.program import Program
 from orccadd.errors import MissionError
@@ -51,7 +52,7 @@ def random_inputs(rng: random.Random, p: Program, active: tuple[int, ...]) -> in
     return inputs
 
 
-@pytest.mark.parametrize(("branches", "depth", "seeds"), [(3, 3, 40), (2, 5, 40), (4, 2, 12)])
+@pytest.mark.parametrize(("branches", "depth", "seeds"), [(3, 3, 30), (2, 5, 30), (4, 2, 8)])
 def test_the_network_reacts_as_the_product(branches: int, depth: int, seeds: int) -> None:
     compared = 0
     for seed, p in programs(range(seeds), branches, depth):
@@ -62,7 +63,7 @@ def test_the_network_reacts_as_the_product(branches: int, depth: int, seeds: int
         net = compile_mission(p, threshold=0)  # a network whenever the par splits
         assert isinstance(net, Network), seed
         rng = random.Random(seed)
-        for _ in range(20):
+        for _ in range(12):
             explicit, network = Runner(a), NetworkRunner(net)
             for instant in range(12):
                 assert sorted(set(network.active())) == sorted(set(a.active[explicit.state]))
@@ -81,7 +82,7 @@ def test_network_verdicts_are_never_laxer_than_the_products() -> None:
     """Every check fails in the network at least as severely as in the one automaton, and the
     mission's verdict (accepted or refused) is the same on these missions."""
     compared = 0
-    for seed, p in programs(range(60)):
+    for seed, p in programs(range(45)):
         try:
             explicit = verify(compile_program(p, max_states=20_000))
         except MissionError:
@@ -97,7 +98,7 @@ def test_network_verdicts_are_never_laxer_than_the_products() -> None:
             assert _worst(network.results, r.name) >= _worst(explicit.results, r.name), (seed, r.name)
         assert network.ok == explicit.ok, seed
         compared += 1
-    assert compared >= 40
+    assert compared >= 30
 
 
 def test_the_scale_target_compiles_and_verifies_as_a_network() -> None:
@@ -163,3 +164,21 @@ def test_a_par_in_a_loop_splits_unless_it_restarts_in_the_instant_it_ends() -> N
     j, a_done = p.input_bit("J"), p.input_bit("A.done")
     for inputs in (0, 0, j | a_done, 0, a_done, j):
         assert network.react(inputs) == explicit.react(inputs)
+
+
+def test_the_dual_arm_cell_is_a_network_that_passes_and_runs_as_its_product() -> None:
+    """Five cycles (two arms, a gripper, a camera, a conveyor); the safe procedure homes both
+    arms with tasks the branches also run (their events are then the context's)."""
+    cell = ROOT / "benchmarks" / "missions" / "dual_arm_cell.mission"
+    net = compile_file(cell, allow_network=True)
+    assert isinstance(net, Network) and len(net.branches) == 5
+    report = verify_network(net)
+    assert report.ok, report.format()
+    p = net.program
+    rng = random.Random(7)
+    for _ in range(30):  # against the reference interpreter (the product takes minutes to build)
+        reference, network = Interpreter(p), NetworkRunner(net)
+        for _ in range(25):
+            inputs = random_inputs(rng, p, tuple(reference.active))
+            assert network.react(inputs) == reference.react(inputs)
+            assert sorted(network.active()) == sorted(reference.active)
