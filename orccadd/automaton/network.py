@@ -121,17 +121,25 @@ def _independent(p: Program, par: K.Par, in_loop: bool) -> Split | None:
     branches = [b for b in par.branches if b is not None]
     if len(branches) < 2:
         return None
+    context = substitute(p.main, par, K.Hole(_loc_of(par), False))[0]
+    around = 0  # events of the tasks the main procedure runs around the par (before, after, beside)
+    for x in _walk(context):
+        if isinstance(x, K.Run):
+            around |= p.event_masks[x.task]
     tasks, ins, tested, emitted = [], [], [], []
     for b in branches:
         run = frozenset(x.task for x in _walk(b) if isinstance(x, K.Run))
         b_ins, b_tested = K.mentions(b, p.end_masks)
+        own = 0
         for t in run:
-            b_ins |= p.event_masks[t]
+            own |= p.event_masks[t]
+        if b_ins & around & ~own:
+            return None  # it reacts to a task that runs around the par
+        b_ins |= own
         tasks.append(run)
         ins.append(b_ins)
         tested.append(b_tested)
         emitted.append(_emits(b))
-    context = substitute(p.main, par, K.Hole(_loc_of(par), False))[0]
     ctx_tested = K.mentions(context, p.end_masks)[1] | K.mentions(p.safe, p.end_masks)[1]
     ctx_emitted = _emits(context) | _emits(p.safe)
     for i in range(len(branches)):

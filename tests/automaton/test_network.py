@@ -52,7 +52,7 @@ def random_inputs(rng: random.Random, p: Program, active: tuple[int, ...]) -> in
     return inputs
 
 
-@pytest.mark.parametrize(("branches", "depth", "seeds"), [(3, 3, 30), (2, 5, 30), (4, 2, 8)])
+@pytest.mark.parametrize(("branches", "depth", "seeds"), [(3, 3, 20), (2, 5, 20), (4, 2, 5)])
 def test_the_network_reacts_as_the_product(branches: int, depth: int, seeds: int) -> None:
     compared = 0
     for seed, p in programs(range(seeds), branches, depth):
@@ -82,7 +82,7 @@ def test_network_verdicts_are_never_laxer_than_the_products() -> None:
     """Every check fails in the network at least as severely as in the one automaton, and the
     mission's verdict (accepted or refused) is the same on these missions."""
     compared = 0
-    for seed, p in programs(range(45)):
+    for seed, p in programs(range(35)):
         try:
             explicit = verify(compile_program(p, max_states=20_000))
         except MissionError:
@@ -98,7 +98,7 @@ def test_network_verdicts_are_never_laxer_than_the_products() -> None:
             assert _worst(network.results, r.name) >= _worst(explicit.results, r.name), (seed, r.name)
         assert network.ok == explicit.ok, seed
         compared += 1
-    assert compared >= 30
+    assert compared >= 25
 
 
 def test_the_scale_target_compiles_and_verifies_as_a_network() -> None:
@@ -149,6 +149,9 @@ def test_what_does_not_split() -> None:
     assert find_split(_program("par(A; emit S || await S; B)")) is None  # a signal crosses
     assert find_split(_program("par(A || B); present S then nothing end")) is not None
     assert find_split(_program("par(A || await pre(I); B)")) is None  # pre(S): memory in the states
+    # a branch waiting for a task that runs beside the par, not in it
+    assert find_split(_program("par(par(await C.done || B) || C)")) is None
+    assert find_split(_program("C; par(await immediate C.done; A || B)")) is None  # C ends as it starts
 
 
 def test_a_par_in_a_loop_splits_unless_it_restarts_in_the_instant_it_ends() -> None:
@@ -176,7 +179,7 @@ def test_the_dual_arm_cell_is_a_network_that_passes_and_runs_as_its_product() ->
     assert report.ok, report.format()
     p = net.program
     rng = random.Random(7)
-    for _ in range(30):  # against the reference interpreter (the product takes minutes to build)
+    for _ in range(15):  # against the reference interpreter (the product takes minutes to build)
         reference, network = Interpreter(p), NetworkRunner(net)
         for _ in range(25):
             inputs = random_inputs(rng, p, tuple(reference.active))
