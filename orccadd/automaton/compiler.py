@@ -22,7 +22,7 @@ from orccadd.automaton import ast as A
 from orccadd.automaton import kernel as K
 from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
 from orccadd.automaton.causality import dependencies, find_cycle
-from orccadd.automaton.classes import event_classes, event_reps
+from orccadd.automaton.classes import EventClass, event_classes, event_reps
 from orccadd.automaton.program import Program
 from orccadd.errors import MissionError
 
@@ -267,14 +267,36 @@ def compile_program(
         if progress is not None and not s % 64 and time.monotonic() - last >= PROGRESS_EVERY_S:
             last = time.monotonic()
             progress(len(states), n_transitions, last - t0)
-    where = tuple(describe_state(p, t) for t in states)
+    return automaton_of(
+        p,
+        layout,
+        classes,
+        relevant,
+        table,
+        active,
+        [t.phase for t in states],
+        [describe_state(p, t) for t in states],
+    )
+
+
+def automaton_of(
+    p: Program,
+    layout: ActionLayout,
+    classes: list[list[EventClass]],
+    relevant: list[int],
+    table: list[dict[int, tuple[int, int]]],
+    active: list[tuple[int, ...]],
+    phase: list[int],
+    where: list[str],
+) -> Automaton:
+    """The immutable automaton of explored states (rows read-only: the checked table is what runs)."""
     return Automaton(
         program=p,
         relevant=tuple(relevant),
-        table=tuple(MappingProxyType(row) for row in table),  # read-only: the checked table is what runs
+        table=tuple(MappingProxyType(row) for row in table),
         active=tuple(active),
-        phase=tuple(t.phase for t in states),
-        where=where,
+        phase=tuple(phase),
+        where=tuple(where),
         action_names=layout.names,
         stop_base=layout.stop_base,
         start_base=layout.start_base,

@@ -41,7 +41,7 @@ from types import MappingProxyType
 from orccadd.automaton import kernel as K
 from orccadd.automaton.ast import Loc
 from orccadd.automaton.automaton import END, MAIN, Automaton
-from orccadd.automaton.classes import event_classes, event_reps
+from orccadd.automaton.classes import event_classes
 from orccadd.automaton.compiler import (
     DEFAULT_MAX_STATES,
     ActionLayout,
@@ -49,6 +49,7 @@ from orccadd.automaton.compiler import (
     Reactor,
     Top,
     _CausalityError,
+    automaton_of,
     bits_of,
     compile_program,
     describe_state,
@@ -339,23 +340,9 @@ def compile_branch(
         active.append(act)
     n = len(terms)
     table = [{k: (n if j == ended else j, a) for k, (j, a) in row.items()} for row in table]
-    a = Automaton(
-        program=p,
-        relevant=(*relevant, 0),
-        table=(*(MappingProxyType(row) for row in table), MappingProxyType({0: (n, 0)})),
-        active=(*active, ()),
-        phase=(*(MAIN for _ in terms), END),
-        where=(*(describe_state(p, Top(MAIN, t)) for t in terms), "ended"),
-        action_names=layout.names,
-        stop_base=layout.stop_base,
-        start_base=layout.start_base,
-        emit_base=layout.emit_base,
-        success_bit=layout.success_bit,
-        safe_bit=layout.safe_bit,
-        failed_bit=layout.failed_bit,
-        safe_done_bit=layout.safe_done_bit,
-        event_rep=event_reps(p, classes),
-    )
+    phase = [*(MAIN for _ in terms), END]
+    where = [*(describe_state(p, Top(MAIN, t)) for t in terms), "ended"]
+    a = automaton_of(p, layout, classes, [*relevant, 0], [*table, {0: (n, 0)}], [*active, ()], phase, where)
     return a, frozenset(codes)
 
 
@@ -529,23 +516,9 @@ def _compile_context(
         relevant.append(rel)
         table.append(row)
         active.append(act)
-    automaton = Automaton(
-        program=q,
-        relevant=tuple(relevant),
-        table=tuple(MappingProxyType(row) for row in table),
-        active=tuple(active),
-        phase=tuple(t.phase for t in states),
-        where=tuple(describe_state(q, t) for t in states),
-        action_names=layout.names,
-        stop_base=layout.stop_base,
-        start_base=layout.start_base,
-        emit_base=layout.emit_base,
-        success_bit=layout.success_bit,
-        safe_bit=layout.safe_bit,
-        failed_bit=layout.failed_bit,
-        safe_done_bit=layout.safe_done_bit,
-        event_rep=event_reps(q, ev_classes),
-    )
+    phase = [t.phase for t in states]
+    where = [describe_state(q, t) for t in states]
+    automaton = automaton_of(q, layout, ev_classes, relevant, table, active, phase, where)
     alive = tuple(t.phase == MAIN and _hole_alive(t.term) for t in states)
     present = tuple(t.phase == MAIN and _has_hole(t.term) for t in states)
     return automaton, alive, present
