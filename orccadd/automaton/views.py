@@ -14,13 +14,16 @@ edge with the inputs it needs (`Home.done`; none: it is taken otherwise) and its
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import subprocess
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from orccadd.automaton import kernel as K
 from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
+from orccadd.automaton.network import Network
 from orccadd.errors import OrccaddError
 
 TAU = ""
@@ -200,35 +203,83 @@ def full_view(a: Automaton, *, faults: bool = False) -> Lts:
     return Lts(a.n_states, 0, tuple(sorted(edges)), a.where, _tasks(a), a.phase)
 
 
+_DOT_HEAD = (
+    "  rankdir=LR;",
+    '  node [shape=circle, fontname="Helvetica"];',
+    '  edge [fontname="Helvetica", fontsize=10];',
+)
+
+
 def to_dot(lts: Lts, title: str) -> str:
     """Graphviz text: a state's number and active tasks; a box per set of active tasks."""
-    out = [f'digraph "{_q(title)}" {{', "  rankdir=LR;", '  node [shape=circle, fontname="Helvetica"];',
-           '  edge [fontname="Helvetica", fontsize=10];', '  start [shape=point];']  # fmt: skip
+    return "\n".join([f'digraph "{_q(title)}" {{', *_DOT_HEAD, *_graph(lts, "s"), "}"]) + "\n"
+
+
+def network_views(net: Network, *, faults: bool = False) -> list[tuple[str, Lts]]:
+    """The full view of a network's context (its edges say the par's code: `par done`, ...)
+    and of each branch (their codes left out: a branch's `ended` state says it)."""
+    p, ctx = net.program, net.context
+    n_in = len(p.inputs)
+    real = (1 << n_in) - 1
+    code_names = tuple(
+        "par done" if c == K.DONE else "par paused" if c == K.PAUSED else f"par exits ({c})"
+        for c in net.codes
+    )
+    table = [
+        {
+            (key & real) | (1 << (n_in + (key >> n_in)) if net.hole_present[s] else 0): hit
+            for key, hit in row.items()
+        }
+        for s, row in enumerate(ctx.table)
+    ]
+    shown = dataclasses.replace(p, inputs=(*p.inputs, *code_names))
+    context = dataclasses.replace(ctx, program=shown, table=tuple(table))
+    low = (1 << net.code_shift) - 1
+    parts = [("context", full_view(context, faults=faults))]
+    for b, a in enumerate(net.branches):
+        rows = tuple({k: (j, act & low) for k, (j, act) in row.items()} for row in a.table)
+        name = f"branch {b + 1} of the par at line {net.split.loc.line}"
+        parts.append((name, full_view(dataclasses.replace(a, table=rows), faults=faults)))
+    return parts
+
+
+def to_dot_network(parts: list[tuple[str, Lts]], title: str) -> str:
+    """A network (network.py): each component's graph in a box of its own (the context's, then
+    each branch's), drawn as `to_dot` draws one automaton."""
+    out = [f'digraph "{_q(title)}" {{', *_DOT_HEAD]
+    for k, (name, lts) in enumerate(parts):
+        out.append(f'  subgraph cluster_part{k} {{ label="{_q(name)}"; style=bold;')
+        out.extend("  " + line for line in _graph(lts, f"p{k}_"))
+        out.append("  }")
+    return "\n".join([*out, "}"]) + "\n"
+
+
+def _graph(lts: Lts, prefix: str) -> list[str]:
+    out = [f"  {prefix}start [shape=point];"]
     boxes: dict[str, list[int]] = {}
     for s in range(lts.n):
         boxes.setdefault(lts.tasks[s] if lts.tasks else "", []).append(s)
     for k, (tasks, states) in enumerate(boxes.items()):
         if tasks:
-            out.append(f'  subgraph cluster_{k} {{ label="{_q(tasks)}"; style=rounded; color=grey;')
+            out.append(f'  subgraph cluster_{prefix}{k} {{ label="{_q(tasks)}"; style=rounded; color=grey;')
         for s in states:
-            out.append("    " + _node(lts, s))
+            out.append("    " + _node(lts, s, prefix))
         if tasks:
             out.append("  }")
-    out.append(f"  start -> s{lts.initial};")
+    out.append(f"  {prefix}start -> {prefix}{lts.initial};")
     for s, lab, t in lts.edges:
         style = ' style=dashed label="τ"' if lab == TAU else f' label="{_q(lab)}"'
-        out.append(f"  s{s} -> s{t} [{style.strip()}];")
-    out.append("}")
-    return "\n".join(out) + "\n"
+        out.append(f"  {prefix}{s} -> {prefix}{t} [{style.strip()}];")
+    return out
 
 
-def _node(lts: Lts, s: int) -> str:
+def _node(lts: Lts, s: int, prefix: str) -> str:
     phase = lts.phases[s] if lts.phases else MAIN
     tasks = lts.tasks[s] if lts.tasks else ""
     label = f"{s}\\n{_q(tasks)}" if tasks else str(s)
     shape = ", shape=doublecircle" if phase == END else ""
     colour = ", color=red, fontcolor=red" if phase == SAFE else ""
-    return f's{s} [label="{label}", tooltip="{_q(lts.names[s])}"{shape}{colour}];'
+    return f'{prefix}{s} [label="{label}", tooltip="{_q(lts.names[s])}"{shape}{colour}];'
 
 
 def _q(text: str) -> str:

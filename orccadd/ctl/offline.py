@@ -141,11 +141,13 @@ def _on_robot(a: Any, config: str) -> Any:
 
 
 def cmd_graph(args: argparse.Namespace) -> int:
-    from orccadd.automaton import compile_file
+    from orccadd.automaton import Network, compile_file
     from orccadd.automaton.views import full_view, minimize, project, render, to_dot
     from orccadd.task.spec import read_task_interface
 
-    a = compile_file(args.file, task_files=read_task_interface, progress=_progress())
+    a = compile_file(args.file, task_files=read_task_interface, progress=_progress(), allow_network=True)
+    if isinstance(a, Network):
+        return _graph_network(a, args)
     names = [n for n in args.abstract.split(",") if n.strip()]
     if not names and not args.full and a.n_states > GRAPH_FULL_MAX:  # unreadable in full
         names = [t.name for t in a.program.tasks] + ["success", "safe"]
@@ -153,6 +155,17 @@ def cmd_graph(args: argparse.Namespace) -> int:
     lts = minimize(project(a, names, faults=args.faults)) if names else full_view(a, faults=args.faults)
     render(to_dot(lts, a.program.name), Path(args.output))
     print(f"{args.output}: {lts.n} states, {len(lts.edges)} transitions")
+    return EXIT_OK
+
+
+def _graph_network(net: Any, args: argparse.Namespace) -> int:
+    """A network: the context's and each branch's automaton, each in full (they are small)."""
+    from orccadd.automaton.views import network_views, render, to_dot_network
+
+    if args.abstract:
+        raise OrccaddError(f"{args.file}: --abstract draws one automaton; this mission is {net.describe()}")
+    render(to_dot_network(network_views(net, faults=args.faults), net.program.name), Path(args.output))
+    print(f"{args.output}: {net.describe()}")
     return EXIT_OK
 
 

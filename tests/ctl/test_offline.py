@@ -157,3 +157,12 @@ def test_check_verifies_a_large_par_as_a_network() -> None:
     assert out["ok"] and "a network" in out["network"] and "10 branches" in out["network"]
     refused = ctl("check", str(ten))  # the daemon's check: one automaton, refused with the way out
     assert refused.returncode == 1 and "--language-only" in refused.stderr
+
+
+def test_graph_draws_a_network_component_by_component(tmp_path: Path) -> None:
+    dot = tmp_path / "ten.dot"
+    r = ctl("graph", str(ROOT / "benchmarks" / "missions" / "concurrent10.mission"), "-o", str(dot))
+    assert r.returncode == 0, r.stderr
+    text = dot.read_text()
+    assert 'label="context"' in text and 'label="branch 10 of the par at line' in text
+    assert "par paused" in text  # the context's edges say the par's code
