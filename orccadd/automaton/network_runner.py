@@ -5,8 +5,11 @@ completion code (the row holds one reaction per code), the branches react first,
 lookup, but only those an input of the instant concerns (each input belongs to one branch) or
 that move on their own; the others stay paused. The par's code is the max of its branches'
 (Esterel). The context's actions then say whether the instant takes the branches' reactions
-(`step_bit`) and whether it kills what is left of them (`kill_bit`: their running tasks stop, a
-task started in this instant is not started).
+(`step_bit`; `fresh_bit`: the par starts in this instant, its code is the branches' first
+instants'), and whether it kills what is left of them (`kill_bit`: their running tasks stop, one
+they started in this instant is not started; `kill_first_bit`: killed, then started afresh, a
+loop around a preemption). A kill works on the branches' own actions, apart from the context's
+(which may start one of those tasks again in the same instant: the safe procedure).
 """
 
 from __future__ import annotations
