@@ -38,6 +38,7 @@ class NetworkRunner:
         "busy",
         "busy_states",
         "ended",
+        "event_masks",
         "fresh_bit",
         "hole_classes",
         "hole_mask",
@@ -46,6 +47,7 @@ class NetworkRunner:
         "low",
         "n_alive",
         "net",
+        "operator_mask",
         "orel",
         "orows",
         "ostate",
@@ -71,7 +73,11 @@ class NetworkRunner:
         ctx = net.context
         code_base = len(net.program.inputs)
         real = (1 << code_base) - 1
-        self.orel = tuple(r & real for r in ctx.relevant)
+        hole_mask = sum(bits for bits, _ in net.hole_classes)
+        # where the par is, a branch task's event counts through its class (`_hole_part`) only
+        self.orel = tuple(
+            r & real & ~(hole_mask if net.hole_present[s] else 0) for s, r in enumerate(ctx.relevant)
+        )
         n_codes = len(net.codes)
         self.orows = tuple(
             _context_row(ctx.stands_for, row, code_base, n_codes, net.step_bit) for row in ctx.table
@@ -79,7 +85,7 @@ class NetworkRunner:
         self.alive = net.hole_alive
         self.present = net.hole_present
         self.hole_classes = net.hole_classes
-        self.hole_mask = sum(bits for bits, _ in net.hole_classes)
+        self.hole_mask = hole_mask
         self.shift = net.code_shift
         self.low = (1 << net.code_shift) - 1
         self.step_bit, self.kill_bit = net.step_bit, net.kill_bit
@@ -101,6 +107,8 @@ class NetworkRunner:
                 self.owner[low] = i
                 bits ^= low
         self.branch_mask = sum(net.split.inputs)
+        self.event_masks = net.program.event_masks
+        self.operator_mask = net.program.operator_mask
         self.binputs = net.split.inputs
         self.task_mask = tuple(tuple(sum(1 << t for t in act) for act in b.active) for b in net.branches)
         self.ostate = 0
@@ -148,7 +156,8 @@ class NetworkRunner:
         os = self.ostate
         key = inputs & self.orel[os]
         h = inputs & self.hole_mask if self.present[os] else 0
-        if h:
+        if h:  # only events of the tasks the branches run (the environment model; as `normalize`)
+            h &= self._running_events()
             key |= _hole_part(self.hole_classes, h)
         row = self.orows[os]
         hit = row.get(key)
@@ -217,6 +226,14 @@ class NetworkRunner:
             branches = self._kill_all(branches)
         return actions & self.plain | branches  # type: ignore[no-any-return]
 
+    def _running_events(self) -> int:
+        events, running = 0, self.running
+        while running:
+            low = running & -running
+            events |= self.event_masks[low.bit_length() - 1]
+            running ^= low
+        return events
+
     def _par(self, inputs: int, alive: bool) -> tuple[int, list[tuple[int, int, int]]]:
         """The par's code index in this instant, and each reacting branch's (index, next, actions)."""
         st, ended = self.st, self.ended
@@ -231,9 +248,12 @@ class NetworkRunner:
                 x ^= low
             states = [(b, st[b]) for b in touched if st[b] != ended[b]]
             top = PAUSED_I if self.n_alive > len(states) else DONE_I
-        elif self.start_moves is not None and not inputs & self.start_rel:
-            return self.start_code, self.start_moves
         else:
+            # the par starts: its tasks' events can only be those of activations running at the
+            # start of the instant (killed in it, then started afresh: a loop)
+            inputs &= self.operator_mask | self._running_events()
+            if self.start_moves is not None and not inputs & self.start_rel:
+                return self.start_code, self.start_moves
             states = [(b, 0) for b in range(len(st))]
             top = DONE_I
         moves = []

@@ -185,3 +185,25 @@ def test_the_dual_arm_cell_is_a_network_that_passes_and_runs_as_its_product() ->
             inputs = random_inputs(rng, p, tuple(reference.active))
             assert network.react(inputs) == reference.react(inputs)
             assert sorted(network.active()) == sorted(reference.active)
+
+
+def test_inputs_outside_the_model_are_reduced_as_the_one_automaton_reduces_them() -> None:
+    """Any input bits at all (events of tasks not running, several events of one task): the
+    network never raises and reacts as the one automaton (`Automaton.normalize`)."""
+    compared = 0
+    for seed, p in programs(range(12)):
+        try:
+            a = compile_program(p, max_states=20_000)
+        except MissionError:
+            continue
+        net = compile_mission(p, threshold=0)
+        assert isinstance(net, Network)
+        rng = random.Random(seed)
+        for _ in range(10):
+            explicit, network = Runner(a), NetworkRunner(net)
+            for _ in range(10):
+                n = len(p.inputs)
+                inputs = rng.getrandbits(n) & rng.getrandbits(n) & rng.getrandbits(n)
+                assert network.react(inputs) == explicit.react(inputs), seed
+        compared += 1
+    assert compared >= 8
