@@ -38,7 +38,6 @@ class NetworkRunner:
         "busy",
         "busy_states",
         "ended",
-        "event_masks",
         "fresh_bit",
         "hole_classes",
         "hole_mask",
@@ -55,6 +54,7 @@ class NetworkRunner:
         "plain",
         "present",
         "running",
+        "running_events",
         "shift",
         "st",
         "start_actions",
@@ -63,6 +63,7 @@ class NetworkRunner:
         "start_code",
         "start_moves",
         "start_rel",
+        "state_events",
         "step_bit",
         "stop_base",
         "task_mask",
@@ -107,7 +108,6 @@ class NetworkRunner:
                 self.owner[low] = i
                 bits ^= low
         self.branch_mask = sum(net.split.inputs)
-        self.event_masks = net.program.event_masks
         self.operator_mask = net.program.operator_mask
         self.binputs = net.split.inputs
         self.task_mask = tuple(tuple(sum(1 << t for t in act) for act in b.active) for b in net.branches)
@@ -115,6 +115,10 @@ class NetworkRunner:
         self.st = [0] * len(net.branches)
         self.n_alive = 0
         self.running = 0  # the tasks the branches run (bit t: task t)
+        self.running_events = 0  # and the events they may raise
+        self.state_events = tuple(
+            tuple(sum(net.program.event_masks[t] for t in set(act)) for act in b.active) for b in net.branches
+        )
         self.busy: set[int] = set()
         self.start_moves: list[tuple[int, int, int]] | None = None
         self.start_rel = 0  # the inputs the branches' first instants test
@@ -124,7 +128,13 @@ class NetworkRunner:
         self.start_code, moves = self._par(0, alive=False)
         if self.start_code == PAUSED_I:
             self.start_actions = self._take(moves, PAUSED_I)
-            self.start_after = (tuple(self.st), self.n_alive, self.running, frozenset(self.busy))
+            self.start_after = (
+                tuple(self.st),
+                self.n_alive,
+                self.running,
+                self.running_events,
+                frozenset(self.busy),
+            )
             self._reset()
             self.start_moves = moves
 
@@ -157,7 +167,7 @@ class NetworkRunner:
         key = inputs & self.orel[os]
         h = inputs & self.hole_mask if self.present[os] else 0
         if h:  # only events of the tasks the branches run (the environment model; as `normalize`)
-            h &= self._running_events()
+            h &= self.running_events
             key |= _hole_part(self.hole_classes, h)
         row = self.orows[os]
         hit = row.get(key)
@@ -210,6 +220,8 @@ class NetworkRunner:
                 if actions & self.step_bit:
                     tasks = self.task_mask[b]
                     self.running = self.running & ~tasks[s] | tasks[nxt]
+                    events = self.state_events[b]
+                    self.running_events = self.running_events & ~events[s] | events[nxt]
                     st[b] = nxt
                     branches = bact & self.low
                     if ci == DONE_I:
@@ -225,14 +237,6 @@ class NetworkRunner:
         if actions & self.kill_bit:
             branches = self._kill_all(branches)
         return actions & self.plain | branches  # type: ignore[no-any-return]
-
-    def _running_events(self) -> int:
-        events, running = 0, self.running
-        while running:
-            low = running & -running
-            events |= self.event_masks[low.bit_length() - 1]
-            running ^= low
-        return events
 
     def _par(self, inputs: int, alive: bool) -> tuple[int, list[tuple[int, int, int]]]:
         """The par's code index in this instant, and each reacting branch's (index, next, actions)."""
@@ -251,7 +255,7 @@ class NetworkRunner:
         else:
             # the par starts: its tasks' events can only be those of activations running at the
             # start of the instant (killed in it, then started afresh: a loop)
-            inputs &= self.operator_mask | self._running_events()
+            inputs &= self.operator_mask | self.running_events
             if self.start_moves is not None and not inputs & self.start_rel:
                 return self.start_code, self.start_moves
             states = [(b, 0) for b in range(len(st))]
@@ -274,7 +278,7 @@ class NetworkRunner:
         st, ended, tasks = self.st, self.ended, self.task_mask
         branches = 0
         if moves is self.start_moves:  # the par starts as always: the outcome is precomputed
-            after, self.n_alive, self.running, busy = self.start_after
+            after, self.n_alive, self.running, self.running_events, busy = self.start_after
             self.st, self.busy = list(after), set(busy)
             branches = self.start_actions
         else:
@@ -284,6 +288,8 @@ class NetworkRunner:
                 if nxt < 0:  # the verifier refuses a mission that can get here (network.py)
                     raise RuntimeError(f"branch {b} of the par has no reaction in state {st[b]}")
                 self.running = self.running & ~tasks[b][st[b]] | tasks[b][nxt]
+                events = self.state_events[b]
+                self.running_events = self.running_events & ~events[st[b]] | events[nxt]
                 st[b] = nxt
                 branches |= actions
                 if nxt == ended[b]:
@@ -313,6 +319,7 @@ class NetworkRunner:
         self.st = [0] * len(self.st)
         self.n_alive = 0
         self.running = 0
+        self.running_events = 0
         self.busy.clear()
 
 
