@@ -80,6 +80,14 @@ class ActionLayout:
         )
 
 
+def possible_inputs(p: Program, active: tuple[int, ...]) -> int:
+    """The inputs the environment can give in a state: operator inputs, events of its active tasks."""
+    possible = p.operator_mask
+    for t in active:
+        possible |= p.event_masks[t]
+    return possible
+
+
 def input_combinations(p: Program, active: tuple[int, ...], relevant: int, reps: list[int]) -> list[int]:
     """Every input set the environment can present in a state (see the module docstring), one
     event per class of each active task (`reps[t]`: the bits of task t's class representatives)."""
@@ -233,11 +241,8 @@ def compile_program(
         s = queue.popleft()
         top = states[s]
         act = tuple(sorted(K.active_tasks(top.term, [])))
-        possible = p.operator_mask
-        for t in act:
-            possible |= p.event_masks[t]
         ins, internal = reactor.mentions(top)
-        rel = ins & possible
+        rel = ins & possible_inputs(p, act)
         try:
             combos = input_combinations(p, act, rel, reps)
         except OverflowError as e:

@@ -34,9 +34,10 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Hashable, Iterator
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import Generic, TypeVar
 
 from orccadd.automaton import kernel as K
 from orccadd.automaton.ast import Loc
@@ -55,6 +56,7 @@ from orccadd.automaton.compiler import (
     describe_state,
     input_combinations,
     instant_actions,
+    possible_inputs,
     resolve,
 )
 from orccadd.automaton.program import Program, Site
@@ -63,6 +65,7 @@ from orccadd.errors import MissionError
 # A par is compiled apart when its branches' state counts multiplied exceed this (below, the
 # product is small and one explicit automaton is simpler to check, draw and export).
 NETWORK_THRESHOLD = 1000
+S = TypeVar("S", bound=Hashable)
 
 
 @dataclass(frozen=True)
@@ -285,12 +288,10 @@ def compile_branch(
     layout = ActionLayout(p)
     classes = event_classes(p)
     reps = [sum(c.rep for c in task) for task in classes]
-    index: dict[K.Term, int] = {branch: 0}
-    terms: list[K.Term] = [branch]
-    parent: list[tuple[int, int]] = [(-1, 0)]
+    terms = _States[K.Term](p, "a branch's automaton", max_states)
+    terms.add(branch)
     relevant, table, active = [], [], []
     codes: set[int] = set()
-    queue = deque([0])
     ended = -1  # patched below: the index of the `ended` state
     # started afresh by a loop in the instant it was killed, the branch's first instant may see
     # events of its tasks' previous activations (raised in that instant, before the kill): those
@@ -300,15 +301,12 @@ def compile_branch(
         own_events |= p.event_masks[t]
     own_events &= _tested_inputs(branch) if restarts else 0
     own_tasks = [t for t in range(len(p.tasks)) if p.event_masks[t] & own_events]
-    while queue:
-        s = queue.popleft()
-        term = terms[s]
+    while terms.queue:
+        s = terms.queue.popleft()
+        term = terms.items[s]
         act = tuple(sorted(K.active_tasks(term, [])))
-        possible = p.operator_mask | (own_events if s == 0 else 0)
-        for t in act:
-            possible |= p.event_masks[t]
         ins, internal = K.mentions(term, p.end_masks)
-        rel = ins & possible
+        rel = ins & (possible_inputs(p, act) | (own_events if s == 0 else 0))
         row: dict[int, tuple[int, int]] = {}
         raising = tuple(sorted({*act, *own_tasks})) if s == 0 else act
         for inputs in _combinations(p, raising, rel, reps):
@@ -325,23 +323,14 @@ def compile_branch(
                 codes.add(code)
                 row[inputs] = (ended, actions | code << code_shift)
                 continue
-            j = index.get(nxt)
-            if j is None:
-                if len(terms) >= max_states:
-                    msg = f"a branch's automaton exceeds {max_states} states"
-                    raise MissionError(p.file, 1, 1, msg, p.text)
-                j = index[nxt] = len(terms)
-                terms.append(nxt)
-                parent.append((s, inputs))
-                queue.append(j)
-            row[inputs] = (j, actions | K.PAUSED << code_shift)
+            row[inputs] = (terms.add(nxt), actions | K.PAUSED << code_shift)
         relevant.append(rel)
         table.append(row)
         active.append(act)
-    n = len(terms)
+    n = len(terms.items)
     table = [{k: (n if j == ended else j, a) for k, (j, a) in row.items()} for row in table]
-    phase = [*(MAIN for _ in terms), END]
-    where = [*(describe_state(p, Top(MAIN, t)) for t in terms), "ended"]
+    phase = [*(MAIN for _ in terms.items), END]
+    where = [*(describe_state(p, Top(MAIN, t)) for t in terms.items), "ended"]
     a = automaton_of(p, layout, classes, [*relevant, 0], [*table, {0: (n, 0)}], [*active, ()], phase, where)
     return a, frozenset(codes)
 
@@ -361,6 +350,27 @@ def _combinations(p: Program, act: tuple[int, ...], rel: int, reps: list[int]) -
     except OverflowError as e:
         msg = f"a state of a branch reacts to {e.args[0]} input combinations: too many tasks active at once"
         raise MissionError(p.file, 1, 1, msg, p.text) from None
+
+
+class _States(Generic[S]):
+    """Explored states, numbered in the order found; each new one queued for exploration."""
+
+    def __init__(self, p: Program, what: str, max_states: int) -> None:
+        self.p, self.what, self.max_states = p, what, max_states
+        self.index: dict[S, int] = {}
+        self.items: list[S] = []
+        self.queue: deque[int] = deque()
+
+    def add(self, x: S) -> int:
+        i = self.index.get(x)
+        if i is None:
+            if len(self.items) >= self.max_states:
+                msg = f"{self.what} exceeds {self.max_states} states"
+                raise MissionError(self.p.file, 1, 1, msg, self.p.text)
+            i = self.index[x] = len(self.items)
+            self.items.append(x)
+            self.queue.append(i)
+        return i
 
 
 class _ContextReactor(Reactor):
@@ -466,32 +476,14 @@ def _compile_context(
     hole_reps = [rep for _, rep in classes]
     hole_events = sum(bits for bits, _ in classes)
     reactor = _ContextReactor(q, layout, flags)
-    index: dict[Top, int] = {}
-    states: list[Top] = []
-    parent: list[tuple[int, int]] = []
+    states = _States[Top](q, "the context's automaton", max_states)
+    states.add(Top(MAIN, q.main))
     relevant, table, active = [], [], []
-
-    def add(top: Top, via: tuple[int, int]) -> int:
-        i = index.get(top)
-        if i is None:
-            if len(states) >= max_states:
-                msg = f"the context's automaton exceeds {max_states} states"
-                raise MissionError(q.file, 1, 1, msg, q.text)
-            i = index[top] = len(states)
-            states.append(top)
-            parent.append(via)
-            queue.append(i)
-        return i
-
-    queue: deque[int] = deque()
-    add(Top(MAIN, q.main), (-1, 0))
-    while queue:
-        s = queue.popleft()
-        top = states[s]
+    while states.queue:
+        s = states.queue.popleft()
+        top = states.items[s]
         act = tuple(sorted(K.active_tasks(top.term, [])))
-        possible = q.operator_mask
-        for t in act:
-            possible |= q.event_masks[t]
+        possible = possible_inputs(q, act)
         ins, internal = reactor.mentions(top)
         hole = top.phase == MAIN and _has_hole(top.term)
         # where the par is, its tasks' events count by class (`hole_classes`); elsewhere (the safe
@@ -512,13 +504,13 @@ def _compile_context(
                 nxt, actions = reactor.react(top, real, internal)
             except (K.InstantaneousLoopError, _CausalityError):
                 continue  # as in a branch (the par's codes here include some it may never give)
-            row[inputs] = (add(nxt, (s, real)), actions)
+            row[inputs] = (states.add(nxt), actions)
         relevant.append(rel)
         table.append(row)
         active.append(act)
-    phase = [t.phase for t in states]
-    where = [describe_state(q, t) for t in states]
+    phase = [t.phase for t in states.items]
+    where = [describe_state(q, t) for t in states.items]
     automaton = automaton_of(q, layout, ev_classes, relevant, table, active, phase, where)
-    alive = tuple(t.phase == MAIN and _hole_alive(t.term) for t in states)
-    present = tuple(t.phase == MAIN and _has_hole(t.term) for t in states)
+    alive = tuple(t.phase == MAIN and _hole_alive(t.term) for t in states.items)
+    present = tuple(t.phase == MAIN and _has_hole(t.term) for t in states.items)
     return automaton, alive, present
