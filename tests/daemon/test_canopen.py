@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -23,14 +25,21 @@ from tests.daemon.conftest import Daemon, start_daemon_with
 MISSION = str(Path(__file__).resolve().parent / "missions/canopen.mission")
 
 
-@pytest.fixture
-def rig_daemon(tmp_path: Path) -> Iterator[tuple[Rig, Daemon]]:
-    with canopen_rig(tmp_path) as rig:
-        d = start_daemon_with(tmp_path, rig.config)
+@contextmanager
+def rig_and_daemon(tmp_path: Path, **rig: Any) -> Iterator[tuple[Rig, Daemon]]:
+    """A CANopen rig (`canopen_rig`'s options) and a daemon on it; both stopped at the end."""
+    with canopen_rig(tmp_path, **rig) as r:
+        d = start_daemon_with(tmp_path, r.config)
         try:
-            yield rig, d
+            yield r, d
         finally:
             d.stop()
+
+
+@pytest.fixture
+def rig_daemon(tmp_path: Path) -> Iterator[tuple[Rig, Daemon]]:
+    with rig_and_daemon(tmp_path) as rd:
+        yield rd
 
 
 def test_a_mission_with_csp_and_cst_motions_completes(rig_daemon: tuple[Rig, Daemon]) -> None:

@@ -9,20 +9,17 @@ from pathlib import Path
 
 import pytest
 
-from tests.canopen_rig import CANOPEN_2BUS, Rig, canopen_rig
-from tests.daemon.conftest import Daemon, start_daemon_with
+from tests.canopen_rig import CANOPEN_2BUS, Rig
+from tests.daemon.conftest import Daemon
+from tests.daemon.test_canopen import rig_and_daemon
 
 MISSION = str(Path(__file__).resolve().parent / "missions/canopen.mission")
 
 
 @pytest.fixture
 def rig_daemon(tmp_path: Path) -> Iterator[tuple[Rig, Daemon]]:
-    with canopen_rig(tmp_path, robot=CANOPEN_2BUS) as rig:
-        d = start_daemon_with(tmp_path, rig.config)
-        try:
-            yield rig, d
-        finally:
-            d.stop()
+    with rig_and_daemon(tmp_path, robot=CANOPEN_2BUS) as rd:
+        yield rd
 
 
 def test_a_mission_with_csp_and_cst_motions_completes_on_two_buses(rig_daemon: tuple[Rig, Daemon]) -> None:

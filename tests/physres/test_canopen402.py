@@ -6,6 +6,7 @@ from __future__ import annotations
 import functools
 import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import can
@@ -46,8 +47,9 @@ def new_arm(rig: Rig) -> Canopen402Arm:
     return res
 
 
-@pytest.fixture
-def arm(rig: Rig) -> Iterator[Canopen402Arm]:
+@contextmanager
+def active_arm(rig: Rig) -> Iterator[Canopen402Arm]:
+    """The rig's arm configured and active in position mode; shut down at the end."""
     res = new_arm(rig)
     try:
         res.configure()
@@ -56,6 +58,12 @@ def arm(rig: Rig) -> Iterator[Canopen402Arm]:
     finally:
         if res.lifecycle.name != "FINALIZED":
             res.shutdown()
+
+
+@pytest.fixture
+def arm(rig: Rig) -> Iterator[Canopen402Arm]:
+    with active_arm(rig) as res:
+        yield res
 
 
 def run(arm: Canopen402Arm, seconds: float, command: Callable[[float], np.ndarray] | None = None) -> int:

@@ -12,10 +12,9 @@ import pytest
 
 from orccadd.drivers.canopen.cia402 import State
 from orccadd.physres.canopen402 import Canopen402Arm
-from orccadd.robot import create_resource, load_robot_config
-from orccadd.types import CommandMode, Status
+from orccadd.types import Status
 from tests.canopen_rig import CANOPEN_2BUS, COB_SYNC, BusRecorder, Rig, canopen_rig
-from tests.physres.test_canopen402 import run, wait_for
+from tests.physres.test_canopen402 import active_arm, run, wait_for
 
 WRISTS = slice(3, 6)  # on can1
 
@@ -29,15 +28,8 @@ def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Rig]:
 
 @pytest.fixture
 def arm(rig: Rig) -> Iterator[Canopen402Arm]:
-    res = create_resource(load_robot_config(rig.config))
-    assert isinstance(res, Canopen402Arm)
-    try:
-        res.configure()
-        res.activate(CommandMode.POSITION)
+    with active_arm(rig) as res:
         yield res
-    finally:
-        if res.lifecycle.name != "FINALIZED":
-            res.shutdown()
 
 
 def test_two_buses_start_hold_and_move_in_csp(rig: Rig, arm: Canopen402Arm) -> None:
