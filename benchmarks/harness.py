@@ -61,8 +61,10 @@ def config_with(config: Path, tmp: Path, daemon_lines: str) -> Path:
     """A copy of `config` in `tmp` with lines added to its [daemon] table (its relative paths
     made absolute, so they still name the shipped files)."""
     text = config.read_text().replace('"../', f'"{config.parent.parent}/')
-    if "hold_task" not in text:  # the default is relative to the config too
+    if "hold_task" not in text:  # the defaults are relative to the config too
         daemon_lines += f'\nhold_task = "{config.parent.parent}/tasks/hold.toml"'
+    if "task_dirs" not in text:
+        daemon_lines += f'\ntask_dirs = ["{config.parent.parent}/tasks"]'
     text = text.replace("\n[daemon]\n", f"\n[daemon]\n{daemon_lines}\n", 1)
     out = tmp / config.name
     out.write_text(text)

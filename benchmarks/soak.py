@@ -1002,9 +1002,11 @@ def config_at_500hz(robot: str, mission: Path) -> Path:
     text = path.read_text()
     text = re.sub(r"(?m)^control_period_s\s*=.*$", f"control_period_s = {PERIOD_S}", text)
     text = re.sub(r'"(\.\.?/[^"]*)"', lambda m: f'"{(path.parent / m.group(1)).resolve()}"', text)
-    text = re.sub(r"(?m)^(hold_task|mission_dirs)\s*=.*$", "", text)
+    text = re.sub(r"(?m)^(hold_task|mission_dirs|task_dirs)\s*=.*$", "", text)
     dirs_toml = ", ".join(f'"{x}"' for x in [*dirs, mission.resolve().parent])
+    tasks_toml = ", ".join(f'"{cfg.resolve(x)}"' for x in cfg.daemon.task_dirs)
     daemon = f'hold_task = "{cfg.resolve(cfg.daemon.hold_task)}"\nmission_dirs = [{dirs_toml}]\n'
+    daemon += f"task_dirs = [{tasks_toml}]\n"
     text = (
         text.replace("\n[daemon]\n", f"\n[daemon]\n{daemon}")
         if "\n[daemon]\n" in text

@@ -11,7 +11,6 @@ loop) is reported, reset and run once more, as an operator would.
 from __future__ import annotations
 
 import argparse
-import shutil
 import signal
 import subprocess
 import sys
@@ -22,7 +21,7 @@ from typing import Any
 
 from orccadd.ctl.client import Client, ClientError
 from orccadd.ctl.format import format_trace
-from orccadd.ctl.online import format_status
+from orccadd.ctl.online import copy_to, format_status
 from orccadd.ctl.plot import plot_csv
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -102,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
                 signals=["q", "dq", "tau", "cmd", "wake_us", "compute_us"],
                 name=f"demo-{time.strftime('%Y%m%d-%H%M%S')}.csv",
             )
-            print(f"$ orccadctl log start -o {csv}")
+            print("$ orccadctl log start q dq tau cmd wake_us compute_us")
             tuned = [False]
             seen, s = run_mission(c, 0, tuned)
             if s["result"] != "success":
@@ -118,7 +117,8 @@ def main(argv: list[str] | None = None) -> int:
                 seen, s = run_mission(c, seen, tuned)
             time.sleep(0.3)
             info = c.call("log", action="stop")
-            shutil.copyfile(info["file"], csv)  # the daemon writes into its own log directory
+            copy_to(Path(info["file"]), csv)  # the daemon writes into its own log directory
+            print(f"$ orccadctl log stop -o {csv}")
             print(f"log: {csv}: {info['rows']} rows at full rate, {info['lost']} lost")
             print(format_status(c.call("status")))
             png = out / "demo.png"

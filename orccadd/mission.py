@@ -9,24 +9,65 @@ from a task file): the `Report`, whose failures the caller refuses with their co
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
-from orccadd.automaton import Automaton, Report, compile_file, verify
+from orccadd.automaton import Automaton, Report, compile_file, compile_text, verify
 from orccadd.automaton import ast as A
 from orccadd.automaton.compiler import DEFAULT_MAX_STATES, Progress
 from orccadd.automaton.verify import CheckResult
-from orccadd.errors import MissionError, OrccaddError, ParameterError
+from orccadd.config.robot import MAX_TOML_BYTES
+from orccadd.confine import Confinement
+from orccadd.errors import ConfigError, MissionError, OrccaddError, ParameterError
 from orccadd.physres.base import PhysicalResource
 from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
-from orccadd.task.spec import read_task_interface
+from orccadd.task.spec import TaskSpec, interface_of, parse_task_text
+from orccadd.types import TaskInterface
+
+
+class TaskFiles:
+    """The task files a mission names, each read once: its interface for the compiler
+    (`interface`, a `TaskFileReader`), its spec for building the task (`spec`). With a
+    `Confinement`, only files inside its directories are read, each by a checked descriptor
+    (the daemon's `load`); without, any file the caller may read (`orccadctl check`)."""
+
+    def __init__(self, confinement: Confinement | None = None) -> None:
+        self.confinement = confinement
+        self.specs: dict[str, TaskSpec] = {}
+
+    def spec(self, path: Path) -> TaskSpec:
+        key = str(path)
+        if key not in self.specs:
+            if self.confinement is None:
+                self.specs[key] = load_task_file(path)
+            else:
+                try:
+                    data, _ = self.confinement.read(path, MAX_TOML_BYTES)
+                except OrccaddError as e:
+                    raise ConfigError(key, "", str(e).removeprefix(f"{key}: ")) from None
+                self.specs[key] = parse_task_text(data, key)
+        return self.specs[key]
+
+    def interface(self, path: Path) -> TaskInterface:
+        return interface_of(self.spec(path))
 
 
 def check_mission(
-    path: str | Path, max_states: int = DEFAULT_MAX_STATES, progress: Progress | None = None
+    path: str | Path,
+    max_states: int = DEFAULT_MAX_STATES,
+    progress: Progress | None = None,
+    text: str | None = None,
+    task_files: TaskFiles | None = None,
 ) -> tuple[Automaton, Report]:
-    """The compiled mission and its verification report; `MissionError` if it does not compile."""
-    automaton = compile_file(path, max_states, read_task_interface, progress)
+    """The compiled mission and its verification report; `MissionError` if it does not compile.
+    `text`: the mission's content, already read from `path` (the daemon reads it by descriptor);
+    `task_files`: how its task files are read (default: any file, by path)."""
+    files = task_files or TaskFiles()
+    if text is None:
+        automaton = compile_file(path, max_states, files.interface, progress)
+    else:
+        automaton = compile_text(text, str(path), max_states, files.interface, progress)
     report = verify(automaton, one_task_at_a_time=True)
     report.results.append(_check_task_files(automaton))
     return automaton, report
@@ -43,12 +84,17 @@ def _check_task_files(automaton: Automaton) -> CheckResult:
 
 
 def build_mission_tasks(
-    automaton: Automaton, resource: PhysicalResource, registry: EventRegistry, queue: EventQueue
+    automaton: Automaton,
+    resource: PhysicalResource,
+    registry: EventRegistry,
+    queue: EventQueue,
+    task_spec: Callable[[Path], TaskSpec] = load_task_file,
 ) -> tuple[tuple[RobotTask, ...], dict[int, int]]:
     """Every task of a compiled mission built for this robot's resource (modules instantiated,
     ports bound, the mission's `set` lines applied), and event registry id → the automaton's
     input bit. `MissionError` at the task's or `set` line's place, `OrccaddError` otherwise.
-    Needs no hardware: the resource is built, not configured. Not for a tick."""
+    `task_spec` gives a task file's spec (default: read it; the daemon: the specs its compiler
+    read). Needs no hardware: the resource is built, not configured. Not for a tick."""
     p = automaton.program
     text = p.text
     for decl in p.ast.tasks:
@@ -58,7 +104,7 @@ def build_mission_tasks(
                 text,
                 f"task {decl.name} runs on `{decl.resource}`, but this robot's resource is `{resource.name}`",
             )
-    tasks = tuple(_build(decl, p.file, text, resource, registry, queue) for decl in p.ast.tasks)
+    tasks = tuple(_build(decl, p.file, text, resource, registry, queue, task_spec) for decl in p.ast.tasks)
     bits: dict[int, int] = {}
     for i, name in enumerate(p.inputs):
         if p.input_task[i] < 0:
@@ -83,11 +129,12 @@ def _build(
     resource: PhysicalResource,
     registry: EventRegistry,
     queue: EventQueue,
+    task_spec: Callable[[Path], TaskSpec],
 ) -> RobotTask:
     src = Path(decl.source)
     if not src.is_absolute():
         src = Path(file).parent / src
-    spec = load_task_file(src)
+    spec = task_spec(src)
     spec = replace(spec, task=replace(spec.task, name=decl.name))
     try:
         task = build_task(spec, resource, registry, queue)

@@ -104,7 +104,10 @@ def rig_config(
     text = re.sub(r"missed_tpdo_periods = \d+", f"missed_tpdo_periods = {round(0.3 / period_s)}", text)
     text = text.replace("[resource.settings]\n", f"[resource.settings]\n{settings_extra}\n")
     dirs = ", ".join(f'"{d}"' for d in (ROOT / "configs/missions", ROOT / "tests/daemon/missions", tmp))
-    text = text.replace("[daemon]\n", f"[daemon]\nmission_dirs = [{dirs}]\n{extra}\n")
+    tasks = ROOT / "configs/tasks"
+    text = text.replace(
+        "[daemon]\n", f'[daemon]\nmission_dirs = [{dirs}]\ntask_dirs = ["{tasks}"]\n{extra}\n'
+    )
     path = tmp / "canopen-robot.toml"
     path.write_text(text)
     return path

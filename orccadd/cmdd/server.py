@@ -32,6 +32,7 @@ from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.wire.commands import (
     COMMANDS,
     MAX_LINE,
+    URGENT_COMMANDS,
     Dispatcher,
     ProtocolError,
     Role,
@@ -53,6 +54,10 @@ GONE_CHECK_S = 0.25  # how soon a stream notices its client has gone
 
 ROLELESS_MAX = 8  # peers without a role waited for at once (each gets one refusal)
 ROLELESS_WAIT_S = 2.0
+# beyond `control_clients`, a control peer may still send one abort or stop: so many are waited
+# for at once (a newer one closes the oldest), each for its first line this long
+RESERVED_MAX = 4
+RESERVED_WAIT_S = 2.0
 RT_TIMEOUT_S = 5.0
 LOAD_TIMEOUT_S = 600.0
 # a reset's device work (a protective stop's unlock and script restart, a reconnection to a
@@ -138,7 +143,6 @@ class CommandDaemon:
         self.socket_path = socket_path
         self.log_dir = log_dir or Path(socket_path).parent / "logs"
         self.logs = LogDir(self.log_dir, cfg.socket_group)
-        self.log_dest = ""
         self.urdf = urdf  # attached to each log's MCAP
         self.rt = RtLink(rt_path)
         self.tel = TelemetryBlock.attach(telemetry)
@@ -148,6 +152,7 @@ class CommandDaemon:
         self.missions: dict[int, dict[str, Any]] = {}  # generation → mission: names the trace
         self.slots = {Role.CONTROL: 0, Role.READ: 0}  # connections served, per role
         self.roleless = 0
+        self.reserved: list[asyncio.StreamWriter] = []  # control peers beyond the limit, oldest first
         self.recording: TelemetryLog | None = None
         self.last_log: dict[str, Any] | None = None
         self.server: asyncio.AbstractServer | None = None
@@ -243,6 +248,9 @@ class CommandDaemon:
                 await self._refuse_roleless(reader, writer, uid)
                 return
             limit = self.cfg.control_clients if role is Role.CONTROL else self.cfg.read_clients
+            if self.slots[role] >= limit and role is Role.CONTROL:
+                await self._serve_reserved(reader, writer, uid, limit)
+                return
             if self.slots[role] >= limit:
                 writer.write(
                     encode(error_reply(None, f"too many clients with the {role} role (max {limit})"))
@@ -287,6 +295,37 @@ class CommandDaemon:
                 await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
                 return  # the stream cannot be resynchronised: close
             await self._request(line, role, uid, writer)
+
+    async def _serve_reserved(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, uid: int, limit: int
+    ) -> None:
+        """Every control place is taken (by busy or idle clients, or by someone holding them):
+        an abort or a stop is still served, on this one connection, then it is closed; any other
+        request is refused. At most `RESERVED_MAX` such peers are waited for at once, for
+        `RESERVED_WAIT_S` each; a newer one closes the oldest, so they cannot be held either."""
+        if len(self.reserved) >= RESERVED_MAX:
+            self.reserved.pop(0).transport.abort()
+        self.reserved.append(writer)
+        rid: Any = None
+        cmd = ""
+        try:
+            line = await asyncio.wait_for(reader.readuntil(b"\n"), RESERVED_WAIT_S)
+            rid, cmd, _ = parse_request(line)
+        except (asyncio.IncompleteReadError, asyncio.LimitOverrunError, TimeoutError, ConnectionError):
+            line = b""
+        except ProtocolError as e:
+            rid = e.rid
+        finally:
+            if writer in self.reserved:
+                self.reserved.remove(writer)
+        if writer.transport.is_closing():
+            return
+        if cmd in URGENT_COMMANDS:
+            await self._request(line, Role.CONTROL, uid, writer)
+            return
+        why = f"too many clients with the control role (max {limit}; beyond that only abort and stop)"
+        writer.write(encode(error_reply(rid, why)))
+        await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
 
     async def _refuse_roleless(
         self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, uid: int
@@ -452,7 +491,6 @@ class CommandDaemon:
         action: str,
         signals: list[Any] | None,
         name: str,
-        dest: str,
     ) -> dict[str, Any]:
         if action == "start":
             if self.recording is not None:
@@ -462,14 +500,13 @@ class CommandDaemon:
                 [str(s) for s in signals or ["q", "dq", "tau", "cmd"]], self.desc["joints"]
             )
             name = name or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv"
-            extra = {"dest": dest, "rt_pid": int(self.tel.header[H.PID])}
+            extra = {"rt_pid": int(self.tel.header[H.PID])}
             rec = TelemetryLog.start(
                 self.logs, self.tel, name, sel, lambda: self.desc, self.decode_trace, self.urdf, extra
             )
             self.recording = rec
-            self.log_dest = dest
             self.logs.save_state(rec.state)
-            return {**rec.describe(), "dest": dest}
+            return rec.describe()
         if self.recording is None:
             raise ValueError("log: not logging")
         try:
@@ -481,7 +518,7 @@ class CommandDaemon:
     def _end_log(self, summary: dict[str, Any]) -> None:
         if "error" in summary:
             log.error("%s: %s", summary["file"], summary["error"])
-        self.last_log = {**summary, "dest": self.log_dest}
+        self.last_log = summary
         self.recording = None
         self.logs.clear_state()
 
@@ -507,7 +544,6 @@ class CommandDaemon:
             self.logs.save_state(rec.state)  # its new MCAP part
         except (OSError, SocketPathError) as e:
             log.error("log %s: cannot update the state file: %s", rec.path, e)
-        self.log_dest = str(state.get("dest", ""))
         log.info("carrying on log %s after %d rows; %s", rec.path, rec.csv.rows, "; ".join(rec.notes))
 
 

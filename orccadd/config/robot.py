@@ -94,6 +94,8 @@ class DaemonConfig:
     # `load` reads missions from these directories only (relative to this file): a client may not
     # make the root daemon read, or echo a line of, any other file
     mission_dirs: tuple[str, ...] = field(default=("../missions",))
+    # and the task files a mission names (`from "file.toml"`) from these, or from `mission_dirs`
+    task_dirs: tuple[str, ...] = field(default=("../tasks",))
     # full-rate CSV logs go here, created by the command daemon (never a path a client names);
     # "": `logs/` in the socket's directory
     log_dir: str = field(default="")
@@ -166,21 +168,28 @@ def read_toml(path: Path) -> dict[str, Any]:
     try:
         with path.open("rb") as fh:
             data = fh.read(MAX_TOML_BYTES + 1)
-        if len(data) > MAX_TOML_BYTES:
-            raise ConfigError(str(path), "", f"is larger than {MAX_TOML_BYTES} bytes: not a config")
-        return tomllib.loads(data.decode("utf-8"))
-    except RecursionError:
-        raise ConfigError(str(path), "", "nests arrays or tables too deeply to be read") from None
     except FileNotFoundError:
         raise ConfigError(str(path), "", "file not found") from None
-    except UnicodeDecodeError as e:
-        raise ConfigError(
-            str(path), "", f"is not UTF-8 text, so not TOML ({e.reason} at byte {e.start})"
-        ) from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(str(path), "", f"is not valid TOML: {e}") from None
     except OSError as e:
         raise ConfigError(str(path), "", f"cannot be read: {e.strerror}") from None
+    return parse_toml(data, str(path))
+
+
+def parse_toml(data: bytes, source: str) -> dict[str, Any]:
+    """TOML text read from `source` (a file's name, for errors) as a table; `ConfigError` if it
+    is too large, not UTF-8 or not TOML."""
+    if len(data) > MAX_TOML_BYTES:
+        raise ConfigError(source, "", f"is larger than {MAX_TOML_BYTES} bytes: not a config")
+    try:
+        return tomllib.loads(data.decode("utf-8"))
+    except RecursionError:
+        raise ConfigError(source, "", "nests arrays or tables too deeply to be read") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(
+            source, "", f"is not UTF-8 text, so not TOML ({e.reason} at byte {e.start})"
+        ) from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(source, "", f"is not valid TOML: {e}") from None
 
 
 def read_robot_config(path: str | Path) -> RobotConfig:

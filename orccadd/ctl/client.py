@@ -46,20 +46,39 @@ class Client:
 
     def send_raw(self, data: bytes) -> dict[str, Any]:
         """Send bytes as they are; read one reply line (for protocol tests)."""
-        self.sock.sendall(data)
+        self._sendall(data)
         return self._line()
 
     def _line(self) -> dict[str, Any]:
-        line = self.file.readline()
+        try:
+            line = self.file.readline()
+        except ConnectionError as e:  # reset: never taken for our own stdout closing
+            raise ClientError(f"orccadd at {self.path} dropped the connection: {e.strerror or e}") from None
         if not line:
             raise ClientError("orccadd closed the connection")
         reply: dict[str, Any] = json.loads(line)
         return reply
 
+    def _sendall(self, data: bytes) -> None:
+        """Send a request; if the daemon has closed the connection first (a refusal: too many
+        clients, no role), `ClientError` with its words, else with the reason: a request that
+        was not delivered is always an error, never taken for our own stdout closing."""
+        try:
+            self.sock.sendall(data)
+        except ConnectionError as e:
+            why = f"the request was not delivered to orccadd at {self.path}: {e.strerror or e}"
+            try:
+                self.sock.settimeout(0.5)
+                line = self.file.readline()  # the refusal it sent before closing, if any
+                refusal = json.loads(line).get("error") if line else None
+            except (OSError, ValueError, AttributeError):
+                refusal = None
+            raise ClientError(f"{refusal} (not delivered)" if refusal else why) from None
+
     def _send(self, cmd: str, args: dict[str, Any]) -> int:
         self.next_id += 1
         msg = {"id": self.next_id, "cmd": cmd, "args": args, "protocol": PROTOCOL_VERSION}
-        self.sock.sendall((json.dumps(msg) + "\n").encode())
+        self._sendall((json.dumps(msg) + "\n").encode())
         return self.next_id
 
     def reply(self, cmd: str, **args: Any) -> dict[str, Any]:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import os
+import stat
 import sys
 import time
 from pathlib import Path
@@ -69,7 +71,13 @@ def add_parsers(sub: Any) -> None:
     p = add("log")
     p.add_argument("action", choices=COMMANDS["log"].arg("action").choices)
     p.add_argument("signals", nargs="*")
-    p.add_argument("-o", "--output", default="", help="start: also copy the CSV here at `log stop`")
+    p.add_argument("--name", default="", help="start: the log's file name in the daemon's log directory")
+    p.add_argument(
+        "-o",
+        "--output",
+        default="",
+        help="stop: copy the CSV (and its MCAP beside it) here, with your rights; a link there is refused",
+    )
     p = add("inject")
     p.add_argument("fault", choices=COMMANDS["inject"].arg("fault").choices)
     p.add_argument("--ticks", type=int, default=20)
@@ -105,10 +113,18 @@ def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     if cmd == "log":
         args: dict[str, Any] = {"action": a.action}
         if a.action == "start":
+            if a.output:
+                raise ClientError(
+                    "log start: -o is for `log stop -o FILE` (the copy is made there, with the rights "
+                    "of whoever stops the log); name the daemon's file with --name"
+                )
             args["signals"] = a.signals or ["q", "dq", "tau", "cmd"]
-            if a.output:  # the daemon writes into its own log directory; we copy it at `log stop`
-                args["name"] = Path(a.output).name
-                args["dest"] = str(Path(a.output).resolve())
+            if a.name:  # the daemon writes into its own log directory; `log stop -o` copies it
+                args["name"] = a.name
+        elif a.name:
+            raise ClientError("log stop: --name is for `log start`")
+        elif a.signals:
+            raise ClientError(f"log stop: takes no signals (got {' '.join(a.signals)[:80]})")
         return cmd, args
     if cmd == "inject":
         return cmd, {"fault": a.fault, "ticks": a.ticks, "extra_ms": a.extra_ms}
@@ -119,14 +135,18 @@ def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
 
 def _urgent_reply(a: argparse.Namespace) -> dict[str, Any] | None:
     """`abort` and `stop` through the real-time process's own socket, when it is there (no
-    queue of other clients' requests in front of them); None: use the main socket."""
+    queue of other clients' requests in front of them); None: use the main socket. A refusal of
+    the connection itself (no place free, the peer's role) is not the command's answer: it comes
+    back without our request's id, and the main socket, which keeps a place for these two, is
+    tried next."""
     path = urgent_socket_path(a.socket or default_socket())
     if not os.path.exists(path):
         return None
     try:
-        with Client(path) as c:
-            return c.reply(a.online)
-    except (ClientError, OSError):
+        with Client(path, timeout_s=CALL_WAIT_S) as c:
+            r = c.reply(a.online)
+            return r if r.get("id") == c.next_id else None
+    except (ClientError, OSError, ValueError):
         return None
 
 
@@ -183,9 +203,9 @@ def _online(
 
 def _report(a: argparse.Namespace, r: dict[str, Any], context: dict[str, Any], args: dict[str, Any]) -> int:
     fetched = EXIT_OK
-    copied = a.online == "log" and a.action == "stop" and r.get("ok") and r["result"].get("dest")
+    copied = a.online == "log" and a.action == "stop" and r.get("ok") and bool(a.output)
     if copied:
-        fetched = _fetch_log(r["result"], quiet=a.json)
+        fetched = _fetch_log(r["result"], Path(a.output), quiet=a.json)
     if a.json:
         print(json.dumps(r, indent=1))
         return (EXIT_OK if r.get("ok") else EXIT_REFUSED) or fetched
@@ -197,27 +217,47 @@ def _report(a: argparse.Namespace, r: dict[str, Any], context: dict[str, Any], a
     return fetched
 
 
-def _fetch_log(info: dict[str, Any], quiet: bool) -> int:
+def _fetch_log(info: dict[str, Any], dest: Path, quiet: bool) -> int:
     """Copy the daemon's log (the CSV, and its MCAP parts beside it: run.mcap, run-2.mcap, ...)
-    to where `log start -o` asked, with this user's rights."""
-    import shutil
-
-    dest = Path(info["dest"])
+    to `dest`, a path from this command's own line (never one the daemon stored or echoed), with
+    this user's rights, through no link at its end (`copy_to`)."""
     copies = [(Path(info["file"]), dest)]
     for part in info.get("mcap", []):  # run.mcap → DEST's name with .mcap (run-2.mcap → DEST-2.mcap)
         suffix = Path(part).stem.removeprefix(Path(info["file"]).stem)
         copies.append((Path(part), dest.with_name(f"{dest.stem}{suffix}.mcap")))
     for src, to in copies:
         try:
-            shutil.copyfile(src, to)
+            copy_to(src, to)
         except OSError as e:
-            why = f"log: {info['rows']} rows in {info['file']}; {src.name} not copied to {to}: {e}"
+            why = f"log: {info['rows']} rows in {info['file']}; {src.name} not copied to {to}: "
+            why += str(e.strerror or e)
             print(error_line(why), file=sys.stderr)
             return EXIT_ERROR
     if not quiet:
         also = "".join(f", {to}" for _, to in copies[1:])
         print(f"log: {info['rows']} rows ({info['lost']} lost) in {dest}{also} (kept in {info['file']})")
     return EXIT_OK
+
+
+def copy_to(src: Path, dest: Path) -> None:
+    """Copy `src` to `dest`: `dest` opened without following a link at its end (O_NOFOLLOW: a
+    link planted there is refused, ELOOP) and only if it is, or becomes, a regular file (a FIFO
+    or a device is refused without blocking); created 0644 less the umask, truncated if it is
+    an existing file of ours."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC | os.O_NOCTTY
+    with open(src, "rb") as fin:
+        fd = os.open(dest, flags, 0o644)
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                raise OSError(errno.EINVAL, "not a regular file")
+            os.set_blocking(fd, True)
+            os.ftruncate(fd, 0)
+            while chunk := fin.read(1 << 20):
+                view = memoryview(chunk)
+                while view:
+                    view = view[os.write(fd, view) :]
+        finally:
+            os.close(fd)
 
 
 def _stdout_gone() -> None:

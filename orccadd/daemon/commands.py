@@ -8,6 +8,7 @@ changed nothing.
 from __future__ import annotations
 
 import dataclasses
+import os
 import pickle
 import shutil
 import subprocess
@@ -19,6 +20,7 @@ from typing import Any, Protocol
 
 from orccadd.automaton import Automaton, Report
 from orccadd.config.robot import RobotConfig
+from orccadd.confine import Confinement, ConfinementError
 from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.mission import prepare_mission
 from orccadd.daemon.procedure import MissionControl
@@ -30,6 +32,7 @@ from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.mailbox import MailboxFullError
 from orccadd.task import RobotTask
 from orccadd.task.events import EventQueue, EventRegistry
+from orccadd.task.spec import TaskSpec
 from orccadd.wire.commands import handles
 from orccadd.wire.schema import PROTOCOL_VERSION, MachineState, OperatorAction, Trace
 
@@ -85,13 +88,28 @@ class RtCommands:
         mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
         if self._loading is not None:
             raise CommandError("a mission is being loaded: wait for its answer")
-        path = self._mission_path(path)
+        fd, path = self._open_mission(path)
         work = Path(tempfile.mkdtemp(prefix="orccadd-load-"))
         out = work / "result.pickle"
-        cmd = [sys.executable, "-m", "orccadd.daemon.compile_worker", path, str(out)]
-        child = subprocess.Popen(
-            cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, start_new_session=True
-        )
+        cfg = self.m.cfg
+        task_dirs = [str(cfg.resolve(d)) for d in (*cfg.daemon.task_dirs, *cfg.daemon.mission_dirs)]
+        cmd = [
+            sys.executable, "-m", "orccadd.daemon.compile_worker", "--fd", str(fd), "--name", path,
+            *(f"--task-dir={d}" for d in task_dirs), str(out),
+        ]  # fmt: skip
+        try:
+            child = subprocess.Popen(
+                cmd,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                start_new_session=True,
+                pass_fds=(fd,),
+            )
+        except OSError as e:
+            shutil.rmtree(work, ignore_errors=True)
+            raise CommandError(f"{path}: cannot start the compiler process: {e.strerror or e}") from None
+        finally:
+            os.close(fd)
         self._loading = child
 
         def done() -> None:
@@ -119,29 +137,27 @@ class RtCommands:
 
         return Pending(poll, time.monotonic_ns() + int(LOAD_TIMEOUT_S * 1e9), expire)
 
-    def _mission_path(self, path: str) -> str:
-        """`path` resolved, if it names a mission file inside one of the configured mission
-        directories; `CommandError` otherwise (saying where missions may be, never what is there)."""
+    def _open_mission(self, path: str) -> tuple[int, str]:
+        """A descriptor of the mission file `path` names and its real path, if it is a regular
+        file inside one of the configured mission directories (checked on the descriptor: no
+        link swapped in after the check, no FIFO); `CommandError` otherwise, saying where
+        missions may be, never what is elsewhere. The compiler reads that descriptor."""
         cfg = self.m.cfg
-        dirs = [cfg.resolve(d) for d in cfg.daemon.mission_dirs]
-        allowed = ", ".join(str(d) for d in dirs) or "none configured"
+        conf = Confinement(
+            [cfg.resolve(d) for d in cfg.daemon.mission_dirs], "mission file", "daemon.mission_dirs"
+        )
         try:
-            real = Path(path).resolve(strict=True)
-            inside = any(real.is_relative_to(d) for d in dirs)
-            if inside and real.is_file():
-                return str(real)
-        except (OSError, RuntimeError, ValueError):  # absent, too long, a link loop, a NUL, a surrogate
-            inside = False
-        shown = path[:300].encode("utf-8", "backslashreplace").decode()
-        if not inside:
-            raise CommandError(f"{shown}: missions are loaded from {allowed} only (daemon.mission_dirs)")
-        raise CommandError(f"{shown}: no such mission file")
+            return conf.open(path)
+        except ConfinementError as e:
+            raise CommandError(str(e)) from None
 
-    def _install(self, path: str, automaton: Automaton, report: Report) -> Result:
+    def _install(self, path: str, automaton: Automaton, report: Report, specs: dict[str, TaskSpec]) -> Result:
         mc = self.m.mission
         mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
         try:
-            loaded = prepare_mission(path, automaton, report, self.m.resource, self.m.registry, self.m.queue)
+            loaded = prepare_mission(
+                path, automaton, report, self.m.resource, self.m.registry, self.m.queue, specs
+            )
         except OrccaddError as e:
             raise CommandError(str(e)) from None
         mc.install(loaded)

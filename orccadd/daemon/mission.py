@@ -11,10 +11,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from orccadd.automaton import Automaton, Report
-from orccadd.errors import VerificationError
-from orccadd.mission import build_mission_tasks, check_mission
+from orccadd.errors import OrccaddError, VerificationError
+from orccadd.mission import TaskFiles, build_mission_tasks, check_mission
 from orccadd.physres.base import PhysicalResource
 from orccadd.task import EventQueue, EventRegistry, RobotTask
+from orccadd.task.spec import TaskSpec
 
 
 @dataclass(frozen=True)
@@ -56,12 +57,15 @@ def load_mission(
     return prepare_mission(path, automaton, report, resource, registry, queue)
 
 
-def compile_and_verify(path: str | Path) -> tuple[Automaton, Report]:
+def compile_and_verify(
+    path: str | Path, text: str | None = None, task_files: TaskFiles | None = None
+) -> tuple[Automaton, Report]:
     """The long, pure part of a load (parse, compile, verify): the real-time process runs it in
     a child process (`orccadd.daemon.compile_worker`), so that it never holds the control
     thread's interpreter lock. `VerificationError` with the counterexamples if a check fails.
-    The same checks as `orccadctl check` (`orccadd.mission.check_mission`)."""
-    automaton, report = check_mission(path)
+    The same checks as `orccadctl check` (`orccadd.mission.check_mission`). `text`: the
+    mission already read; `task_files`: how its task files are read (and kept)."""
+    automaton, report = check_mission(path, text=text, task_files=task_files)
     if not report.ok:
         raise VerificationError(f"{path}: the mission fails its checks:\n{report.format()}")
     return automaton, report
@@ -74,7 +78,19 @@ def prepare_mission(
     resource: PhysicalResource,
     registry: EventRegistry,
     queue: EventQueue,
+    specs: dict[str, TaskSpec] | None = None,
 ) -> LoadedMission:
-    """Check a verified mission against this robot and build its tasks (milliseconds)."""
-    tasks, bits = build_mission_tasks(automaton, resource, registry, queue)
+    """Check a verified mission against this robot and build its tasks (milliseconds). `specs`:
+    the task files as the compiler read them (path → spec), so the tasks built are the ones it
+    checked and no file is read again here; None: read them."""
+    if specs is None:
+        tasks, bits = build_mission_tasks(automaton, resource, registry, queue)
+    else:
+
+        def spec(p: Path) -> TaskSpec:
+            if str(p) not in specs:
+                raise OrccaddError(f"{p}: not among the task files the compiler read")
+            return specs[str(p)]
+
+        tasks, bits = build_mission_tasks(automaton, resource, registry, queue, spec)
     return LoadedMission(str(path), automaton, report, tasks, bits)

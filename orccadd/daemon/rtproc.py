@@ -44,7 +44,7 @@ from orccadd.runtime import enter_realtime, leave_realtime
 from orccadd.task import load_task_file
 from orccadd.task.loop import resource_clock
 from orccadd.types import CommandMode, Status
-from orccadd.wire.commands import COMMANDS, ProtocolError, check_args
+from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, ProtocolError, check_args
 from orccadd.wire.schema import H, Layout, MachineState, MissionResult, OperatorAction, Trace
 from orccadd.wire.socketdir import check_socket_path, prepare_socket_dir, urgent_socket_path
 from orccadd.wire.telemetry import TelemetryBlock
@@ -58,7 +58,7 @@ RESPAWN_DELAY_S = 1.0
 RESPAWN_MAX_S = 60.0
 RESPAWN_STABLE_S = 10.0  # a command daemon that lived this long had started fine
 GIL_SWITCH_INTERVAL_S = 0.0002
-URGENT = frozenset({"abort", "stop"})  # served on arrival, ahead of any queue, not waiting for slack
+URGENT = URGENT_COMMANDS  # served on arrival, ahead of any queue, not waiting for slack
 URGENT_MAX_BYTES = 4096  # an abort or a stop is a short message; longer ones are not looked into
 RECEIVE_MAX = 256  # messages read per wake-up (the command daemon has fewer in flight)
 SERVE_BUDGET_PERIODS = 0.3  # other requests served per slack; the rest at the next one

@@ -8,6 +8,12 @@ the next tick. It takes nothing else: one JSON line per request (`{"id": 1, "cmd
 one reply line, from a peer with the control role (SO_PEERCRED), a few connections at a time,
 each line at most `LINE_MAX` bytes; anything else gets one error line and the connection closed.
 `orccadctl abort` and `orccadctl stop` use it when it is there.
+
+Its few places cannot be held against an operator: a new connection when all are taken closes
+the one that has gone longest without a complete request (a peer that trickles a byte now and
+then keeps none), a request line begun must end within `LINE_WAIT_S`, and a connection without
+a request for `IDLE_S` is closed. `orccadctl` falls back to the main socket, which keeps places
+for abort and stop too, if this one refuses it.
 """
 
 from __future__ import annotations
@@ -22,15 +28,28 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from orccadd.wire.commands import Role
+from orccadd.wire.commands import URGENT_COMMANDS, Role
 from orccadd.wire.roles import RoleConfig, Roles, peer_credentials
 
 log = logging.getLogger("orccadd")
 
-URGENT_COMMANDS = frozenset({"abort", "stop"})
-LINE_MAX = 4096
+LINE_MAX = 4096  # bytes of one request line, its newline not counted
 CLIENTS_MAX = 8
-IDLE_S = 10.0
+IDLE_S = 10.0  # a connection without a complete request for this long is closed
+LINE_WAIT_S = 1.0  # a request line, once begun, is complete within this or the connection closed
+
+
+class _Conn:
+    """One connection: its socket, the line being read, and when it last completed a request
+    (or connected) and began the current line (monotonic s; 0: no line begun)."""
+
+    __slots__ = ("begun_s", "buf", "since_s", "sock")
+
+    def __init__(self, sock: socket.socket, now_s: float) -> None:
+        self.sock = sock
+        self.buf = bytearray()
+        self.since_s = now_s
+        self.begun_s = 0.0
 
 
 class UrgentSocket:
@@ -55,7 +74,7 @@ class UrgentSocket:
             os.chown(path, -1, gid)
         s.listen(CLIENTS_MAX)
         self.listener = s
-        self.clients: dict[int, tuple[socket.socket, bytearray, float]] = {}
+        self.clients: dict[int, _Conn] = {}
 
     def fds(self) -> list[int]:
         return [self.listener.fileno(), *self.clients]
@@ -67,10 +86,13 @@ class UrgentSocket:
             self._read(fd)
 
     def expire(self) -> None:
-        """Close connections idle for `IDLE_S` (called now and then)."""
+        """Close connections idle for `IDLE_S`, or slower than `LINE_WAIT_S` to finish a line
+        (called now and then)."""
         now = time.monotonic()
-        for fd, (_, _, since) in list(self.clients.items()):
-            if now - since > IDLE_S:
+        for fd, c in list(self.clients.items()):
+            if c.begun_s and now - c.begun_s > LINE_WAIT_S:
+                self._close(fd, f"request line not completed within {LINE_WAIT_S:g} s")
+            elif now - c.since_s > IDLE_S:
                 self._close(fd)
 
     def close(self) -> None:
@@ -90,15 +112,16 @@ class UrgentSocket:
         if self.roles.role(uid, gid) is not Role.CONTROL:
             self._refuse(conn, None, "not authorised: abort and stop need the control role")
             return
-        if len(self.clients) >= CLIENTS_MAX:
-            self._refuse(conn, None, f"too many connections on the urgent socket (max {CLIENTS_MAX})")
-            return
-        self.clients[conn.fileno()] = (conn, bytearray(), time.monotonic())
+        if len(self.clients) >= CLIENTS_MAX:  # the longest without a request makes way
+            oldest = min(self.clients, key=lambda fd: self.clients[fd].since_s)
+            self._close(oldest, f"closed to make way for a newer connection (max {CLIENTS_MAX})")
+        self.clients[conn.fileno()] = _Conn(conn, time.monotonic())
+        self._read(conn.fileno())  # the request usually came with the connection
 
     def _read(self, fd: int) -> None:
-        conn, buf, _ = self.clients[fd]
+        c = self.clients[fd]
         try:
-            data = conn.recv(LINE_MAX)
+            data = c.sock.recv(LINE_MAX + 1)
         except (BlockingIOError, InterruptedError):
             return
         except OSError:
@@ -106,12 +129,18 @@ class UrgentSocket:
         if not data:
             self._close(fd)
             return
+        buf = c.buf
+        if not buf:
+            c.begun_s = time.monotonic()
         buf += data
-        self.clients[fd] = (conn, buf, time.monotonic())
         while (end := buf.find(b"\n")) >= 0:
+            if end > LINE_MAX:
+                break
             line = bytes(buf[:end])
             del buf[: end + 1]
-            self._answer(fd, conn, line)
+            c.since_s = time.monotonic()
+            c.begun_s = c.since_s if buf else 0.0
+            self._answer(fd, c.sock, line)
             if fd not in self.clients:
                 return
         if len(buf) > LINE_MAX:
@@ -138,10 +167,14 @@ class UrgentSocket:
 
     def _refuse(self, conn: socket.socket, rid: Any, error: str) -> None:
         self._send(conn, {"id": rid, "ok": False, "error": error})
+        with contextlib.suppress(OSError):  # what it sent unread would turn the close into a reset
+            for _ in range(16):
+                if not conn.recv(LINE_MAX):
+                    break
         conn.close()
 
     def _close(self, fd: int, error: str = "", rid: Any = None) -> None:
-        conn, _, _ = self.clients.pop(fd)
+        conn = self.clients.pop(fd).sock
         if error:
             self._refuse(conn, rid, error)
         else:

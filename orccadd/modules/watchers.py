@@ -71,7 +71,9 @@ class JointLimitWatch(Watcher):
         self.q = self.add_input("q", (n,), "rad")
         self.dq = self.add_input("dq", (n,), "rad/s")
         self.margin = self.add_parameter("margin_rad", 0.05, bounds=(0.0, 1.0), unit="rad", tunable=True)
-        self.vfrac = self.add_parameter("velocity_fraction", 0.95, bounds=(0.01, 1.5), unit="1", tunable=True)
+        # at most 1: beyond max_velocity the resource acts itself (its velocity guard cuts torques,
+        # position and velocity commands are clamped, a measured excess is a type 3 LimitViolation)
+        self.vfrac = self.add_parameter("velocity_fraction", 0.95, bounds=(0.01, 1.0), unit="1", tunable=True)
         self._lo, self._hi, self._vmax = m.q_min_rad, m.q_max_rad, m.v_max_rad_s
         # the bounds that fire, as lists (set from the parameters)
         self._q_lo: list[float] = []

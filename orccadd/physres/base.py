@@ -24,6 +24,7 @@ from orccadd.config.robot import RobotConfig
 from orccadd.errors import LifecycleError, ResourceError
 from orccadd.model import RobotModel
 from orccadd.physres.description import ResourceDescription
+from orccadd.physres.guard import VelocityGuard
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CMD_CLAMPED, LIMIT_VIOLATION, CommandMode, Lifecycle, Status
 from orccadd.vec import clamped, outside
@@ -83,6 +84,9 @@ class PhysicalResource(ABC):
         step_max = model.v_max_rad_s * config.control_period_s * config.limits.velocity_tolerance
         self._step_max: list[float] = step_max.tolist()
         self._stop_flags = 0
+        # torque commands that would carry a joint past max_velocity are cut before the device
+        torque = CommandMode.TORQUE in self.supported_modes
+        self._velocity_guard = VelocityGuard(model, config.control_period_s) if torque else None
         self.clamp_count = 0
         self.rejected_count = 0  # commands with a NaN or an infinity, never sent
 
@@ -214,7 +218,8 @@ class PhysicalResource(ABC):
     def write(self, t_s: float, command: FloatArray) -> int:
         """Send one command in the active mode (tick). Returns the `Status` flags.
 
-        Torques are clamped to max_torque_nm (CMD_CLAMPED). Position and velocity commands
+        Torques are clamped to max_torque_nm, and cut where they would carry a joint past its
+        max_velocity within two periods (`guard.VelocityGuard`; CMD_CLAMPED). Position and velocity commands
         outside the limits, or position steps faster than max_velocity, are clamped and also
         flagged LIMIT_VIOLATION (a type 3 exception for the task). A command with a NaN or an
         infinity is not sent and flagged LIMIT_VIOLATION. During a safe stop the command is
@@ -231,6 +236,8 @@ class PhysicalResource(ABC):
         mode = self.mode
         if mode is CommandMode.TORQUE:
             sent = clamped(wanted, self._tau_lo, self._tau_hi)
+            if self._velocity_guard is not None:
+                sent = self._velocity_guard.limit(self.state.q_rad, self.state.dq_rad_s, sent)
         elif mode is CommandMode.VELOCITY:
             sent = clamped(wanted, self._v_lo, self._v_hi)
         else:  # position: within the joint range, and no faster than max_velocity from the last one
@@ -311,7 +318,12 @@ class PhysicalResource(ABC):
         return 0
 
     def _details(self) -> dict[str, float | int | str]:
-        return {"clamped_commands": self.clamp_count, "rejected_commands": self.rejected_count}
+        guard = self._velocity_guard
+        return {
+            "clamped_commands": self.clamp_count,
+            "rejected_commands": self.rejected_count,
+            "velocity_guard_cuts": guard.cut_count if guard is not None else 0,
+        }
 
     @abstractmethod
     def _read_into(self, t_s: float, state: JointState) -> int:

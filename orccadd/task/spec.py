@@ -40,7 +40,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from orccadd.config.robot import read_toml
+from orccadd.config.robot import parse_toml, read_toml
 from orccadd.config.schema import field, load_dataclass
 from orccadd.errors import ConfigError
 from orccadd.types import CommandMode, TaskInterface
@@ -177,6 +177,11 @@ def parse_task(raw: dict[str, Any], source: str) -> TaskSpec:
 def load_task_file(path: str | Path) -> TaskSpec:
     """Read a task file. Not for a tick."""
     return parse_task(read_toml(Path(path)), str(path))
+
+
+def parse_task_text(data: bytes, source: str) -> TaskSpec:
+    """A task file's content, read from `source` (its name, for errors). Not for a tick."""
+    return parse_task(parse_toml(data, source), source)
 
 
 def interface_of(spec: TaskSpec) -> TaskInterface:

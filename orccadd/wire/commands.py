@@ -170,7 +170,6 @@ COMMANDS: dict[str, CommandSpec] = {
                 Arg("action", (str,), "start or stop", required=True, choices=("start", "stop")),
                 Arg("signals", (list,), "signal names (default: q dq tau cmd)", default=None),
                 Arg("name", (str,), "start: the file's name in the daemon's log directory", default=""),
-                Arg("dest", (str,), "start: where the client will copy it; echoed back at stop", default=""),
             ),
         ),
         CommandSpec(
@@ -186,6 +185,11 @@ COMMANDS: dict[str, CommandSpec] = {
         ),
     )
 }
+
+
+# served ahead of everything: on the real-time process's urgent socket, and on the command
+# daemon's main socket even when every control place is taken (a place kept for them)
+URGENT_COMMANDS = frozenset({"abort", "stop"})
 
 
 class ProtocolError(Exception):

@@ -16,7 +16,7 @@ from enum import IntEnum
 
 from orccadd.types import CommandMode, Phase, Status
 
-PROTOCOL_VERSION = 4  # bumped when a request, reply, record layout or enum changes meaning
+PROTOCOL_VERSION = 5  # bumped when a request, reply, record layout or enum changes meaning
 
 MAGIC = 0x0CCADD02
 HEADER_LEN = 16

@@ -158,7 +158,10 @@ def test_params_events_log_status_and_top_in_words(session: dict[str, Any]) -> N
     assert any(re.fullmatch(r"  ct +kp +500 \(×6\) +1/s\^2 +in \[0, 100000\]", x) for x in params)
     events = session["events"].out.splitlines()
     assert len(events) == 3 and all(re.match(r"\d\d:\d\d:\d\d\.\d{3} t=", x) for x in events)
-    assert re.fullmatch(r"logging 6 signals to .*/logs/orccadd-[\d-]+\.csv\n", session["log_start"].out)
+    assert re.fullmatch(
+        r"logging 6 signals to .*/logs/orccadd-[\d-]+\.csv \(`log stop -o FILE` copies it to FILE\)\n",
+        session["log_start"].out,
+    )
     assert re.fullmatch(r"log: \d+ rows \(0 lost\) in .*\.csv(, MCAP .*\.mcap)?\n", session["log_stop"].out)
     status = session["status"].out.splitlines()
     assert status[0].startswith("ur5e: ready, faulted, mission PickDemo; fault: ")

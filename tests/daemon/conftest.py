@@ -38,7 +38,9 @@ def robot_config(tmp: Path, daemon: str = "") -> Path:
         'urdf = "../urdf/ur5e.urdf"', f'urdf = "{ROOT / "configs/urdf/ur5e.urdf"}"'
     )
     text = text.replace(
-        "\n[daemon]\n", f'\n[daemon]\nhold_task = "{ROOT / "configs/tasks/hold.toml"}"\n{daemon}\n'
+        "\n[daemon]\n",
+        f'\n[daemon]\nhold_task = "{ROOT / "configs/tasks/hold.toml"}"\n'
+        f'task_dirs = ["{ROOT / "configs/tasks"}"]\n{daemon}\n',
     )
     text = text.replace("mission_dirs = [", f"mission_dirs = [{mission_dirs(tmp)}, ")
     path = tmp / "robot.toml"

@@ -31,7 +31,10 @@ def dxl_daemon_rig(tmp: Path, *edits: tuple[str, str]) -> Iterator[DxlRig]:
     `tmp`: the hold task's path made absolute, the shipped and the tests' missions allowed."""
     daemon = (
         ('hold_task = "../tasks/', f'hold_task = "{ROOT}/configs/tasks/'),
-        ("[daemon]\n", f"[daemon]\nmission_dirs = [{mission_dirs(tmp)}]\n"),
+        (
+            "[daemon]\n",
+            f'[daemon]\nmission_dirs = [{mission_dirs(tmp)}]\ntask_dirs = ["{ROOT}/configs/tasks"]\n',
+        ),
     )
     # The servos are hardware: their answers must not wait for the controller's load. At
     # normal priority the simulator (one thread) was starved beside orccadd's SCHED_FIFO loop

@@ -125,12 +125,12 @@ def test_two_clients_monitor_while_another_commands(daemon: Daemon) -> None:
 
 def test_monitor_and_log_through_orccadctl(daemon: Daemon, tmp_path: Path) -> None:
     out = tmp_path / "run.csv"
-    assert daemon.ctl("log", "start", "q", "tau", "-o", str(out)).returncode == 0
+    assert daemon.ctl("log", "start", "q", "tau", "--name", "run.csv").returncode == 0
     p = daemon.ctl("monitor", "q.0", "compute_us", "--rate", "20", "--count", "5", "--json")
     assert p.returncode == 0, p.stderr
     lines = [json.loads(x) for x in p.stdout.splitlines()]
     assert lines[0]["signals"] == ["t_s", "q.shoulder_pan_joint", "compute_us"] and len(lines) == 6
-    stop = daemon.ctl("log", "stop", "--json")
+    stop = daemon.ctl("log", "stop", "-o", str(out), "--json")
     info = json.loads(stop.stdout)["result"]
     assert info["rows"] > 100 and info["lost"] == 0
     header = next(x for x in out.read_text().splitlines() if not x.startswith("#")).split(",")
@@ -142,6 +142,31 @@ def test_monitor_and_log_through_orccadctl(daemon: Daemon, tmp_path: Path) -> No
     png = tmp_path / "run.png"
     assert daemon.ctl("plot", str(out), "-o", str(png)).returncode == 0
     assert png.stat().st_size > 1000
+
+
+def test_log_stop_copies_only_to_a_path_on_its_own_command_line(daemon: Daemon, tmp_path: Path) -> None:
+    """The copy goes where the user stopping the log says, never where the one who started it
+    said (a control user naming root's file, root's `log stop` overwriting it), never through a
+    link or into a FIFO."""
+    victim = tmp_path / "victim.csv"
+    victim.write_text("root's file\n")
+    r = daemon.reply("log", action="start", name="a.csv", dest=str(victim))
+    assert not r["ok"] and "dest" in str(r["error"]), r  # the daemon stores no destination
+    p = daemon.ctl("log", "start", "q", "-o", str(victim))
+    assert p.returncode == 2 and "log stop -o" in p.stderr, p.stderr
+    assert daemon.ctl("log", "start", "q", "--name", "b.csv").returncode == 0
+    link = tmp_path / "planted.csv"
+    link.symlink_to(victim)
+    fifo = tmp_path / "fifo.csv"
+    os.mkfifo(fifo)
+    for dest in (link, fifo):
+        p = daemon.ctl("log", "stop", "-o", str(dest), timeout_s=20)
+        assert p.returncode == 2 and "not copied" in p.stderr, (dest, p.returncode, p.stdout, p.stderr)
+        assert daemon.ctl("log", "start", "q", "--name", f"{dest.stem}.csv").returncode == 0
+    assert victim.read_text() == "root's file\n" and link.is_symlink()
+    assert not (tmp_path / "planted.mcap").exists()
+    p = daemon.ctl("log", "stop")  # no -o: nothing copied anywhere, the log stays in the log directory
+    assert p.returncode == 0 and "log stop -o" not in p.stdout and "rows" in p.stdout, p.stdout
 
 
 def _as_nobody(sock: str, cmd: str) -> dict[str, object]:
@@ -214,9 +239,31 @@ def test_load_reads_only_the_configured_mission_directories(daemon: Daemon, tmp_
     link.symlink_to(secret)
     for path in (str(secret), str(link), "/etc/shadow", "/" + "x" * 300):
         r = daemon.reply("load", path=path)
-        assert not r["ok"] and "missions are loaded from" in r["error"], r
+        assert not r["ok"] and "mission files are loaded from" in r["error"], r
         assert "root-only" not in r["error"]
     assert daemon.call("load", path=DEMO)["mission"]["name"] == "PickDemo"  # type: ignore[index]
+
+
+def test_a_task_file_outside_the_task_and_mission_directories_is_not_read(
+    daemon: Daemon, tmp_path: Path
+) -> None:
+    """A mission (in a mission directory) naming a task file anywhere else: refused in the same
+    words whether that file exists or not, without a key of it quoted."""
+    outside = tmp_path.parent / "elsewhere"
+    outside.mkdir(exist_ok=True)
+    toml = outside / "keys.toml"
+    toml.write_text('secret_key_x = "root-only"\n[table_y]\nz = 1\n')
+    errors = []
+    for target in (toml, outside / "absent.toml", Path("/etc/passwd")):
+        m = tmp_path / f"m{len(errors)}.mission"
+        m.write_text(f'mission M\nresource arm\ntask T on arm from "{target}"\n  post\nend\n'
+                     "main procedure P\n  T\nend\n")  # fmt: skip
+        r = daemon.reply("load", path=str(m))
+        assert not r["ok"], r
+        assert "task files are loaded from" in r["error"] and "daemon.task_dirs" in r["error"], r
+        assert "secret_key" not in r["error"] and "table_y" not in r["error"] and "root:" not in r["error"]
+        errors.append(str(r["error"]).replace(str(target), "FILE"))
+    assert errors[0] == errors[1].replace("m1.mission", "m0.mission"), errors
 
 
 def test_a_log_goes_only_into_the_daemons_log_directory(daemon: Daemon, tmp_path: Path) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
@@ -86,19 +87,73 @@ def test_the_urgent_socket_takes_abort_and_stop_only_and_bounded_lines(daemon: D
     assert daemon.status()["state"] == "idle"
 
 
-def test_connections_beyond_the_few_allowed_are_refused_and_the_socket_still_answers(daemon: Daemon) -> None:
+def test_a_new_connection_makes_way_for_itself_and_a_line_longer_than_4_kib_is_refused(
+    daemon: Daemon,
+) -> None:
     held = [_urgent(daemon) for _ in range(8)]
     try:
-        with _urgent(daemon) as extra:
-            reply = _line(extra)
-            assert not reply["ok"] and "too many connections" in str(reply["error"])
+        with _urgent(daemon) as s:  # all places held by silent peers: the oldest makes way
+            s.sendall(b'{"id": 1, "cmd": "stop"}\n')
+            reply = _line(s)
+            assert reply["id"] == 1 and "stop" in str(reply["error"]), reply  # served (nothing to stop)
+        first = _line(held[0])
+        assert not first["ok"] and "make way" in str(first["error"]), first
     finally:
-        for s in held:
+        for h in held:
+            h.close()
+    with _urgent(daemon) as s:  # 8,094 bytes in two writes: refused, not read as a request
+        body = b'{"id": 2, "cmd": "abort", "pad": "' + b"x" * 8050 + b'"}\n'
+        s.sendall(body[:4000])
+        time.sleep(0.1)
+        s.sendall(body[4000:])
+        reply = _line(s)
+        assert not reply["ok"] and "longer than 4096" in str(reply["error"]), reply
+    assert not daemon.status()["faulted"]
+
+
+def test_abort_cannot_be_denied_by_peers_holding_every_place(daemon: Daemon) -> None:
+    """The urgent places held by peers trickling a byte now and then, every control place of the
+    main socket held by idle connections: `orccadctl abort` still aborts (exit 0), and a `hold`
+    that cannot be delivered says so (exit 1, never 0 in silence)."""
+    daemon.call("load", path=DEMO)
+    stop = threading.Event()
+    urgent = [_urgent(daemon) for _ in range(8)]
+    main: list[socket.socket] = []
+
+    def trickle() -> None:
+        while not stop.wait(0.3):
+            for s in list(urgent):
+                try:
+                    s.sendall(b" ")
+                except OSError:  # closed to make way: reconnect and hold again
+                    urgent.remove(s)
+                    with contextlib.suppress(OSError):
+                        urgent.append(_urgent(daemon))
+
+    t = threading.Thread(target=trickle)
+    daemon.call("start")
+    try:
+        for _ in range(16):
+            s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            s.connect(daemon.socket)
+            main.append(s)
+        t.start()
+        time.sleep(0.5)
+        with Client(daemon.socket) as c:  # the place kept beyond the limit serves abort and stop only
+            r = c.reply("status")
+        assert not r["ok"] and "too many clients" in str(r["error"]), r
+        h = daemon.ctl("hold")
+        assert h.returncode == 1 and "too many clients" in h.stderr, (h.returncode, h.stderr)
+        r = daemon.ctl("abort")
+        assert r.returncode == 0, (r.returncode, r.stdout, r.stderr)
+    finally:
+        stop.set()
+        if t.is_alive():
+            t.join()
+        for s in [*urgent, *main]:
             s.close()
-    time.sleep(0.3)
-    with _urgent(daemon) as s:
-        s.sendall(b'{"id": 1, "cmd": "abort"}\n')
-        assert _line(s)["ok"]
+    st = daemon.wait(lambda st: "stopped" in st.get("resource_status", []))
+    assert st["result"] == "aborted", st
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root to run a client as another user")

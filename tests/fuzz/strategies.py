@@ -106,7 +106,6 @@ def value_of(spec: CommandSpec, a: Arg, paths: list[str]) -> st.SearchStrategy[A
         "start.procedure": names_from(PROCEDURES) | texts,
         "params.task": names_from(TASKS) | texts,
         "log.name": st.sampled_from(["run.csv", "a.csv", ".x.csv", "../x.csv", "x"]) | texts,
-        "log.dest": texts | huge_texts.map(lambda s: s[:2000]),
     }
     if name in special:
         return special[name]
