@@ -54,7 +54,7 @@ class SignalSelection:
             start = NF + TICK_VECTORS.index(base) * n
             if not idx:
                 picked = list(range(n))
-            elif idx.isdigit() and int(idx) < n:
+            elif idx.isascii() and idx.isdigit() and int(idx) < n:  # not `q.٣`: ASCII digits only
                 picked = [int(idx)]
             elif idx in joints:
                 picked = [joints.index(idx)]
@@ -63,8 +63,16 @@ class SignalSelection:
             for j in picked:
                 cols.append(start + j)
                 labels.append(f"{base}.{joints[j]}")
-        self.cols = cols
-        self.labels = labels
+        # a column named twice (`q q.0`, 12,000 × `q`) is sampled once: a selection is never wider
+        # than the tick record, however long the list of names
+        first = dict.fromkeys(range(len(cols)))
+        seen: set[int] = set()
+        for i, c in enumerate(cols):
+            if c in seen:
+                first.pop(i)
+            seen.add(c)
+        self.cols = [cols[i] for i in first]
+        self.labels = [labels[i] for i in first]
 
     def values(self, rec: np.ndarray) -> list[float]:
         return [float(rec[c]) for c in self.cols]

@@ -44,7 +44,7 @@ from orccadd.runtime import enter_realtime, leave_realtime
 from orccadd.task import load_task_file
 from orccadd.task.loop import resource_clock
 from orccadd.types import CommandMode, Status
-from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, ProtocolError, check_args
+from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, ProtocolError, check_args, request_id
 from orccadd.wire.schema import H, Layout, MachineState, MissionResult, OperatorAction, Trace
 from orccadd.wire.socketdir import check_socket_path, prepare_socket_dir, urgent_socket_path
 from orccadd.wire.telemetry import TelemetryBlock
@@ -391,7 +391,7 @@ class RealtimeProcess:
         rid = None
         try:
             msg = json.loads(data)
-            rid = msg.get("id") if isinstance(msg, dict) else None
+            rid = request_id(msg)
             if not isinstance(msg, dict) or not isinstance(msg.get("cmd"), str):
                 return rid, {"id": rid, "ok": False, "error": "a request is an object with a string 'cmd'"}
             cmd, args = msg["cmd"], msg.get("args", {})

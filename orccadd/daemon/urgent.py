@@ -28,7 +28,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from orccadd.wire.commands import URGENT_COMMANDS, Role
+from orccadd.wire.commands import URGENT_COMMANDS, Role, request_id
 from orccadd.wire.roles import RoleConfig, Roles, peer_credentials
 
 log = logging.getLogger("orccadd")
@@ -150,7 +150,7 @@ class UrgentSocket:
         rid: Any = None
         try:
             msg = json.loads(line)
-            rid = msg.get("id") if isinstance(msg, dict) else None
+            rid = request_id(msg)
             cmd = msg.get("cmd") if isinstance(msg, dict) else None
         except (ValueError, RecursionError):
             cmd = None

@@ -86,7 +86,10 @@ class RuckigTrajectory(KernelModule):
         def trajectory(t_s: float, q: list[float], dq: list[float]) -> Outputs:
             if self._settled:  # holds the target; Ruckig is not asked again until it changes
                 return self._outs
-            result = otg.update(inp, out)
+            try:
+                result = otg.update(inp, out)
+            except ValueError:  # a code the binding's enum lacks (0.19.4: -101, duration too long)
+                result = Result.Error
             self.last_result = result
             goal = self._outs[3]
             if result in (working, finished):

@@ -80,6 +80,10 @@ class SimProcessArm(PhysicalResource):
         self._cycle_r = -1  # the plant's cycle pipe (paced_by_plant)
         self.cycles_dropped = 0
         self._settled_heartbeat = 0
+        # a dead plant's channel and cycle pipe, kept open until shutdown: the control thread may
+        # still hold them in the tick during which a reset swaps in the new plant's
+        self._retired: list[tuple[PlantChannel, int]] = []
+        self.plant_starts = 0
 
     # ---- lifecycle ------------------------------------------------------------------------
     def _on_configure(self) -> None:
@@ -91,14 +95,20 @@ class SimProcessArm(PhysicalResource):
             self._release()
             raise
 
-    def _start_plant(self, s: SimProcessSettings) -> None:
-        assert self.channel is not None
+    def _start_plant(
+        self, s: SimProcessSettings, config: RobotConfig | None = None, channel: PlantChannel | None = None
+    ) -> None:
+        """Start the plant process on `channel` (default: ours) with `config` (default: ours),
+        wait for its first heartbeat."""
+        channel = channel or self.channel
+        assert channel is not None
+        self.plant_starts += 1
         cmd = [
             sys.executable,
             "-m",
             "orccadd.plantsim",
             "--shm",
-            self.channel.name,
+            channel.name,
             "--watchdog-periods",
             str(s.watchdog_periods),
             "--priority",
@@ -119,10 +129,10 @@ class SimProcessArm(PhysicalResource):
             for fd in pass_fds:
                 os.close(fd)
         assert self.process.stdin is not None
-        self.process.stdin.write(pickle.dumps(self.config))
+        self.process.stdin.write(pickle.dumps(config or self.config))
         self.process.stdin.close()
         deadline = time.monotonic() + s.startup_timeout_s
-        while self.channel.ctl[Ctl.HEARTBEAT] == 0:
+        while channel.ctl[Ctl.HEARTBEAT] == 0:
             if not self.plant_alive():
                 code = self.process.returncode
                 raise ResourceError(f"resource {self.name!r}: the plant process exited (code {code})")
@@ -183,8 +193,33 @@ class SimProcessArm(PhysicalResource):
         self._request(Request.INJECT_FAULT, INJECTED_FAULT_CODE)
 
     def _on_reset_fault(self) -> None:
+        if not self.plant_alive():
+            self._respawn()
+        else:
+            self._request(Request.RESET_FAULT)
         self.fault_message = ""
-        self._request(Request.RESET_FAULT)
+
+    def _respawn(self) -> None:
+        """A new plant process in place of a dead one (a reset after it was killed): at rest where
+        the arm was last measured, active in the current mode, on a fresh channel. As a drive's
+        power cycled: the reset's own reads then show whether it answers. Not for a tick."""
+        s = self.settings
+        start = replace(s, initial_q_rad=tuple(self.state.q_rad.tolist()))
+        old = self.channel
+        self.channel = None  # the ticks meanwhile read COMM_LOST and send nothing
+        if old is not None:
+            self._retired.append((old, self._cycle_r))
+            old.shm.unlink()  # its name goes now; its memory when nothing maps it (shutdown)
+            self._cycle_r = -1
+        channel = PlantChannel(self.dof, create=True)
+        try:
+            self._start_plant(start, replace(self.config, backend_settings=start), channel)
+        except BaseException:
+            channel.close(unlink=True)
+            raise
+        self._last_heartbeat, self._silent_reads, self._settled_heartbeat = -1, 0, 0
+        self.channel = channel  # publishing the state of an arm at rest where ours was
+        self._request(Request.ACTIVATE, int(self.mode))
 
     def helper_pid(self) -> int:
         return int(self.process.pid) if self.plant_alive() else 0
@@ -195,6 +230,7 @@ class SimProcessArm(PhysicalResource):
             **super()._details(),
             "plant_channel": ch.name if ch is not None else "",
             "cycles_dropped": self.cycles_dropped,
+            "plant_starts": self.plant_starts,
         }
 
     def plant_alive(self) -> bool:
@@ -218,6 +254,11 @@ class SimProcessArm(PhysicalResource):
         if self.channel is not None:
             self.channel.close(unlink=True)
             self.channel = None
+        for channel, cycle_r in self._retired:
+            channel.close()
+            if cycle_r >= 0:
+                os.close(cycle_r)
+        self._retired.clear()
 
     # ---- tick -----------------------------------------------------------------------------
     def _read_into(self, t_s: float, state: JointState) -> int:
@@ -237,7 +278,13 @@ class SimProcessArm(PhysicalResource):
         flags = status & ~SELF_STOPPED & ~int(Status.LIMIT_VIOLATION)
         if self._silent_reads >= self.settings.heartbeat_timeout_periods:
             flags |= Status.COMM_LOST
-            self.fault_message = "the plant process stopped answering"
+            if self.plant_alive():
+                self.fault_message = "the plant process stopped answering"
+            else:  # gone: nothing is left to move or to stop (`reset` starts a new one)
+                code = self.process.returncode
+                self.fault_message = f"the plant process stopped answering: it exited (code {code})"
+                if self._stop_flags & Status.STOPPING:
+                    self._mark_stopped(torque_off=True)
         # a state published before a cleared stop was confirmed still says "stopped": not news
         if status & SELF_STOPPED and hb >= self._settled_heartbeat:
             if not self._stop_flags:  # the arm stopped by itself (its watchdog): fatal here
@@ -255,7 +302,10 @@ class SimProcessArm(PhysicalResource):
     def wait_for_cycle(self, timeout_s: float) -> int:
         """The plant's next step (paced_by_plant): its arrival time, or -1 after `timeout_s`."""
         if self._cycle_r < 0:
-            return super().wait_for_cycle(timeout_s)
+            if not self.settings.paced_by_plant:
+                return super().wait_for_cycle(timeout_s)
+            time.sleep(max(0.0, timeout_s))  # a new plant is being started (reset): no cycle
+            return -1
         ready, _, _ = select.select([self._cycle_r], [], [], max(0.0, timeout_s))
         if not ready:
             return -1

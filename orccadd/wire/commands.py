@@ -29,6 +29,7 @@ from orccadd.wire.schema import PROTOCOL_VERSION
 
 MAX_LINE = 65536
 MAX_INT = 2**53  # integers a JSON peer can represent exactly; beyond: refused
+MAX_ID_CHARS = 256  # a request id is echoed in the reply: a short one
 NUMBER = (int, float)
 
 
@@ -214,8 +215,10 @@ def parse_request(line: bytes) -> tuple[Any, str, dict[str, Any]]:
     if not isinstance(msg, dict):
         raise ProtocolError('a request is a JSON object {"cmd": ..., "args": {...}}')
     rid = msg.get("id")
-    if not isinstance(rid, str | int | float | None) or isinstance(rid, bool):
-        raise ProtocolError("'id' must be a number, a string or null")
+    if not isinstance(rid, str | int | float | None) or isinstance(rid, bool) or _scalar_problem(rid):
+        raise ProtocolError("'id' must be a finite number (within ±2^53), a string or null")
+    if isinstance(rid, str) and len(rid) > MAX_ID_CHARS:
+        raise ProtocolError(f"'id' must be at most {MAX_ID_CHARS} characters")
     unknown = set(msg) - {"id", "cmd", "args", "protocol"}
     if unknown:
         names = ", ".join(sorted(map(str, unknown)))[:200]
@@ -243,6 +246,15 @@ def parse_request(line: bytes) -> tuple[Any, str, dict[str, Any]]:
     return rid, cmd, args
 
 
+def request_id(msg: Any) -> Any:
+    """The id of a decoded request if it is one a reply may echo (a finite number within ±2^53, a
+    string of at most `MAX_ID_CHARS`, null), else None: never NaN or Infinity, which are not JSON."""
+    rid = msg.get("id") if isinstance(msg, dict) else None
+    if isinstance(rid, bool) or not isinstance(rid, str | int | float) or _scalar_problem(rid):
+        return None
+    return None if isinstance(rid, str) and len(rid) > MAX_ID_CHARS else rid
+
+
 def check_args(spec: CommandSpec, args: dict[str, Any]) -> None:
     names = {a.name for a in spec.args}
     for k, v in args.items():
@@ -252,6 +264,8 @@ def check_args(spec: CommandSpec, args: dict[str, Any]) -> None:
         a = spec.arg(k)
         if isinstance(v, bool) and bool not in a.types:
             raise ProtocolError(f"{spec.name}: argument {k!r} must be {_types(a.types)}, not a boolean")
+        if isinstance(v, float) and int in a.types and float not in a.types:
+            raise ProtocolError(f"{spec.name}: argument {k!r} must be an integer, not {v!r}")
         if not isinstance(v, a.types):
             raise ProtocolError(f"{spec.name}: argument {k!r} must be {_types(a.types)}, not {_json_type(v)}")
         for item in v if isinstance(v, list) else [v]:
@@ -289,7 +303,9 @@ def with_defaults(spec: CommandSpec, args: dict[str, Any]) -> dict[str, Any]:
 
 
 def _types(types: tuple[type, ...]) -> str:
-    names = {int: "a number", float: "a number", str: "a string", list: "a list", bool: "a boolean"}
+    names = {int: "an integer", float: "a number", str: "a string", list: "a list", bool: "a boolean"}
+    if float in types:  # a number, integers included
+        types = tuple(t for t in types if t is not int)
     return " or ".join(dict.fromkeys(names.get(t, t.__name__) for t in types))
 
 

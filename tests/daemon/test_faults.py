@@ -72,6 +72,32 @@ def test_resource_fault_raises_type_3_then_reset_and_move_again(daemon: Daemon) 
     daemon.wait(lambda s: s["active_task"] == "Home" and _moving(s))
 
 
+def test_plant_killed_mid_motion_stops_and_a_reset_starts_a_new_one(daemon: Daemon) -> None:
+    """The simulated arm's process killed: CommLost, the stop confirmed (nothing is left to move),
+    `reset` starts a new plant where the arm was, and the mission runs again. Before: `comm_lost,
+    stopping` for ever, `reset` refused, SIGTERM ending in "safe stop not confirmed"."""
+    daemon.call("load", path=DEMO)
+    daemon.call("start")
+    daemon.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
+    plant = int(daemon.status()["helper_pid"])  # type: ignore[arg-type]
+    q_before = [j["q_rad"] for j in daemon.status()["joints"]]  # type: ignore[union-attr]
+    os.kill(plant, signal.SIGKILL)
+    s = daemon.wait(lambda s: "stopped" in s.get("resource_status", []))
+    assert "exited" in str(s["fault"]) and "CommLost" in str(s["fault"]), s
+    if s["state"] == "running":  # the safe procedure waits for the operator's Stop
+        daemon.call("stop")
+    daemon.wait(lambda s: s["state"] == "ready")
+    daemon.call("reset")
+    s = daemon.wait(lambda s: not s["faulted"])
+    assert int(s["helper_pid"]) not in (0, plant), s  # type: ignore[arg-type]
+    q_after = [j["q_rad"] for j in s["joints"]]  # type: ignore[union-attr]
+    assert max(abs(a - b) for a, b in zip(q_before, q_after, strict=True)) < 0.5  # where it was
+    daemon.call("start")
+    daemon.wait(lambda s: s["active_task"] == "Home" and _moving(s))
+    assert daemon.stop() == 0
+    assert "safe stop not confirmed" not in daemon.log.read_text()
+
+
 def test_command_daemon_killed_mission_goes_on_and_a_new_one_attaches(daemon: Daemon) -> None:
     daemon.call("load", path=DEMO)
     daemon.call("start")

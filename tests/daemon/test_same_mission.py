@@ -24,6 +24,8 @@ UR = ROOT / "configs/robots/ur5e-rtde-sim.toml"
 def local_config(tmp: Path, source: Path) -> Path:
     """`source` with its relative paths made absolute and the test's mission directory allowed."""
     text = source.read_text().replace('"../', f'"{source.parent.parent}/')
+    if "task_dirs" not in text:  # its default, ../tasks, is relative to the config too
+        text = text.replace("\n[daemon]\n", f'\n[daemon]\ntask_dirs = ["{source.parent.parent}/tasks"]\n', 1)
     path = tmp / source.name
     path.write_text(text)
     return path

@@ -179,7 +179,9 @@ def no_torque(t_s: float) -> Vec:
     return np.zeros(6)
 
 
-AMPLITUDE_NM = np.array([3.0, 15.0, 8.0, 1.0, 1.0, 0.5])
+# within the limits: at 3 N·m the shoulder pan reached 3.12 of its 3.14 rad/s, where the resource's
+# velocity guard rightly cuts the torque (this test is of the plant, not of the guard)
+AMPLITUDE_NM = np.array([2.5, 15.0, 8.0, 1.0, 1.0, 0.5])
 FREQUENCY_HZ = np.array([0.7, 1.1, 1.3, 1.7, 2.3, 2.9])
 
 

@@ -69,3 +69,30 @@ def test_a_finished_trajectory_takes_a_new_speed_limit_without_replanning() -> N
     assert task.phase is Phase.DONE
     assert np.allclose(traj.q_des.value, FAR)  # type: ignore[attr-defined]
     s.close()
+
+
+def test_a_result_code_the_ruckig_binding_lacks_holds_the_last_desired_position() -> None:
+    """Ruckig 0.19.4's Python enum has no -101 (trajectory duration beyond its limits): the binding
+    raises ValueError from `update`, seen after `speed_scale` 1.0 then 0.01 mid-motion. That is
+    Ruckig failing to plan, not the law failing: the hold branch, never a LawError."""
+    s = Session.open(UR5E)
+    task = s.task(MOVE_TASK)
+    traj = next(m for m in task.modules if m.name == "traj")
+    traj.configure({"target_rad": FAR})
+    loop = s.loop(SimClock())
+    task.activate()
+    loop.active = task
+    loop.run_for(0.3)
+
+    class Duration:  # the real binding's failure mode, on demand
+        def update(self, inp: object, out: object) -> object:
+            raise ValueError("-101 is not a valid Result")
+
+    traj._otg = Duration()  # type: ignore[attr-defined]
+    task.recompile()
+    held = traj.q_des.value.copy()  # type: ignore[attr-defined]
+    loop.run_for(0.5)
+    assert "MoveJoints.T3.LawError" not in s.event_names(), s.event_names()
+    assert task.phase is Phase.RUN and not s.resource.state.status & (Status.STOPPING | Status.STOPPED)
+    assert np.allclose(traj.q_des.value, held) and not traj.dq_des.value.any()  # type: ignore[attr-defined]
+    s.close()

@@ -12,7 +12,7 @@ import pytest
 
 from orccadd.cmdd.server import CommandDaemon
 from orccadd.daemon.commands import RtCommands
-from orccadd.wire.commands import COMMANDS, Dispatcher, ProtocolError, handles, parse_request
+from orccadd.wire.commands import COMMANDS, Dispatcher, ProtocolError, handles, parse_request, request_id
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -63,11 +63,24 @@ def test_a_side_missing_a_handler_or_serving_the_other_sides_is_refused() -> Non
         (req("status", verbose=True), "unknown argument 'verbose'"),
         (b"[" * 100_000 + b"]" * 100_000, "not JSON"),
         (b'{"id": {"a": 1}, "cmd": "ping"}', "'id' must be"),
+        (b'{"id": NaN, "cmd": "ping"}', "'id' must be a finite number"),  # echoed, it would not be JSON
+        (b'{"id": -Infinity, "cmd": "ping"}', "'id' must be a finite number"),
+        (b'{"id": "' + b"x" * 300 + b'", "cmd": "ping"}', "'id' must be at most 256"),
+        (req("events", last=1.5), "'last' must be an integer, not 1.5"),  # was: "a number, not a number"
     ],
 )
 def test_malformed_arguments_are_refused_in_the_clients_terms(line: bytes, error: str) -> None:
     with pytest.raises(ProtocolError, match=error):
         parse_request(line)
+
+
+def test_an_id_a_reply_cannot_echo_as_json_is_not_echoed() -> None:
+    assert [request_id(json.loads(x)) for x in ('{"id": NaN}', '{"id": 1e999}', '{"id": 3}', "[1]")] == [
+        None,
+        None,
+        3,
+        None,
+    ]
 
 
 def test_a_well_formed_request_passes() -> None:
