@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import io
 import json
 import os
 import re
@@ -97,12 +98,19 @@ class LogDir:
                 os.unlink(self.path / name)
 
     def save_state(self, state: dict[str, Any]) -> None:
+        """Replace the state file at once (written beside it, then renamed); on a failure (a full
+        disk) the old one stays and nothing is left beside it."""
         tmp = f"{STATE_FILE}.{os.getpid()}"
         with contextlib.suppress(FileNotFoundError):
             os.unlink(self.path / tmp)
-        with os.fdopen(self._open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600), "w") as fh:
-            json.dump(state, fh)
-        os.replace(self.path / tmp, self.path / STATE_FILE)
+        try:
+            with os.fdopen(self._open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600), "w") as fh:
+                json.dump(state, fh)
+            os.replace(self.path / tmp, self.path / STATE_FILE)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(self.path / tmp)
+            raise
 
     def load_state(self) -> dict[str, Any] | None:
         try:
@@ -182,7 +190,10 @@ def header_lines(origin: LogOrigin, labels: list[str], meta: dict[str, Any]) -> 
 
 class CsvLog:
     """Chosen signals at full rate into a CSV file, with the log's events as comment lines
-    (PlotJuggler: File > Load Data, time column `time_s`, skipping the header's comment lines)."""
+    (PlotJuggler: File > Load Data, time column `time_s`, skipping the header's comment lines).
+
+    Each `write` goes to the file in one piece or not at all: should the disk fill mid-way, the
+    file is cut back to its last complete line (a cut row would be a row of wrong numbers)."""
 
     def __init__(
         self,
@@ -197,37 +208,52 @@ class CsvLog:
         self.path = path
         self.sel = selection
         self.origin = origin
-        self.fh = fh
-        self.writer = csv.writer(self.fh, lineterminator="\n")
+        self.fh = fh  # owns the descriptor; written through `fd` only (no buffer to flush later)
+        self.fd = fh.fileno()
+        self.size = os.lseek(self.fd, 0, os.SEEK_END)  # bytes of complete lines
         self.rows = rows
         if meta is not None:
+            buf = io.StringIO()
             for line in header_lines(origin, selection.labels, meta):
-                self.fh.write(line + "\n")
-            self.writer.writerow(["time_s", *selection.labels])
-            self.fh.flush()
+                buf.write(line + "\n")
+            csv.writer(buf, lineterminator="\n").writerow(["time_s", *selection.labels])
+            self._emit(buf.getvalue())
 
     def write(self, recs: FloatArray, events: list[LogEvent]) -> None:
         """The new rows, each event just before the first row at or after its time (`OSError`
-        if the file cannot take them)."""
+        if the file cannot take them: then none of them is in it)."""
         cols = self.sel.cols
         t0 = self.origin.t_s
         times = recs[:, T.T_S] - t0
         at: list[int] = np.searchsorted(times, [e.time_s for e in events], side="left").tolist()
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
         k = 0
         for i, rec in enumerate(recs):
             while k < len(events) and at[k] <= i:
-                self._event(events[k])
+                self._event(writer, events[k])
                 k += 1
-            self.writer.writerow([f"{times[i]:.6f}", *(f"{rec[c]:.9g}" for c in cols)])
+            writer.writerow([f"{times[i]:.6f}", *(f"{rec[c]:.9g}" for c in cols)])
         for e in events[k:]:
-            self._event(e)
+            self._event(writer, e)
+        self._emit(buf.getvalue())
         self.rows += len(recs)
-        self.fh.flush()
 
-    def _event(self, e: LogEvent) -> None:
-        self.writer.writerow(
-            ["# event", f"{e.time_s:.6f}", e.seq if e.seq >= 0 else "", e.kind, e.name, e.detail]
-        )
+    def _emit(self, text: str) -> None:
+        data = memoryview(text.encode("utf-8"))
+        written = 0
+        try:
+            while written < len(data):
+                written += os.pwrite(self.fd, data[written:], self.size + written)
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self.fd, self.size)  # frees space: always possible on a full disk
+            raise
+        self.size += written
+
+    @staticmethod
+    def _event(writer: Any, e: LogEvent) -> None:
+        writer.writerow(["# event", f"{e.time_s:.6f}", e.seq if e.seq >= 0 else "", e.kind, e.name, e.detail])
 
     def close(self) -> None:
         self.fh.close()

@@ -161,6 +161,8 @@ class TelemetryLog:
             try:
                 self._open_mcap(os.fdopen(fd, "wb"), n, sel, desc, period_s, from_s)
             except OSError as e:
+                self.logs.remove(name)  # an empty or cut part is not an MCAP file
+                self.state["mcap"] = parts
                 self.notes.append(
                     f"{name} could not be written ({e.strerror or e}): the log goes on in CSV only"
                 )
@@ -232,13 +234,36 @@ class TelemetryLog:
         return summary
 
     def abandon(self, error: OSError) -> dict[str, Any]:
-        """A file failed: close what can be closed and say why the log ended."""
+        """A file failed (a full disk): close what can be closed, leave every file readable (the
+        CSV ends with its last complete row: `CsvLog`; the MCAP part sealed, or removed if it holds
+        nothing) and say why the log ended."""
         with contextlib.suppress(OSError, ValueError):
             self.csv.close()
         if self.mcap is not None:
             self.mcap.abandon()
+            self.mcap = None
+            self._seal_last_part()
         reason = error.strerror or str(error)
         return {**self.describe(), "error": f"log ended: {reason} after {self.csv.rows} rows"}
+
+    def _seal_last_part(self) -> None:
+        parts: list[str] = [str(p) for p in self.state.get("mcap", [])]
+        if not parts:
+            return
+        try:
+            fd = self.logs.open_existing(parts[-1])
+            try:
+                if os.fstat(fd).st_size < 8:  # not even its magic: nothing to keep
+                    self.logs.remove(parts[-1])
+                    self.state["mcap"] = parts[:-1]
+                elif seal(fd):
+                    self.notes.append(
+                        f"{parts[-1]} sealed after the write error (readable to its last record)"
+                    )
+            finally:
+                os.close(fd)
+        except (OSError, ValueError) as e:
+            self.notes.append(f"{parts[-1]} could not be sealed: {e}")
 
     def describe(self) -> dict[str, Any]:
         origin = self.feed.origin

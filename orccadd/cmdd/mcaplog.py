@@ -14,6 +14,7 @@ every reader reads linearly) and carries the log on in a new part, `<name>-2.mca
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import math
 import os
@@ -242,7 +243,8 @@ def _clean(v: Any) -> float | None:
 def seal(fd: int) -> bool:
     """Make an MCAP file cut short readable: cut it after its last complete record and end it
     with a footer without index (readers then read it linearly); a complete file is left as it
-    is. False if it was complete."""
+    is. False if it was complete. On a full disk, records are given up from the end until the
+    footer fits (cutting frees what they held)."""
     size = os.fstat(fd).st_size
     if os.pread(fd, 8, 0) != MAGIC:
         raise ValueError("not an MCAP file")
@@ -253,23 +255,32 @@ def seal(fd: int) -> bool:
         and os.pread(fd, 8, size - 8) == MAGIC
     ):
         return False  # finished: nothing to seal
-    pos, records, data_end = 8, 0, False
-    while pos + 9 <= size:
-        op, length = struct.unpack("<BQ", os.pread(fd, 9, pos))
-        end = pos + 9 + length
+    ends = [8]  # where each complete record ends (the first: after the magic)
+    data_end = False
+    while ends[-1] + 9 <= size:
+        op, length = struct.unpack("<BQ", os.pread(fd, 9, ends[-1]))
+        end = ends[-1] + 9 + length
         if end > size or op == Opcode.FOOTER:
             break
-        pos, records = end, records + 1
+        ends.append(end)
         if op == Opcode.DATA_END:
             data_end = True  # the summary after it may be cut short: end the file here
             break
-    b = RecordBuilder()
-    if records == 0:
-        Header(profile="", library=LIBRARY).write(b)
-    if not data_end:
-        DataEnd(data_section_crc=0).write(b)
-    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(b)
-    tail = bytes(b.end()) + MAGIC  # type: ignore[no-untyped-call]
-    os.ftruncate(fd, pos)
-    os.pwrite(fd, tail, pos)
-    return True
+    while True:
+        pos = ends[-1]
+        b = RecordBuilder()
+        if len(ends) == 1:
+            Header(profile="", library=LIBRARY).write(b)
+        if not data_end:
+            DataEnd(data_section_crc=0).write(b)
+        Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(b)
+        tail = bytes(b.end()) + MAGIC  # type: ignore[no-untyped-call]
+        os.ftruncate(fd, pos)
+        try:
+            if os.pwrite(fd, tail, pos) == len(tail):
+                return True
+        except OSError as e:
+            if e.errno != errno.ENOSPC or len(ends) == 1:
+                raise
+        ends.pop()  # no room: give up the last record too
+        data_end = False

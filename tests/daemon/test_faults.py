@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 from orccadd.physres.shm_channel import Ctl, PlantChannel
 from orccadd.types import Status
@@ -225,8 +226,28 @@ def test_log_disk_full_ends_the_log_with_the_reason_and_nothing_else(tmp_path: P
             assert not r["ok"] and "not logging" in str(r["error"])
         finally:
             d.stop()
+        _assert_every_log_file_readable(logs)
     finally:
         subprocess.run(["umount", "-l", str(logs)], check=False)
+
+
+def _assert_every_log_file_readable(logs: Path) -> None:
+    """What a full disk leaves: CSVs whose every row is whole (before: a last row of 7 of 13
+    columns, a number cut to `0.`), MCAPs that mcap's own reader reads to the end (before: an
+    unsealed part, RecordLengthLimitExceeded; a 0-byte part), no state file's temporary."""
+    names = sorted(p.name for p in logs.iterdir())
+    assert not [n for n in names if n.startswith(".active-log.json.")], names
+    csvs = [logs / n for n in names if n.endswith(".csv")]
+    assert csvs, names
+    for path in csvs:
+        lines = [x for x in path.read_text().splitlines() if not x.startswith("#")]
+        width = len(lines[0].split(","))
+        assert all(len(x.split(",")) == width for x in lines), (path, lines[-1])
+        assert path.read_text().endswith("\n")
+    for path in (logs / n for n in names if n.endswith(".mcap")):
+        with path.open("rb") as f:
+            messages = sum(1 for _ in make_reader(f).iter_messages())  # raises on a broken file
+        assert messages > 0, path
 
 
 def test_abort_mid_motion_safe_stops_within_two_ticks_of_its_handling(daemon: Daemon) -> None:
