@@ -18,13 +18,13 @@ import numpy as np
 import numpy.typing as npt
 
 from orccadd.cmdd import views
+from orccadd.wire.foxglove_schemas import CMD_UNIT
 from orccadd.wire.schema import CommandMode, H, R, T
 from orccadd.wire.telemetry import RingReader, TelemetryBlock
 
 FloatArray = npt.NDArray[np.float64]
 
 MODE_UNITS = {CommandMode.POSITION: "rad", CommandMode.VELOCITY: "rad/s", CommandMode.TORQUE: "N.m"}
-CMD_UNIT = "by mode: rad (position), rad/s (velocity), N.m (torque)"
 UNITS = {
     "time_s": "s",
     "t_s": "s",

@@ -1,6 +1,7 @@
 """The MCAP file of a log, beside its CSV (same base name), for Foxglove, PlotJuggler or any MCAP
 reader: every signal group of the selection as a JSON channel whose schema gives its unit
-(`mcapschemas`), `/joint_states` (foxglove.JointStates: all joints, at most `JOINT_STATES_HZ`),
+(`orccadd.wire.foxglove_schemas`), `/joint_states` (foxglove.JointStates: all joints, at most
+`JOINT_STATES_HZ`),
 `/events` (foxglove.Log: automaton instants, task events, operator commands, mode changes),
 `/robot_description` (the URDF as text, once), the URDF file attached, and the log's start and
 end as metadata records. Log times are wall-clock ns: the log's start plus `time_s`.
@@ -31,9 +32,9 @@ from mcap.records import DataEnd, Footer, Header
 from mcap.writer import Writer
 
 from orccadd import __version__
-from orccadd.cmdd import mcapschemas as sch
 from orccadd.cmdd.logfeed import MODE_UNITS, FloatArray, LogEvent, LogOrigin, mode_name, unit
 from orccadd.cmdd.views import NF, SignalSelection
+from orccadd.wire import foxglove_schemas as sch
 from orccadd.wire.schema import CommandMode, Phase, T, status_names
 
 MAGIC = b"\x89MCAP0\r\n"

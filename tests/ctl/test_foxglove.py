@@ -1,18 +1,26 @@
-"""`orccadctl foxglove`: the WebSocket server listens on 127.0.0.1 only and stops cleanly, fed by
-the monitor and events streams of a stand-in daemon (the protocol's framing, no real daemon)."""
+"""`orccadctl foxglove`: the WebSocket server listens on 127.0.0.1 only, speaks the Foxglove
+WebSocket protocol to a stock WebSocket client, serves the user who started it only (not another
+local user, not a page of a foreign origin) and stops cleanly, fed by the monitor and events
+streams of a stand-in daemon (the protocol's framing, no real daemon)."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import pwd
 import socket
+import struct
 import threading
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-pytest.importorskip("foxglove")
+pytest.importorskip("websockets")
+
+from websockets.exceptions import InvalidStatus
+from websockets.sync.client import connect
 
 from orccadd.ctl.foxglove import LiveView, run_foxglove
 
@@ -95,3 +103,93 @@ def test_orccadctl_foxglove_serves_the_stream_then_stops(
     out = capsys.readouterr().out
     port = int(out.split("ws://127.0.0.1:", 1)[1].split()[0])
     assert not listeners(port) and refused(port), (listeners(port), refused(port))
+
+
+def _connect(port: int, origin: str | None = None):  # type: ignore[no-untyped-def]
+    return connect(
+        f"ws://127.0.0.1:{port}",
+        subprotocols=["foxglove.websocket.v1"],
+        origin=origin,
+        open_timeout=10,  # type: ignore[list-item,arg-type]
+    )
+
+
+def test_a_stock_client_gets_the_channels_and_the_messages_it_subscribed_to() -> None:
+    view = LiveView(LABELS, port=0)
+    try:
+        with _connect(view.port) as ws:
+            info = json.loads(ws.recv(timeout=10))
+            adv = json.loads(ws.recv(timeout=10))
+            assert info["op"] == "serverInfo" and adv["op"] == "advertise"
+            topics = {c["topic"]: c for c in adv["channels"]}
+            assert set(topics) == {"/q", "/dq", "/tau", "/cmd", "/joint_states", "/events"}
+            assert topics["/joint_states"]["schemaName"] == "foxglove.JointStates"
+            assert json.loads(topics["/q"]["schema"])["properties"]["j1"]["unit"] == "rad"
+            subs = [
+                {"id": 7, "channelId": topics["/q"]["id"]},
+                {"id": 9, "channelId": topics["/events"]["id"]},
+            ]
+            ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+            got: dict[int, dict[str, object]] = {}
+            for _ in range(200):  # the subscription is taken asynchronously: publish until seen
+                view.sample(1.5, [0.1 * i for i in range(len(LABELS))])
+                view.event({"kind": "instant", "seq": 3, "inputs": ["start"], "actions": ["Approach"]})
+                try:
+                    while len(got) < 2:
+                        frame = ws.recv(timeout=0.05)
+                        assert isinstance(frame, bytes) and frame[0] == 1
+                        sub, _ns = struct.unpack_from("<IQ", frame, 1)
+                        got[sub] = json.loads(frame[13:])
+                except TimeoutError:
+                    pass
+                if len(got) == 2:
+                    break
+        assert got[7] == {"time_s": 1.5, "j1": 0.0, "j2": 0.1}, got
+        assert got[9]["message"] == "start -> Approach" and got[9]["line"] == 3, got
+    finally:
+        view.stop()
+
+
+def test_a_foreign_origin_is_refused_foxglove_and_native_clients_are_not() -> None:
+    view = LiveView(LABELS, port=0)
+    try:
+        with pytest.raises(InvalidStatus) as e:
+            _connect(view.port, origin="https://evil.example")
+        assert e.value.response.status_code == 403
+        for origin in (None, "https://app.foxglove.dev"):
+            with _connect(view.port, origin=origin) as ws:
+                assert json.loads(ws.recv(timeout=10))["op"] == "serverInfo"
+    finally:
+        view.stop()
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root to connect as another user")
+def test_another_local_user_is_refused() -> None:
+    """User nobody, holding no role on the daemon, reaches 127.0.0.1 like everyone: refused."""
+    view = LiveView(LABELS, port=0)
+    try:
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: become nobody, try the handshake, report the status
+            try:
+                os.close(r)
+                nobody = pwd.getpwnam("nobody")
+                os.setgid(nobody.pw_gid)
+                os.setuid(nobody.pw_uid)
+                try:
+                    with _connect(view.port):
+                        status = 101
+                except InvalidStatus as err:
+                    status = err.response.status_code
+                os.write(w, str(status).encode())
+            finally:
+                os._exit(0)
+        os.close(w)
+        with os.fdopen(r) as fh:
+            status = fh.read()
+        os.waitpid(pid, 0)
+        assert status == "403", status
+        with _connect(view.port) as ws:  # and we still are served
+            assert json.loads(ws.recv(timeout=10))["op"] == "serverInfo"
+    finally:
+        view.stop()

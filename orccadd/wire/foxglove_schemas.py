@@ -1,4 +1,5 @@
-"""The JSON schemas of a log's MCAP channels, and the helpers that fill their messages.
+"""The JSON schemas of the Foxglove channels (a log's MCAP, `orccadctl foxglove`'s live view), and
+the helpers that fill their messages.
 
 Each signal group of the log's selection (`q`, `dq`, `tau`, `cmd`, `wake_us`, ...) is one channel
 `/<group>` whose messages carry `time_s` and one number per selected joint (or `value` for a
@@ -13,7 +14,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from orccadd.cmdd.logfeed import CMD_UNIT
+CMD_UNIT = "by mode: rad (position), rad/s (velocity), N.m (torque)"
 
 NAMED = ("task", "phase", "mode")  # scalars whose messages also carry the name of their value
 
