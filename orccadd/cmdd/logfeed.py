@@ -119,7 +119,10 @@ class LogFeed:
         self.ticks = RingReader(tel.ticks, tel.header, H.TICK_HEAD, from_now=True)
         self.trace = RingReader(tel.trace, tel.header, H.TRACE_HEAD, from_now=after_trace is None)
         oldest = max(0, int(tel.header[H.TICK_HEAD]) - len(tel.ticks))
-        self.gap_lost = after_tick < oldest  # a gap longer than the ring keeps
+        # a gap longer than the ring keeps (no command daemon for longer): its ticks are lost,
+        # counted in `lost` and marked by a `gap` event where the rows resume
+        self.gap_ticks = max(0, oldest - after_tick)
+        self._gap_mark = self.gap_ticks > 0
         self.ticks.next = max(after_tick, oldest)
         if after_trace is not None:
             self.trace.next = max(after_trace, self.trace.next)
@@ -127,7 +130,13 @@ class LogFeed:
 
     @property
     def lost(self) -> int:
-        return self.ticks.lost
+        """Ticks that will never be in the log: a gap beyond the ring, and any the ring
+        overwrote before they were read."""
+        return self.ticks.lost + self.gap_ticks
+
+    @property
+    def gap_lost(self) -> bool:
+        return self.gap_ticks > 0
 
     def poll(self) -> tuple[FloatArray, list[LogEvent]]:
         """The new tick records and the new events (trace and mode changes), in time order."""
@@ -135,6 +144,14 @@ class LogFeed:
         trace = self.trace.poll()
         events = [decode_event(r, self.decode, self.origin) for r in trace] if len(trace) else []
         events += self._mode_changes(recs)
+        if self._gap_mark and len(recs):
+            self._gap_mark = False
+            seconds = self.gap_ticks * self.tel.period_s
+            name = f"{self.gap_ticks} ticks lost ({seconds:.3f} s)"
+            at = float(recs[0, T.T_S]) - self.origin.t_s
+            events.append(
+                LogEvent(at, -1, "gap", name, "(no command daemon ran for longer than the ring keeps)")
+            )
         events.sort(key=lambda e: e.time_s)
         return recs, events
 

@@ -33,12 +33,19 @@ def part_name(csv_name: str, part: int) -> str:
 
 
 def tick_at(tel: TelemetryBlock, t_s: float) -> int:
-    """The sequence number of the ring's tick at loop time `t_s` (−1: no longer in the ring)."""
+    """The sequence number of the tick at loop time `t_s`: the ring's, or, when the ring no longer
+    holds it, counted back from the oldest tick it holds, a period each (what the log misses in
+    between is then counted as lost)."""
     ring = tel.ticks
     d = np.abs(ring[:, T.T_S] - t_s)
     d[ring[:, T.SEQ] <= 0] = np.inf
     i = int(np.argmin(d))
-    return int(ring[i, T.SEQ]) if d[i] < 0.5 * tel.period_s else -1
+    if d[i] < 0.5 * tel.period_s:
+        return int(ring[i, T.SEQ])
+    valid = ring[:, T.SEQ] > 0
+    oldest = int(np.argmin(np.where(valid, ring[:, T.SEQ], np.inf)))
+    periods = round((float(ring[oldest, T.T_S]) - t_s) / tel.period_s)
+    return max(0, int(ring[oldest, T.SEQ]) - max(1, periods))
 
 
 class TelemetryLog:
@@ -283,5 +290,9 @@ class TelemetryLog:
         if self.notes:
             out["notes"] = list(self.notes)
         if self.feed.gap_lost:
-            out["gap"] = "ticks lost while no command daemon ran (longer than the telemetry ring keeps)"
+            n = self.feed.gap_ticks
+            out["gap"] = (
+                f"{n} ticks ({n * self.feed.tel.period_s:.3f} s) lost while no command daemon ran "
+                "(longer than the telemetry ring keeps); a `gap` event marks where the rows resume"
+            )
         return out

@@ -101,6 +101,8 @@ def level(kind: str, name: str) -> int:
     operator's stops warnings, mode changes debug, the rest info."""
     if kind == "mode":
         return DEBUG
+    if kind == "gap":
+        return WARNING
     if ".T3." in name or name.rsplit(".", 1)[-1] in T3_BUILTIN:
         return ERROR
     if ".T2." in name or (kind == "command" and name in ("abort", "stop", "inject", "shutdown")):
