@@ -59,7 +59,7 @@ ROLELESS_WAIT_S = 2.0
 RESERVED_MAX = 4
 RESERVED_WAIT_S = 2.0
 RT_TIMEOUT_S = 5.0
-LOAD_TIMEOUT_S = 600.0
+LOAD_MARGIN_S = 30.0  # beyond the real-time process's own limit, so that its refusal arrives
 # a reset's device work (a protective stop's unlock and script restart, a reconnection to a
 # restarted controller, a servo's reboot) takes seconds: its reply is waited for that long
 RESET_TIMEOUT_S = 30.0
@@ -365,7 +365,8 @@ class CommandDaemon:
             await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
             return
         if spec.where == "rt":
-            timeout = {"load": LOAD_TIMEOUT_S, "reset": RESET_TIMEOUT_S}.get(cmd, RT_TIMEOUT_S)
+            load_s = self.cfg.load_timeout_s + LOAD_MARGIN_S
+            timeout = {"load": load_s, "reset": RESET_TIMEOUT_S}.get(cmd, RT_TIMEOUT_S)
             reply = await self.rt.call(cmd, args, timeout)
             reply["id"] = rid
             if cmd == "load" and reply.get("ok"):

@@ -20,7 +20,9 @@ from orccadd.wire.commands import COMMANDS
 from orccadd.wire.socketdir import urgent_socket_path
 
 EXIT_OK, EXIT_REFUSED, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
-CALL_WAIT_S, LOAD_WAIT_S = 10.0, 660.0  # a load compiles and verifies for up to 600 s
+# a load compiles and verifies for up to `daemon.load_timeout_s` (at most 3600 s), then the command
+# daemon passes its answer on: orccadctl waits for that answer
+CALL_WAIT_S, LOAD_WAIT_S = 10.0, 3700.0
 RESET_WAIT_S = 40.0  # a reset's device work: the command daemon waits up to 30 s for it
 
 

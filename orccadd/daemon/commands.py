@@ -37,7 +37,6 @@ from orccadd.wire.commands import handles
 from orccadd.wire.schema import PROTOCOL_VERSION, MachineState, OperatorAction, Trace
 
 MAX_INJECTED_MS = 5000.0  # longest injected tick: a stall, not a hang
-LOAD_TIMEOUT_S = 600.0  # compiling and verifying a large mission takes minutes (README, benchmarks)
 TUNE_WAIT_S = 1.0  # a tune not applied within this (or 100 periods) is reported as such
 
 
@@ -95,8 +94,9 @@ class RtCommands:
         task_dirs = [str(cfg.resolve(d)) for d in (*cfg.daemon.task_dirs, *cfg.daemon.mission_dirs)]
         cmd = [
             sys.executable, "-m", "orccadd.daemon.compile_worker", "--fd", str(fd), "--name", path,
-            *(f"--task-dir={d}" for d in task_dirs), str(out),
+            *(f"--task-dir={d}" for d in task_dirs), f"--memory-mb={cfg.daemon.load_memory_mb}", str(out),
         ]  # fmt: skip
+        timeout_s = cfg.daemon.load_timeout_s
         try:
             child = subprocess.Popen(
                 cmd,
@@ -133,9 +133,12 @@ class RtCommands:
             child.kill()
             child.wait()
             done()
-            raise CommandError(f"{path}: not compiled and verified within {LOAD_TIMEOUT_S:g} s")
+            raise CommandError(
+                f"{path}: not compiled and verified within {timeout_s:g} s (daemon.load_timeout_s); "
+                "`orccadctl check` shows how far it gets"
+            )
 
-        return Pending(poll, time.monotonic_ns() + int(LOAD_TIMEOUT_S * 1e9), expire)
+        return Pending(poll, time.monotonic_ns() + int(timeout_s * 1e9), expire)
 
     def _open_mission(self, path: str) -> tuple[int, str]:
         """A descriptor of the mission file `path` names and its real path, if it is a regular

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import pickle
+import resource
 from pathlib import Path
 
 from orccadd.automaton.parser import MAX_MISSION_CHARS
@@ -41,8 +42,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fd", type=int, required=True)
     ap.add_argument("--name", required=True)
     ap.add_argument("--task-dir", action="append", default=[])
+    ap.add_argument("--memory-mb", type=int, default=0, help="address-space limit (0: none)")
     ap.add_argument("out")
     args = ap.parse_args(argv)
+    if args.memory_mb:
+        limit = args.memory_mb << 20
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     files = TaskFiles(Confinement(args.task_dir, "task file", "daemon.task_dirs, daemon.mission_dirs"))
     try:
         text = read_mission(args.fd, args.name)
@@ -52,6 +57,13 @@ def main(argv: list[str] | None = None) -> int:
         code = 0
     except OrccaddError as e:
         result, code = str(e), 1
+    except MemoryError:
+        files.specs.clear()  # what it holds goes: room to write the answer
+        result = (
+            f"{args.name}: the compiler needed more than {args.memory_mb} MB (daemon.load_memory_mb): "
+            "too large a mission for this daemon's limit; `orccadctl check` shows how far it gets"
+        )
+        code = 1
     Path(args.out).write_bytes(pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL))
     return code
 
