@@ -49,6 +49,10 @@ STOP_SPEED_RAD_S = 0.01
 STOP_TIMEOUT_S = 1.0  # after the ramp, longest wait for standstill before the brake
 
 
+CW_ENABLE_OPERATION_BIT = 0x08
+PUBLISH_EVERY_S = 0.001  # the drive's own cycle refreshes its statusword and actual values
+
+
 @dataclass(frozen=True)
 class Strictness:
     """Behaviours of real drives that a lenient simulation would let a master get away with. All
@@ -95,6 +99,8 @@ class Axis:
         self._prev_target: float | None = None
         self._limits: dict[tuple[int, int], tuple[int, int]] = {}
         self._mode_due: tuple[int, float] | None = None  # (mode asked, when the display shows it)
+        self._published_s = -1.0  # when the statusword and actual values were last refreshed
+        self.sto = False  # Safe Torque Off active: the power stage cannot be enabled
         node.on_write[(0x6040, 0)] = self._controlword
         node.on_write[(0x6060, 0)] = self._mode_asked
         node.on_reset_node = self.reset
@@ -126,15 +132,17 @@ class Axis:
         self._publish()
 
     def reset(self) -> None:
-        """NMT reset node: the drive restarts (power stage off, fault cleared, self-test done)."""
+        """NMT reset node: the drive restarts (power stage off, fault cleared, self-test done),
+        its dictionary back to its defaults: SWITCH ON DISABLED, in the mode of 0x6060, as at
+        power-on."""
         self.arm.drive[self.j] = Drive.OFF
         self.fault_code = 0
-        self._mode_due = None
-        self.sm = DriveStateMachine(self._get(0x605A, 2))
-        self.sm.boot()
+        self.boot()
 
     def _controlword(self, cw: int) -> None:
         before = self.sm.state
+        if self.sto:  # Enable Operation refused (transition 4): at most SWITCHED ON
+            cw = int(cw) & ~CW_ENABLE_OPERATION_BIT
         t = self.sm.controlword(int(cw))
         if t == 15:  # fault reset: the error is acknowledged
             self.fault_code = 0
@@ -174,11 +182,15 @@ class Axis:
         self.poll(self.node.now_s)
 
     def poll(self, now_s: float) -> None:
-        """Timers between SYNCs: the mode display catches up with a mode asked."""
+        """The drive's own cycle between SYNCs (a real drive runs it whatever the bus does): the
+        mode display catches up with a mode asked, the statusword and actual values are fresh
+        for an SDO read."""
         due = self._mode_due
         if due is not None and now_s >= due[1]:
             self._mode_due = None
             self._set(0x6061, due[0])
+        if now_s - self._published_s >= PUBLISH_EVERY_S:  # SYNCs publish too: no need then
+            self._publish()
 
     def _mode(self) -> int:
         """The mode the drive runs in: the one it shows (0x6061)."""
@@ -263,6 +275,7 @@ class Axis:
         return settled or elapsed > abs(self._stop_v0) / decel + STOP_TIMEOUT_S  # then brake anyway
 
     def _publish(self) -> None:
+        self._published_s = self.node.now_s
         arm, j, u = self.arm, self.j, self.units
         self._set(0x6064, round(arm.q[j] * u.counts_per_rad))
         self._set(0x606C, round(arm.dq[j] * u.counts_per_rad))

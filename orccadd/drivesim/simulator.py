@@ -41,7 +41,7 @@ from orccadd.model import RobotModel
 
 log = logging.getLogger("orccadd.drivesim")
 
-FAULTS = ("overcurrent", "following_error", "heartbeat_silence", "node_silence", "clear")
+FAULTS = ("overcurrent", "following_error", "heartbeat_silence", "node_silence", "sto", "clear")
 
 
 @dataclass(frozen=True)
@@ -234,7 +234,8 @@ class DriveSimulator:
 
     def inject(self, node_id: int, fault: str, bus: str = "") -> None:
         """Fault injection: overcurrent / following_error (EMCY, fault reaction), heartbeat_silence
-        (no more heartbeats), node_silence (nothing at all), clear (silences end)."""
+        (no more heartbeats), node_silence (nothing at all), sto (its Safe Torque Off input active:
+        Enable Operation refused, the drive stays SWITCHED ON), clear (silences and STO end)."""
         axis = self.axis_of(node_id, bus)
         with self.lock:
             if fault == "overcurrent":
@@ -245,8 +246,11 @@ class DriveSimulator:
                 axis.node.heartbeat_silent = True
             elif fault == "node_silence":
                 axis.node.silent = True
+            elif fault == "sto":
+                axis.sto = True
             elif fault == "clear":
                 axis.node.silent = axis.node.heartbeat_silent = False
+                axis.sto = False
             else:
                 raise ValueError(f"unknown fault {fault!r} (faults: {', '.join(FAULTS)})")
             self._send_queued()

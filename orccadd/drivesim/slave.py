@@ -170,6 +170,8 @@ class SlaveNode:
 
     def _reset(self, now_s: float, comm_only: bool) -> None:
         self._defaults(comm_only)
+        if not comm_only:  # the application restarts too: its own values, before the boot-up
+            self.on_reset_node()
         self._seg = None
         self.nmt = Nmt.PRE_OPERATIONAL
         self._lost.clear()
@@ -185,7 +187,6 @@ class SlaveNode:
         elif cs == 0x80:
             self.nmt = Nmt.PRE_OPERATIONAL
         elif cs == 0x81:
-            self.on_reset_node()
             self._reset(now_s, comm_only=False)
         elif cs == 0x82:
             self._reset(now_s, comm_only=True)
@@ -255,7 +256,8 @@ class SlaveNode:
             return
         period_ms = int(self.values.get((0x1017, 0), 0) or 0)
         if period_ms and now_s >= self._next_heartbeat_s:
-            self._next_heartbeat_s = max(self._next_heartbeat_s + period_ms / 1000, now_s)
+            # never sooner than 0x1017 after the last one, however late this one is
+            self._next_heartbeat_s = now_s + period_ms / 1000
             if not self.heartbeat_silent:
                 self._emit(0x700 + self.node_id, bytes([self.nmt]))
         if self.nmt is Nmt.OPERATIONAL:

@@ -102,6 +102,8 @@ class Canopen402Arm(PhysicalResource):
         self._fault_reset = False
         self._stop_t0 = 0.0
         self._comm_lost = False
+        self._walk_t0 = 0.0  # when the walk under way began (monotonic s)
+        self._walk_failed = ""  # why a walk ended without its state (a fault until `reset`)
         self._data = model.new_data()
 
     # ---- lifecycle ------------------------------------------------------------------------
@@ -137,6 +139,7 @@ class Canopen402Arm(PhysicalResource):
         """Fault reset on every faulted drive: the next cycles send the rising edges."""
         self.master.clear_faults()
         self._fault_reset = True
+        self._walk_failed = ""
         self.fault_message = ""
 
     # ---- helpers for the blocking phases (the loop may or may not be ticking) -------------
@@ -166,7 +169,9 @@ class Canopen402Arm(PhysicalResource):
         looped = self.master.tick > 0 and self._ticking()
         while not done():
             if time.monotonic() > end:
-                states = ", ".join(f"{a.node_id}: {a.state.name}" for a in self.master.axes)
+                states = ", ".join(
+                    f"{a.node_id}: {a.state.name}, statusword 0x{a.statusword:04X}" for a in self.master.axes
+                )
                 limit = self.settings.startup_timeout_s
                 raise ResourceError(f"resource {self.name!r}: no {what} within {limit:g} s (drives {states})")
             if looped:
@@ -205,6 +210,7 @@ class Canopen402Arm(PhysicalResource):
         """From the next tick on, take every drive to `target`, once each answered a SYNC since
         now (a fresh TPDO: its state is current and the cyclic exchange runs)."""
         self._walk_after = [a.tpdo_count for a in self.master.axes]
+        self._walk_t0 = time.monotonic()
         self._walk_to = target
 
     def _step_walk(self, target: cia402.State) -> None:
@@ -219,6 +225,14 @@ class Canopen402Arm(PhysicalResource):
                     self._vel[j] = 0.0
         if m.step_towards(target):
             self._walk_to = None
+        elif time.monotonic() - self._walk_t0 > self.settings.startup_timeout_s:
+            late = next(a for a in m.axes if a.state is not target)
+            self._walk_failed = (
+                f"node {late.node_id} ({late.name}) did not reach {target.name} within "
+                f"{self.settings.startup_timeout_s:g} s (startup_timeout_s): statusword "
+                f"0x{late.statusword:04X} ({late.state.name}), controlword 0x{late.controlword:04X}"
+            )
+            self._walk_to = None  # commands stay unsent: the fault stops the arm
 
     def _enable_blocking(self) -> None:
         self._hold_here()
@@ -264,6 +278,9 @@ class Canopen402Arm(PhysicalResource):
             flags |= Status.FAULT
             self.fault_message = rep.fault
             state.fault_code = rep.fault_code
+        elif self._walk_failed:
+            flags |= Status.FAULT
+            self.fault_message = self._walk_failed
         if not powered:
             flags |= Status.TORQUE_OFF
         self._comm_lost = bool(rep.comm_lost)

@@ -307,3 +307,20 @@ def test_two_buses_keep_their_frames_and_their_sync_apart() -> None:
     finally:
         for b in (*sim_buses, *peers):
             b.shutdown()
+
+
+def test_a_reset_node_boots_the_drive_as_at_power_on(rig: Rig) -> None:
+    """NMT reset node: the statusword shows SWITCH ON DISABLED and 0x6061 the mode of 0x6060 at
+    once, read by SDO before any SYNC (before: 0x0000 and 0, until a SYNC came)."""
+    node = canopen.BaseNode402(1, rig.sim.nodes[0].eds)
+    rig.network.add_node(node)
+    for _ in range(2):
+        assert node.sdo[0x6041].raw & 0x4F == 0x40  # SWITCH ON DISABLED
+        assert node.sdo[0x6061].raw == node.sdo[0x6060].raw
+        node.nmt.send_command(0x81)
+        node.nmt.wait_for_bootup(2.0)
+    node.sdo[0x6060].raw = 8  # csp, before any SYNC: shown within the drive's own cycle
+    end = time.monotonic() + 1.0
+    while node.sdo[0x6061].raw != 8:
+        assert time.monotonic() < end
+        time.sleep(0.005)

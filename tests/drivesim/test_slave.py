@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 from collections.abc import Iterator
@@ -215,3 +216,21 @@ def test_write_cob_id_invalidates_changes_then_validates(e35: Harness) -> None:
     ]
     assert e35.node.get(0x1014) == 0x85
     assert e35.node.rpdos[0x1400].cob_id == 0x205 and e35.node.rpdos[0x1400].valid
+
+
+def test_a_late_heartbeat_is_not_followed_by_a_catch_up_one() -> None:
+    """The producer never sends sooner than 0x1017 after its last heartbeat, however late the
+    last one was (before: a late one was followed by another within the next poll)."""
+    sent: list[tuple[float, int]] = []
+    clock = [0.0]
+    node = SlaveNode(
+        NODE, str(eds("ros_canopen/Elmo.dcf")), lambda m: sent.append((clock[0], m.arbitration_id))
+    )
+    node.boot(0.0)
+    node.set(0x1017, 0, 100)
+    for t in [0.0, 0.01, 0.35, 0.36, 0.40, 0.44, 0.45, 0.46, 0.56]:  # 0.35: a stall of 250 ms
+        clock[0] = t
+        node.poll(t)
+    beats = [t for t, cob in sent if cob == 0x700 + NODE and t > 0.0]
+    assert beats == [0.35, 0.45, 0.56], beats
+    assert min(b - a for a, b in itertools.pairwise(beats)) >= 0.1

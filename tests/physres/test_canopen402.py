@@ -224,6 +224,33 @@ def test_drives_watching_our_heartbeat_are_enabled_once_sync_runs(tmp_path: Path
     assert max(np.diff([t for t in ours if t >= watched_s])) < 3 * period_s  # the drives' timeout
 
 
+def test_a_drive_that_never_enables_is_a_fault_naming_it_and_its_statusword(tmp_path: Path) -> None:
+    """A drive whose Safe Torque Off is active stays SWITCHED ON whatever the controlword says:
+    within `startup_timeout_s` of the walk the resource reports a fault naming the node, its
+    statusword and what was awaited (before: it waited in SWITCHED ON for ever, without a word);
+    once STO is released, `reset` enables every drive."""
+    with canopen_rig(tmp_path, settings_extra="startup_timeout_s = 1.5") as rig:
+        rig.drives.inject(2, "sto")
+        res = new_arm(rig)
+        try:
+            res.configure()
+            res.activate(CommandMode.POSITION)
+            waited = wait_for(res, Status.FAULT, 10.0)
+            assert 1.0 < waited < 5.0, waited
+            msg = res.fault_message
+            assert "node 2 (shoulder_lift_joint) did not reach OPERATION_ENABLED within 1.5 s" in msg, msg
+            assert "statusword 0x" in msg and "SWITCHED_ON" in msg, msg
+            rig.drives.inject(2, "clear")
+            res.safe_stop()
+            wait_for(res, Status.STOPPED, 5.0)
+            res.reset_fault()
+            run(res, 0.3)
+            res.clear_stop()
+            assert all(a.state is State.OPERATION_ENABLED for a in res.master.axes)
+        finally:
+            res.shutdown()
+
+
 def test_a_drive_slow_to_show_its_mode_is_waited_for(tmp_path: Path) -> None:
     """Drives show a new mode of operation (0x6061) some ms after 0x6060 is written: configure
     (csp) and activate in another mode (torque: cst) read 0x6061 until it shows the mode."""
