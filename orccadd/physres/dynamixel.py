@@ -396,12 +396,17 @@ class DynamixelArm(PhysicalResource):
         ch = self.chain
         n = self.settings.comm_errors_in_a_row
         j = ch.cut_at
+        waited = (
+            f"each reply waited for {ch.cycle_deadline_s() * 1e3:.2f} ms, its wire time plus "
+            f"read_timeout_s = {self.settings.read_timeout_s * 1e3:g} ms and the adapter's latency"
+        )
         if ch.last_result == READ_TIMEOUT and j >= 0:
-            self._lose(j, f"{ch.labels[j]} does not answer: {n} sync reads in a row stopped at its reply")
+            why = f"{n} sync reads in a row stopped at its reply; {waited}"
+            self._lose(j, f"{ch.labels[j]} does not answer: {why}")
         else:
             what = "damaged (CRC)" if ch.last_result != READ_TIMEOUT else "missing"
             counts = f"{ch.timeouts} timeouts, {ch.crc_errors} CRC errors in {ch.reads} reads"
-            self._lose(-1, f"{n} sync reads in a row failed, the last reply {what} ({counts})")
+            self._lose(-1, f"{n} sync reads in a row failed, the last reply {what} ({counts}; {waited})")
         ch.in_a_row = 0
 
     def _lose(self, j: int, why: str) -> None:
@@ -539,6 +544,11 @@ class DynamixelArm(PhysicalResource):
             "latency_timer_ms": self.latency_s * 1e3,
             "reads": ch.reads,
             "timeouts": ch.timeouts,
+            "timeouts_by_servo": ", ".join(
+                f"{i}: {n}" for i, n in zip(ch.ids, ch.timeouts_by_servo, strict=True)
+            ),
+            "late_bytes_dropped": ch.late_bytes_dropped,
+            "cycle_deadline_ms": round(ch.cycle_deadline_s() * 1e3, 3) if ch.port is not None else 0.0,
             "crc_errors": ch.crc_errors,
             "lost": lost or "none",
             "hardware_errors": errors or "none",

@@ -78,6 +78,8 @@ class ServoChain:
         # counters
         self.reads = 0
         self.timeouts = 0
+        self.timeouts_by_servo = [0] * n  # timeouts that found this joint's part missing
+        self.late_bytes_dropped = 0  # of replies that came after their deadline
         self.crc_errors = 0
         self.in_a_row = 0  # failed cyclic reads since the last good one
         self.cut_at = -1  # joint whose part was missing in the last failed read (-1: none/unknown)
@@ -241,9 +243,22 @@ class ServoChain:
             self.in_a_row += 1
             if result == READ_TIMEOUT:
                 self.timeouts += 1
+                if self.cut_at >= 0:
+                    self.timeouts_by_servo[self.cut_at] += 1
+                with self.lock:  # its late end must not be read as the next cycle's reply
+                    self.late_bytes_dropped += self._p().drop_late_reply()
             else:
                 self.crc_errors += 1
         return result
+
+    def cycle_deadline_s(self) -> float:
+        """How long the cyclic read waits for its reply (for the last servo's, with plain sync
+        reads): the request's and the reply's wire time, the adapter's latency, `read_timeout_s`."""
+        port, n = self._p(), len(self._order)
+        request = 14 + n  # header, id, length, instruction, address, size, the ids, CRC
+        if self.settings.fast_sync_read:
+            return port.deadline_s(request, 8 + n * (T.CYCLIC_LENGTH + 4))
+        return port.deadline_s(request, 11 + T.CYCLIC_LENGTH)
 
     def _fast_read(self) -> int:
         reader, order = self._reader, self._order

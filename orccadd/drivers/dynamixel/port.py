@@ -10,7 +10,16 @@ here, and a timeout far beyond a control period. `BlockingPort` keeps the SDK's 
   what is there (the SDK asks for exactly the bytes it still needs);
 - a packet's deadline is the wire time of the request and of the expected reply at the baud
   rate, plus the adapter's latency and `read_timeout_s` (see `setPacketTimeout`);
-- time is CLOCK_MONOTONIC (the SDK uses the wall clock).
+- time is CLOCK_MONOTONIC (the SDK uses the wall clock);
+- after a read that timed out, the rest of its late reply is waited out and dropped
+  (`drop_late_reply`), so that it does not arrive in the next request's time and read as its
+  reply (the SDK's `clearPort` drops only what is already there when the next request goes).
+
+So the chain may answer up to `read_timeout_s` (default 3 ms) later than the wire time of the
+request and of its reply at the baud rate, plus the adapter's latency timer: a servo busy, a
+loaded host, a USB adapter that holds bytes back. Later than that, the read is a timeout (counted
+per servo whose part was missing); `comm_errors_in_a_row` failed reads in a row are CommLost.
+`cycle_deadline_s` says what that deadline is for the cyclic read.
 
 `latency_timer_s` reads an FTDI adapter's latency timer from sysfs; `check_latency` refuses a
 period it cannot meet, with the fix.
@@ -67,6 +76,27 @@ class BlockingPort(PortHandler):  # type: ignore[misc]  # the SDK is untyped
             return os.read(self._fd, length)
         except BlockingIOError:
             return b""
+
+    def drop_late_reply(self) -> int:
+        """After a timeout: drop the late reply, if it comes within another `read_timeout_s` (and
+        the adapter's latency), then whatever follows until the line has been quiet for the wire
+        time of a few bytes. Bytes dropped (tick-safe: bounded by the port's margins)."""
+        quiet_s = max(0.0003, self.tx_time_per_byte * 16e-3)
+        wait_s = self.extra_ms * 1e-3  # for its first byte
+        dropped = 0
+        while True:
+            ready, _, _ = select.select((self._fd,), (), (), wait_s)
+            if not ready:
+                return dropped
+            try:
+                dropped += len(os.read(self._fd, 4096))
+            except BlockingIOError:
+                return dropped
+            wait_s = quiet_s
+
+    def deadline_s(self, request_bytes: int, reply_bytes: int) -> float:
+        """How long a reply of `reply_bytes` to a request of `request_bytes` is waited for."""
+        return float(self.tx_time_per_byte * (request_bytes + reply_bytes) + self.extra_ms) * 1e-3
 
     def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802
         """Deadline for a reply of `packet_length` bytes to the request just written."""

@@ -1,14 +1,18 @@
-"""The USB adapter's latency timer: read from sysfs for a usb-serial tty, skipped for anything
-else (a pseudo-terminal), and a period it cannot meet refused with the fix."""
+"""The port under the SDK: the USB adapter's latency timer (read from sysfs for a usb-serial tty,
+skipped for anything else, a period it cannot meet refused with the fix), the cycle's deadline,
+and a late reply dropped before the next request."""
 
 from __future__ import annotations
 
 import os
+import threading
+import time
+import tty
 from pathlib import Path
 
 import pytest
 
-from orccadd.drivers.dynamixel.port import check_latency, latency_timer_s
+from orccadd.drivers.dynamixel.port import BlockingPort, check_latency, latency_timer_s
 from orccadd.errors import ResourceError
 
 
@@ -45,6 +49,40 @@ def test_a_pseudo_terminal_has_no_latency_timer(tmp_path: Path) -> None:
     try:
         assert latency_timer_s(os.ttyname(slave)) is None
         assert check_latency(os.ttyname(slave), 0.001, 0.0009) == 0.0
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_a_late_reply_is_dropped_not_read_as_the_next_requests() -> None:
+    """A reply that comes after its read timed out (here 2 ms later, in pieces: within another
+    `read_timeout_s`) is waited out and dropped before the next request, and the wait ends once
+    the line is quiet (a busy-wait-free bound: the margin for its first byte)."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    try:
+        port = BlockingPort(os.ttyname(slave), read_timeout_s=0.003)
+        port.baudrate = 4_000_000
+        assert port.openPort()
+        late = bytes([0xFF, 0xFF, 0xFD, 0x00, 0x01, 0x08, 0x00, 0x55, 0x00, 0x11, 0x22, 0x33, 0x44])
+
+        def answer_late() -> None:
+            time.sleep(0.002)
+            os.write(master, late[:6])
+            time.sleep(0.0001)
+            os.write(master, late[6:])
+
+        writer = threading.Thread(target=answer_late)
+        writer.start()
+        t0 = time.monotonic()
+        dropped = port.drop_late_reply()
+        writer.join()
+        assert dropped == len(late) and port.ser.in_waiting == 0
+        assert time.monotonic() - t0 < 0.05  # ended on a quiet line
+        t0 = time.monotonic()
+        assert port.drop_late_reply() == 0 and time.monotonic() - t0 < 0.05  # nothing late: one margin
+        assert port.deadline_s(10, 14) == pytest.approx(24 * 10 / 4_000_000 + 0.003)
+        port.closePort()
     finally:
         os.close(master)
         os.close(slave)
