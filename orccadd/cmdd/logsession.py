@@ -225,6 +225,11 @@ class TelemetryLog:
             except Exception as e:  # a bug in a writer must not stop the command daemon's pump
                 raise OSError(f"{type(e).__name__}: {e} ({path})") from e
 
+    def size_bytes(self) -> int:
+        """What the log's files hold so far (the CSV and the MCAP part being written)."""
+        mcap = self.mcap.fh.tell() if self.mcap is not None else 0
+        return self.csv.size + int(mcap)
+
     def _mcap_path(self) -> Path | None:
         return self.mcap.path if self.mcap else None
 

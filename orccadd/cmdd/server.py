@@ -233,6 +233,15 @@ class CommandDaemon:
                     self.recording.pump()
                 except OSError as e:
                     self._end_log(self.recording.abandon(e))
+            if self.recording is not None and self.recording.size_bytes() > self.cfg.log_max_mb * 1e6:
+                limit = f"its size limit, {self.cfg.log_max_mb:g} MB (daemon.log_max_mb)"
+                try:
+                    summary = self.recording.close(f"reached {limit}")
+                    self._end_log(
+                        {**summary, "error": f"log ended: reached {limit} after {summary['rows']} rows"}
+                    )
+                except OSError as e:
+                    self._end_log(self.recording.abandon(e))
             if self.rt.closed or not _alive(int(self.tel.header[H.PID])):
                 log.info("the real-time process is gone; exiting")
                 self.done.set()

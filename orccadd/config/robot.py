@@ -103,6 +103,8 @@ class DaemonConfig:
     # full-rate CSV logs go here, created by the command daemon (never a path a client names);
     # "": `logs/` in the socket's directory
     log_dir: str = field(default="")
+    # a log (its CSV and MCAP together) ends once this large: a log left running fills no disk
+    log_max_mb: float = field(default=2048.0, bounds=(1.0, 1 << 20))
     # connections the command daemon serves at once, per role: read-only clients cannot take
     # the control clients' places; clients without a role are answered once and closed
     control_clients: int = field(default=16, bounds=(1, 1024))

@@ -231,6 +231,27 @@ def test_log_disk_full_ends_the_log_with_the_reason_and_nothing_else(tmp_path: P
         subprocess.run(["umount", "-l", str(logs)], check=False)
 
 
+def test_a_log_ends_at_its_size_limit_readable_and_nothing_else_changes(tmp_path: Path) -> None:
+    """A log left running (or 12,000 signals asked for) fills no disk: it ends at
+    `daemon.log_max_mb`, saying so, its files whole; the loop and the mission carry on."""
+    logs = tmp_path / "logs"
+    d = start_daemon(tmp_path, daemon_cfg=f'log_dir = "{logs}"\nlog_max_mb = 1.0')
+    try:
+        d.call("load", path=DEMO)
+        d.call("start")
+        d.call("log", action="start", name="big.csv", signals=["q"] * 12_000 + ["dq", "tau", "cmd"])
+        s = d.wait(lambda s: "error" in (s.get("log") or {}), timeout_s=60)
+        assert "size limit, 1 MB (daemon.log_max_mb)" in s["log"]["error"], s["log"]  # type: ignore[index]
+        ticks = int(d.status()["ticks"])  # type: ignore[arg-type]
+        d.wait(lambda s: int(s["ticks"]) > ticks + 100)  # the loop goes on
+        assert not d.status()["faulted"]
+    finally:
+        d.stop()
+    total = sum(p.stat().st_size for p in logs.iterdir() if p.suffix in (".csv", ".mcap"))
+    assert 1e6 < total < 1.5e6, total  # the limit, and at most one pump's worth (50 ms) past it
+    _assert_every_log_file_readable(logs)
+
+
 def _assert_every_log_file_readable(logs: Path) -> None:
     """What a full disk leaves: CSVs whose every row is whole (before: a last row of 7 of 13
     columns, a number cut to `0.`), MCAPs that mcap's own reader reads to the end (before: an
