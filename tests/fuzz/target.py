@@ -117,7 +117,9 @@ class Outcome:
 
 
 def expected_id(payload: bytes) -> Any:
-    """The id a reply must carry: the request's own, if it is a JSON object with a valid id."""
+    """The id a reply must carry: the request's own, if it is a JSON object with a valid id (the
+    protocol's: an integer within ±2^53, a finite number, or a string of at most 256 characters);
+    else null (NaN or Infinity echoed would not be JSON)."""
     try:
         msg = json.loads(payload)
     except (ValueError, RecursionError):
@@ -125,12 +127,14 @@ def expected_id(payload: bytes) -> Any:
     rid = msg.get("id") if isinstance(msg, dict) else None
     if isinstance(rid, bool) or not isinstance(rid, str | int | float):
         return None
-    return rid
+    if isinstance(rid, float) and not math.isfinite(rid):
+        return None
+    if isinstance(rid, int) and not -(2**53) <= rid <= 2**53:
+        return None
+    return None if isinstance(rid, str) and len(rid) > 256 else rid
 
 
 def same_id(a: Any, b: Any) -> bool:
-    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
-        return True
     return type(a) is type(b) and a == b
 
 
