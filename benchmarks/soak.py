@@ -14,7 +14,12 @@ all through the real socket:
 - `--monitors` `orccadctl monitor --rate 100` processes, each killed (SIGKILL: no goodbye) and
   restarted every `--monitor-life-s`, staggered; every `--stall-every-s` a client that asks for a
   500 Hz monitor and never reads (the command daemon must drop it and free its slot);
-- a client tuning `<active task>.traj.speed_scale` at 10 Hz.
+- a client tuning `<active task>.traj.speed_scale` at 10 Hz;
+- hostile clients (`soak_hostile`), every `--hostile-every-s`: in the middle of a run, every
+  place of the urgent and main sockets held (slow senders, idle connections) while
+  `orccadctl abort` must still abort; between them, a log of 12,000 signals with `status` timed
+  all through, in a log directory of `--small-log-dir-kb` (a tmpfs, root) that it fills: the log
+  ends saying so and leaves every file readable.
 
 Measured: every tick record of the shared-memory ring. A tick overran when the next release
 came more than one period after its own (our clocks release on the nominal deadline, so the
@@ -56,6 +61,14 @@ from typing import Any
 
 import numpy as np
 from harness import ROOT, running_daemon
+from soak_hostile import (
+    STATUS_LIMIT_S,
+    SmallLogDir,
+    abort_through_holders,
+    empty,
+    huge_log,
+    unreadable_log_files,
+)
 
 from orccadd.config.robot import read_robot_config
 from orccadd.ctl.client import Client, ClientError
@@ -430,6 +443,7 @@ class Operator(Worker):
         runs = 0
         next_fault = self.s.t0 + args.fault_first_s
         next_overrun = self.s.t0 + args.overrun_first_s
+        next_hostile = self.s.t0 + args.hostile_every_s if args.hostile_every_s else float("inf")
         overruns = 0
         while not self.s.stop.is_set():
             if runs % args.reload_every == 0:
@@ -449,6 +463,8 @@ class Operator(Worker):
                 fault = "overrun" if overruns % 2 == 0 else "overrun-t3"
                 overruns += 1
                 next_overrun = now + args.overrun_every_s * self.rng.uniform(0.85, 1.15)
+            elif now >= next_hostile:
+                fault, next_hostile = "hostile-abort", now + args.hostile_every_s
             self._run_once(c, fault)
             runs += 1
 
@@ -490,6 +506,13 @@ class Operator(Worker):
             self._inject(c, fault)
             s = self._wait(c, lambda s: bool(s["faulted"]), 0.5)
         t_inj = time.monotonic()
+        if fault == "hostile-abort":
+            s = self._wait(c, lambda s: bool(s["faulted"]) and s["state"] not in ("running", "holding"), 5.0)
+            if s["result"] != "aborted":
+                tally.note("abort_denied", f"the run did not end aborted: {_brief(s)}")
+            self._recover(c, "aborted", t_inj)
+            tally.add("runs_aborted")
+            return
         if fault in ("resource", "overrun-t3"):
             s = self._wait(c, lambda s: bool(s["faulted"]), 5.0)
             if not s["faulted"]:
@@ -526,6 +549,13 @@ class Operator(Worker):
         if fault == "resource":
             meter.mark("inject resource")
             c.call("inject", fault="resource")
+        elif fault == "hostile-abort":
+            meter.mark("hostile abort")
+            free = self.s.control_clients - self.s.ours()
+            code, err, took_s = abort_through_holders(self.s.sock, free)
+            self.s.tally.time("hostile_abort_s", took_s)
+            if code != 0:
+                self.s.tally.note("abort_denied", f"orccadctl abort exited {code}: {err}")
         else:
             ticks = max(1, limit - 5) if fault == "overrun" else limit + 10
             w = meter.open_window()
@@ -738,6 +768,42 @@ class Monitors(Worker):
         self.errlog.close()
 
 
+class HostileLogs(Worker):
+    """Every `--hostile-every-s` (half a period after the hostile aborts): a log of 12,000
+    signals, `status` timed through it; in a small log directory, the files checked after it
+    filled the disk, then removed (see `soak_hostile`)."""
+
+    def __init__(self, soak: Soak) -> None:
+        super().__init__("hostile-logs", soak.stop, soak.fatal)
+        self.s = soak
+
+    def work(self) -> None:
+        every, tally = self.s.args.hostile_every_s, self.s.tally
+        if not every:
+            return
+        small = self.s.small_logs
+        if self.stop.wait(every / 2):
+            return
+        while True:
+            self.s.meter.mark("hostile log")
+            r = huge_log(self.s.sock, self.stop)
+            tally.add("hostile_logs")
+            tally.time("hostile_status_s", r["slowest_status_s"])
+            if r["slowest_status_s"] > STATUS_LIMIT_S:
+                tally.note("status_stalled", f"status took {r['slowest_status_s']:.2f} s during a huge log")
+            if not r["ended"]:
+                tally.note("log_not_ended", str(r.get("error")))
+            elif r.get("error"):
+                tally.add("logs_ended_full")
+            if small is not None:
+                time.sleep(0.5)  # the command daemon has closed the files
+                for problem in unreadable_log_files(small):
+                    tally.note("log_files_broken", problem)
+                empty(small)
+            if self.stop.wait(every):
+                return
+
+
 class Sampler(Worker):
     """Process statistics every `--sample-s`."""
 
@@ -764,6 +830,7 @@ class Soak:
         self.rt_pid = rt_pid
         self.tel = tel
         self.tmp = tmp
+        self.small_logs: Path | None = args.small_log_path
         self.mission = Path(args.mission).resolve()
         self.overrun_limit = read_robot_config(args.config).daemon.overrun_limit
         self.stop = threading.Event()
@@ -777,6 +844,8 @@ class Soak:
         self.tuner = Tuner(self)
         self.monitors = Monitors(self)
         self.sampler = Sampler(self)
+        self.hostile_logs = HostileLogs(self)
+        self.control_clients = read_robot_config(args.config).daemon.control_clients
 
     def dump_ticks(self) -> Path | None:
         """The whole tick ring (its last `TICK_RING_S`), as CSV in the daemon's folder (5 at most)."""
@@ -811,10 +880,11 @@ class Soak:
         self.monitors.start()
         time.sleep(1.0)  # the first load before the tuner asks for the parameters
         self.tuner.start()
+        self.hostile_logs.start()
 
     def close(self) -> None:
         self.stop.set()
-        for t in (self.operator, self.tuner, self.monitors, self.sampler):
+        for t in (self.operator, self.tuner, self.monitors, self.sampler, self.hostile_logs):
             if t.ident is not None:  # started
                 t.join(timeout=30)
         self.monitors.close()
@@ -902,10 +972,21 @@ def report(soak: Soak, elapsed_s: float, why_end: str, log: Path) -> list[str]:
         f"(runs {dict(sorted(d.injected_runs.items()))}); the loop's own count {total_hdr} "
         f"(this reader: {d.overruns + d.injected_overruns})"
     )
+    times = soak.tally.times
+    print(
+        f"  hostile clients: {n['runs_aborted']} runs aborted through every place held (orccadctl abort "
+        f"{_fig(times['hostile_abort_s'], 's', 2)}), {n['abort_denied']} denied; {n['hostile_logs']} logs "
+        f"of 12,000 signals ({n['logs_ended_full']} ended by a full log directory), slowest status "
+        f"{_fig(times['hostile_status_s'], 's', 2)}, {n['status_stalled']} over {STATUS_LIMIT_S:g} s; "
+        f"files left unreadable {n['log_files_broken']}; logs that did not end {n['log_not_ended']}"
+    )
     print(f"  wake-up (spontaneous ticks)  {soak.meter.wake.figures()}")
     print(f"  compute (spontaneous ticks)  {soak.meter.compute.figures()}")
     problems += _process_table(soak, samples)
-    keys = ("run_failed", "load_failed", "recovery_failed", "monitor_ended", "stalled_kept", "tune_refused")
+    keys = (
+        "run_failed", "load_failed", "recovery_failed", "monitor_ended", "stalled_kept", "tune_refused",
+        "abort_denied", "status_stalled", "log_files_broken", "log_not_ended",
+    )  # fmt: skip
     for key in (*keys, "client_failed"):
         for msg in soak.tally.notes.get(key, []):
             print(f"  {key}: {msg}")
@@ -921,6 +1002,14 @@ def report(soak: Soak, elapsed_s: float, why_end: str, log: Path) -> list[str]:
         problems.append(f"clients cut off: {n['monitor_ended']} monitors, {n['client_failed']} others")
     if n["stalled_kept"]:
         problems.append(f"{n['stalled_kept']} clients that stopped reading were never dropped")
+    for key, what in (
+        ("abort_denied", "aborts not applied through held places"),
+        ("status_stalled", f"status answers slower than {STATUS_LIMIT_S:g} s during a huge log"),
+        ("log_files_broken", "log files left unreadable"),
+        ("log_not_ended", "logs that did not end"),
+    ):
+        if n[key]:
+            problems.append(f"{n[key]} {what}")
     return problems
 
 
@@ -990,14 +1079,15 @@ def _over_time(run: list[Sample]) -> None:
 
 
 # ---- config, main ------------------------------------------------------------------------------------
-def config_at_500hz(robot: str, mission: Path) -> Path:
+def config_at_500hz(robot: str, mission: Path, log_dir: Path | None = None) -> Path:
     """The robot config, or a copy at 500 Hz (relative paths made absolute, the mission's folder
-    among `daemon.mission_dirs`) if it runs at another rate or cannot load the mission."""
+    among `daemon.mission_dirs`, `log_dir` if given) if it runs at another rate, cannot load the
+    mission or must log elsewhere."""
     path = Path(robot) if robot.endswith(".toml") else ROOT / f"configs/robots/{robot}.toml"
     cfg = read_robot_config(path)
     dirs = [cfg.resolve(x) for x in cfg.daemon.mission_dirs]
     inside = any(mission.resolve().is_relative_to(x) for x in dirs)
-    if abs(cfg.control_period_s - PERIOD_S) < 1e-12 and inside:
+    if abs(cfg.control_period_s - PERIOD_S) < 1e-12 and inside and log_dir is None:
         return path
     text = path.read_text()
     text = re.sub(r"(?m)^control_period_s\s*=.*$", f"control_period_s = {PERIOD_S}", text)
@@ -1007,6 +1097,9 @@ def config_at_500hz(robot: str, mission: Path) -> Path:
     tasks_toml = ", ".join(f'"{cfg.resolve(x)}"' for x in cfg.daemon.task_dirs)
     daemon = f'hold_task = "{cfg.resolve(cfg.daemon.hold_task)}"\nmission_dirs = [{dirs_toml}]\n'
     daemon += f"task_dirs = [{tasks_toml}]\n"
+    if log_dir is not None:
+        text = re.sub(r"(?m)^log_dir\s*=.*$", "", text)
+        daemon += f'log_dir = "{log_dir}"\n'
     text = (
         text.replace("\n[daemon]\n", f"\n[daemon]\n{daemon}")
         if "\n[daemon]\n" in text
@@ -1014,7 +1107,9 @@ def config_at_500hz(robot: str, mission: Path) -> Path:
     )
     out = Path(tempfile.mkdtemp(prefix="orccadd-soak-")) / path.name
     out.write_text(text)
-    print(f"soak: {path} runs at {cfg.control_period_s:g} s or cannot load {mission}: using {out}")
+    print(
+        f"soak: {path} copied to {out} (at {PERIOD_S:g} s, {mission.name}'s folder allowed, logs: {log_dir})"
+    )
     return out
 
 
@@ -1038,6 +1133,15 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--monitors", type=int, default=5)
     ap.add_argument("--monitor-life-s", type=float, default=120.0, help="each monitor killed after … s")
     ap.add_argument("--stall-every-s", type=float, default=60.0, help="a client that never reads (0: none)")
+    ap.add_argument(
+        "--hostile-every-s", type=float, default=300.0, help="hostile clients every … s (0: none)"
+    )
+    ap.add_argument(
+        "--small-log-dir-kb",
+        type=int,
+        default=512,
+        help="the daemon's logs on a tmpfs this small (root; 0: no)",
+    )
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     args.duration_s = 3600.0 * args.hours if args.hours is not None else 60.0 * args.minutes
@@ -1068,7 +1172,16 @@ def _running(pid: int) -> bool:
 
 def main() -> int:
     args = parse_args()
-    args.config = str(config_at_500hz(args.robot, Path(args.mission)))
+    small = SmallLogDir(args.small_log_dir_kb)
+    try:
+        return _main(args, small)
+    finally:
+        small.close()
+
+
+def _main(args: argparse.Namespace, small: SmallLogDir) -> int:
+    args.small_log_path = small.path
+    args.config = str(config_at_500hz(args.robot, Path(args.mission), small.path))
     with running_daemon(Path(args.config), "--allow-fault-injection", new_session=True) as d:
         with Client(d.socket) as c:
             tel = TelemetryBlock.attach(str(c.call("describe")["telemetry"]))
