@@ -365,7 +365,7 @@ def _waits(p: Program, t: K.Term | None, out: list[str]) -> None:
     elif isinstance(t, K.Halt):
         out.append(f"halt at line {t.loc.line}")
     elif isinstance(t, K.Seq):
-        _waits(p, t.items[0], out)
+        _waits(p, t.first, out)
     elif isinstance(t, K.Par):
         for b in t.branches:
             _waits(p, b, out)

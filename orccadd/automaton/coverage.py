@@ -98,7 +98,7 @@ def _running(t: K.Term | None, out: set[tuple[int, Loc]]) -> None:
     if isinstance(t, K.Running | K.Started):
         out.add((t.task, t.loc))
     elif isinstance(t, K.Seq):
-        _running(t.items[0], out)
+        _running(t.first, out)
     elif isinstance(t, K.Par):
         for b in t.branches:
             _running(b, out)
@@ -128,7 +128,7 @@ def _probed(t: K.Term, probes: dict[int, int]) -> K.Term:
 
 def _map_children(t: K.Term, probes: dict[int, int]) -> K.Term:
     if isinstance(t, K.Seq):
-        return K.seq(tuple(_probed(item, probes) for item in t.items))
+        return K.seq(tuple(_probed(item, probes) for item in t.parts()))
     if isinstance(t, K.Par):
         return K.Par(tuple(None if b is None else _probed(b, probes) for b in t.branches))
     if isinstance(t, K.Loop):

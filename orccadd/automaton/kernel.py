@@ -61,13 +61,79 @@ class Present:
     _h: int = field(default=0, init=False, repr=False, compare=False)
 
 
-@dataclass(frozen=True, slots=True)
+class _Shared:
+    """What every residual of one sequence shares: its items' suffix hashes (a residual's hash in
+    O(1)) and, per program, what each suffix may test (`mentions` in O(1))."""
+
+    __slots__ = ("hashes", "mentions")
+
+    def __init__(self, items: tuple[Term, ...]) -> None:
+        h = [0] * (len(items) + 1)
+        for k in range(len(items) - 1, -1, -1):
+            h[k] = hash((items[k], h[k + 1]))
+        self.hashes = h
+        self.mentions: dict[tuple[int, ...], list[tuple[int, int]]] = {}
+
+
+@dataclass(frozen=True, slots=True, eq=False)
 class Seq:
     """`P1; P2; …; Pn` (n ≥ 2), flat: a sequence of hundreds of tasks is one term, not a chain
-    hundreds deep (every function over terms recurses on nesting only). Build with `seq`."""
+    hundreds deep (every function over terms recurses on nesting only). Build with `seq`.
+
+    A residual (the sequence under way at its item `start`, that item now `head`) shares `items`
+    with the sequence as written: a state of a sequence of n tasks costs O(1), not O(n), and its
+    hash and `mentions` come from what the residuals share. Equal and hashed as the sequence it
+    stands for, `(first, *rest)`, whatever tuple holds it."""
 
     items: tuple[Term, ...]
-    _h: int = field(default=0, init=False, repr=False, compare=False)
+    start: int = 0
+    head: Term | None = None  # None: items[start] itself
+    _shared: _Shared | None = field(default=None, repr=False)
+    _h: int = field(default=0, init=False, repr=False)
+
+    @property
+    def first(self) -> Term:
+        return self.items[self.start] if self.head is None else self.head
+
+    def rest(self) -> tuple[Term, ...]:
+        """The items after the first (a copy: O(n); the step does not need it)."""
+        return self.items[self.start + 1 :]
+
+    def parts(self) -> tuple[Term, ...]:
+        return (self.first, *self.rest())
+
+    def shared(self) -> _Shared:
+        s = self._shared
+        if s is None:
+            s = _Shared(self.items)
+            object.__setattr__(self, "_shared", s)
+        return s
+
+    def at(self, i: int, head: Term) -> Term:
+        """The residual paused in item i, which became `head`."""
+        if i == len(self.items) - 1:
+            return head
+        if isinstance(head, Seq):  # flat, as `seq` builds it
+            return seq((*head.parts(), *self.items[i + 1 :]))
+        return Seq(self.items, i, head, self.shared())
+
+    def __hash__(self) -> int:
+        h = self._h
+        if h == 0:
+            h = hash(("Seq", self.first, self.shared().hashes[self.start + 1])) or 1
+            object.__setattr__(self, "_h", h)
+        return h
+
+    def __eq__(self, other: object) -> bool:
+        if self is other:
+            return True
+        if not isinstance(other, Seq):
+            return NotImplemented
+        if hash(self) != hash(other) or self.first != other.first:
+            return False
+        if self.items is other.items and self.start == other.start:
+            return True
+        return self.rest() == other.rest()
 
 
 @dataclass(frozen=True, slots=True)
@@ -202,7 +268,7 @@ def seq(items: tuple[Term, ...] | list[Term]) -> Term:
     flat: list[Term] = []
     for t in items:
         if isinstance(t, Seq):
-            flat.extend(t.items)
+            flat.extend(t.parts())
         else:
             flat.append(t)
     return flat[0] if len(flat) == 1 else Seq(tuple(flat))
@@ -229,7 +295,6 @@ for _cls in (
     Halt,
     Emit,
     Present,
-    Seq,
     Par,
     Loop,
     Abort,
@@ -243,7 +308,7 @@ for _cls in (
     Handle,
     Hole,
 ):
-    _cache_hash(_cls)
+    _cache_hash(_cls)  # (Seq hashes itself: see the class)
 
 
 class HoleTwiceError(Exception):
@@ -328,7 +393,7 @@ class Instant:
         elif isinstance(t, Started):
             self.cancelled.append(t.task)
         elif isinstance(t, Seq):
-            self.kill(t.items[0])  # the rest has not started yet
+            self.kill(t.first)  # the rest has not started yet
         elif isinstance(t, Par):
             for b in t.branches:
                 self.kill(b)
@@ -346,14 +411,17 @@ def step(t: Term, r: Instant) -> tuple[int, Term]:
             return DONE, NOTHING
         return PAUSED, t
     if isinstance(t, Seq):
-        items = t.items
-        for i, item in enumerate(items):
-            k, res = step(item, r)
+        items, i = t.items, t.start
+        k, res = step(t.first, r)
+        while True:
             if k == PAUSED:
-                return PAUSED, seq((res, *items[i + 1 :]))
+                return PAUSED, t.at(i, res)
             if k != DONE:
                 return k, NOTHING
-        return DONE, NOTHING
+            i += 1
+            if i == len(items):
+                return DONE, NOTHING
+            k, res = step(items[i], r)
     if isinstance(t, Par):
         codes: list[int] = []
         rest: list[Term | None] = []
@@ -439,7 +507,8 @@ def settle(t: Term) -> Term:
     if isinstance(t, Started):
         return Running(t.task, t.loc)
     if isinstance(t, Seq):
-        return seq((settle(t.items[0]), *t.items[1:]))
+        first = settle(t.first)
+        return t if first is t.first else t.at(t.start, first)
     if isinstance(t, Par):
         return Par(tuple(None if b is None else settle(b) for b in t.branches))
     if isinstance(t, Abort):
@@ -456,7 +525,7 @@ def settle(t: Term) -> Term:
 def children(t: Term | None) -> list[Term | None]:
     """The sub-terms of a statement (a terminated `par` branch is None)."""
     if isinstance(t, Seq):
-        return list(t.items)
+        return list(t.parts())
     if isinstance(t, Par):
         return list(t.branches)
     if isinstance(t, Abort | Loop | Trap | Suspend):
@@ -482,7 +551,7 @@ def active_tasks(t: Term | None, out: list[int]) -> list[int]:
     if isinstance(t, Running | Started):
         out.append(t.task)
     elif isinstance(t, Seq):
-        active_tasks(t.items[0], out)
+        active_tasks(t.first, out)
     elif isinstance(t, Par):
         for b in t.branches:
             active_tasks(b, out)
@@ -518,10 +587,7 @@ def mentions(t: Term | None, end_masks: tuple[int, ...]) -> tuple[int, int]:
     if isinstance(t, Await):
         return cond_masks(t.cond)
     if isinstance(t, Seq):
-        acc = (0, 0)
-        for item in t.items:
-            acc = _union(acc, mentions(item, end_masks))
-        return acc
+        return _union(mentions(t.first, end_masks), _suffix_mentions(t, end_masks)[t.start + 1])
     if isinstance(t, Par):
         acc = (0, 0)
         for b in t.branches:
@@ -559,6 +625,19 @@ def pre_masks(*terms: Term | None) -> tuple[int, int]:
         stack.extend(conds(x))
         stack.extend(c for c in children(x) if c is not None)
     return pin, pint
+
+
+def _suffix_mentions(t: Seq, end_masks: tuple[int, ...]) -> list[tuple[int, int]]:
+    """What each suffix of `t.items` may test (index k: items[k:]), computed once per sequence."""
+    shared = t.shared()
+    out = shared.mentions.get(end_masks)
+    if out is None:
+        items = t.items
+        out = [(0, 0)] * (len(items) + 1)
+        for k in range(len(items) - 1, -1, -1):
+            out[k] = _union(mentions(items[k], end_masks), out[k + 1])
+        shared.mentions[end_masks] = out
+    return out
 
 
 def _union(a: tuple[int, int], b: tuple[int, int]) -> tuple[int, int]:

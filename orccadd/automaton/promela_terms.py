@@ -181,7 +181,7 @@ class Codegen:
 
     def _seq(self, t: K.Term, ctx: Ctx, p: Proc) -> None:
         assert isinstance(t, K.Seq)
-        for item in t.items:
+        for item in t.parts():
             self.term(item, ctx, p)
 
     def _pause(self, t: K.Term, ctx: Ctx, p: Proc) -> None:
