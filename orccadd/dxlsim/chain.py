@@ -37,7 +37,7 @@ from orccadd.model import RobotModel
 
 SERVO_PERIOD_S = 0.001  # the servos' control period and the arm's integration step
 VISCOUS_NM_S_RAD = 0.01
-FAULTS = ("overload", "overheating", "unplug", "replug", "noise", "clear")
+FAULTS = ("overload", "overheating", "unplug", "replug", "noise", "late", "clear")
 READS = (Instruction.READ, Instruction.SYNC_READ, Instruction.BULK_READ)
 FAST_READS = (Instruction.FAST_SYNC_READ, Instruction.FAST_BULK_READ)
 
@@ -73,6 +73,8 @@ class Chain:
         self.t_s: float | None = None
         self.last_packet_s = 0.0
         self.noise_rate = 0.0
+        self.late_s = 0.0  # the next `late_packets` status packets come this much later
+        self.late_packets = 0
         self.rng = random.Random(1)
         self.packets = 0
         self.crc_errors = 0
@@ -274,6 +276,19 @@ class Chain:
             if self.rng.random() < self.noise_rate:
                 out[i] ^= 1 << self.rng.randrange(8)
         return bytes(out)
+
+    def make_late(self, late_s: float, packets: int) -> None:
+        """The next `packets` status packets come `late_s` after their due time."""
+        if not 0.0 <= late_s <= 1.0 or packets < 0:
+            raise ValueError(f"late: ms (={late_s * 1e3:g}) must be in [0, 1000], packets (={packets}) >= 0")
+        self.late_s, self.late_packets = late_s, packets
+
+    def delay_s(self) -> float:
+        """Extra delay of the next status packet (and one fewer late ones to come)."""
+        if self.late_packets <= 0:
+            return 0.0
+        self.late_packets -= 1
+        return self.late_s
 
     def inject(self, fault: str, dxl_id: int | None, rate: float, now_s: float) -> None:
         """Inject `fault` (one of `FAULTS`) into servo `dxl_id` (noise: at `rate` per byte)."""

@@ -6,6 +6,9 @@
     {"inject": "replug", "id": 3}         power back: the servo boots (RAM at power-on values)
     {"inject": "noise", "rate": 0.01}     each byte of every status packet gets one bit flipped
                                           at this probability (0: off)
+    {"inject": "late", "ms": 6, "packets": 3}
+                                          the next 3 status packets each come 6 ms later than
+                                          their wire time (a busy host, a USB adapter's hiccup)
     {"inject": "clear"}                   ends noise, held temperatures and unplugs; latched
                                           hardware errors stay until a reboot, as on a servo
     {"status": true}                      the arm and each servo (see `status`)
@@ -115,6 +118,9 @@ class ControlServer:
             req = json.loads(line)
             if not isinstance(req, dict):
                 raise ValueError("a request is a JSON object")
+            if req.get("inject") == "late":
+                chain.make_late(float(req["ms"]) * 1e-3, int(req.get("packets", 1)))
+                return {"ok": True}
             if "inject" in req:
                 dxl_id = req.get("id")
                 rate = float(req.get("rate", 0.0))

@@ -69,10 +69,12 @@ class Server:
             arrived_s = self._rx_start_s + wire_time_s(packet.wire_bytes, self.baud)
             self._rx_start_s = arrived_s  # the next packet of the same write follows it
             t = max(arrived_s, self.bus_free_s)
+            late_s = 0.0
             for reply in self.chain.handle(packet, now_s):
+                late_s = late_s or self.chain.delay_s()  # one transaction's replies late together
                 t += reply.delay_s + wire_time_s(len(reply.data), self.baud)
-                self._queue(t, self.chain.corrupt(reply.data))
-            self.bus_free_s = t
+                self._queue(t + late_s, self.chain.corrupt(reply.data))
+            self.bus_free_s = t + late_s  # what follows on the bus comes after it
         if not self.reader.pending:
             self._rx_start_s = now_s
 

@@ -311,6 +311,39 @@ def test_crc_noise_below_the_threshold_is_counted_and_the_motion_completes(
     assert not (loop.ticks().status.astype(int) & Status.COMM_LOST).any()
 
 
+def test_replies_a_little_late_are_dropped_whole_never_read_as_the_next_cycles(tmp_path: Path) -> None:
+    """Two cyclic reads answered later than their deadline (wire time + read_timeout_s) and later
+    than the next tick's request would go (half a millisecond past the 5 ms period): each is a
+    timeout of the servo whose part was missing (the first), and its reply is waited for and
+    dropped whole before the next request. Without that, the next request's read takes it as its
+    own reply (the SDK drops only what is there before the request goes): one cycle stale, its own
+    reply then late in turn, the shift going on until CommLost. The motion completes. The
+    simulator at a real-time priority, as servos answer whatever the PC does (a loaded machine's
+    own late replies are dropped whole too)."""
+    with dxl_rig(tmp_path, sim_args=("--priority", "70")) as rig:
+        s = Session.from_config(load_robot_config(rig.config), CommandMode.POSITION)
+        try:
+            res = s.resource
+            task, loop = move(s, TARGET)
+            loop.run_for(0.2)
+            deadline_ms = float(res.diagnostics().details["cycle_deadline_ms"])
+            margin_ms = 1e3 * res.settings.read_timeout_s
+            wire_ms = deadline_ms - margin_ms
+            period_ms = 1e3 * s.config.control_period_s
+            assert period_ms + 0.5 < deadline_ms + margin_ms  # late past the period, within the drop
+            rig.sim.request({"inject": "late", "ms": period_ms - wire_ms + 0.5, "packets": 2})
+            loop.executor.run(max_ticks=1000, until=lambda: task.phase is not Phase.RUN)
+            assert task.phase is Phase.DONE, (task.fault_reason, res.fault_message)
+            d = res.diagnostics().details
+            assert not (loop.ticks().status.astype(int) & Status.COMM_LOST).any()
+        finally:
+            s.close()
+    reply_bytes = 8 + 6 * (10 + 4)  # the fast sync read's one status packet for six servos
+    timeouts = int(d["timeouts"])  # a late reply already there when the read begins is on time
+    assert timeouts >= 1 and d["timeouts_by_servo"] == f"1: {timeouts}, 2: 0, 3: 0, 4: 0, 5: 0, 6: 0", d
+    assert int(d["late_bytes_dropped"]) == timeouts * reply_bytes and int(d["crc_errors"]) == 0, d
+
+
 def test_mode_switches_hold_the_arm(rig: DxlRig, session: Session) -> None:
     res = session.resource
     assert res.description.mode_switch_needs_disable
