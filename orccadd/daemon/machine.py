@@ -91,8 +91,10 @@ class Machine:
     def now_s(self) -> float:
         return self.clock.now_ns() * 1e-9
 
-    def note(self, msg: str) -> None:
-        log.info("%s", msg)
+    def note(self, msg: str, level: int = logging.INFO) -> None:
+        """A line for the journal (WARNING for what an operator must see: a safe stop, an abort,
+        the safe procedure, a mission that did not succeed) and for `status`."""
+        log.log(level, "%s", msg)
         self.notes = [*self.notes[-(NOTES_KEPT - 1) :], f"{time.strftime('%H:%M:%S')} {msg}"]
 
     def publish(self) -> None:

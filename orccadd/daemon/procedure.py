@@ -9,6 +9,7 @@ through `SwitchingLoop.request_switch` only.
 from __future__ import annotations
 
 from collections.abc import Callable
+from logging import INFO, WARNING
 from typing import NamedTuple
 
 from orccadd.automaton import Runner
@@ -49,7 +50,7 @@ class MissionControl:
         self,
         loop: SwitchingLoop,
         publisher: Publisher,
-        note: Callable[[str], None],
+        note: Callable[..., None],
         abort: Callable[[str], None],
     ) -> None:
         self.loop = loop
@@ -216,7 +217,7 @@ class MissionControl:
         if a.stops(actions) or a.starts(actions):
             self.note(", ".join(a.describe_actions(actions)))
         if actions & a.safe_bit:
-            self.note("entering the safe procedure")
+            self.note("entering the safe procedure", WARNING)
         self.current = target
         if request and self.state is not MachineState.HOLDING:
             want = target if target is not None else self.hold
@@ -230,5 +231,6 @@ class MissionControl:
                 if actions & a.failed_bit
                 else MissionResult.SAFE
             )
-            self.note(f"mission {mission.name} ended: {result.name.lower()}")
+            level = INFO if result is MissionResult.SUCCESS else WARNING
+            self.note(f"mission {mission.name} ended: {result.name.lower()}", level)
             self.end(result)

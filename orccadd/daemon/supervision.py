@@ -13,6 +13,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from logging import WARNING
 
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.loop import SwitchingLoop
@@ -34,7 +35,7 @@ class Supervisor:
         resource: PhysicalResource,
         loop: SwitchingLoop,
         mission: MissionControl,
-        note: Callable[[str], None],
+        note: Callable[..., None],
     ) -> None:
         self.cfg = cfg
         self.resource = resource
@@ -49,7 +50,9 @@ class Supervisor:
         if not self.fault:
             self.faults += 1
             self.fault = f"{name} ({self.resource.fault_message or 'safe stop'})"
-            self.note(f"type 3: {name}: safe stop")
+            self.note(
+                f"type 3: {name}: safe stop ({self.resource.fault_message or 'no device message'})", WARNING
+            )
 
     def abort(self, why: str) -> None:
         """Safe stop at the next tick, remember why, end the run (`aborted`)."""
@@ -57,11 +60,11 @@ class Supervisor:
         if not self.fault:
             self.faults += 1
             self.fault = why
-        self.note(f"abort: {why}")
+        self.note(f"abort: {why}", WARNING)
         self.mission.end(MissionResult.ABORTED)
 
     def link_lost(self, why: str) -> None:
-        self.note(why)
+        self.note(why, WARNING)
         if self.cfg.daemon.on_command_daemon_loss == "safe_stop" and self.mission.running:
             self.abort(f"{why} (on_command_daemon_loss = safe_stop)")
 

@@ -73,8 +73,8 @@ class Parameter:
     """A declared parameter. `value` is a numpy array updated in place (never rebound)."""
 
     __slots__ = (
-        "bounds", "default", "given", "integer", "module", "name", "required", "shape", "tunable", "unit",
-        "value",
+        "bounds", "default", "given", "integer", "module", "name", "per_joint", "required", "shape",
+        "tunable", "unit", "value",
     )  # fmt: skip
 
     def __init__(
@@ -88,6 +88,7 @@ class Parameter:
         shape: tuple[int, ...],
         integer: bool = False,
         required: bool = False,
+        per_joint: bool = False,
     ) -> None:
         self.module = module
         self.name = name
@@ -96,6 +97,9 @@ class Parameter:
         self.tunable = tunable
         self.shape = shape
         self.integer = integer  # whole numbers only (a count of ticks): 2.5 is refused, not truncated
+        # one value per joint that one number must not give every joint (a position: `tune
+        # Reach.traj.target_rad 0.1` would send all six there); gains take one number for all
+        self.per_joint = per_joint
         self.value: FloatArray = np.zeros(shape)
         self.value[...] = self.check(default)
         self.default = self.value.copy()
@@ -113,6 +117,10 @@ class Parameter:
             raise self._error(f"(={value!r}) must be a number or a list of numbers")
         arr = np.asarray(value, dtype=np.float64)
         if arr.shape != self.shape:
+            if arr.shape == () and self.shape != () and self.per_joint:
+                n = self.shape[0]
+                why = "one number would send every joint to it"
+                raise self._error(f"(={value!r}) must be {n} numbers, one per joint: {why}")
             if arr.shape == () and self.shape != ():
                 arr = np.full(self.shape, float(arr))
             else:
@@ -189,11 +197,15 @@ class Module(ABC):
         shape: tuple[int, ...] = (),
         integer: bool = False,
         required: bool = False,
+        per_joint: bool = False,
     ) -> Parameter:
         """`required`: a task of a mission must set it (its task file or the mission's `set`);
         `default` is then only what a task built outside a mission (a test, a benchmark) starts
-        from. A robot-specific gain or a goal, which no default fits."""
-        param = Parameter(self.name, name, default, bounds, unit, tunable, shape, integer, required)
+        from. A robot-specific gain or a goal, which no default fits. `per_joint`: a vector that a
+        single number must not set for every joint (a position); gains take one number for all."""
+        param = Parameter(
+            self.name, name, default, bounds, unit, tunable, shape, integer, required, per_joint
+        )
         self.parameters[name] = param
         return param
 

@@ -39,6 +39,7 @@ class RuckigTrajectory(KernelModule):
             tunable=True,
             shape=(n,),
             required=True,  # a goal: a copied task without one would go home
+            per_joint=True,
         )
         self.speed_scale = self.add_parameter("speed_scale", 1.0, bounds=(0.01, 1.0), unit="1", tunable=True)
         self._otg = Ruckig(n, ctx.period_s)

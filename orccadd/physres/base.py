@@ -213,7 +213,22 @@ class PhysicalResource(ABC):
         q_dq = st.q_dq.tolist()
         if outside(q_dq, self._limit_lo, self._limit_hi) or not all(map(isfinite, q_dq)):
             st.status |= LIMIT_VIOLATION
+            self.fault_message = self._beyond("measured", q_dq, self._limit_lo, self._limit_hi)
         return st
+
+    def _beyond(self, what: str, values: list[float], lo: list[float], hi: list[float]) -> str:
+        """Which joint, quantity, value and limit a LIMIT_VIOLATION is about (the rare path of a
+        tick: the words a type 3 reports). `values` per joint, positions then velocities when
+        twice as long as the joints."""
+        units = ("rad", "rad/s", "N.m")
+        kinds = ("position", "velocity") if len(values) == 2 * self.dof else (self.mode.name.lower(),)
+        for i, (v, a, b) in enumerate(zip(values, lo, hi, strict=True)):
+            if not a <= v <= b:  # NaN too
+                kind = kinds[i // self.dof]
+                unit = units[("position", "velocity", "torque").index(kind)]
+                joint = self.model.joint_names[i % self.dof]
+                return f"{what} {kind} of {joint} {v:.4g} {unit} outside [{a:.4g}, {b:.4g}]"
+        return f"{what} values not finite"
 
     def write(self, t_s: float, command: FloatArray) -> int:
         """Send one command in the active mode (tick). Returns the `Status` flags.
@@ -249,11 +264,25 @@ class PhysicalResource(ABC):
         if sent != wanted:
             flags = CMD_CLAMPED if mode is CommandMode.TORQUE else CMD_CLAMPED | LIMIT_VIOLATION
             self.clamp_count += 1
+            if flags & LIMIT_VIOLATION:
+                self.fault_message = "command clamped: " + self._beyond(
+                    "commanded", wanted, *self._command_bounds(mode)
+                )
         cmd = self._cmd
         cmd[:] = sent
         if mode is CommandMode.POSITION:
             self._last_pos_cmd[:] = cmd
         return flags | self._write_command(t_s, mode, cmd)
+
+    def _command_bounds(self, mode: CommandMode) -> tuple[list[float], list[float]]:
+        """The bounds a command of `mode` was held to in this tick (position: the range and the
+        step the maximum velocity allows from the last command)."""
+        if mode is CommandMode.VELOCITY:
+            return self._v_lo, self._v_hi
+        last, step = self._last_pos_cmd.tolist(), self._step_max
+        lo = [max(q, p - s) for q, p, s in zip(self._q_lo, last, step, strict=True)]
+        hi = [min(q, p + s) for q, p, s in zip(self._q_hi, last, step, strict=True)]
+        return lo, hi
 
     def keep_alive(self, t_s: float) -> None:
         """A tick without a new command (the task waits for its preconditions, is stopped, or

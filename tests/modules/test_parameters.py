@@ -50,3 +50,13 @@ def test_a_count_is_a_whole_number_not_truncated() -> None:
     assert p.check(4.0) == 4.0
     with pytest.raises(ParameterError, match=r"\(=2.5\) must be a whole number"):
         p.check(2.5)
+
+
+def test_a_position_per_joint_takes_one_number_per_joint_never_one_for_all() -> None:
+    """`tune Approach.traj.target_rad 0.1` sent all six joints to 0.1 rad: refused; a gain still
+    takes one number for every joint."""
+    target = Parameter("traj", "target_rad", [0.0] * 6, (-3.0, 3.0), "rad", True, (6,), per_joint=True)
+    with pytest.raises(ParameterError, match="must be 6 numbers, one per joint: one number would send every"):
+        target.check(0.1)
+    assert (target.check([0.1] * 6) == 0.1).all()
+    assert (vector().check(500) == 500.0).all()

@@ -169,6 +169,10 @@ def test_position_steps_within_the_speed_limit_pass_unchanged(resource: Physical
     fast = q + 1.0  # a jump no joint can make in one period
     flags = resource.write(time.monotonic(), fast)
     assert flags & Status.CMD_CLAMPED and flags & Status.LIMIT_VIOLATION
+    joint = resource.model.joint_names[0]
+    assert resource.fault_message.startswith(f"command clamped: commanded position of {joint} "), (
+        resource.fault_message
+    )
     resource.safe_stop()
 
 

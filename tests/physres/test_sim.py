@@ -91,6 +91,9 @@ def test_measured_position_beyond_limit_is_flagged() -> None:
     res = make()
     res.q[2] = res.model.q_max_rad[2] + 0.1
     assert res.read(0.0).status & Status.LIMIT_VIOLATION
+    hi = res.model.q_max_rad[2] + res.config.limits.position_tolerance_rad
+    assert res.fault_message.startswith(f"measured position of elbow_joint {res.q[2]:.4g} rad outside")
+    assert f"{hi:.4g}]" in res.fault_message, res.fault_message  # the limit it crossed, with its tolerance
 
 
 def test_unsupported_mode_is_refused_clearly() -> None:
