@@ -65,9 +65,15 @@ def test_resource_fault_raises_type_3_then_reset_and_move_again(daemon: Daemon) 
     ev = daemon.call("events", last=30)
     inputs = [i for e in ev["events"] if e["kind"] == "instant" for i in e["inputs"]]  # type: ignore[index]
     assert "Reach.T3.ResourceFault" in inputs
-    journal = daemon.log.read_text()  # `journalctl -p warning` shows safe stops and their cause
-    assert "WARNING orccadd.machine: type 3: Reach.T3.ResourceFault (" in journal, journal[-2000:]
-    assert "WARNING orccadd.machine: entering the safe procedure" in journal
+    # `journalctl -p warning` shows the safe stop, its cause and the safe procedure
+    want = (
+        "WARNING orccadd.machine: type 3: Reach.T3.ResourceFault (",
+        "WARNING orccadd.machine: entering the safe",
+    )
+    end = time.monotonic() + 10
+    while not all(w in daemon.log.read_text() for w in want):
+        assert time.monotonic() < end, daemon.log.read_text()[-2000:]
+        time.sleep(0.05)
     daemon.call("stop")
     daemon.wait(lambda s: s["state"] == "ready")
     daemon.call("reset")
