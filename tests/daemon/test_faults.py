@@ -67,7 +67,7 @@ def test_resource_fault_raises_type_3_then_reset_and_move_again(daemon: Daemon) 
     assert "Reach.T3.ResourceFault" in inputs
     # `journalctl -p warning` shows the safe stop, its cause and the safe procedure
     want = (
-        "WARNING orccadd.machine: type 3: Reach.T3.ResourceFault (",
+        "WARNING orccadd.machine: type 3: Reach.T3.ResourceFault: safe stop (",
         "WARNING orccadd.machine: entering the safe",
     )
     end = time.monotonic() + 10
