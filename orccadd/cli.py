@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from orccadd.ctl import offline, online
@@ -39,6 +40,10 @@ def orccadctl_main(argv: list[str] | None = None) -> int:
         return _main(argv)
     except KeyboardInterrupt:  # every command: quietly, no traceback
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # our reader left (`| head`): the socket's errors never get here
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # the interpreter's last flush writes nowhere
+        return 0
 
 
 def _main(argv: list[str] | None) -> int:

@@ -55,6 +55,27 @@ def robot_config_path(name_or_path: str) -> Path:
     )
 
 
+def is_bare_name(arg: str) -> bool:
+    """A mission or config given by name (`demo`), not by path (`./demo.mission`, `a/b`)."""
+    return "/" not in arg and "." not in arg and arg not in ("", "..")
+
+
+def mission_path(name_or_path: str) -> Path:
+    """A mission given as a path (it exists) or by the name of a shipped one (`demo`)."""
+    p = Path(name_or_path)
+    if p.exists() or not is_bare_name(name_or_path):
+        return p
+    missions = shipped("missions")
+    if name_or_path in missions:
+        return missions[name_or_path]
+    raise ConfigError(
+        name_or_path,
+        "",
+        f"no such file, and no shipped mission of that name (shipped: {', '.join(missions) or 'none'}; "
+        "`orccadd --list-configs`)",
+    )
+
+
 def list_configs() -> str:
     """The shipped robot configs and missions, one per line, for `orccadd --list-configs`."""
     lines = []

@@ -209,6 +209,10 @@ def _progress() -> Any:
 
 def run(args: argparse.Namespace) -> int:
     try:
+        if isinstance(getattr(args, "file", None), str):  # `check demo`: a shipped mission by name
+            from orccadd.config.shipped import mission_path
+
+            args.file = str(mission_path(args.file))
         code: int = args.func(args)
         return code
     except MissionError as e:

@@ -98,8 +98,9 @@ def add_parsers(sub: Any) -> None:
 
 def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     cmd = a.online
-    if cmd == "load":
-        return cmd, {"path": str(Path(a.mission).resolve())}
+    if cmd == "load":  # a bare name (`demo`) the daemon finds in its mission directories
+        bare = "/" not in a.mission and "." not in a.mission and not Path(a.mission).exists()
+        return cmd, {"path": a.mission if bare else str(Path(a.mission).resolve())}
     if cmd == "start":
         return cmd, {"procedure": a.procedure} if a.procedure else {}
     if cmd == "send":

@@ -20,6 +20,7 @@ from typing import Any, Protocol
 
 from orccadd.automaton import Automaton, Report
 from orccadd.config.robot import RobotConfig
+from orccadd.config.shipped import is_bare_name
 from orccadd.confine import Confinement, ConfinementError
 from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.mission import prepare_mission
@@ -146,9 +147,10 @@ class RtCommands:
         link swapped in after the check, no FIFO); `CommandError` otherwise, saying where
         missions may be, never what is elsewhere. The compiler reads that descriptor."""
         cfg = self.m.cfg
-        conf = Confinement(
-            [cfg.resolve(d) for d in cfg.daemon.mission_dirs], "mission file", "daemon.mission_dirs"
-        )
+        dirs = [cfg.resolve(d) for d in cfg.daemon.mission_dirs]
+        conf = Confinement(dirs, "mission file", "daemon.mission_dirs")
+        if is_bare_name(path):  # `load demo`: the first <dir>/demo.mission of the mission directories
+            path = next((str(d / f"{path}.mission") for d in dirs if (d / f"{path}.mission").is_file()), path)
         try:
             return conf.open(path)
         except ConfinementError as e:

@@ -166,3 +166,10 @@ def test_graph_draws_a_network_component_by_component(tmp_path: Path) -> None:
     text = dot.read_text()
     assert 'label="context"' in text and 'label="branch 10 of the par at line' in text
     assert "par paused" in text  # the context's edges say the par's code
+
+
+def test_a_shipped_mission_is_checked_by_its_name() -> None:
+    r = ctl("check", "demo")
+    assert r.returncode == 0 and "mission PickDemo" in r.stdout, (r.stdout, r.stderr)
+    r = ctl("check", "nosuch")
+    assert r.returncode == 2 and "no shipped mission of that name (shipped: demo," in r.stderr, r.stderr

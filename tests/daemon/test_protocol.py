@@ -245,6 +245,16 @@ def test_load_reads_only_the_configured_mission_directories(daemon: Daemon, tmp_
     assert daemon.call("load", path=DEMO)["mission"]["name"] == "PickDemo"  # type: ignore[index]
 
 
+def test_a_mission_is_named_as_installed(daemon: Daemon) -> None:
+    """`orccadctl load demo`: the first demo.mission of the daemon's mission directories (from a
+    wheel the user knows the name, not the path under share/)."""
+    r = daemon.ctl("load", "demo")
+    assert r.returncode == 0, r.stderr
+    assert daemon.status()["mission"] == "PickDemo"
+    r = daemon.ctl("load", "nosuch")
+    assert r.returncode == 1 and "mission files are loaded from" in r.stderr, r.stderr
+
+
 def test_a_task_file_outside_the_task_and_mission_directories_is_not_read(
     daemon: Daemon, tmp_path: Path
 ) -> None:
