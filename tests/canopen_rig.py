@@ -80,7 +80,7 @@ def rig_config(
     testdata/eds/), `settings_extra` lines in [resource.settings]."""
     path = eds_file if isinstance(eds_file, Path) else eds(eds_file)
     text = robot.read_text().replace('urdf = "../urdf/', f'urdf = "{ROOT}/configs/urdf/')
-    text = text.replace('eds = "Elmo.dcf"', f'eds = "{path}"')
+    text = re.sub(r'(?m)^eds = "[^"]*"', f'eds = "{path}"', text)
     if port is None:  # the kernel's virtual CAN
         text = text.replace('interface = "socketcand"', 'interface = "socketcan"')
         for channel in BUS_CHANNELS:

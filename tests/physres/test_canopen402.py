@@ -125,6 +125,23 @@ def test_startup_enables_every_axis_and_csp_moves_the_arm(rig: Rig, arm: Canopen
     assert all(a.state is State.SWITCH_ON_DISABLED for a in arm.master.axes)
 
 
+def test_the_shipped_description_starts_watches_our_heartbeat_and_moves(tmp_path: Path) -> None:
+    """configs/eds/orccadd-cia402.eds, the description the shipped CANopen configs name (a user's
+    drives come with their vendor's): the drives start on it, watch our heartbeat, and move in
+    CSP; position and torque modes are available (one RPDO per axis carries the controlword and
+    the targets of CSP and CST)."""
+    shipped = Path(__file__).resolve().parents[2] / "configs/eds/orccadd-cia402.eds"
+    with canopen_rig(tmp_path, shipped) as rig, active_arm(rig) as arm:
+        assert all(a.consumer_ok for a in arm.master.axes)
+        assert {CommandMode.POSITION, CommandMode.TORQUE} <= arm.supported_modes  # CSP and CST
+        run(arm, 0.1)
+        q0 = arm.state.q_rad.copy()
+        goal = q0 + np.array([0.2, -0.1, 0.1, 0.0, 0.1, -0.1])
+        flags = run(arm, 1.5, lambda t: q0 + (goal - q0) * min(1.0, t / 1.0))
+        assert not flags & (Status.FAULT | Status.COMM_LOST | Status.LIMIT_VIOLATION), arm.fault_message
+        np.testing.assert_allclose(arm.state.q_rad, goal, atol=0.01)
+
+
 @pytest.mark.parametrize("rig", [CONSUMING_ELMO], indirect=True)
 def test_drive_fault_emcy_then_fault_reset_and_a_new_motion(rig: Rig, arm: Canopen402Arm) -> None:
     run(arm, 0.2, lambda t: arm.state.q_rad.copy())
