@@ -552,7 +552,7 @@ class Operator(Worker):
         elif fault == "hostile-abort":
             meter.mark("hostile abort")
             free = self.s.control_clients - self.s.ours()
-            code, err, took_s = abort_through_holders(self.s.sock, free)
+            code, err, took_s = abort_through_holders(self.s.sock, free, self.s.opened)
             self.s.tally.time("hostile_abort_s", took_s)
             if code != 0:
                 self.s.tally.note("abort_denied", f"orccadctl abort exited {code}: {err}")
@@ -786,7 +786,7 @@ class HostileLogs(Worker):
             return
         while True:
             self.s.meter.mark("hostile log")
-            r = huge_log(self.s.sock, self.stop)
+            r = huge_log(self.s.sock, self.stop, self.s.opened)
             tally.add("hostile_logs")
             tally.time("hostile_status_s", r["slowest_status_s"])
             if r["slowest_status_s"] > STATUS_LIMIT_S:
@@ -862,6 +862,10 @@ class Soak:
     def latest_task(self) -> float:
         head = int(self.tel.header[H.TICK_HEAD])
         return float(self.tel.ticks[(head - 1) % self.tel.tick_len][T.TASK]) if head else 0.0
+
+    def opened(self, k: int) -> None:
+        """A hostile client's connections opened (+k) or closed (-k): counted as the soak's own."""
+        self.tally.add("open", k)
 
     def ours(self) -> int:
         """The connections this soak holds, or may (monitor processes starting up)."""

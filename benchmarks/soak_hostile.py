@@ -25,6 +25,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -43,8 +44,9 @@ LOG_HOLD_S = 10.0
 class SlotHolders:
     """Peers holding every place they can (a context manager); see the module."""
 
-    def __init__(self, sock: str, free_control_places: int) -> None:
+    def __init__(self, sock: str, free_control_places: int, opened: Callable[[int], None]) -> None:
         self.sock = sock
+        self.opened = opened  # told of each main-socket connection held (+1) and let go (-1)
         self.stop = threading.Event()
         self.urgent: list[socket.socket] = []
         self.main: list[socket.socket] = []
@@ -55,6 +57,7 @@ class SlotHolders:
             s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
             s.connect(sock)
             self.main.append(s)
+            opened(1)
         self.thread = threading.Thread(target=self._trickle, daemon=True)
         self.thread.start()
 
@@ -86,11 +89,15 @@ class SlotHolders:
         self.thread.join(timeout=5)
         for s in [*self.urgent, *self.main]:
             s.close()
+        self.opened(-len(self.main))
 
 
-def abort_through_holders(sock: str, free_control_places: int) -> tuple[int, str, float]:
-    """`orccadctl abort` while every place is held: (exit code, stderr, seconds it took)."""
-    with SlotHolders(sock, free_control_places):
+def abort_through_holders(
+    sock: str, free_control_places: int, opened: Callable[[int], None]
+) -> tuple[int, str, float]:
+    """`orccadctl abort` while every place is held: (exit code, stderr, seconds it took).
+    `opened` is told of the connections held (the soak counts its own clients)."""
+    with SlotHolders(sock, free_control_places, opened):
         time.sleep(0.5)  # the command daemon has taken the idle connections in
         env = {**os.environ, "ORCCADD_SOCKET": sock}
         t0 = time.monotonic()
@@ -104,20 +111,31 @@ def abort_through_holders(sock: str, free_control_places: int) -> tuple[int, str
         return p.returncode, p.stderr.strip(), time.monotonic() - t0
 
 
-def timed_status(sock: str) -> float:
+def timed_status(sock: str, opened: Callable[[int], None]) -> float:
     """Seconds for a `status` on a new connection (inf: no answer within 10 s)."""
     t0 = time.monotonic()
+    opened(1)
     try:
         with Client(sock, timeout_s=10.0) as c:
             c.call("status")
     except (ClientError, OSError):
         return float("inf")
+    finally:
+        opened(-1)
     return time.monotonic() - t0
 
 
-def huge_log(sock: str, stop: threading.Event) -> dict[str, Any]:
+def huge_log(sock: str, stop: threading.Event, opened: Callable[[int], None]) -> dict[str, Any]:
     """A log of `HUGE_LOG` for `LOG_HOLD_S` (or until it ends by itself: a full log directory),
     `status` timed all through. {"slowest_status_s", "ended", "error", "files"}."""
+    opened(1)
+    try:
+        return _huge_log(sock, stop, opened)
+    finally:
+        opened(-1)
+
+
+def _huge_log(sock: str, stop: threading.Event, opened: Callable[[int], None]) -> dict[str, Any]:
     slowest = 0.0
     with Client(sock, timeout_s=10.0) as c:
         r = c.reply("log", action="start", signals=HUGE_LOG)
@@ -127,7 +145,7 @@ def huge_log(sock: str, stop: threading.Event) -> dict[str, Any]:
         end = time.monotonic() + LOG_HOLD_S
         ended_by_itself: dict[str, Any] | None = None
         while time.monotonic() < end and not stop.is_set():
-            slowest = max(slowest, timed_status(sock))
+            slowest = max(slowest, timed_status(sock, opened))
             s = c.call("status")
             if s.get("log") and "error" in s["log"]:
                 ended_by_itself = s["log"]

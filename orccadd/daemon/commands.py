@@ -122,6 +122,11 @@ class RtCommands:
                 return None
             try:
                 result = pickle.loads(out.read_bytes()) if out.exists() else None
+            except (pickle.UnpicklingError, AttributeError, ImportError, EOFError, TypeError) as e:
+                raise CommandError(
+                    f"{path}: the compiler process's answer cannot be read by this daemon "
+                    f"({type(e).__name__}: {e}): is orccadd's code on disk newer than this daemon? restart it"
+                ) from None
             finally:
                 done()
             if isinstance(result, str):
