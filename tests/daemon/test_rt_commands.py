@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import json
+import time
 from typing import Any
 
-from orccadd.daemon.replies import CommandError
+import pytest
+
+from orccadd.daemon.machine import Machine
+from orccadd.daemon.replies import CommandError, Pending
 from orccadd.daemon.rtproc import RealtimeProcess
+from tests.daemon.conftest import ROOT
 
 
 class Broken:
@@ -54,3 +59,25 @@ def test_requests_the_table_refuses_never_reach_the_machine() -> None:
     assert not reply["ok"] and "finite" in reply["error"]
     _, reply = handle({"id": 4, "cmd": "inject", "args": {"fault": "meteor"}})
     assert not reply["ok"] and "must be one of" in reply["error"]
+
+
+def test_a_compiler_answer_this_daemon_cannot_read_is_refused_saying_why(
+    machine: Machine, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The compile child runs the code on disk; upgraded under a running daemon, its answer names
+    a class this daemon's code lacks (seen in a soak: `Can't get attribute '_Shared'`): `load` is
+    refused saying what to do, not answered with an internal error."""
+    from orccadd.daemon import commands
+
+    def newer_code(data: bytes) -> object:
+        raise AttributeError("Can't get attribute '_Shared' on <module 'orccadd.automaton.kernel'>")
+
+    with machine.reactor.held():
+        reply = machine.command("load", {"path": str(ROOT / "configs/missions/demo.mission")})
+    assert isinstance(reply, Pending)
+    monkeypatch.setattr(commands.pickle, "loads", newer_code)
+    deadline = time.monotonic() + 60
+    with pytest.raises(CommandError, match="cannot be read by this daemon .*restart it"):
+        while reply.poll() is None:
+            assert time.monotonic() < deadline, "the mission did not compile"
+            time.sleep(0.05)
