@@ -97,7 +97,8 @@ class DaemonConfig:
     # and the task files a mission names (`from "file.toml"`) from these, or from `mission_dirs`
     task_dirs: tuple[str, ...] = field(default=("../tasks",))
     # a `load` compiles and verifies in a process of its own, stopped after this long or when it
-    # needs more memory than this (the mission refused, saying which; `orccadctl check` has no limit)
+    # needs this much more memory than it took to start (the mission refused, saying which;
+    # `orccadctl check` has no limit)
     load_timeout_s: float = field(default=600.0, bounds=(1.0, 3600.0))
     load_memory_mb: int = field(default=2048, bounds=(256, 1 << 20))
     # full-rate CSV logs go here, created by the command daemon (never a path a client names);

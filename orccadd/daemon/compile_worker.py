@@ -25,6 +25,15 @@ from orccadd.errors import MissionError, OrccaddError
 from orccadd.mission import TaskFiles
 
 MAX_MISSION_BYTES = 4 * MAX_MISSION_CHARS  # UTF-8: at most 4 bytes a character
+RESERVE_BYTES = 16 << 20
+
+
+def _address_space_bytes() -> int:
+    """This process's address space now (VmSize), in bytes."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmSize:"):
+            return int(line.split()[1]) * 1024
+    return 0
 
 
 def read_mission(fd: int, name: str) -> str:
@@ -45,8 +54,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--memory-mb", type=int, default=0, help="address-space limit (0: none)")
     ap.add_argument("out")
     args = ap.parse_args(argv)
-    if args.memory_mb:
-        limit = args.memory_mb << 20
+    reserve = bytearray(RESERVE_BYTES)  # freed to write the answer should memory run out
+    if args.memory_mb:  # on top of what the process holds once started (Python, numpy, Pinocchio)
+        limit = _address_space_bytes() + (args.memory_mb << 20)
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     files = TaskFiles(Confinement(args.task_dir, "task file", "daemon.task_dirs, daemon.mission_dirs"))
     try:
@@ -58,6 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     except OrccaddError as e:
         result, code = str(e), 1
     except MemoryError:
+        del reserve
         files.specs.clear()  # what it holds goes: room to write the answer
         result = (
             f"{args.name}: the compiler needed more than {args.memory_mb} MB (daemon.load_memory_mb): "

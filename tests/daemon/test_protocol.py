@@ -294,7 +294,7 @@ def test_a_load_past_its_time_or_memory_is_refused_saying_which_and_the_next_one
 ) -> None:
     """A mission too large for the daemon's limits is refused with the limit named, in the real-time
     process's own words (before: both sides timed out at 600 s and its message was lost)."""
-    long = str(_long_mission(tmp_path / "long.mission", 3000))  # ~15 s, ~300 MB here
+    long = str(_long_mission(tmp_path / "long.mission", 50_000))  # ~40 s, ~440 MB to check here
     d = start_daemon(tmp_path, daemon_cfg="load_timeout_s = 2.0")
     try:
         for _ in range(2):  # the second is not refused as "being loaded": the first was cleared
