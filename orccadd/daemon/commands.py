@@ -66,6 +66,14 @@ class RtCommands:
         self.m = machine
         self._loading: subprocess.Popen[bytes] | None = None  # the compiler process of a load
 
+    def close(self) -> None:
+        """Stop a load's compiler process still running (the daemon is stopping): in a session of
+        its own, it would outlive the daemon otherwise."""
+        child = self._loading
+        if child is not None and child.poll() is None:
+            child.kill()
+            child.wait()
+
     def _trace(self, action: OperatorAction) -> float:
         t = self.m.now_s()
         self.m.pub.trace(Trace.COMMAND, t, action)

@@ -81,7 +81,8 @@ class Machine:
         self.reactor = InlineReactor(self.mission, self.registry, self.queue)
         self.loop.reactor = self.reactor
         self.supervisor = Supervisor(cfg, resource, self.loop, self.mission, self.note)
-        self.commands = Dispatcher(RtCommands(self), "rt")
+        self.rt_commands = RtCommands(self)
+        self.commands = Dispatcher(self.rt_commands, "rt")
         self.publish()
 
     def _abort(self, why: str) -> None:

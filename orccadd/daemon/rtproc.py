@@ -467,6 +467,7 @@ class RealtimeProcess:
                 break
             time.sleep(0.01)
         m.loop.executor.stop()
+        m.rt_commands.close()
         if self.thread is not None:
             self.thread.join(timeout=2.0)
         m.mission.state = MachineState.IDLE

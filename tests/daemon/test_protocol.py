@@ -313,6 +313,36 @@ def test_a_load_past_its_time_or_memory_is_refused_saying_which_and_the_next_one
         d.stop()
 
 
+def test_a_load_under_way_when_the_daemon_stops_ends_with_it(tmp_path: Path) -> None:
+    """The compiler runs in a session of its own: the daemon stopping kills it (before: a 50,000-
+    motion compile went on for minutes after its daemon had gone)."""
+    long = str(_long_mission(tmp_path / "long.mission", 50_000))
+    d = start_daemon(tmp_path)
+    try:
+        with Client(d.socket) as c:
+            c.sock.sendall((json.dumps({"id": 1, "cmd": "load", "args": {"path": long}}) + "\n").encode())
+            end = time.monotonic() + 30
+            while not _compilers(long):
+                assert time.monotonic() < end, "no compiler process"
+                time.sleep(0.1)
+    finally:
+        d.stop()
+    end = time.monotonic() + 10
+    while _compilers(long):
+        assert time.monotonic() < end, "the compiler outlived its daemon"
+        time.sleep(0.1)
+
+
+def _compilers(mission: str) -> list[int]:
+    out = []
+    for p in Path("/proc").iterdir():
+        with contextlib.suppress(OSError):
+            mine = p.name.isdigit() and mission.encode() in (p / "cmdline").read_bytes()
+            if mine and (p / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z":
+                out.append(int(p.name))
+    return out
+
+
 def test_a_log_goes_only_into_the_daemons_log_directory(daemon: Daemon, tmp_path: Path) -> None:
     for name, why in [
         ("../escape.csv", "a file name, not a path"),
