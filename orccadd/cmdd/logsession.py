@@ -145,19 +145,8 @@ class TelemetryLog:
         self, sel: SignalSelection, desc: Callable[[], dict[str, Any]], period_s: float, from_s: float
     ) -> None:
         """Seal the part a dead command daemon left, carry the MCAP on in a new one."""
+        self._seal_last_part("was left unfinished by a command daemon that died: sealed")
         parts: list[str] = [str(p) for p in self.state.get("mcap", [])]
-        if parts:
-            try:
-                fd = self.logs.open_existing(parts[-1])
-                try:
-                    if seal(fd):
-                        self.notes.append(
-                            f"{parts[-1]} was left unfinished by a command daemon that died: sealed"
-                        )
-                finally:
-                    os.close(fd)
-            except (OSError, ValueError) as e:
-                self.notes.append(f"{parts[-1]} could not be sealed: {e}")
         for n in range(len(parts) + 1, MAX_PARTS + 1):
             name = part_name(str(self.state["file"]), n)
             try:
@@ -254,24 +243,24 @@ class TelemetryLog:
         if self.mcap is not None:
             self.mcap.abandon()
             self.mcap = None
-            self._seal_last_part()
+            self._seal_last_part("sealed after the write error (readable to its last record)")
         reason = error.strerror or str(error)
         return {**self.describe(), "error": f"log ended: {reason} after {self.csv.rows} rows"}
 
-    def _seal_last_part(self) -> None:
+    def _seal_last_part(self, why: str) -> None:
+        """Leave the last MCAP part readable: sealed to its last record (noted with `why`), or
+        removed if it holds nothing (not even its magic)."""
         parts: list[str] = [str(p) for p in self.state.get("mcap", [])]
         if not parts:
             return
         try:
             fd = self.logs.open_existing(parts[-1])
             try:
-                if os.fstat(fd).st_size < 8:  # not even its magic: nothing to keep
+                if os.fstat(fd).st_size < 8:
                     self.logs.remove(parts[-1])
                     self.state["mcap"] = parts[:-1]
                 elif seal(fd):
-                    self.notes.append(
-                        f"{parts[-1]} sealed after the write error (readable to its last record)"
-                    )
+                    self.notes.append(f"{parts[-1]} {why}")
             finally:
                 os.close(fd)
         except (OSError, ValueError) as e:
