@@ -74,10 +74,12 @@ def rig_config(
     extra: str = "",
     settings_extra: str = "",
     robot: Path = CANOPEN_6AXIS,
+    period_s: float | None = None,
 ) -> Path:
     """`robot` (canopen-6axis.toml, or canopen-2bus.toml) on this rig: the buses (a hub's port
     each, or None: vcan), the URDF path, every axis on `eds_file` (a path, or a name under
-    testdata/eds/), `settings_extra` lines in [resource.settings]."""
+    testdata/eds/), `settings_extra` lines in [resource.settings], `period_s` for the robot's
+    control period if given."""
     path = eds_file if isinstance(eds_file, Path) else eds(eds_file)
     text = robot.read_text().replace('urdf = "../urdf/', f'urdf = "{ROOT}/configs/urdf/')
     text = re.sub(r'(?m)^eds = "[^"]*"', f'eds = "{path}"', text)
@@ -100,7 +102,9 @@ def rig_config(
     # (0.3 s whatever the period: 150 at 500 Hz, 300 at 1 kHz)
     period = re.search(r"^control_period_s = ([0-9.e-]+)", text, re.MULTILINE)
     assert period is not None, robot
-    period_s = float(period.group(1))
+    if period_s is None:
+        period_s = float(period.group(1))
+    text = text.replace(period.group(0), f"control_period_s = {period_s!r}")
     text = re.sub(r"missed_tpdo_periods = \d+", f"missed_tpdo_periods = {round(0.3 / period_s)}", text)
     text = text.replace("[resource.settings]\n", f"[resource.settings]\n{settings_extra}\n")
     dirs = ", ".join(f'"{d}"' for d in (ROOT / "configs/missions", ROOT / "tests/daemon/missions", tmp))
@@ -121,15 +125,15 @@ def canopen_rig(
     settings_extra: str = "",
     drivesim_args: tuple[str, ...] = (),
     robot: Path = CANOPEN_6AXIS,
+    period_s: float | None = None,
 ) -> Iterator[Rig]:
     """The bus (a hub per bus of `robot`) and six simulated drives (strict, see
     `orccadd.drivesim.axis.Strictness`; relaxed by `drivesim_args` such as `--lenient
     heartbeat_consumer`), every one described by `eds_file` (by default Elmo drives that watch
     our heartbeat). Every process it starts is stopped on exit."""
     # The bus and the drives are hardware on a robot: their timing must not depend on the
-    # controller's load. The hub (light) runs at real-time priority below the controller's; the
-    # drives (a Pinocchio simulation, ~40 % of a core here) at a high weight but normal policy:
-    # at SCHED_FIFO they made the kernel throttle real-time tasks on this 2-core machine.
+    # controller's load nor on anything else the machine runs. The hub and the drives (every
+    # thread of each) run at real-time priority below the controller's.
     description = consuming_elmo(tmp) if eds_file == CONSUMING_ELMO else eds_file
     n = bus_count(robot)
     vcan = all(vcan_available(f"v{c}") for c in BUS_CHANNELS[:n])
@@ -139,7 +143,7 @@ def canopen_rig(
             for _ in range(n):
                 hubs.append(HubProcess("--priority", "70"))
         ports = [h.port for h in hubs] if hubs else None
-        config = rig_config(tmp, description, ports, daemon_extra, settings_extra, robot)
+        config = rig_config(tmp, description, ports, daemon_extra, settings_extra, robot, period_s)
         drives = DriveSimProcess(config, "--priority", "70", *drivesim_args)
         try:
             yield Rig(config, hubs[0] if hubs else None, drives, tuple(hubs))

@@ -44,7 +44,8 @@ from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.physres.sim import SimSettings, load_sim_settings
 from orccadd.robot import load_robot_config
-from orccadd.runtime import Summary, enter_realtime
+from orccadd.runtime import Summary
+from orccadd.runtime.rt import realtime_device_process
 
 log = logging.getLogger("orccadd.drivesim")
 
@@ -178,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
         except OSError as e:
             log.warning("nice %d refused (%s)", args.nice, e.strerror)
     if args.priority:
-        for w in enter_realtime(args.priority, lock_memory=False, freeze_gc=False).warnings:
+        for w in realtime_device_process(args.priority):
             log.warning("%s", w)
     # six object dictionaries and a Pinocchio model are many long-lived objects: frozen, the
     # collector's full passes skip them (they stalled this loop for up to ~0.1 s)

@@ -24,7 +24,7 @@ from orccadd.dxlsim.server import Server
 from orccadd.dxlsim.settings import read_chain_settings
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
-from orccadd.runtime.rt import enter_realtime
+from orccadd.runtime.rt import realtime_device_process
 
 log = logging.getLogger("orccadd.dxlsim")
 
@@ -81,9 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(sig, lambda *_: stop.set())
     server = Server(chain, link, control)
     if args.priority:
-        for warning in enter_realtime(
-            args.priority, lock_memory=False, freeze_gc=False, cpu_dma_latency_us=None
-        ).warnings:
+        for warning in realtime_device_process(args.priority):
             log.warning("%s", warning)
     gc.collect()
     gc.freeze()  # the model and tables are long-lived: keep the collector's passes short

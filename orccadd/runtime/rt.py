@@ -98,6 +98,28 @@ def enter_realtime(
     return rep
 
 
+def realtime_device_process(priority: int) -> list[str]:
+    """Every thread of this process at SCHED_FIFO `priority`, and every thread it starts from now
+    on (inherited: no reset-on-fork here), for a simulated device: hardware answers whatever the
+    host's load, so its simulator must not wait behind time-shared work. (`enter_realtime` is
+    for one loop thread: the threads a loop's process starts later run at normal priority.)
+    Returns the warnings; nothing is changed where the system refuses."""
+    if priority <= 0:
+        return []
+    param = os.sched_param(priority)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, param)
+        for tid in os.listdir("/proc/self/task"):
+            with contextlib.suppress(ProcessLookupError):  # a thread that just ended
+                os.sched_setscheduler(int(tid), os.SCHED_FIFO, param)
+    except (PermissionError, OSError) as e:
+        return [
+            f"SCHED_FIFO {priority} refused ({e.strerror or e}): the simulator runs at normal "
+            "priority and may answer late on a busy machine"
+        ]
+    return []
+
+
 def _request_cpu_latency(rep: RealtimeReport, latency_us: int) -> None:
     try:
         fd = os.open(CPU_DMA_LATENCY, os.O_WRONLY | os.O_CLOEXEC)

@@ -25,7 +25,7 @@ from pathlib import Path
 from orccadd.config.robot import read_robot_config, read_toml
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
-from orccadd.runtime.rt import enter_realtime
+from orccadd.runtime.rt import realtime_device_process
 from orccadd.ursim.faults import serve_control
 from orccadd.ursim.series import CB3, E_SERIES
 from orccadd.ursim.simulator import DEFAULT_PORTS, UrSimulator
@@ -121,9 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         log.error("%s", e)
         return 1
     if args.priority:
-        for warning in enter_realtime(
-            args.priority, lock_memory=False, freeze_gc=False, cpu_dma_latency_us=None
-        ).warnings:
+        for warning in realtime_device_process(args.priority):
             log.warning("%s", warning)
     try:
         sim.open()

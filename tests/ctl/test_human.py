@@ -211,7 +211,16 @@ def test_ctrl_c_in_a_stream_exits_130_without_traceback(server: tuple[str, list[
     path, _ = server
     env = {**os.environ, "ORCCADD_SOCKET": path}
     cmd = [sys.executable, "-m", "orccadd.cli", "monitor", "q"]
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    # as from an operator's shell: Ctrl-C at its default (a shell's background job, as under
+    # `make test &`, starts with SIGINT ignored, and Python keeps that)
+    p = subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         assert p.stdout is not None and p.stdout.readline().split() == ["q.0"]  # streaming
         p.send_signal(signal.SIGINT)

@@ -1,5 +1,7 @@
-"""orccadd on canopen-2bus (six CiA 402 axes on two buses at 1 kHz), everything in its own
-process: a hub per bus, one drive simulator on both, orccadd and orccadctl."""
+"""orccadd on canopen-2bus (six CiA 402 axes on two buses), everything in its own process: a hub
+per bus, one drive simulator on both, orccadd and orccadctl. At 500 Hz here: the drive simulator
+(six Pinocchio-simulated axes in Python) beside the controller on two cores does not keep up with
+1 kHz when the machine is busy; the 1 kHz figures are `benchmarks/canopen_cycle.py --buses 2`'s."""
 
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ MISSION = str(Path(__file__).resolve().parent / "missions/canopen.mission")
 
 @pytest.fixture
 def rig_daemon(tmp_path: Path) -> Iterator[tuple[Rig, Daemon]]:
-    with rig_and_daemon(tmp_path, robot=CANOPEN_2BUS) as rd:
+    with rig_and_daemon(tmp_path, robot=CANOPEN_2BUS, period_s=0.002) as rd:
         yield rd
 
 

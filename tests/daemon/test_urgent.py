@@ -133,18 +133,21 @@ def test_abort_cannot_be_denied_by_peers_holding_every_place(daemon: Daemon) -> 
     t = threading.Thread(target=trickle)
     daemon.call("start")
     try:
-        for _ in range(16):
+        t.start()
+        end = time.monotonic() + 20
+        while True:
+            # hold a place more until none is left (the 16 are counted in turn; one connected
+            # while the server still counted `start`'s closing connection got no place)
             s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
             s.connect(daemon.socket)
             main.append(s)
-        t.start()
-        end = time.monotonic() + 20  # the command daemon takes the 16 in turn (a loaded machine)
-        while True:
+            if len(main) < 16:
+                continue
+            time.sleep(0.1)
             with Client(daemon.socket) as c:  # beyond the limit: abort and stop only
                 r = c.reply("status")
             if not r["ok"] or time.monotonic() > end:
                 break
-            time.sleep(0.1)
         assert not r["ok"] and "too many clients" in str(r["error"]), r
         h = daemon.ctl("hold")
         assert h.returncode == 1 and "too many clients" in h.stderr, (h.returncode, h.stderr)

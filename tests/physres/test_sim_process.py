@@ -33,7 +33,8 @@ def session() -> Iterator[Session]:
 def test_motion_through_the_process_link(session: Session) -> None:
     task = session.task(MOVE_TASK)
     loop = session.loop(WallClock(), overrun_limit=10**6)
-    assert loop.run_task(task, timeout_s=6.0) is Phase.DONE
+    phase = loop.run_task(task, timeout_s=6.0)
+    assert phase is Phase.DONE, (task.fault_reason, session.resource.fault_message)
     assert session.event_names() == ["MoveJoints.pre", "MoveJoints.done"]
 
 
@@ -120,7 +121,8 @@ def test_a_device_paced_loop_ticks_on_the_plants_cycle(paced: Session) -> None:
     assert isinstance(clock, DevicePacedClock)
     task = paced.task(MOVE_TASK)
     loop = paced.loop(clock, overrun_limit=10**6)
-    assert loop.run_task(task, timeout_s=6.0) is Phase.DONE
+    phase = loop.run_task(task, timeout_s=6.0)
+    assert phase is Phase.DONE, (task.fault_reason, paced.resource.fault_message)
     stats = loop.stats
     period_us = res.config.control_period_s * 1e6
     # the releases follow the plant's steps, not a deadline of ours (an order of magnitude)

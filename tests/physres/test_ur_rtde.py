@@ -56,7 +56,8 @@ def move(s: Session, target: list[float]) -> tuple[RobotTask, TickRecorder]:
 
 def test_a_motion_is_paced_by_the_controllers_stream_and_reaches_its_target(arm: Session) -> None:
     task, loop = move(arm, REACH)
-    assert loop.run_task(task, timeout_s=20.0) is Phase.DONE
+    phase = loop.run_task(task, timeout_s=20.0)
+    assert phase is Phase.DONE, (task.fault_reason, arm.resource.fault_message)
     assert arm.event_names() == ["MoveJointsCSP.done"]
     period_us = arm.config.control_period_s * 1e6
     assert period_us / 3 < loop.stats.release_period.median_us < 3 * period_us  # the controller's 500 Hz
@@ -98,7 +99,8 @@ def test_protective_stop_mid_motion_is_a_type_3_then_reset_unlocks_and_it_moves_
     assert res.state.status & Status.STOPPED
     res.clear_stop()
     task2, loop2 = move(arm, HOME)
-    assert loop2.run_task(task2, timeout_s=20.0) is Phase.DONE
+    phase = loop2.run_task(task2, timeout_s=20.0)
+    assert phase is Phase.DONE, (task2.fault_reason, arm.resource.fault_message)
 
 
 def test_an_emergency_stop_cannot_be_reset_from_here(sim: UrSimProcess, arm: Session) -> None:

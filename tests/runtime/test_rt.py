@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import os
 import struct
+import subprocess
+import sys
 
 import pytest
 
@@ -34,3 +36,29 @@ def test_no_cpu_latency_request_when_not_asked() -> None:
     leave_realtime(rep)
     assert rep.cpu_dma_latency_us is None
     assert "request none" in rep.describe()
+
+
+DEVICE_PROCESS = """
+import os, threading
+from orccadd.runtime.rt import realtime_device_process
+before = threading.Event()
+t1 = threading.Thread(target=before.wait)  # a thread started before (a bus's reader)
+t1.start()
+assert realtime_device_process(5) == []
+seen = {}
+def later():
+    seen["later"] = os.sched_getscheduler(0)
+t2 = threading.Thread(target=later)  # and one started after (the simulator's loop)
+t2.start(); t2.join()
+seen["before"] = os.sched_getscheduler(t1.native_id)
+before.set(); t1.join()
+print(seen["before"] == os.SCHED_FIFO, seen["later"] == os.SCHED_FIFO)
+"""
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="SCHED_FIFO needs root (or RLIMIT_RTPRIO)")
+def test_a_simulated_device_runs_every_thread_at_real_time_priority_even_those_started_later() -> None:
+    # (enter_realtime's reset-on-fork left a simulator's later threads time-shared: a busy machine
+    # starved them and the controller saw its drives go silent)
+    r = subprocess.run([sys.executable, "-c", DEVICE_PROCESS], capture_output=True, text=True, timeout=60)
+    assert r.stdout.split() == ["True", "True"], r.stdout + r.stderr
