@@ -157,7 +157,8 @@ def _tune(r: dict[str, Any], ctx: dict[str, Any]) -> str:
     path = str(r["tuned"])
     task, _, name = path.partition(".")
     plist = ((ctx.get("params") or {}).get("params") or {}).get(task, [])
-    unit = next((str(p["unit"]) for p in plist if p["name"] == name), "")
+    element = name.partition("[")[0]  # `traj.target_rad[2]`: the unit of `traj.target_rad`
+    unit = next((str(p["unit"]) for p in plist if p["name"] == element), "")
     unit = "" if unit in ("", "1") else " " + unit
     return f"{path}: {num(r['previous'])} → {num(r['value'])}{unit} (applied at tick {r['applied_at_tick']})"
 

@@ -257,11 +257,18 @@ class RtCommands:
             raise CommandError(f"{path!r}: a parameter is named TASK.MODULE.PARAM (see `params`)")
         task = self._task(parts[0])
         rest = f"{parts[1]}.{parts[2]}"
-        old = next((p["value"] for p in task.parameters() if p["name"] == rest), None)
         try:
             change = task.prepare_tune(rest, value)
         except ParameterError as e:
             raise CommandError(str(e)) from None
+        shape = change.param.shape
+        if change.index is None and shape and not isinstance(value, list):
+            # on a moving arm one number for every joint is a surprise no one wants, gains included
+            raise CommandError(
+                f"tune {path} (={value!r}): {parts[2]} has {shape[0]} values, one per joint: give "
+                f"a list of {shape[0]}, or one joint's as {path}[i] (i from 0)"
+            )
+        old = change.param.value.tolist() if change.index is None else float(change.param.value[change.index])
         loop = self.m.loop
         try:
             seq = loop.tunes.post(change)

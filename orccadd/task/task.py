@@ -35,7 +35,19 @@ class ParameterChange(NamedTuple):
 
     module: Module
     param: Parameter
-    value: npt.NDArray[np.float64]
+    value: npt.NDArray[np.float64]  # the whole parameter, or the one element at `index`
+    index: int | None = None  # `PARAM[i]`: only that element is written
+
+
+def split_index(path: str) -> tuple[str, int | None]:
+    """`traj.target_rad[2]` → (`traj.target_rad`, 2); a path without `[i]` → (path, None).
+    `ParameterError` for a malformed index."""
+    if not path.endswith("]"):
+        return path, None
+    name, sep, rest = path[:-1].partition("[")
+    if not sep or not rest.isdigit() or len(rest) > 6:
+        raise ParameterError(f"{path!r}: an element is named PARAM[i], i a joint's index from 0")
+    return name, int(rest)
 
 
 @dataclass(frozen=True)
@@ -186,16 +198,28 @@ class RobotTask:
         self.wrote = False
 
     def prepare_tune(self, path: str, value: Any) -> ParameterChange:
-        """Check `MODULE.PARAM = value` (name, tunable, bounds, shape) without applying it.
-        `ParameterError` says what is wrong. Not for a tick."""
-        if path not in self._tunable:
+        """Check `MODULE.PARAM = value`, or `MODULE.PARAM[i] = number` for one element of a
+        vector (name, tunable, index, bounds, shape), without applying it. `ParameterError` says
+        what is wrong. Not for a tick."""
+        name, index = split_index(path)
+        if name not in self._tunable:
             raise ParameterError(
-                f"task {self.name} has no parameter {path!r} (parameters: {', '.join(sorted(self._tunable))})"
+                f"task {self.name} has no parameter {name!r} (parameters: {', '.join(sorted(self._tunable))})"
             )
-        module, param = self._tunable[path]
+        module, param = self._tunable[name]
         if not param.tunable:
-            raise ParameterError(f"{self.name}.{path} is not tunable at run time")
-        return ParameterChange(module, param, param.check(value))
+            raise ParameterError(f"{self.name}.{name} is not tunable at run time")
+        if index is None:
+            return ParameterChange(module, param, param.check(value))
+        n = param.shape[0] if param.shape else 0
+        if not 0 <= index < n:
+            what = f"indices 0 to {n - 1}" if n else "no index: it is one number"
+            raise ParameterError(f"{self.name}.{path}: {name} has {what}")
+        if not isinstance(value, int | float) or isinstance(value, bool):
+            raise ParameterError(f"{self.name}.{path} (={value!r}) must be one number")
+        whole = param.value.copy()
+        whole[index] = value
+        return ParameterChange(module, param, param.check(whole)[index : index + 1], index)
 
     def tune(self, path: str, value: Any) -> None:
         """Check and apply at once: only for a task no thread is ticking (the daemon hands a
@@ -205,7 +229,10 @@ class RobotTask:
     @staticmethod
     def apply_change(change: ParameterChange) -> None:
         """Write a checked change into its parameter (tick-safe: an in-place copy)."""
-        change.param.value[...] = change.value
+        if change.index is None:
+            change.param.value[...] = change.value
+        else:
+            change.param.value[change.index] = change.value[0]
         change.module.on_parameter_change(change.param.name)
 
     def parameters(self) -> list[dict[str, Any]]:

@@ -153,11 +153,23 @@ COMMANDS: dict[str, CommandSpec] = {
             "tune",
             C,
             "rt",
-            "`TASK.MODULE.PARAM`: bounds and shape checked, applied at one tick boundary (its number in "
+            "`TASK.MODULE.PARAM` (a vector: a list of one per joint, or `…PARAM[i]`, one joint's): "
+            "bounds and shape checked, applied at one tick boundary (its number in "
             "the reply), traced",
             (
-                Arg("path", (str,), "TASK.MODULE.PARAM", required=True),
-                Arg("value", (*NUMBER, list), "a number or a list of numbers", required=True, items=NUMBER),
+                Arg(
+                    "path",
+                    (str,),
+                    "TASK.MODULE.PARAM, or TASK.MODULE.PARAM[i] for one joint's",
+                    required=True,
+                ),
+                Arg(
+                    "value",
+                    (*NUMBER, list),
+                    "a number, or a list of one per joint for a vector",
+                    required=True,
+                    items=NUMBER,
+                ),
             ),
         ),
         CommandSpec(

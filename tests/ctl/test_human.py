@@ -54,9 +54,9 @@ def session(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]
         o["describe"] = run(*sock, "describe")
         o["describe_json"] = run(*sock, "--json", "describe")
         o["describe_json_after"] = run(*sock, "describe", "--json")
-        o["raw_tune_refused"] = d.reply("tune", path="Reach.ct.kp", value=-3)
-        o["tune_refused"] = run(*sock, "tune", "Reach.ct.kp", "-3")
-        o["tune"] = run(*sock, "tune", "Reach.ct.kp", "500")
+        o["raw_tune_refused"] = d.reply("tune", path="Reach.ct.kp[0]", value=-3)
+        o["tune_refused"] = run(*sock, "tune", "Reach.ct.kp[0]", "-3")
+        o["tune"] = run(*sock, "tune", "Reach.ct.kp[2]", "500")
         o["start"] = run(*sock, "start")
         o["raw_status"] = d.status()
         o["hold"] = run(*sock, "hold")
@@ -137,7 +137,7 @@ def test_load_start_tune_hold_resume_stop_reset_abort_in_words(session: dict[str
     assert re.fullmatch(r"mission PickDemo: \d+ states, \d+ transitions", load[1])  # the daemon's report
     assert session["start"].out == "started mission PickDemo (procedure PickAndInspect, run 1)\n"
     assert re.fullmatch(
-        r"Reach\.ct\.kp: 900 \(×6\) → 500 1/s\^2 \(applied at tick \d+\)\n", session["tune"].out
+        r"Reach\.ct\.kp\[2\]: 900 → 500 1/s\^2 \(applied at tick \d+\)\n", session["tune"].out
     )
     assert session["hold"].out.startswith("holding: the mission is suspended, the Hold task holds the arm")
     assert re.fullmatch(
@@ -155,7 +155,7 @@ def test_params_events_log_status_and_top_in_words(session: dict[str, Any]) -> N
     assert re.fullmatch(
         r"  traj +target_rad +\[0\.8, -1\.2, 1\.2, -1\.6, -1\.2, 0\.4\] +rad +in ±\[.*\]", params[1]
     )
-    assert any(re.fullmatch(r"  ct +kp +500 \(×6\) +1/s\^2 +in \[0, 100000\]", x) for x in params)
+    assert any(re.fullmatch(r"  ct +kp +\[900, 900, 500, 900, 900, 900\] +1/s\^2 +in \[0, 100000\]", x) for x in params)
     events = session["events"].out.splitlines()
     assert len(events) == 3 and all(re.match(r"\d\d:\d\d:\d\d\.\d{3} t=", x) for x in events)
     assert re.fullmatch(

@@ -81,19 +81,26 @@ def test_params_and_tune(daemon: Daemon) -> None:
     assert isinstance(params, dict)
     kp = next(p for p in params["params"]["Reach"] if p["name"] == "ct.kp")
     assert kp["tunable"] and kp["unit"]
-    ok = daemon.ctl("tune", "Reach.ct.kp", "500")
+    ok = daemon.ctl("tune", "Reach.ct.kp", "[500, 500, 500, 500, 500, 500]")
     assert ok.returncode == 0, ok.stderr
     before = int(daemon.status()["ticks"])  # type: ignore[arg-type]
-    reply = daemon.call("tune", path="Reach.ct.kp", value=600)
+    reply = daemon.call("tune", path="Reach.ct.kp[2]", value=600)  # one joint's: the elbow's
     after = int(daemon.status()["ticks"])  # type: ignore[arg-type]
     # acknowledged once the control thread applied it, with that tick's (telemetry record) number
-    assert isinstance(reply, dict) and reply["previous"] in (500.0, [500.0] * 6)
+    assert isinstance(reply, dict) and reply["previous"] == 500.0 and reply["tuned"] == "Reach.ct.kp[2]"
     assert before <= reply["applied_at_tick"] <= after + 1, (before, reply, after)
-    daemon.call("tune", path="Reach.ct.kp", value=500)
+    daemon.call("tune", path="Reach.ct.kp[5]", value=400)
     params = daemon.call("params", task="Reach")
-    assert next(p for p in params["params"]["Reach"] if p["name"] == "ct.kp")["value"] in (500.0, [500.0] * 6)
+    kp = next(p for p in params["params"]["Reach"] if p["name"] == "ct.kp")["value"]
+    assert kp == [500.0, 500.0, 600.0, 500.0, 500.0, 400.0]
     for path, value, why in [
-        ("Reach.ct.kp", "-3", "must be in"),
+        ("Reach.ct.kp", "500", "(=500): kp has 6 values, one per joint: give a list of 6, or one joint's as"),
+        ("Reach.ct.kp[6]", "500", "ct.kp has indices 0 to 5"),
+        ("Reach.ct.kp[x]", "500", "an element is named PARAM[i]"),
+        ("Reach.ct.kp[1]", "[1, 2]", "must be one number"),
+        ("Reach.traj.speed_scale[0]", "1", "no index: it is one number"),
+        ("Reach.ct.kp[0]", "-3", "must be in"),
+        ("Reach.ct.kp", "[-3, 1, 1, 1, 1, 1]", "must be in"),
         ("Reach.ct.nope", "1", "no parameter"),
         ("Nobody.ct.kp", "1", "no task"),
         ("Reach.kp", "1", "TASK.MODULE.PARAM"),
@@ -102,7 +109,13 @@ def test_params_and_tune(daemon: Daemon) -> None:
         assert p.returncode == 1 and why in p.stderr, (path, p.stderr)
     ev = daemon.call("events")
     assert isinstance(ev, dict)
-    assert [e["command"] for e in ev["events"] if e["kind"] == "command"].count("tune") == 3
+    assert [e["command"] for e in ev["events"] if e["kind"] == "command"].count("tune") == 3  # the served
+    assert (
+        kp
+        == next(p for p in daemon.call("params", task="Reach")["params"]["Reach"] if p["name"] == "ct.kp")[
+            "value"
+        ]
+    )  # nothing refused changed anything
 
 
 def test_two_clients_monitor_while_another_commands(daemon: Daemon) -> None:

@@ -117,6 +117,25 @@ def test_tune_is_checked_before_anything_changes() -> None:
     assert (ct.kp.value == 500.0).all()
 
 
+def test_one_element_of_a_vector_is_tuned_alone() -> None:
+    _, task, _ = open_task()
+    ct = next(m for m in task.modules if m.name == "ct")
+    change = task.prepare_tune("ct.kp[2]", 650.0)
+    other = task.prepare_tune("ct.kp[4]", 350)  # checked before the first is applied
+    task.apply_change(change)
+    task.apply_change(other)  # writes its element only: the first stays
+    assert ct.kp.value.tolist() == [900.0, 900.0, 650.0, 900.0, 350.0, 900.0]
+    with pytest.raises(ParameterError, match=r"must be in \[0, 100000\] at index 2"):
+        task.prepare_tune("ct.kp[2]", -1.0)
+    with pytest.raises(ParameterError, match="has indices 0 to 5"):
+        task.prepare_tune("ct.kp[6]", 1.0)
+    with pytest.raises(ParameterError, match=r"an element is named PARAM\[i\]"):
+        task.prepare_tune("ct.kp[-1]", 1.0)
+    with pytest.raises(ParameterError, match="must be one number"):
+        task.prepare_tune("ct.kp[1]", [1.0])
+    assert ct.kp.value.tolist() == [900.0, 900.0, 650.0, 900.0, 350.0, 900.0]
+
+
 @pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
 def test_a_law_that_outputs_nan_is_a_type_3_and_nothing_is_sent(compiled: bool) -> None:
     s, task, loop = open_task()
