@@ -3,10 +3,13 @@ pytest-timeout's `os._exit` leaves no simulator running (at real-time priority) 
 
 from __future__ import annotations
 
+import importlib
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+import pytest
 
 from tests.conftest import ROOT
 
@@ -38,3 +41,15 @@ def test_a_child_dies_with_its_parent() -> None:
     while _running(pid) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not _running(pid)
+
+
+@pytest.mark.parametrize(
+    "module", ["orccadd.drivesim", "orccadd.dxlsim", "orccadd.ursim", "tools.virtual_can.hub"]
+)
+def test_a_simulators_usage_names_the_command_that_runs_it(
+    module: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    main = importlib.import_module(module if module.endswith("hub") else f"{module}.__main__").main
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    assert capsys.readouterr().out.startswith(f"usage: python -m {module} ")

@@ -107,7 +107,11 @@ def _figures_ms(values_s: list[float]) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        prog="python -m orccadd.drivesim",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     ap.add_argument("--config", required=True, help="a canopen402 robot config")
     ap.add_argument(
         "--plant", default="", help="TOML table of `sim` settings for the arm (friction, initial_q_rad)"

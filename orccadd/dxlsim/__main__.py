@@ -37,7 +37,11 @@ def _floats(text: str) -> list[float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        prog="python -m orccadd.dxlsim",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     ap.add_argument("--config", required=True, help="a robot config whose resource is a DYNAMIXEL chain")
     ap.add_argument("--port", default="", help="where to link the serial port (default: the config's port)")
     ap.add_argument("--control", default="", help="the fault-injection socket (default: PORT.control)")

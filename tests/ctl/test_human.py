@@ -155,7 +155,10 @@ def test_params_events_log_status_and_top_in_words(session: dict[str, Any]) -> N
     assert re.fullmatch(
         r"  traj +target_rad +\[0\.8, -1\.2, 1\.2, -1\.6, -1\.2, 0\.4\] +rad +in ±\[.*\]", params[1]
     )
-    assert any(re.fullmatch(r"  ct +kp +\[900, 900, 500, 900, 900, 900\] +1/s\^2 +in \[0, 100000\]", x) for x in params)
+    assert any(
+        re.fullmatch(r"  ct +kp +\[900, 900, 500, 900, 900, 900\] +1/s\^2 +in \[0, 100000\]", x)
+        for x in params
+    )
     events = session["events"].out.splitlines()
     assert len(events) == 3 and all(re.match(r"\d\d:\d\d:\d\d\.\d{3} t=", x) for x in events)
     assert re.fullmatch(

@@ -186,7 +186,11 @@ async def run(port: int, port_file: str, max_backlog: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        prog="python -m tools.virtual_can.hub",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     ap.add_argument("--port", type=int, default=29536, help="TCP port on 127.0.0.1 (0: any free port)")
     ap.add_argument("--port-file", default="", help="also write the port to this file when ready")
     ap.add_argument("--max-backlog-bytes", type=int, default=4 << 20)
