@@ -262,13 +262,14 @@ class RtCommands:
         except ParameterError as e:
             raise CommandError(str(e)) from None
         shape = change.param.shape
-        if change.index is None and shape and not isinstance(value, list):
+        if change.element is None and shape and not isinstance(value, list):
             # on a moving arm one number for every joint is a surprise no one wants, gains included
             raise CommandError(
                 f"tune {path} (={value!r}): {parts[2]} has {shape[0]} values, one per joint: give "
                 f"a list of {shape[0]}, or one joint's as {path}[i] (i from 0)"
             )
-        old = change.param.value.tolist() if change.index is None else float(change.param.value[change.index])
+        i = change.element
+        old = change.param.value.tolist() if i is None else float(change.param.value[i])
         loop = self.m.loop
         try:
             seq = loop.tunes.post(change)

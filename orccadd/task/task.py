@@ -35,8 +35,8 @@ class ParameterChange(NamedTuple):
 
     module: Module
     param: Parameter
-    value: npt.NDArray[np.float64]  # the whole parameter, or the one element at `index`
-    index: int | None = None  # `PARAM[i]`: only that element is written
+    value: npt.NDArray[np.float64]  # the whole parameter, or the one element at `element`
+    element: int | None = None  # `PARAM[i]`: only that element is written
 
 
 def split_index(path: str) -> tuple[str, int | None]:
@@ -229,10 +229,10 @@ class RobotTask:
     @staticmethod
     def apply_change(change: ParameterChange) -> None:
         """Write a checked change into its parameter (tick-safe: an in-place copy)."""
-        if change.index is None:
+        if change.element is None:
             change.param.value[...] = change.value
         else:
-            change.param.value[change.index] = change.value[0]
+            change.param.value[change.element] = change.value[0]
         change.module.on_parameter_change(change.param.name)
 
     def parameters(self) -> list[dict[str, Any]]:
