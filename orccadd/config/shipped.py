@@ -15,6 +15,8 @@ from pathlib import Path
 from orccadd.errors import ConfigError
 
 CHECKOUT = Path(__file__).resolve().parents[2] / "configs"
+# the robot the systemd service runs (packaging/systemd/orccadd.service): this PC's robot
+SERVICE_CONFIG = Path("/etc/orccadd/robots/robot.toml")
 INSTALLED = Path(sys.prefix) / "share" / "orccadd" / "configs"
 
 

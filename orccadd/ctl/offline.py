@@ -38,7 +38,8 @@ def add_parsers(sub: Any) -> None:
     p.add_argument(
         "--config",
         default=None,
-        help="also build every task on this robot (a robot config file or a shipped name)",
+        help="the robot to build every task on, as load does (a robot config file or a shipped "
+        "name; default: the service's, /etc/orccadd/robots/robot.toml, where it exists)",
     )
     p.set_defaults(func=cmd_check)
     g = sub.add_parser("graph", help="draw a mission's automaton, or an abstract view of it")
@@ -93,8 +94,7 @@ def cmd_check(args: argparse.Namespace) -> int:
             report = verify_network(a) if isinstance(a, Network) else verify(a)
         else:
             a, report = check_mission(args.file, args.max_states, _progress())
-            if args.config:
-                report.results.append(_on_robot(a, args.config))
+            report.results.append(_on_robot(a, args.config))
     except MissionError as e:
         if args.json:
             print(
@@ -131,12 +131,27 @@ def cmd_check(args: argparse.Namespace) -> int:
     return EXIT_OK if report.ok else EXIT_FAILED
 
 
-def _on_robot(a: Any, config: str) -> Any:
-    from orccadd.config.shipped import robot_config_path
+def _on_robot(a: Any, config: str | None) -> Any:
+    """`load`'s checks on a robot (every task built on it: parameter names, shapes, bounds,
+    joints): `config`'s, else the service's on this PC; without either, a warning that says
+    which checks did not run (never a silent ok)."""
+    from orccadd.automaton.verify import WARNING, CheckResult
+    from orccadd.config.shipped import SERVICE_CONFIG, robot_config_path
     from orccadd.mission import check_on_robot
     from orccadd.robot import load_robot
 
-    robot = load_robot(robot_config_path(config))  # ConfigError: exit 2, naming file and key
+    if config is None and not SERVICE_CONFIG.is_file():
+        return CheckResult(
+            "robot",
+            False,
+            "not checked: no --config and no service config here "
+            f"({SERVICE_CONFIG}): the tasks' parameter names, shapes and bounds and their joints "
+            "are load's checks on a robot; run `check --config ROBOT` (a file or a shipped name "
+            "such as sim-ur5e)",
+            level=WARNING,
+        )
+    path = robot_config_path(config) if config is not None else SERVICE_CONFIG
+    robot = load_robot(path)  # ConfigError: exit 2, naming file and key
     return check_on_robot(a, robot.resource, robot.config.name)
 
 

@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from tests.automaton.conftest import KEEPSTABLE, NO_GUARD
 from tests.conftest import ROOT
 
@@ -173,3 +175,28 @@ def test_a_shipped_mission_is_checked_by_its_name() -> None:
     assert r.returncode == 0 and "mission PickDemo" in r.stdout, (r.stdout, r.stderr)
     r = ctl("check", "nosuch")
     assert r.returncode == 2 and "no shipped mission of that name (shipped: demo," in r.stderr, r.stderr
+
+
+def test_check_without_a_robot_says_which_checks_it_did_not_run_and_runs_them_on_the_services(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`check` ran only the language's checks without --config and printed ok for a misspelt
+    parameter that `load` refuses: now it warns that the robot's checks did not run (--strict
+    fails), and on a PC with the service's robot config it runs them on that robot."""
+    from orccadd.cli import orccadctl_main as main
+    from orccadd.config import shipped
+    from tests.daemon.conftest import robot_config
+
+    text = (ROOT / "configs/missions/demo.mission").read_text()
+    text = text.replace('from "../tasks/', f'from "{ROOT}/configs/tasks/')
+    typo = tmp_path / "typo.mission"
+    typo.write_text(text.replace("set lost.threshold_rad", "set lost.treshold_rad"))
+    monkeypatch.setattr(shipped, "SERVICE_CONFIG", tmp_path / "absent.toml")
+    assert main(["check", str(typo)]) == 0
+    assert "warn robot: not checked: no --config and no service config here" in capsys.readouterr().out
+    assert main(["check", "--strict", str(typo)]) == 1
+    capsys.readouterr()
+    monkeypatch.setattr(shipped, "SERVICE_CONFIG", robot_config(tmp_path))  # this PC's robot
+    assert main(["check", str(typo)]) == 1
+    assert "FAIL robot ur5e:" in capsys.readouterr().out
+    assert main(["check", str(typo), "--config", "sim-ur5e"]) == 1
