@@ -55,7 +55,9 @@ class Daemon:
         self.log = log
 
     def client(self) -> Client:
-        return Client(self.socket)
+        # a load compiles in a process of its own at normal priority: on a busy machine, beside a
+        # real-time loop and simulators, that takes far longer than the client's default 10 s
+        return Client(self.socket, timeout_s=60.0)
 
     def call(self, cmd: str, **args: object) -> object:
         with self.client() as c:

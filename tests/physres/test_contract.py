@@ -115,12 +115,15 @@ def drive(
     `until`: return as soon as a read state satisfies it (at most `seconds` all the same)."""
     data = res.model.new_data()
     period = res.config.control_period_s
-    t_end = time.monotonic() + seconds
+    t_start = time.monotonic()
+    t_end = t_start + seconds
     target = res.read(time.monotonic()).q_rad.copy()
+    q0 = float(target[0])
     while time.monotonic() < t_end:
         st = res.read(time.monotonic())
         if res.mode is CommandMode.POSITION:
-            target[0] += push / 10 * period
+            # on the wall clock, not per pass: a busy machine makes passes longer than a period
+            target[0] = q0 + push / 10 * (time.monotonic() - t_start)
             res.write(time.monotonic(), target)
         else:
             res.write(time.monotonic(), pin.computeGeneralizedGravity(res.model.model, data, st.q_rad) + push)

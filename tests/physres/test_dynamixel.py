@@ -34,6 +34,9 @@ BACK = [0.0, -0.16, -1.41, 0.0, 0.1, 0.0]
 SETTINGS = "baud_rate = 4_000_000"
 pytestmark = pytest.mark.timeout(120)
 
+# the SDK's busy polling and the pty's worker: see tests/physres/conftest.py
+LOOP_AT_REALTIME = False
+
 
 @dataclass
 class DxlRig:
@@ -58,7 +61,9 @@ def dxl_rig(tmp: Path, *edits: tuple[str, str], sim_args: tuple[str, ...] = ()) 
     config = tmp / "dxl.toml"
     port = tmp / "ttyDXL"
     config.write_text(variant_text(SIM, ('port = "/tmp/orccadd-dxl-6axis"', f'port = "{port}"'), *edits))
-    sim = DxlSimProcess(config, *sim_args)
+    # the servos are hardware: at real-time priority, above the test's loop (tests/physres/conftest.py)
+    priority = () if "--priority" in sim_args else ("--priority", "70")
+    sim = DxlSimProcess(config, *priority, *sim_args)
     try:
         yield DxlRig(config, sim)
     finally:
@@ -231,7 +236,7 @@ def test_the_4_dof_openmanipulator_x_moves_under_a_robot_task(tmp_path: Path) ->
     port = ('port = "/tmp/orccadd-omx"', f'port = "{tmp_path / "ttyOMX"}"')
     config.write_text(variant_text(ROOT / "configs/robots/openmanipulator-x-sim.toml", port))
     target = [0.8, -0.35, -0.85, -0.9]
-    sim = DxlSimProcess(config)
+    sim = DxlSimProcess(config, "--priority", "70")
     try:
         s = Session.from_config(load_robot_config(config), CommandMode.POSITION)
         try:
