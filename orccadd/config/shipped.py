@@ -43,7 +43,7 @@ def shipped(kind: str) -> dict[str, Path]:
 def robot_config_path(name_or_path: str) -> Path:
     """A robot config given as a path (it exists) or as the name of a shipped one."""
     p = Path(name_or_path)
-    if p.exists():
+    if exists(p):
         return p
     robots = shipped("robots")
     key = p.stem if p.suffix == ".toml" and len(p.parts) == 1 else name_or_path
@@ -62,10 +62,26 @@ def is_bare_name(arg: str) -> bool:
     return "/" not in arg and "." not in arg and arg not in ("", "..")
 
 
+def is_file(p: Path) -> bool:
+    """Whether `p` is a regular file; False for a name the system refuses (too long, a NUL)."""
+    try:
+        return p.is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def exists(p: Path) -> bool:
+    """Whether `p` exists; False for a name the system refuses (too long, a NUL)."""
+    try:
+        return p.exists()
+    except (OSError, ValueError):
+        return False
+
+
 def mission_path(name_or_path: str) -> Path:
     """A mission given as a path (it exists) or by the name of a shipped one (`demo`)."""
     p = Path(name_or_path)
-    if p.exists() or not is_bare_name(name_or_path):
+    if exists(p) or not is_bare_name(name_or_path):
         return p
     missions = shipped("missions")
     if name_or_path in missions:

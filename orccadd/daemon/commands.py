@@ -20,7 +20,7 @@ from typing import Any, Protocol
 
 from orccadd.automaton import Automaton, Report
 from orccadd.config.robot import RobotConfig
-from orccadd.config.shipped import is_bare_name
+from orccadd.config.shipped import is_bare_name, is_file
 from orccadd.confine import Confinement, ConfinementError
 from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.mission import prepare_mission
@@ -163,7 +163,7 @@ class RtCommands:
         dirs = [cfg.resolve(d) for d in cfg.daemon.mission_dirs]
         conf = Confinement(dirs, "mission file", "daemon.mission_dirs")
         if is_bare_name(path):  # `load demo`: the first <dir>/demo.mission of the mission directories
-            path = next((str(d / f"{path}.mission") for d in dirs if (d / f"{path}.mission").is_file()), path)
+            path = next((str(d / f"{path}.mission") for d in dirs if is_file(d / f"{path}.mission")), path)
         try:
             return conf.open(path)
         except ConfinementError as e:

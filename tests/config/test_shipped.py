@@ -43,3 +43,14 @@ def test_list_configs_and_version_from_the_command_line() -> None:
     argv = [sys.executable, "-m", "orccadd.daemon.rtproc", "--list-configs"]
     out = subprocess.run(argv, capture_output=True, text=True, check=True)
     assert "ur5e-rtde-sim" in out.stdout
+
+
+def test_a_name_the_system_refuses_is_no_such_file_not_a_crash() -> None:
+    """The protocol fuzzer's `load` of a 1000-letter bare name: the lookup's stat raised
+    ENAMETOOLONG and the daemon answered "internal error"."""
+    from orccadd.config.shipped import mission_path
+
+    with pytest.raises(ConfigError, match="no such file, and no shipped mission"):
+        mission_path("a" * 1000)
+    with pytest.raises(ConfigError, match="no such file"):
+        robot_config_path("a" * 1000)
