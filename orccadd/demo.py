@@ -11,6 +11,7 @@ loop) is reported, reset and run once more, as an operator would.
 from __future__ import annotations
 
 import argparse
+import shutil
 import signal
 import subprocess
 import sys
@@ -95,13 +96,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"$ orccadctl load {args.mission}")
             print(c.call("load", path=args.mission)["report"])
             csv = out / "demo.csv"
-            c.call(
-                "log",
-                action="start",
-                signals=["q", "dq", "tau", "cmd", "wake_us", "compute_us"],
-                name=f"demo-{time.strftime('%Y%m%d-%H%M%S')}.csv",
-            )
-            print("$ orccadctl log start q dq tau cmd wake_us compute_us")
+            name = f"demo-{time.strftime('%Y%m%d-%H%M%S')}.csv"
+            signals = ["q", "dq", "tau", "cmd", "wake_us", "compute_us"]
+            print(f"$ orccadctl log start {' '.join(signals)} --name {name}")
+            c.call("log", action="start", signals=signals, name=name)
             tuned = [False]
             seen, s = run_mission(c, 0, tuned)
             if s["result"] != "success":
@@ -116,10 +114,14 @@ def main(argv: list[str] | None = None) -> int:
                         time.sleep(0.5)
                 seen, s = run_mission(c, seen, tuned)
             time.sleep(0.3)
+            print(f"$ orccadctl log stop -o {csv}")
             info = c.call("log", action="stop")
             copy_to(Path(info["file"]), csv)  # the daemon writes into its own log directory
-            print(f"$ orccadctl log stop -o {csv}")
+            mcaps = [out / f"demo{'' if i == 0 else f'-{i + 1}'}.mcap" for i in range(len(info["mcap"]))]
+            for part, dest in zip(info["mcap"], mcaps, strict=True):  # the same log for Foxglove
+                copy_to(Path(part), dest)
             print(f"log: {csv}: {info['rows']} rows at full rate, {info['lost']} lost")
+            print(f"log: {', '.join(str(m) for m in mcaps)} (MCAP: Foxglove, the mcap tools)")
             print(format_status(c.call("status")))
             png = out / "demo.png"
             print(plot_csv(csv, png, ["q", "tau", "wake_us"]))
@@ -134,6 +136,7 @@ def main(argv: list[str] | None = None) -> int:
                 rc = proc.wait()
             print(f"orccadd stopped (exit {rc}): {daemon_log.read_text().strip().splitlines()[-1]}")
             code = code or (1 if rc else 0)
+        shutil.rmtree(tmp, ignore_errors=True)  # its socket and the daemon's log directory
     return code
 
 
