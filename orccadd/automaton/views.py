@@ -28,6 +28,7 @@ from orccadd.errors import OrccaddError
 
 TAU = ""
 EDGE_ALTERNATIVES_SHOWN = 4  # input sets named on one edge of the full view
+TYPE_3 = "type 3"  # the label of the summed-up exception edges of a full view without `--faults`
 
 
 @dataclass(frozen=True)
@@ -184,9 +185,12 @@ def full_view(a: Automaton, *, faults: bool = False) -> Lts:
     for m in p.t3_masks:
         t3_bits |= m
     groups: dict[tuple[int, int, int], list[int]] = {}  # (source, target, actions) → input sets
+    to_safe: set[tuple[int, str, int]] = set()  # without `faults`: one edge per (source, target)
     for s in range(a.n_states):
         for inputs, (n, actions) in a.table[s].items():
             if inputs & t3_bits and not faults:
+                if n != s:  # (else drawn nowhere: the safe procedure would look unreachable)
+                    to_safe.add((s, TYPE_3, n))
                 continue
             if n == s and not actions:
                 continue
@@ -200,6 +204,7 @@ def full_view(a: Automaton, *, faults: bool = False) -> Lts:
             label += " ∨ …"
         acts = ", ".join(a.describe_actions(actions))
         edges.add((s, f"{label} / {acts}" if label and acts else label or acts, n))
+    edges |= {e for e in to_safe if not any(x[0] == e[0] and x[2] == e[2] for x in edges)}
     return Lts(a.n_states, 0, tuple(sorted(edges)), a.where, _tasks(a), a.phase)
 
 
@@ -269,6 +274,8 @@ def _graph(lts: Lts, prefix: str) -> list[str]:
     out.append(f"  {prefix}start -> {prefix}{lts.initial};")
     for s, lab, t in lts.edges:
         style = ' style=dashed label="τ"' if lab == TAU else f' label="{_q(lab)}"'
+        if lab == TYPE_3:  # the exceptions, summed up (`graph --faults` draws each)
+            style = f' style=dashed color=red fontcolor=red label="{TYPE_3}"'
         out.append(f"  {prefix}{s} -> {prefix}{t} [{style.strip()}];")
     return out
 
