@@ -40,7 +40,10 @@ def test_two_buses_start_hold_and_move_in_csp(rig: Rig, arm: Canopen402Arm) -> N
     assert [a.port for a in arm.master.axes] == [0, 0, 0, 1, 1, 1]
     assert [a.node_id for a in arm.master.axes] == [1, 2, 3, 1, 2, 3]
     with BusRecorder(rig, bus=1) as can1:
-        run(arm, 0.2)  # the loop's first ticks enable every drive on both buses
+        for _ in range(20):  # the loop's first ticks enable every drive on both buses
+            run(arm, 0.1)
+            if all(a.state is State.OPERATION_ENABLED for a in arm.master.axes):
+                break
         assert all(a.state is State.OPERATION_ENABLED for a in arm.master.axes)
         q0 = arm.state.q_rad.copy()
         goal = q0 + np.array([0.2, -0.15, 0.15, 0.1, 0.1, -0.1])
