@@ -47,6 +47,7 @@ from orccadd.errors import ConfigError, ResourceError
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, ClockSource, Quantity, ResourceDescription, Source
+from orccadd.runtime.rt import ThreadsStartedHere
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Status
 
@@ -193,14 +194,18 @@ class UrRtdeArm(PhysicalResource):
         import rtde_receive
 
         host, hz, prio = self.settings.host, 1.0 / self.period_s, self.settings.rtde_priority
-        self.receive = self._try(
-            lambda: rtde_receive.RTDEReceiveInterface(host, hz, [], False, False, prio),
-            f"RTDE at {host}:30004",
-        )
-        flags = rtde_control.RTDEControlInterface.FLAG_UPLOAD_SCRIPT
-        self.control = self._try(
-            lambda: rtde_control.RTDEControlInterface(host, hz, flags, 50002, prio), "the control script"
-        )
+        # ur_rtde sets its threads' priority on a PREEMPT_RT kernel only: ours sets it on any
+        with ThreadsStartedHere(prio) as started:
+            self.receive = self._try(
+                lambda: rtde_receive.RTDEReceiveInterface(host, hz, [], False, False, prio),
+                f"RTDE at {host}:30004",
+            )
+            flags = rtde_control.RTDEControlInterface.FLAG_UPLOAD_SCRIPT
+            self.control = self._try(
+                lambda: rtde_control.RTDEControlInterface(host, hz, flags, 50002, prio), "the control script"
+            )
+        for w in started.warnings:
+            log.warning("%s: %s", self.name, w)
         self._watchdog_armed = False
         self._last_stamp = -1.0
         self._last_new_s = 0.0

@@ -75,7 +75,7 @@ def enter_realtime(
             # normal priority unless it asks for more, never above the loop by inheritance
             os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
             rep.sched_fifo_priority = priority
-        except (PermissionError, OSError) as e:
+        except OSError as e:
             rep.warnings.append(
                 f"SCHED_FIFO {priority} refused ({e.strerror or e}): the loop runs at normal "
                 "priority; run as root or grant LimitRTPRIO (systemd) / rtprio (limits.conf)"
@@ -106,18 +106,61 @@ def realtime_device_process(priority: int) -> list[str]:
     Returns the warnings; nothing is changed where the system refuses."""
     if priority <= 0:
         return []
-    param = os.sched_param(priority)
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, param)
-        for tid in os.listdir("/proc/self/task"):
-            with contextlib.suppress(ProcessLookupError):  # a thread that just ended
-                os.sched_setscheduler(int(tid), os.SCHED_FIFO, param)
-    except (PermissionError, OSError) as e:
+        _fifo(_thread_ids(), priority)
+    except OSError as e:
         return [
             f"SCHED_FIFO {priority} refused ({e.strerror or e}): the simulator runs at normal "
             "priority and may answer late on a busy machine"
         ]
     return []
+
+
+class ThreadsStartedHere:
+    """`with ThreadsStartedHere(priority) as started:` puts the threads a library starts inside
+    the block at SCHED_FIFO `priority` (`started.warnings` says where refused). For a device
+    library's I/O threads, which a loop's reset-on-fork leaves time-shared, and which some set
+    real-time only on a PREEMPT_RT kernel (ur_rtde reads /sys/kernel/realtime): on a busy host
+    a time-shared receive thread starves and the loop sees its stream stall."""
+
+    def __init__(self, priority: int) -> None:
+        self.priority = priority
+        self.warnings: list[str] = []
+        self._before: set[int] = set()
+
+    def __enter__(self) -> ThreadsStartedHere:
+        self._before = _thread_ids()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        new = {t for t in _thread_ids() - self._before if _time_shared(t)}
+        if self.priority <= 0 or not new:
+            return
+        try:
+            _fifo(new, self.priority)
+        except OSError as e:
+            self.warnings.append(
+                f"SCHED_FIFO {self.priority} refused for {len(new)} I/O thread(s) ({e.strerror or e}): "
+                "they run at normal priority and may fall behind on a busy machine"
+            )
+
+
+def _thread_ids() -> set[int]:
+    return {int(t) for t in os.listdir("/proc/self/task")}
+
+
+def _time_shared(tid: int) -> bool:
+    try:
+        return os.sched_getscheduler(tid) == os.SCHED_OTHER
+    except ProcessLookupError:  # it has ended
+        return False
+
+
+def _fifo(tids: set[int], priority: int) -> None:
+    param = os.sched_param(priority)
+    for tid in tids:
+        with contextlib.suppress(ProcessLookupError):  # a thread that just ended
+            os.sched_setscheduler(tid, os.SCHED_FIFO, param)
 
 
 def _request_cpu_latency(rep: RealtimeReport, latency_us: int) -> None:

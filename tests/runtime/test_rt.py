@@ -62,3 +62,30 @@ def test_a_simulated_device_runs_every_thread_at_real_time_priority_even_those_s
     # starved them and the controller saw its drives go silent)
     r = subprocess.run([sys.executable, "-c", DEVICE_PROCESS], capture_output=True, text=True, timeout=60)
     assert r.stdout.split() == ["True", "True"], r.stdout + r.stderr
+
+
+LIBRARY_THREADS = """
+import os, threading
+from orccadd.runtime.rt import ThreadsStartedHere, enter_realtime
+enter_realtime(6, lock_memory=False, freeze_gc=False, cpu_dma_latency_us=None)  # a loop's thread
+old = threading.Event()
+t0 = threading.Thread(target=old.wait)  # started before the block: left alone
+t0.start()
+go = threading.Event()
+with ThreadsStartedHere(4) as started:
+    t1 = threading.Thread(target=go.wait)  # a library's receive thread (reset-on-fork: time-shared)
+    t1.start()
+    was = os.sched_getscheduler(t1.native_id)
+now = os.sched_getscheduler(t1.native_id), os.sched_getparam(t1.native_id).sched_priority
+print(was == os.SCHED_OTHER, now == (os.SCHED_FIFO, 4), os.sched_getscheduler(t0.native_id) == os.SCHED_OTHER)
+print(started.warnings)
+go.set(); old.set(); t1.join(); t0.join()
+"""
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="SCHED_FIFO needs root (or RLIMIT_RTPRIO)")
+def test_threads_a_library_starts_in_the_block_run_at_its_priority_those_before_do_not() -> None:
+    # (ur_rtde sets its receive threads real-time on a PREEMPT_RT kernel only: on another, beside
+    # a busy process, they starved and the loop saw the controller's stream stall for 56 ms)
+    r = subprocess.run([sys.executable, "-c", LIBRARY_THREADS], capture_output=True, text=True, timeout=60)
+    assert r.stdout.split("\n")[:2] == ["True True True", "[]"], r.stdout + r.stderr
