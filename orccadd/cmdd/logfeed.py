@@ -18,8 +18,9 @@ import numpy as np
 import numpy.typing as npt
 
 from orccadd.cmdd import views
+from orccadd.fault import StopCause
 from orccadd.wire.foxglove_schemas import CMD_UNIT
-from orccadd.wire.schema import CommandMode, H, R, T
+from orccadd.wire.schema import CommandMode, H, R, T, exception_of
 from orccadd.wire.telemetry import RingReader, TelemetryBlock
 
 FloatArray = npt.NDArray[np.float64]
@@ -82,9 +83,11 @@ class LogEvent:
 
     time_s: float
     seq: int  # the trace record's number (-1: a change of mode, seen in the tick records)
-    kind: str  # instant, event, command, mode
+    kind: str  # instant, event, command, fault, mode, gap
     name: str  # what a plot writes: the instant's inputs, the event, the command, the mode
     detail: str = ""
+    exception: int = 0  # 3: a type 3 exception or a safe stop's cause, 2: a type 2, 0: neither
+    fault: dict[str, Any] | None = None  # a `fault` mark's cause (`orccadd.fault.StopCause`)
 
 
 Decoder = Callable[[FloatArray], dict[str, Any]]  # a trace record → its names (`views.decode_trace`)
@@ -95,9 +98,16 @@ def decode_event(rec: FloatArray, decode: Decoder, origin: LogOrigin) -> LogEven
     t = float(rec[R.T_S]) - origin.t_s
     if d["kind"] == "instant":
         detail = f"-> {' '.join(d['actions']) or '(no action)'} (state {d['from']} -> {d['to']})"
-        return LogEvent(t, d["seq"], "instant", "+".join(d["inputs"]) or "(no input)", detail)
+        ex = exception_of(d)
+        return LogEvent(t, d["seq"], "instant", "+".join(d["inputs"]) or "(no input)", detail, ex)
     if d["kind"] == "event":
-        return LogEvent(t, d["seq"], "event", str(d["event"]), "(task event)")
+        return LogEvent(t, d["seq"], "event", str(d["event"]), "(task event)", exception_of(d))
+    if d["kind"] == "fault":
+        cause = d["fault"]
+        if "kind" not in cause:  # no longer kept by the daemon
+            return LogEvent(t, d["seq"], "fault", f"#{cause['n']}", "(safe stop; cause no longer kept)", 3)
+        c = StopCause.from_wire(cause)
+        return LogEvent(t, d["seq"], "fault", c.event or c.fault.kind.value, str(c.fault), 3, cause)
     return LogEvent(t, d["seq"], "command", str(d["command"]), "(operator)")
 
 

@@ -2,7 +2,8 @@
 reader: every signal group of the selection as a JSON channel whose schema gives its unit
 (`orccadd.wire.foxglove_schemas`), `/joint_states` (foxglove.JointStates: all joints, at most
 `JOINT_STATES_HZ`),
-`/events` (foxglove.Log: automaton instants, task events, operator commands, mode changes),
+`/events` (foxglove.Log: automaton instants, task events, operator commands, safe stops, mode
+changes), `/faults` (orccadd.StopCause: each safe stop's cause, typed),
 `/robot_description` (the URDF as text, once), the URDF file attached, and the log's start and
 end as metadata records. Log times are wall-clock ns: the log's start plus `time_s`.
 
@@ -127,6 +128,9 @@ class McapLog:
         self.events = w.register_channel(
             "/events", "json", w.register_schema("foxglove.Log", "jsonschema", sch.LOG_SCHEMA)
         )
+        self.faults = w.register_channel(
+            "/faults", "json", w.register_schema("orccadd.StopCause", "jsonschema", sch.STOP_CAUSE_SCHEMA)
+        )
         start_ns = origin.wall_ns_at(from_time_s)
         if urdf.text and urdf.path is not None:
             w.add_attachment(start_ns, start_ns, urdf.path.name, "application/xml", urdf.text.encode())
@@ -210,13 +214,16 @@ class McapLog:
         ns = self.origin.wall_ns_at(e.time_s)
         msg = {
             "timestamp": sch.stamp(ns),
-            "level": sch.level(e.kind, e.name),
+            "level": sch.level(e.kind, e.name, e.exception),
             "message": f"{e.name} {e.detail}".strip(),
             "name": f"orccadd.{e.kind}",
             "file": "",
             "line": max(e.seq, 0),
         }
         self.writer.add_message(self.events, ns, json.dumps(msg).encode(), ns, max(e.seq, 0))
+        if e.fault is not None:
+            cause = {"timestamp": sch.stamp(ns), **e.fault}
+            self.writer.add_message(self.faults, ns, json.dumps(cause).encode(), ns, max(e.seq, 0))
 
     def _end_chunk(self) -> None:
         """What the writer has finished (whole chunks) to the file."""

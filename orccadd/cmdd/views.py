@@ -170,6 +170,7 @@ def decode_trace(
     inputs: list[str] = mission.get("inputs", [])
     actions: list[str] = mission.get("actions", [])
     events: list[str] = desc.get("events", [])  # the registry only grows: ids keep their names
+    kinds: list[str] = desc.get("event_kinds", [])
     out: dict[str, Any] = {
         "seq": int(rec[R.SEQ]),
         "kind": kind.name.lower(),
@@ -186,9 +187,16 @@ def decode_trace(
         out["from"] = int(rec[R.STATE_FROM])
         out["to"] = int(rec[R.STATE_TO])
         out["inputs"] = [inputs[i] if i < len(inputs) else f"#{i}" for i in ins]
+        kind_of = dict(zip(events, kinds, strict=False))
+        out["input_kinds"] = [kind_of.get(name, "input") for name in out["inputs"]]
         out["actions"] = [actions[i] if i < len(actions) else f"#{i}" for i in acts]
     elif kind is Trace.EVENT:
-        out["event"] = events[code] if 0 <= code < len(events) else f"#{code}"
+        known = 0 <= code < len(events)
+        out["event"] = events[code] if known else f"#{code}"
+        out["event_kind"] = kinds[code] if 0 <= code < len(kinds) else "?"
+    elif kind is Trace.FAULT:
+        cause = next((f for f in desc.get("faults", []) if f.get("n") == code), None)
+        out["fault"] = cause if cause is not None else {"n": code}  # beyond those kept: its number
     else:
         known_action = code in OperatorAction._value2member_map_
         out["command"] = OperatorAction(code).name.lower() if known_action else code

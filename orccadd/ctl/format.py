@@ -7,6 +7,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
+from orccadd.fault import cause_words
+
 PROG = "orccadctl"
 
 
@@ -23,6 +25,8 @@ def format_trace(e: dict[str, Any]) -> str:
         return f"{head}  instant {e['from']}->{e['to']}  inputs {{{ins}}}  actions {{{acts}}}"
     if e["kind"] == "event":
         return f"{head}  event   {e['event']}"
+    if e["kind"] == "fault":
+        return f"{head}  fault   {cause_words(e['fault'])}"
     return f"{head}  command {e['command']}"
 
 
@@ -86,7 +90,7 @@ def format_status(s: dict[str, Any]) -> str:
         f"{s.get('robot')}: {state_words(s)}"
         + (f", mission {s['mission']}" if s.get("mission") else "")
         + automaton
-        + (f"; fault: {s.get('fault') or '?'} (`reset` needed)" if s.get("faulted") else ""),
+        + (f"; fault: {cause_words(s.get('fault'))} (`reset` needed)" if s.get("faulted") else ""),
         f"active task {s.get('active_task')} ({s.get('task_phase')}), last result {s['result']}, "
         f"resource {', '.join(s.get('resource_status') or ['ok'])}",
         "loop: " + timing_line(s),

@@ -20,7 +20,9 @@ from typing import Any
 
 from orccadd.ctl.client import Client, ClientError, default_socket
 from orccadd.ctl.format import error_line
+from orccadd.fault import cause_words
 from orccadd.wire import foxglove_schemas as sch
+from orccadd.wire.schema import exception_of
 
 HOST = "127.0.0.1"  # never another address
 SIGNALS = ["q", "dq", "tau", "cmd"]
@@ -105,12 +107,14 @@ class LiveView:
         kind = str(e.get("kind", "?"))
         if kind == "instant":
             text = f"{'+'.join(e.get('inputs', []))} -> {' '.join(e.get('actions', []))}"
+        elif kind == "fault":
+            text = f"safe stop: {cause_words(e['fault'])}"
         else:
             text = str(e.get("event", e.get("command", "?")))
         seq = max(int(e.get("seq", 0)), 0)
         msg = {
             "timestamp": sch.stamp(ns),
-            "level": sch.level(kind, text),
+            "level": sch.level(kind, text, exception_of(e)),
             "message": text,
             "name": f"orccadd.{kind}",
             "file": "",

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 from orccadd.ctl.format import format_status, format_trace, num, param_lines, table
+from orccadd.fault import cause_words
 
 Formatter = Callable[[dict[str, Any], dict[str, Any]], str]
 
@@ -68,7 +69,7 @@ def _describe(r: dict[str, Any], ctx: dict[str, Any]) -> str:
     else:
         lines.append("tasks: " + ", ".join(r["tasks"]))
     if r.get("fault"):
-        lines.append(f"fault: {r['fault']} (`reset` needed)")
+        lines.append(f"fault: {cause_words(r['fault'])} (`reset` needed)")
     if r.get("log"):
         lines.append("recent")
         lines += ["  " + str(n) for n in r["log"]]

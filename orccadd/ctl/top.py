@@ -16,6 +16,8 @@ from typing import Any, Protocol
 from orccadd.ctl.client import ClientError
 from orccadd.ctl.format import format_trace, joint_lines, state_words, timing_line
 from orccadd.ctl.human import format_reply
+from orccadd.fault import cause_words
+from orccadd.wire.schema import exception_of
 
 KEY_COMMANDS = {"h": "hold", "r": "resume"}  # key → the daemon's command of that name
 KEYS_HELP = "q quit  p pause  h hold  r resume"
@@ -48,18 +50,20 @@ def goal(s: dict[str, Any]) -> str:
     return text
 
 
-def is_exception(name: str) -> bool:
-    """A task's type 2 or type 3 exception (`Reach.T2.TrackingLost`, `Hold.T3.ResourceFault`)."""
-    return ".T2." in name or ".T3." in name
-
-
 def newest_exception(events: Sequence[dict[str, Any]]) -> tuple[int, str] | None:
-    """(seq, words) of the newest exception in the trace: an instant's input or a task event."""
+    """(seq, words) of the newest exception in the trace (by the kinds the records carry): an
+    instant's type 2 or 3 input, a task event, or a safe stop's cause."""
     for e in reversed(events):
-        names = e.get("inputs", []) if e["kind"] == "instant" else [e.get("event", "")]
-        found = [n for n in names if is_exception(str(n))]
-        if found:
-            return int(e["seq"]), f"{e['time']} {', '.join(found)}"
+        if not exception_of(e):
+            continue
+        if e["kind"] == "fault":
+            return int(e["seq"]), f"{e['time']} safe stop: {cause_words(e['fault'])}"
+        if e["kind"] == "instant":
+            kinds = e.get("input_kinds", [])
+            found = [n for n, k in zip(e.get("inputs", []), kinds, strict=False) if k in ("t2", "t3")]
+        else:
+            found = [str(e.get("event", ""))]
+        return int(e["seq"]), f"{e['time']} {', '.join(found)}"
     return None
 
 
@@ -101,7 +105,7 @@ def render(
     if status.get("automaton_state", -1) >= 0:
         state += f", automaton state {status['automaton_state']}"
     state += f", last result {status.get('result')}"
-    fault = status.get("fault") if status.get("faulted") else ""
+    fault = cause_words(status.get("fault")) if status.get("faulted") else ""
     error = f"fault: {fault} (`reset` needed)" if fault else last_error
     flags = ", ".join(status.get("resource_status") or []) or "ok"
     c = state_colour(status) if colour else ""

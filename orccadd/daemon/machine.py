@@ -29,6 +29,7 @@ from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.supervision import Supervisor
+from orccadd.fault import Fault
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
 from orccadd.task import EventQueue, EventRegistry, build_task, load_task_file
@@ -81,6 +82,7 @@ class Machine:
         self.reactor = InlineReactor(self.mission, self.registry, self.queue)
         self.loop.reactor = self.reactor
         self.supervisor = Supervisor(cfg, resource, self.loop, self.mission, self.note)
+        self.supervisor.on_cause = lambda n: self.pub.trace(Trace.FAULT, self.now_s(), code=n)
         self.rt_commands = RtCommands(self)
         self.commands = Dispatcher(self.rt_commands, "rt")
         self.publish()
@@ -137,10 +139,12 @@ class Machine:
             "generation": mc.generation,
             "tasks": [t.name for t in mc.tasks()],
             "events": self.registry.names(),
+            "event_kinds": [k.name.lower() for k in self.registry.kinds()],  # post, t1, t2, t3, sync, pre
             "mission": mc.mission.describe() if mc.mission else None,
             "missions": mc.loaded,  # the last ones loaded: the trace names its records by them
             "log": self.notes[-10:],
-            "fault": self.supervisor.fault,
+            "fault": self.supervisor.fault.to_wire() if self.supervisor.fault else None,
+            "faults": self.supervisor.recent(),
         }
 
     # ---- events from the control thread ---------------------------------------------------
@@ -156,7 +160,7 @@ class Machine:
         for t_s, eid in self.queue.drain():
             info = self.registry.info(eid)
             if info.kind is EventKind.T3:
-                self.supervisor.on_t3(info.name)
+                self.supervisor.on_t3(info.name, self._task_fault(info.task))
             bit = mission.event_bits.get(eid, 0) if mission is not None and mc.running else 0
             reacted = index < upto
             index += 1
@@ -169,6 +173,10 @@ class Machine:
         if inputs:
             mc.react(t_last, inputs)
         self.publish()
+
+    def _task_fault(self, task: str) -> Fault | None:
+        """What task `task`'s last type 3 was about (set in its tick, before the event was queued)."""
+        return next((t.fault for t in self.mission.tasks() if t.name == task), None)
 
     # ---- commands -------------------------------------------------------------------------
     def command(self, cmd: str, args: dict[str, Any]) -> Result | Pending:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from logging import WARNING
 
@@ -20,10 +21,12 @@ from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.errors import OrccaddError
+from orccadd.fault import Fault, FaultKind, StopCause
 from orccadd.physres.base import PhysicalResource
 from orccadd.types import Status
 from orccadd.wire.schema import MissionResult
 
+FAULTS_KEPT = 32  # the last stop causes `describe` lists, for the logs' fault records
 RESET_WAIT_S = 2.0  # longest wait for a device to leave its fault after a reset (bus round trips)
 RESET_DEVICE_S = 30.0  # longest a device's reset may take (a controller reconnected, a servo rebooted)
 
@@ -42,26 +45,37 @@ class Supervisor:
         self.loop = loop
         self.mission = mission
         self.note = note
-        self.fault = ""  # why the resource was safe-stopped ("" when not)
+        self.fault: StopCause | None = None  # why the resource was safe-stopped (None when not)
         self.faults = 0  # safe stops so far: a new fault is a new number, even with the same words
+        self.history: deque[tuple[int, StopCause]] = deque(maxlen=FAULTS_KEPT)  # (number, cause)
+        self.on_cause: Callable[[int], None] = lambda n: None  # a new cause recorded, its number
         self._resetting: _DeviceReset | None = None  # the device's last reset
 
-    def on_t3(self, name: str) -> None:
-        if not self.fault:
-            self.faults += 1
-            self.fault = f"{name} ({self.resource.fault_message or 'safe stop'})"
-            self.note(
-                f"type 3: {name}: safe stop ({self.resource.fault_message or 'no device message'})", WARNING
-            )
+    def on_t3(self, event: str, fault: Fault | None) -> None:
+        """The type 3 exception `event` safe-stopped the arm, about `fault` (the task's)."""
+        if self.fault is None:
+            if fault is None:
+                fault = Fault(FaultKind.DEVICE, self.resource.name, "safe stop (no message)")
+            self._record(StopCause(event, fault))
+            self.note(f"type 3: {event}: safe stop ({fault})", WARNING)
 
-    def abort(self, why: str) -> None:
+    def abort(self, why: str, kind: FaultKind = FaultKind.ABORT) -> None:
         """Safe stop at the next tick, remember why, end the run (`aborted`)."""
         self.loop.request_safe_stop()
-        if not self.fault:
-            self.faults += 1
-            self.fault = why
+        if self.fault is None:
+            self._record(StopCause("", Fault(kind, self.resource.name, why)))
         self.note(f"abort: {why}", WARNING)
         self.mission.end(MissionResult.ABORTED)
+
+    def _record(self, cause: StopCause) -> None:
+        self.faults += 1
+        self.fault = cause
+        self.history.append((self.faults, cause))
+        self.on_cause(self.faults)
+
+    def recent(self) -> list[dict[str, object]]:
+        """The last causes, numbered (the trace's fault records name them by number)."""
+        return [{"n": n, **c.to_wire()} for n, c in self.history]
 
     def link_lost(self, why: str) -> None:
         self.note(why, WARNING)
@@ -89,7 +103,7 @@ class Supervisor:
         def poll() -> Result | None:
             if not device.done():
                 return None
-            self.fault = ""
+            self.fault = None
             self.note("reset: stop cleared, holding")
             on_done()
             return {"reset": True}

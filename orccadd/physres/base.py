@@ -22,6 +22,7 @@ import numpy as np
 
 from orccadd.config.robot import RobotConfig
 from orccadd.errors import LifecycleError, ResourceError
+from orccadd.fault import Fault, FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.description import ResourceDescription
 from orccadd.physres.guard import VelocityGuard
@@ -70,7 +71,7 @@ class PhysicalResource(ABC):
         self.lifecycle = Lifecycle.UNCONFIGURED
         self.mode = CommandMode.TORQUE
         self.state = JointState(self.dof)
-        self.fault_message = ""
+        self.fault: Fault | None = None  # what the device or the limits reported last (None: nothing)
         self._cmd: FloatArray = np.zeros(self.dof)
         self._last_pos_cmd: FloatArray = np.zeros(self.dof)
         # limits as lists: the tick checks them with list builtins (see orccadd.vec)
@@ -213,10 +214,23 @@ class PhysicalResource(ABC):
         q_dq = st.q_dq.tolist()
         if outside(q_dq, self._limit_lo, self._limit_hi) or not all(map(isfinite, q_dq)):
             st.status |= LIMIT_VIOLATION
-            self.fault_message = self._beyond("measured", q_dq, self._limit_lo, self._limit_hi)
+            self.fault = self._beyond(FaultKind.LIMIT, "measured", q_dq, self._limit_lo, self._limit_hi)
         return st
 
-    def _beyond(self, what: str, values: list[float], lo: list[float], hi: list[float]) -> str:
+    @property
+    def fault_message(self) -> str:
+        """The last fault in words, with the resource's name ("" when none)."""
+        return "" if self.fault is None else str(self.fault)
+
+    def _set_fault(self, kind: FaultKind, text: str, joint: str = "", code: int = 0) -> None:
+        """Record what the device reports (tick-safe: a new value only when it changes)."""
+        f = self.fault
+        if f is None or f.text != text or f.kind is not kind or f.joint != joint or f.code != code:
+            self.fault = Fault(kind, self.name, text, joint, code)
+
+    def _beyond(
+        self, kind: FaultKind, what: str, values: list[float], lo: list[float], hi: list[float]
+    ) -> Fault:
         """Which joint, quantity, value and limit a LIMIT_VIOLATION is about (the rare path of a
         tick: the words a type 3 reports). `values` per joint, positions then velocities when
         twice as long as the joints."""
@@ -224,11 +238,12 @@ class PhysicalResource(ABC):
         kinds = ("position", "velocity") if len(values) == 2 * self.dof else (self.mode.name.lower(),)
         for i, (v, a, b) in enumerate(zip(values, lo, hi, strict=True)):
             if not a <= v <= b:  # NaN too
-                kind = kinds[i // self.dof]
-                unit = units[("position", "velocity", "torque").index(kind)]
+                quantity = kinds[i // self.dof]
+                unit = units[("position", "velocity", "torque").index(quantity)]
                 joint = self.model.joint_names[i % self.dof]
-                return f"{what} {kind} of {joint} {v:.4g} {unit} outside [{a:.4g}, {b:.4g}]"
-        return f"{what} values not finite"
+                text = f"{what} {quantity} of {joint} {v:.4g} {unit} outside [{a:.4g}, {b:.4g}]"
+                return Fault(kind, self.name, text, joint)
+        return Fault(kind, self.name, f"{what} values not finite")
 
     def write(self, t_s: float, command: FloatArray) -> int:
         """Send one command in the active mode (tick). Returns the `Status` flags.
@@ -246,7 +261,9 @@ class PhysicalResource(ABC):
         wanted = command.tolist()
         if not all(map(isfinite, wanted)):
             self.rejected_count += 1
-            self.fault_message = f"a command with a NaN or an infinity was not sent: {wanted}"
+            self.fault = Fault(
+                FaultKind.COMMAND, self.name, f"a command with a NaN or an infinity was not sent: {wanted}"
+            )
             return LIMIT_VIOLATION
         mode = self.mode
         if mode is CommandMode.TORQUE:
@@ -265,8 +282,8 @@ class PhysicalResource(ABC):
             flags = CMD_CLAMPED if mode is CommandMode.TORQUE else CMD_CLAMPED | LIMIT_VIOLATION
             self.clamp_count += 1
             if flags & LIMIT_VIOLATION:
-                self.fault_message = "command clamped: " + self._beyond(
-                    "commanded", wanted, *self._command_bounds(mode)
+                self.fault = self._beyond(
+                    FaultKind.LIMIT, "command clamped: commanded", wanted, *self._command_bounds(mode)
                 )
         cmd = self._cmd
         cmd[:] = sent

@@ -40,6 +40,7 @@ from orccadd.drivers.canopen.master import POWERED, CanopenMaster
 from orccadd.drivers.canopen.settings import CanopenSettings, load_canopen_settings
 from orccadd.drivers.canopen.startup import mode_not_shown
 from orccadd.errors import ResourceError
+from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, Quantity, ResourceDescription, Source
@@ -140,7 +141,7 @@ class Canopen402Arm(PhysicalResource):
         self.master.clear_faults()
         self._fault_reset = True
         self._walk_failed = ""
-        self.fault_message = ""
+        self.fault = None
 
     # ---- helpers for the blocking phases (the loop may or may not be ticking) -------------
     def _ticking(self) -> bool:
@@ -273,14 +274,14 @@ class Canopen402Arm(PhysicalResource):
             powered = powered and a.state in POWERED
         if rep.comm_lost:
             flags |= Status.COMM_LOST
-            self.fault_message = rep.comm_lost
+            self._set_fault(FaultKind.COMM_LOST, rep.comm_lost, rep.comm_lost_joint)
         elif rep.fault:
             flags |= Status.FAULT
-            self.fault_message = rep.fault
+            self._set_fault(FaultKind.DEVICE, rep.fault, rep.fault_joint, rep.fault_code)
             state.fault_code = rep.fault_code
         elif self._walk_failed:
             flags |= Status.FAULT
-            self.fault_message = self._walk_failed
+            self._set_fault(FaultKind.DEVICE, self._walk_failed)
         if not powered:
             flags |= Status.TORQUE_OFF
         self._comm_lost = bool(rep.comm_lost)

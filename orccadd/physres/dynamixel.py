@@ -55,6 +55,7 @@ from orccadd.drivers.dynamixel.ramp import StopRamp
 from orccadd.drivers.dynamixel.settings import DynamixelSettings, load_dynamixel_settings
 from orccadd.drivers.dynamixel.startup import eeprom_targets, goal_item, operating_modes
 from orccadd.errors import ResourceError
+from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, Quantity, ResourceDescription, Source
@@ -202,8 +203,8 @@ class DynamixelArm(PhysicalResource):
             self._switch(mode, target)
             self._check_switch(target)
         except (ChainError, OSError) as e:
-            self._switch_fault = f"{self.name}: switch to {mode.name.lower()} mode failed: {e}"
-            log.error("%s", self._switch_fault)
+            self._switch_fault = f"switch to {mode.name.lower()} mode failed: {e}"
+            log.error("%s: %s", self.name, self._switch_fault)
         self._ramp.hold(self.state.q_rad.tolist(), self.state.t_s)
         self._holding = False
 
@@ -322,7 +323,7 @@ class DynamixelArm(PhysicalResource):
         self._comm_lost = ""
         self._switch_fault = ""
         ch.in_a_row = 0
-        self.fault_message = ""
+        self.fault = None
         self.state.fault_code = 0
 
     def _reboot(self, j: int) -> None:
@@ -415,7 +416,7 @@ class DynamixelArm(PhysicalResource):
             self._enabled[j] = False
             self.chain.set_active(j, False)  # the others can still be read and stopped
         if not self._comm_lost:
-            self._comm_lost = f"{self.name}: {why}"
+            self._comm_lost = why
 
     def _flags(self, state: JointState) -> int:
         flags = 0
@@ -434,14 +435,19 @@ class DynamixelArm(PhysicalResource):
     def _fault_text(self, state: JointState) -> None:
         parts = [m for m in (self._comm_lost, self._switch_fault) if m]
         ch = self.chain
+        joint, code = "", 0  # the first servo in hardware error, its bits
         for j, bits in enumerate(self._hw_error):
             if bits:
                 what = "not read yet (alert)" if bits == ALERT else hardware_error_text(bits)
-                parts.append(f"{self.name}: {ch.labels[j]}: hardware error: {what}")
+                parts.append(f"{ch.labels[j]}: hardware error: {what}")
+                if not joint:
+                    joint, code = self.model.joint_names[j], bits
                 if not state.fault_code or state.fault_code & 0xFF == ALERT:  # the real bits, once read
                     state.fault_code = ch.ids[j] << 8 | bits
         if parts:
-            self.fault_message = "; ".join(parts)
+            kind = FaultKind.COMM_LOST if self._comm_lost else FaultKind.DEVICE
+            whole = self._comm_lost or self._switch_fault  # about the chain, not one servo
+            self._set_fault(kind, "; ".join(parts), "" if whole else joint, 0 if whole else code)
 
     def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
         self._holding = False

@@ -28,6 +28,7 @@ import pinocchio as pin
 from orccadd.config.robot import RobotConfig
 from orccadd.config.schema import field, load_dataclass
 from orccadd.errors import ConfigError
+from orccadd.fault import Fault, FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, ResourceDescription
@@ -229,13 +230,13 @@ class SimulatedArm(PhysicalResource):
     def _on_inject_fault(self, kind: str, message: str) -> None:
         """Make the next read report a device fault (like a drive's EMCY)."""
         self._fault = int(Status.FAULT)
-        self.fault_message = message
+        self.fault = Fault(FaultKind.DEVICE, self.name, message, code=INJECTED_FAULT_CODE)
         self.state.fault_code = INJECTED_FAULT_CODE
 
     def _on_reset_fault(self) -> None:
         """Acknowledge a device fault (like CiA 402 fault reset). Not for a tick."""
         self._fault = 0
-        self.fault_message = ""
+        self.fault = None
         self.state.fault_code = 0
 
     # ---- tick hooks -----------------------------------------------------------------------

@@ -22,6 +22,7 @@ import numpy as np
 from orccadd.config.robot import RobotConfig
 from orccadd.config.schema import field
 from orccadd.errors import ResourceError
+from orccadd.fault import Fault, FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import ClockSource, ResourceDescription
@@ -189,7 +190,7 @@ class SimProcessArm(PhysicalResource):
 
     def _on_inject_fault(self, kind: str, message: str) -> None:
         """Make the plant report a device fault (tests). Not for a tick."""
-        self.fault_message = message
+        self.fault = Fault(FaultKind.DEVICE, self.name, message, code=INJECTED_FAULT_CODE)
         self._request(Request.INJECT_FAULT, INJECTED_FAULT_CODE)
 
     def _on_reset_fault(self) -> None:
@@ -197,7 +198,7 @@ class SimProcessArm(PhysicalResource):
             self._respawn()
         else:
             self._request(Request.RESET_FAULT)
-        self.fault_message = ""
+        self.fault = None
 
     def _respawn(self) -> None:
         """A new plant process in place of a dead one (a reset after it was killed): at rest where
@@ -279,17 +280,19 @@ class SimProcessArm(PhysicalResource):
         if self._silent_reads >= self.settings.heartbeat_timeout_periods:
             flags |= Status.COMM_LOST
             if self.plant_alive():
-                self.fault_message = "the plant process stopped answering"
+                self._set_fault(FaultKind.COMM_LOST, "the plant process stopped answering")
             else:  # gone: nothing is left to move or to stop (`reset` starts a new one)
                 code = self.process.returncode
-                self.fault_message = f"the plant process stopped answering: it exited (code {code})"
+                self._set_fault(
+                    FaultKind.COMM_LOST, f"the plant process stopped answering: it exited (code {code})"
+                )
                 if self._stop_flags & Status.STOPPING:
                     self._mark_stopped(torque_off=True)
         # a state published before a cleared stop was confirmed still says "stopped": not news
         if status & SELF_STOPPED and hb >= self._settled_heartbeat:
             if not self._stop_flags:  # the arm stopped by itself (its watchdog): fatal here
                 flags |= Status.FAULT
-                self.fault_message = "the arm stopped on its own (command watchdog)"
+                self._set_fault(FaultKind.DEVICE, "the arm stopped on its own (command watchdog)")
             elif status & Status.STOPPED:
                 self._mark_stopped(bool(status & Status.TORQUE_OFF))
         return flags

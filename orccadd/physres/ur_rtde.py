@@ -44,6 +44,7 @@ from orccadd.drivers.ur.controller import (
 )
 from orccadd.drivers.ur.settings import UrRtdeSettings
 from orccadd.errors import ConfigError, ResourceError
+from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, ClockSource, Quantity, ResourceDescription, Source
@@ -272,7 +273,7 @@ class UrRtdeArm(PhysicalResource):
                 raise ResourceError(f"{self.name}: protective stop: {e}: reset again then") from None
             self.dashboard.closeSafetyPopup()
         self._restart_script()
-        self.fault_message = ""
+        self.fault = None
         st.fault_code = 0
 
     def _restart_script(self) -> None:
@@ -292,7 +293,7 @@ class UrRtdeArm(PhysicalResource):
             raise ResourceError(f"{self.fault_message}: reconnected, but no package has come")
         self._hold_here()
         self._begin_safe_stop()
-        self.fault_message = ""
+        self.fault = None
         self.state.fault_code = 0
 
     def _close_links(self) -> None:
@@ -371,7 +372,10 @@ class UrRtdeArm(PhysicalResource):
         if self._off_by_us and safety_mode == SafetyMode.NORMAL:
             return int(Status.TORQUE_OFF)  # as the stop left it, until `clear_stop` powers it on
         state.fault_code = safety_mode if safety_mode != SafetyMode.NORMAL else 100 + robot_mode
-        self.fault_message = f"{self.name}: {cond.what}"
+        # the controller's own code: its safety mode (UR's numbering), 0 when normal (the words
+        # say the robot mode)
+        code = safety_mode if safety_mode != SafetyMode.NORMAL else 0
+        self._set_fault(FaultKind.DEVICE, cond.what, code=code)
         flags = int(Status.FAULT)
         if robot_mode != RobotMode.RUNNING:
             flags |= int(Status.TORQUE_OFF)
@@ -389,7 +393,7 @@ class UrRtdeArm(PhysicalResource):
         """CommLost, said as first seen (the type 3 reports the message of its tick)."""
         if not self._comm_lost:
             self._comm_lost = why
-            self.fault_message = f"{self.name}: {why}"
+            self._set_fault(FaultKind.COMM_LOST, why)
 
     def _control_ready(self) -> bool:
         """The control link is up (a command sent on a dead one blocks while ur_rtde reconnects)
@@ -426,10 +430,10 @@ class UrRtdeArm(PhysicalResource):
             return int(Status.COMM_LOST)
         if ok:
             return 0
-        if not self.fault_message:  # the type 3 says why, even when this comes before the read
+        if self.fault is None:  # the type 3 says why, even when this comes before the read
             cond = self._condition()
             why = cond.what if cond else "no stop reported yet"
-            self.fault_message = f"{self.name}: the controller refused the command ({why})"
+            self._set_fault(FaultKind.DEVICE, f"the controller refused the command ({why})")
         return int(Status.FAULT)
 
     def _condition(self) -> Condition | None:

@@ -76,6 +76,10 @@ class EventRegistry:
     def names(self) -> list[str]:
         return [e.name for e in self._by_id]
 
+    def kinds(self) -> list[EventKind]:
+        """The kind of each event, by id."""
+        return [e.kind for e in self._by_id]
+
     def __len__(self) -> int:
         return len(self._by_id)
 

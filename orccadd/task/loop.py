@@ -60,7 +60,8 @@ class ControlLoop:
 
     def _on_overrun(self, t_s: float, consecutive: int) -> None:
         if consecutive >= self.overrun_limit and self.active is not None:
-            self.active.raise_t3(t_s, "Overrun")
+            why = f"the control thread missed {consecutive} deadlines in a row (limit {self.overrun_limit})"
+            self.active.raise_t3(t_s, "Overrun", why)
 
     def run_task(self, task: RobotTask, timeout_s: float) -> Phase:
         """Activate `task` and tick until it settles (done, T2, T3, precondition failure) or

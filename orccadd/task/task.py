@@ -18,12 +18,29 @@ import numpy as np
 import numpy.typing as npt
 
 from orccadd.errors import ParameterError
+from orccadd.fault import Fault, FaultKind
 from orccadd.modules.base import Module, Parameter
 from orccadd.physres.base import PhysicalResource
 from orccadd.task.compiled import CompiledTick, compile_schedule
 from orccadd.task.events import EventKind, EventQueue
 from orccadd.types import T3_MASK, TASK_TIMEOUT, CommandMode, Phase, Status
 from orccadd.vec import max_of, min_of
+
+# the kind of each built-in type 3 exception; those a resource raises take the resource's own
+# fault (its words, joint and code) when it is of a matching kind
+BUILTIN_FAULT_KINDS = {
+    "LimitViolation": FaultKind.LIMIT,
+    "ResourceFault": FaultKind.DEVICE,
+    "CommLost": FaultKind.COMM_LOST,
+    "Overrun": FaultKind.OVERRUN,
+    "LawError": FaultKind.INTERNAL,
+    TASK_TIMEOUT: FaultKind.TIMEOUT,
+}
+RESOURCE_T3 = {
+    "LimitViolation": (FaultKind.LIMIT, FaultKind.COMMAND),
+    "ResourceFault": (FaultKind.DEVICE,),
+    "CommLost": (FaultKind.COMM_LOST,),
+}
 
 log = logging.getLogger("orccadd.task")
 
@@ -151,6 +168,7 @@ class RobotTask:
         self.t_started_s = 0.0
         self.last_write_flags = 0
         self.fault_reason = ""
+        self.fault: Fault | None = None  # what its last type 3 exception was about
         self._pre_started = False
         self._tunable = {f"{m.name}.{p.name}": (m, p) for m in modules for p in m.parameters.values()}
         # bumpless transfer: the first command continues the previous task's last one
@@ -238,14 +256,25 @@ class RobotTask:
     def parameters(self) -> list[dict[str, Any]]:
         return [p.describe() for _, p in self._tunable.values()]
 
-    def raise_t3(self, t_s: float, name: str) -> None:
-        """A type 3 exception from outside the task (e.g. the executor's overrun count). Tick-safe."""
+    def raise_t3(self, t_s: float, name: str, text: str = "") -> None:
+        """A type 3 exception from outside the task (e.g. the executor's overrun count), `text`
+        saying why. Tick-safe (the rare path: allocates)."""
         if self.phase is Phase.FAULT:
             return
         self.resource.safe_stop()
         self.phase = Phase.FAULT
         self.fault_reason = name
+        self.fault = self._fault_for(name, text)
         self.queue.push(t_s, self.builtin_ids[name])
+
+    def _fault_for(self, name: str, text: str) -> Fault:
+        res = self.resource
+        kind = BUILTIN_FAULT_KINDS.get(name)
+        if kind is None:  # one the task file declares (a watcher's)
+            return Fault(FaultKind.MISSION, res.name, text or f"{self.name} raised {name}")
+        if name in RESOURCE_T3 and res.fault is not None and res.fault.kind in RESOURCE_T3[name]:
+            return res.fault  # the device's own words, joint and code
+        return Fault(kind, res.name, text or f"{name} (no device message)")
 
     # ---- the hot path ---------------------------------------------------------------------
     def tick(self, t_s: float) -> None:
@@ -306,8 +335,9 @@ class RobotTask:
                 where = f"{self.name}.{compiled.module_at.get(tb.tb_lineno, '')}".rstrip(".")
             tb = tb.tb_next
         self.wrote = False
-        self.raise_t3(t_s, "LawError")
-        self.fault_reason = f"LawError: {where}: {type(error).__name__}: {error}"
+        why = f"{where}: {type(error).__name__}: {error}"
+        self.raise_t3(t_s, "LawError", why)
+        self.fault_reason = f"LawError: {why}"
         log.error("%s (at t = %.3f s): the arm is safe-stopped", self.fault_reason, t_s, exc_info=error)
 
     def _compute(self, t_s: float, read: bool) -> None:
@@ -334,8 +364,9 @@ class RobotTask:
         if phase not in RUNNING:
             return
         if t_s - self.t_started_s >= self.timeout_s:
-            self.raise_t3(t_s, TASK_TIMEOUT)
-            self.fault_reason = f"{TASK_TIMEOUT}: ran {self.timeout_s:g} s (its timeout_s) without ending"
+            why = f"{self.name} ran {self.timeout_s:g} s (its timeout_s) without ending"
+            self.raise_t3(t_s, TASK_TIMEOUT, why)
+            self.fault_reason = f"{TASK_TIMEOUT}: {why}"
             return
         self.ticks += 1
         if self.decimation > 1 and (self.ticks - 1) % self.decimation:
@@ -394,6 +425,7 @@ class RobotTask:
             self.resource.safe_stop()
             self.phase = Phase.FAULT
             self.fault_reason = ev.name
+            self.fault = self._fault_for(ev.name, "")
 
     def _resource_t3(self, t_s: float, flags: int) -> None:
         if flags & Status.FAULT:

@@ -14,6 +14,8 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from orccadd.fault import FaultKind
+
 CMD_UNIT = "by mode: rad (position), rad/s (velocity), N.m (torque)"
 
 NAMED = ("task", "phase", "mode")  # scalars whose messages also carry the name of their value
@@ -65,6 +67,29 @@ LOG_SCHEMA = json.dumps(
     }
 ).encode()
 
+# orccadd's own: why the arm was safe-stopped (`orccadd.fault.StopCause.to_wire`), typed
+STOP_CAUSE_SCHEMA = json.dumps(
+    {
+        "title": "orccadd.StopCause",
+        "description": "Why the arm was safe-stopped: the type 3 event raised and the fault behind it",
+        "type": "object",
+        "properties": {
+            "timestamp": _TIME,
+            "n": {"type": "integer", "description": "the daemon's safe stops so far, this one's number"},
+            "event": {
+                "type": "string",
+                "description": "the type 3 event (Move.T3.CommLost); empty for an abort",
+            },
+            "kind": {"type": "string", "enum": [k.value for k in FaultKind]},
+            "resource": {"type": "string"},
+            "joint": {"type": "string", "description": "empty when about the whole resource"},
+            "code": {"type": "integer", "description": "the device's own code (0: none)"},
+            "text": {"type": "string"},
+        },
+        "required": ["timestamp", "n", "event", "kind", "resource", "joint", "code", "text"],
+    }
+).encode()
+
 JOINT_STATES_SCHEMA = json.dumps(
     {
         "title": "foxglove.JointStates",
@@ -93,19 +118,18 @@ STRING_SCHEMA = json.dumps(
 ).encode()
 
 DEBUG, INFO, WARNING, ERROR = 1, 2, 3, 4
-T3_BUILTIN = ("LimitViolation", "ResourceFault", "CommLost", "Overrun", "LawError")
 
 
-def level(kind: str, name: str) -> int:
-    """The foxglove.Log level of a log event: type 3 exceptions are errors, type 2 and the
-    operator's stops warnings, mode changes debug, the rest info."""
+def level(kind: str, name: str, exception: int) -> int:
+    """The foxglove.Log level of a log event: type 3 exceptions and safe stops are errors, type
+    2 and the operator's stops warnings, mode changes debug, the rest info."""
     if kind == "mode":
         return DEBUG
-    if kind == "gap":
-        return WARNING
-    if ".T3." in name or name.rsplit(".", 1)[-1] in T3_BUILTIN:
+    if exception == 3:
         return ERROR
-    if ".T2." in name or (kind == "command" and name in ("abort", "stop", "inject", "shutdown")):
+    if kind == "gap" or exception == 2:
+        return WARNING
+    if kind == "command" and name in ("abort", "stop", "inject", "shutdown"):
         return WARNING
     return INFO
 

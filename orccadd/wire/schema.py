@@ -11,12 +11,14 @@ both take every index and enum from here. Values are float64 throughout (one num
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Any
 
 from orccadd.types import CommandMode, Phase, Status
 
-PROTOCOL_VERSION = 5  # bumped when a request, reply, record layout or enum changes meaning
+PROTOCOL_VERSION = 6  # bumped when a request, reply, record layout or enum changes meaning
 
 MAGIC = 0x0CCADD02
 HEADER_LEN = 16
@@ -62,6 +64,16 @@ class Trace(IntEnum):
     INSTANT = 0  # an automaton reaction: inputs -> actions
     EVENT = 1  # a task event the automaton does not see (T1, the Hold task's events)
     COMMAND = 2  # an operator action (start, stop, abort, hold, resume, reset, tune)
+    FAULT = 3  # the arm safe-stopped: `code` numbers its cause (`describe`'s "faults")
+
+
+def exception_of(event: Mapping[str, Any]) -> int:
+    """A decoded trace record's exception class, from the kinds it carries (never its names):
+    3 for a type 3 exception or a safe stop's cause, 2 for a type 2, 0 for anything else."""
+    if event.get("kind") == "fault":
+        return 3
+    kinds = event.get("input_kinds") or [event.get("event_kind")]
+    return 3 if "t3" in kinds else 2 if "t2" in kinds else 0
 
 
 class H(IntEnum):

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -22,13 +20,24 @@ TOKENS = [
 ]  # fmt: skip
 
 
+def refused_where(e: MissionError, text: str) -> None:
+    """A refusal names the file and a place in the text (or none: a whole-mission check)."""
+    assert str(e).startswith("fuzz.mission:"), e
+    if e.line:
+        assert 1 <= e.line <= text.count("\n") + 1 and e.col >= 1, (e.line, e.col, str(e))
+
+
 def outcome(text: str) -> None:
     try:
         a = compile_text(text, "fuzz.mission", max_states=2000)
     except MissionError as e:
-        assert str(e).startswith("fuzz.mission:")
+        refused_where(e, text)
         return
-    verify(a)  # a program that compiles must also check without crashing
+    # compiled: a well-formed automaton (every transition to a state of the table), and checked
+    assert 1 <= a.n_states <= 2000
+    assert all(nxt < a.n_states for row in a.table for nxt, _ in row.values())
+    report = verify(a)
+    assert report.results and all(r.name for r in report.results)
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -40,8 +49,13 @@ def test_token_soup_never_crashes(text: str) -> None:
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.text(max_size=200))
 def test_any_text_never_crashes_the_parser(text: str) -> None:
-    with contextlib.suppress(MissionError):
-        parse_mission(text, "fuzz.mission")
+    try:
+        m = parse_mission(text, "fuzz.mission")
+    except MissionError as e:
+        refused_where(e, text)
+        return
+    assert m.file == "fuzz.mission" and m.text == text
+    assert not m.name or "mission" in text  # a name only from a `mission` declaration
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -8,6 +8,7 @@ import sys
 import pytest
 
 from orccadd.automaton import compile_text, verify
+from orccadd.automaton.automaton import Runner
 from orccadd.automaton.elaborate import MAX_EXPANDED_NESTING, MAX_EXPANDED_STATEMENTS
 from orccadd.automaton.parser import MAX_MISSION_CHARS, MAX_NESTING
 from orccadd.errors import MissionError
@@ -56,8 +57,19 @@ def test_nesting_up_to_the_limit_compiles_and_beyond_is_refused_where_it_goes_to
 def test_long_and_or_chains_compile_flat() -> None:
     names = [f"S{i % 8}" for i in range(2000)]
     inputs = ", ".join(["Stop", *sorted(set(names))])
-    for op in (" or ", " and "):
-        compile_text(mission(f"await {op.join(names)}; T0", inputs=inputs))
+
+    def first_reactions(op: str, present: set[str]) -> list[str]:
+        a = compile_text(mission(f"await {op.join(names)}; T0", inputs=inputs))
+        assert a.n_states < 10  # flat: 2000 terms are one condition, not a nest of states
+        bits = sum(1 << a.program.inputs.index(n) for n in present)
+        r = Runner(a)
+        r.react(0)  # the first instant: the await begins (it counts from the next one)
+        return a.describe_actions(r.react(bits))
+
+    assert first_reactions(" or ", {"S5"}) == ["start T0"]  # any one of them
+    assert first_reactions(" or ", set()) == []
+    assert first_reactions(" and ", {f"S{i}" for i in range(8)}) == ["start T0"]  # all of them
+    assert first_reactions(" and ", {f"S{i}" for i in range(7)}) == []  # S7 missing
 
 
 def test_procedure_calls_nesting_too_deep_once_expanded_are_refused_naming_the_chain() -> None:

@@ -26,6 +26,18 @@ DESC: dict[str, Any] = {
     "joints": ["shoulder_pan_joint", "elbow_joint"],
     "tasks": ["Hold", "Approach"],
     "events": ["Approach.T1.TrackingDrift", "Approach.T3.LimitViolation"],
+    "event_kinds": ["t1", "t3"],
+    "faults": [
+        {
+            "n": 1,
+            "event": "Approach.T3.LimitViolation",
+            "kind": "limit",
+            "resource": "arm",
+            "joint": "elbow_joint",
+            "code": 0,
+            "text": "measured position of elbow_joint 3.2 rad outside [-3.1, 3.1]",
+        }
+    ],
     "mission": {"name": "m", "inputs": ["start", "Approach.done"], "actions": ["Approach", "Stop"]},
 }
 

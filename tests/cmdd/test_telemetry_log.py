@@ -64,6 +64,7 @@ def test_a_log_writes_csv_and_mcap_with_units_events_and_the_robot(tmp_path: Pat
     loop.mode = CommandMode.POSITION
     loop.ticks(30)
     loop.trace(Trace.EVENT, 1)  # Approach.T3.LimitViolation
+    loop.trace(Trace.FAULT, 1)  # the safe stop's cause, number 1 (DESC's "faults")
     info = rec.close()
     assert info["rows"] == 50 and info["lost"] == 0 and info["urdf"] == str(URDF)
 
@@ -86,7 +87,9 @@ def test_a_log_writes_csv_and_mcap_with_units_events_and_the_robot(tmp_path: Pat
         ("instant", "start"),
         ("mode", "position"),
         ("event", "Approach.T3.LimitViolation"),
+        ("fault", "Approach.T3.LimitViolation"),
     ]
+    assert events[-1][5] == "arm: measured position of elbow_joint 3.2 rad outside [-3.1, 3.1]"
     assert float(events[1][1]) == pytest.approx(20 * PERIOD_S)
 
     with (tmp_path / "logs/run.mcap").open("rb") as fh:
@@ -97,6 +100,7 @@ def test_a_log_writes_csv_and_mcap_with_units_events_and_the_robot(tmp_path: Pat
         assert set(channels) == {f"/{s}" for s in SIGNALS} | {
             "/joint_states",
             "/events",
+            "/faults",
             "/robot_description",
         }
         counts = summary.statistics.channel_message_counts  # type: ignore[union-attr]
@@ -105,6 +109,7 @@ def test_a_log_writes_csv_and_mcap_with_units_events_and_the_robot(tmp_path: Pat
         schema = json.loads(summary.schemas[channels["/q"].schema_id].data)
         assert schema["properties"]["elbow_joint"]["unit"] == "rad"
         assert summary.schemas[channels["/events"].schema_id].name == "foxglove.Log"
+        assert summary.schemas[channels["/faults"].schema_id].name == "orccadd.StopCause"
         assert summary.schemas[channels["/joint_states"].schema_id].name == "foxglove.JointStates"
         [attachment] = list(reader.iter_attachments())
         assert attachment.name == "ur5e.urdf" and attachment.data == URDF.read_bytes()
@@ -118,7 +123,9 @@ def test_a_log_writes_csv_and_mcap_with_units_events_and_the_robot(tmp_path: Pat
         "start (operator)",
         "start -> Approach (state 0 -> 1)",
     ]
-    assert [m["level"] for _, m in msgs["/events"]][-1] == 4  # a type 3 exception: an error
+    assert [m["level"] for _, m in msgs["/events"]][-2:] == [4, 4]  # a type 3 exception, a safe stop: errors
+    [(_, cause)] = msgs["/faults"]
+    assert (cause["kind"], cause["joint"], cause["n"]) == ("limit", "elbow_joint", 1)
     wall0 = msgs["/q"][0][0]  # log times: the wall clock at the start plus time_s
     assert msgs["/q"][-1][0] - wall0 == pytest.approx(49 * PERIOD_S * 1e9, abs=1e3)
     joints = msgs["/joint_states"][0][1]["joints"]

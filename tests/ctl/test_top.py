@@ -35,21 +35,26 @@ RUNNING: dict[str, Any] = {
     "task_phase": "run", "resource_status": [], "joints": JOINTS,
 }  # fmt: skip
 HOLDING = {**RUNNING, "state": "holding", "active_task": "Hold", "switches": 3}
+CAUSE = {
+    "event": "Home.T3.ResourceFault", "kind": "device", "resource": "arm", "joint": "", "code": 9999,
+    "text": "injected fault",
+}  # fmt: skip
 FAULTED = {
-    **RUNNING, "automaton_state": 4, "instants": 4, "faulted": True,
-    "fault": "Home.T3.ResourceFault (injected fault)", "active_task": "Hold", "task_phase": "fault",
-    "resource_status": ["fault", "stopped", "torque_off"],
+    **RUNNING, "automaton_state": 4, "instants": 4, "faulted": True, "fault": CAUSE, "active_task": "Hold",
+    "task_phase": "fault", "resource_status": ["fault", "stopped", "torque_off"],
 }  # fmt: skip
 EVENTS: list[dict[str, Any]] = [
     {"seq": 5, "kind": "command", "t_s": 33065.930611, "time": "00:59:53.393", "command": "hold"},
     {"seq": 6, "kind": "command", "t_s": 33065.986598, "time": "00:59:53.449", "command": "resume"},
     {"seq": 7, "kind": "instant", "t_s": 33065.988239, "time": "00:59:53.451", "mission": "PickDemo",
-     "from": 1, "to": 1, "inputs": ["Home.pre"], "actions": []},
+     "from": 1, "to": 1, "inputs": ["Home.pre"], "input_kinds": ["pre"], "actions": []},
     {"seq": 8, "kind": "command", "t_s": 33065.990775, "time": "00:59:53.454", "command": "inject"},
-    {"seq": 9, "kind": "instant", "t_s": 33065.992239, "time": "00:59:53.455", "mission": "PickDemo",
-     "from": 1, "to": 4, "inputs": ["Home.T3.ResourceFault"], "actions": ["stop Home", "safe"]},
-    {"seq": 10, "kind": "event", "t_s": 33065.994239, "time": "00:59:53.457",
-     "event": "Hold.T3.ResourceFault"},
+    {"seq": 9, "kind": "fault", "t_s": 33065.992100, "time": "00:59:53.455", "fault": {"n": 1, **CAUSE}},
+    {"seq": 10, "kind": "instant", "t_s": 33065.992239, "time": "00:59:53.455", "mission": "PickDemo",
+     "from": 1, "to": 4, "inputs": ["Home.T3.ResourceFault"], "input_kinds": ["t3"],
+     "actions": ["stop Home", "safe"]},
+    {"seq": 11, "kind": "event", "t_s": 33065.994239, "time": "00:59:53.457",
+     "event": "Hold.T3.ResourceFault", "event_kind": "t3"},
 ]  # fmt: skip
 SIZE = (100, 30)
 
@@ -103,12 +108,19 @@ def test_a_terminal_too_small_is_said_so() -> None:
 
 
 def test_the_last_error_is_the_fault_first_then_the_newest_exception() -> None:
-    assert newest_exception(EVENTS) == (10, "00:59:53.457 Hold.T3.ResourceFault")
-    assert newest_exception(EVENTS[:5]) == (9, "00:59:53.455 Home.T3.ResourceFault")
+    # found by the kinds the records carry, not by their names
+    assert newest_exception(EVENTS) == (11, "00:59:53.457 Hold.T3.ResourceFault")
+    assert newest_exception(EVENTS[:6]) == (10, "00:59:53.455 Home.T3.ResourceFault")
+    assert newest_exception(EVENTS[:5]) == (
+        9,
+        "00:59:53.455 safe stop: Home.T3.ResourceFault (arm: injected fault)",
+    )
     assert newest_exception(EVENTS[:3]) is None
+    named_alike = [{**EVENTS[6], "event": "Hold.T3.Like", "event_kind": "t1"}]  # a T1 named like a T3
+    assert newest_exception(named_alike) is None
     frame = render(FAULTED, EVENTS, SIZE, colour=True)
     assert line(frame, "error") == (
-        "error    \x1b[31mfault: Home.T3.ResourceFault (injected fault) (`reset` needed)\x1b[0m"
+        "error    \x1b[31mfault: Home.T3.ResourceFault (arm: injected fault) (`reset` needed)\x1b[0m"
     )
     assert line(frame, "goal") == "goal     Hold (fault)"
     assert line(frame, "resource") == "resource \x1b[31mfault, stopped, torque_off\x1b[0m"

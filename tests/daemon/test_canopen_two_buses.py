@@ -52,5 +52,7 @@ def test_a_drive_fault_on_one_bus_stops_every_axis_then_reset(rig_daemon: tuple[
     r = d.ctl("reset")
     assert r.returncode == 0, r.stdout + r.stderr
     d.wait(lambda s: not s["faulted"])
-    time.sleep(0.2)
-    assert rig.drives.status()["states"] == ["OPERATION_ENABLED"] * 6
+    deadline = time.monotonic() + 5.0  # the Hold task enables every drive again, on both buses
+    while (states := rig.drives.status()["states"]) != ["OPERATION_ENABLED"] * 6:
+        assert time.monotonic() < deadline, states
+        time.sleep(0.05)

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
+from orccadd.ctl.client import ClientError
 from orccadd.physres.shm_channel import Ctl, PlantChannel
 from orccadd.types import Status
 from tests.daemon.conftest import ROBOT, ROOT, Daemon, start_daemon
@@ -174,14 +175,16 @@ def test_realtime_process_killed_the_arm_stops(daemon: Daemon) -> None:
 
 def _new_command_daemon(daemon: Daemon, old_pid: int, within_s: float = 30.0) -> int:
     end = time.monotonic() + within_s
+    last = ""
     while True:
         try:
             pid = int(daemon.call("ping")["pid"])  # type: ignore[index]
             if pid != old_pid:
                 return pid
-        except Exception:
-            pass
-        assert time.monotonic() < end, daemon.log.read_text()
+            last = f"still the old command daemon ({pid})"
+        except (OSError, ClientError) as e:  # the socket is down or refuses while it restarts
+            last = f"{type(e).__name__}: {e}"
+        assert time.monotonic() < end, f"{last}\n{daemon.log.read_text()}"
         time.sleep(0.05)
 
 

@@ -102,7 +102,8 @@ def test_abort_safe_stops_and_reset_recovers(daemon: Daemon) -> None:
     assert s["faulted"] and s["result"] == "aborted" and s["state"] == "ready"
     r = daemon.reply("start")
     assert not r["ok"] and "reset" in str(r["error"])
-    assert s["fault"].startswith("aborted"), s["fault"]
+    abort = {"event": "", "kind": "abort", "resource": "arm", "joint": "", "code": 0}
+    assert s["fault"] == {**abort, "text": "aborted by the operator"}, s["fault"]  # typed: what, where, why
     daemon.call("reset")
     s = daemon.wait(lambda s: not s["faulted"] and s["task_phase"] == "run")
     r = daemon.call("start")
@@ -115,7 +116,10 @@ def test_abort_safe_stops_and_reset_recovers(daemon: Daemon) -> None:
     daemon.call("start")
     daemon.call("inject", fault="resource")
     s = daemon.wait(lambda s: s["faulted"])
-    assert "ResourceFault" in s["fault"], s["fault"]
+    assert s["fault"]["event"] == "Home.T3.ResourceFault" and s["fault"]["kind"] == "device", s["fault"]
+    events = daemon.call("events", last=20)["events"]  # type: ignore[index]
+    [cause] = [e["fault"] for e in events if e["kind"] == "fault"][-1:]
+    assert cause["n"] == 3 and cause["text"] == "injected fault", cause  # the run's third safe stop
 
 
 def test_sigterm_mid_motion_safe_stops_and_exits_cleanly(daemon: Daemon) -> None:

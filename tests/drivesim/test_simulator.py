@@ -152,22 +152,28 @@ def test_csv_moves_the_joint_at_the_commanded_speed(elmo: Rig) -> None:
     node = _cyclic_node(elmo, 0x60FF, 9)
     q0 = elmo.sim.arm.q[0]
     node.rpdo[1][0x60FF].raw = round(0.2 * UNITS.counts_per_rad)  # 0.2 rad/s
-    time.sleep(1.0)
+    deadline = time.monotonic() + 5.0
+    while elmo.sim.arm.q[0] - q0 < 0.02:  # under way (the drive accelerates first)
+        assert time.monotonic() < deadline, elmo.sim.arm.q[0] - q0
+        time.sleep(0.01)
+    # the speed, measured: the distance over the time it took (not over a sleep's nominal length)
+    t1, q1 = time.monotonic(), elmo.sim.arm.q[0]
+    time.sleep(0.5)
+    t2, q2 = time.monotonic(), elmo.sim.arm.q[0]
     node.rpdo[1][0x60FF].raw = 0
-    time.sleep(0.3)
-    moved = elmo.sim.arm.q[0] - q0
-    assert 0.15 < moved < 0.25, moved
+    assert (q2 - q1) / (t2 - t1) == pytest.approx(0.2, rel=0.15)
 
 
 def test_cst_torque_reaches_the_joint(elmo: Rig) -> None:
     node = _cyclic_node(elmo, 0x6071, 10)
     # wrist 3 carries almost no gravity load: a small positive torque accelerates it
-    time.sleep(0.1)
     q0 = elmo.sim.arm.q[0]
     node.rpdo[1][0x6071].raw = 150  # 15 % of rated: 0.075 N·m × 100 = 7.5 N·m at the joint
-    time.sleep(0.3)
-    assert elmo.sim.arm.q[0] > q0 + 0.005
-    assert abs(node.tpdo[1][0x6077].raw - 150) <= 2  # the torque actual value reports it
+    deadline = time.monotonic() + 3.0
+    while elmo.sim.arm.q[0] <= q0 + 0.005 or abs(node.tpdo[1][0x6077].raw - 150) > 2:
+        # it moves, and the torque actual value reports the torque (within 2 ‰)
+        assert time.monotonic() < deadline, (elmo.sim.arm.q[0] - q0, node.tpdo[1][0x6077].raw)
+        time.sleep(0.01)
 
 
 def test_an_injected_fault_sends_emcy_and_the_drive_ends_in_fault(elmo: Rig) -> None:

@@ -11,6 +11,7 @@ import pinocchio as pin
 import pytest
 
 from orccadd.errors import ResourceError
+from orccadd.fault import FaultKind
 from orccadd.physres import PhysicalResource
 from orccadd.physres.description import ClockSource, Source
 from orccadd.robot import create_resource, load_robot_config, with_backend
@@ -84,19 +85,23 @@ def resource(request: pytest.FixtureRequest) -> Iterator[PhysicalResource]:
 
 
 @pytest.fixture
-def inject_device_fault(request: pytest.FixtureRequest, resource: PhysicalResource) -> Callable[[], None]:
+def inject_device_fault(
+    request: pytest.FixtureRequest, resource: PhysicalResource
+) -> tuple[Callable[[], None], str]:
     """Make the device report a fault: through the resource where it declares injection, at
-    the device otherwise (a simulated drive's over-current)."""
+    the device otherwise (a simulated drive's over-current); and the joint the fault is about
+    ("" for the whole arm)."""
+    third = resource.model.joint_names[2]
     if "device" in resource.description.fault_injection:
-        return lambda: resource.inject_fault("device", "over-current")
+        return (lambda: resource.inject_fault("device", "over-current")), ""
     if resource.description.backend == "dynamixel":
         dxl: DxlRig = request.getfixturevalue("dxl")
-        return lambda: dxl.sim.inject("overload", 3)
+        return (lambda: dxl.sim.inject("overload", 3)), third  # ID 3: the third joint
     if resource.description.backend == "ur_rtde":
         sim: UrSimProcess = request.getfixturevalue("ur_sim")[1]
-        return lambda: sim.inject("protective_stop")
+        return (lambda: sim.inject("protective_stop")), ""  # the controller stops the whole arm
     rig: Rig = request.getfixturevalue("can_rig")
-    return lambda: rig.drives.inject(3, "overcurrent")
+    return (lambda: rig.drives.inject(3, "overcurrent")), third  # node 3: the third joint
 
 
 def hold_mode(res: PhysicalResource) -> CommandMode:
@@ -173,9 +178,9 @@ def test_position_steps_within_the_speed_limit_pass_unchanged(resource: Physical
     flags = resource.write(time.monotonic(), fast)
     assert flags & Status.CMD_CLAMPED and flags & Status.LIMIT_VIOLATION
     joint = resource.model.joint_names[0]
-    assert resource.fault_message.startswith(f"command clamped: commanded position of {joint} "), (
-        resource.fault_message
-    )
+    f = resource.fault
+    assert f is not None and (f.kind, f.resource, f.joint) == (FaultKind.LIMIT, resource.name, joint), f
+    assert f.text.startswith(f"command clamped: commanded position of {joint} "), f
     resource.safe_stop()
 
 
@@ -195,15 +200,18 @@ def test_safe_stop_brings_the_arm_to_rest(resource: PhysicalResource) -> None:
 
 
 def test_device_fault_is_reported_and_reset(
-    resource: PhysicalResource, inject_device_fault: Callable[[], None]
+    resource: PhysicalResource, inject_device_fault: tuple[Callable[[], None], str]
 ) -> None:
+    inject, joint = inject_device_fault
     resource.activate(hold_mode(resource))
     drive(resource, 0.05)
-    inject_device_fault()
+    inject()
     injected_s = time.monotonic()
     drive(resource, 0.3, until=lambda s: bool(s.status & Status.FAULT))
     assert resource.state.status & Status.FAULT
-    assert resource.fault_message
+    f = resource.fault  # typed: a device fault of this resource, about that joint, in words
+    assert f is not None and (f.kind, f.resource, f.joint) == (FaultKind.DEVICE, resource.name, joint), f
+    assert f.text and f.code, f  # the device's own code: EMCY, hardware error bits, safety mode
     resource.safe_stop()
     # stopped, and past the UR controller's unlock delay (a protective stop is reset 1 s after it)
     reset_allowed_s = injected_s + UNLOCK_DELAY_S + 0.2
@@ -235,7 +243,8 @@ def test_a_command_with_nan_or_inf_is_not_sent(resource: PhysicalResource, mode:
         flags = resource.write(time.monotonic(), bad)
         assert flags & Status.LIMIT_VIOLATION, (bad_value, flags)  # a type 3 exception for the task
     assert resource.rejected_count == 3
-    assert "NaN or an infinity" in resource.fault_message
+    assert resource.fault is not None and resource.fault.kind is FaultKind.COMMAND, resource.fault
+    assert "NaN or an infinity" in resource.fault.text
     drive(resource, 0.05)  # the device never saw them: the arm's state stays finite
     assert np.isfinite(resource.state.vector).all()
     resource.safe_stop()

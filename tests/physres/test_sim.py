@@ -7,6 +7,7 @@ import pinocchio as pin
 import pytest
 
 from orccadd.errors import LifecycleError, ResourceError
+from orccadd.fault import FaultKind
 from orccadd.physres.sim import SimulatedArm
 from orccadd.robot import create_resource, load_robot_config
 from orccadd.types import CommandMode, Lifecycle, Status
@@ -92,8 +93,10 @@ def test_measured_position_beyond_limit_is_flagged() -> None:
     res.q[2] = res.model.q_max_rad[2] + 0.1
     assert res.read(0.0).status & Status.LIMIT_VIOLATION
     hi = res.model.q_max_rad[2] + res.config.limits.position_tolerance_rad
-    assert res.fault_message.startswith(f"measured position of elbow_joint {res.q[2]:.4g} rad outside")
-    assert f"{hi:.4g}]" in res.fault_message, res.fault_message  # the limit it crossed, with its tolerance
+    f = res.fault
+    assert f is not None and (f.kind, f.joint) == (FaultKind.LIMIT, "elbow_joint"), f
+    assert f.text.startswith(f"measured position of elbow_joint {res.q[2]:.4g} rad outside")
+    assert f"{hi:.4g}]" in f.text, f  # the limit it crossed, with its tolerance
 
 
 def test_unsupported_mode_is_refused_clearly() -> None:

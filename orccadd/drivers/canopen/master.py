@@ -102,7 +102,9 @@ class CycleReport:
     """What `receive` found wrong, for the resource's status flags and messages."""
 
     comm_lost: str = ""
+    comm_lost_joint: str = ""  # the axis it is about ("" for the bus)
     fault: str = ""
+    fault_joint: str = ""
     fault_code: int = 0
     notes: list[str] = field(default_factory=list)
 
@@ -264,18 +266,21 @@ class CanopenMaster:
         hb_timeout = 3 * self.s.heartbeat_ms / 1000
         tpdo_timeout = self.s.missed_tpdo_periods * self.period_s
         for a in self.axes:
+            lost = ""
             if a.rebooted:
-                rep.comm_lost = rep.comm_lost or f"node {a.node_id} ({a.name}) rebooted (boot-up message)"
+                lost = f"node {a.node_id} ({a.name}) rebooted (boot-up message)"
             elif a.tpdo_seen_s and self._tpdo_missing(a, now_s, tpdo_timeout):
-                rep.comm_lost = rep.comm_lost or (
+                lost = (
                     f"node {a.node_id} ({a.name}) silent: no TPDO for {(now_s - a.tpdo_seen_s) * 1e3:.0f} ms "
                     f"(> {self.s.missed_tpdo_periods} SYNC periods)"
                 )
             elif now_s - a.heartbeat_s > hb_timeout:
-                rep.comm_lost = rep.comm_lost or (
+                lost = (
                     f"node {a.node_id} ({a.name}): heartbeat lost ({(now_s - a.heartbeat_s) * 1e3:.0f} ms "
                     f"> 3 × {self.s.heartbeat_ms} ms)"
                 )
+            if lost and not rep.comm_lost:
+                rep.comm_lost, rep.comm_lost_joint = lost, a.name
             if (
                 a.state is cia402.State.FAULT or a.state is cia402.State.FAULT_REACTION_ACTIVE
             ) and not rep.fault:
@@ -283,14 +288,14 @@ class CanopenMaster:
                 rep.fault = f"node {a.node_id} ({a.name}): drive fault" + (
                     f", EMCY 0x{code:04X} {a.emcy_text}" if code else ""
                 )
-                rep.fault_code = code
+                rep.fault_code, rep.fault_joint = code, a.name
             if a.sdo_pending is not None and now_s > a.sdo_pending[2]:
                 a.sdo_error = (
                     f"node {a.node_id} ({a.name}): no answer to SDO request 0x{a.sdo_pending[0]:04X}"
                 )
                 a.sdo_pending = None
             if a.sdo_error and not rep.comm_lost:
-                rep.comm_lost = a.sdo_error
+                rep.comm_lost, rep.comm_lost_joint = a.sdo_error, a.name
         return rep
 
     def _drain(self, k: int, now_s: float) -> None:
