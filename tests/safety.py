@@ -14,13 +14,12 @@ import numpy as np
 from orccadd.config.robot import RobotConfig, read_robot_config
 from orccadd.task.loop import ControlLoop
 from orccadd.types import CommandMode, Status
-from orccadd.wire.schema import TICK_FIELDS, H, T
+from orccadd.wire.schema import H, T, TickLayout
 from orccadd.wire.telemetry import TelemetryBlock
 
 FloatArray = np.ndarray
 SAFE = int(Status.STOPPING | Status.STOPPED)
 STOP_WITHIN_TICKS = 2
-NF = len(TICK_FIELDS)
 
 
 @dataclass
@@ -49,7 +48,7 @@ def from_telemetry(telemetry: str) -> Ticks:
     recs = recs[recs[:, T.SEQ] == seqs]
     return Ticks(
         recs[:, T.SEQ], recs[:, T.T_S], recs[:, T.STATUS], recs[:, T.MODE], recs[:, T.WROTE],
-        recs[:, NF + 3 * dof : NF + 4 * dof], recs[:, T.COMPUTE_US],
+        recs[:, TickLayout(dof).cmd], recs[:, T.COMPUTE_US],
     )  # fmt: skip
 
 

@@ -34,9 +34,9 @@ from mcap.writer import Writer
 
 from orccadd import __version__
 from orccadd.cmdd.logfeed import MODE_UNITS, FloatArray, LogEvent, LogOrigin, mode_name, unit
-from orccadd.cmdd.views import NF, SignalSelection
+from orccadd.cmdd.views import SignalSelection
 from orccadd.wire import foxglove_schemas as sch
-from orccadd.wire.schema import CommandMode, Phase, T, status_names
+from orccadd.wire.schema import CommandMode, Phase, T, TickLayout, status_names
 
 MAGIC = b"\x89MCAP0\r\n"
 FOOTER_BYTES = 1 + 8 + 20  # opcode, length, summary start and offset start, crc
@@ -115,6 +115,7 @@ class McapLog:
         self.origin = origin
         self.desc = desc
         self.joints = joints
+        self.layout = TickLayout(len(joints))
         self.every = max(1, round(1.0 / (JOINT_STATES_HZ * period_s))) if period_s > 0 else 1
         w = self.writer = Writer(fh, use_chunking=False)
         w.start(profile="", library=LIBRARY)
@@ -178,14 +179,10 @@ class McapLog:
             data = g.text(t, vals, extra) if finite else g.json_text(t, vals, extra)
             add(g.channel, ns, data, ns, seq)
         if seq % self.every == 0:
-            n = len(self.joints)
+            at = self.layout
+            q, dq, tau = vals[at.q], vals[at.dq], vals[at.tau]
             joints = [
-                {
-                    "name": name,
-                    "position": _clean(vals[NF + j]),
-                    "velocity": _clean(vals[NF + n + j]),
-                    "effort": _clean(vals[NF + 2 * n + j]),
-                }
+                {"name": name, "position": _clean(q[j]), "velocity": _clean(dq[j]), "effort": _clean(tau[j])}
                 for j, name in enumerate(self.joints)
             ]
             data = json.dumps({"timestamp": sch.stamp(ns), "joints": joints}).encode()

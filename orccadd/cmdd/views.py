@@ -25,12 +25,11 @@ from orccadd.wire.schema import (
     R,
     S,
     T,
+    TickLayout,
     Trace,
     status_names,
 )
 from orccadd.wire.telemetry import TelemetryBlock, read_status
-
-NF = len(TICK_FIELDS)
 
 
 class SignalSelection:
@@ -51,7 +50,7 @@ class SignalSelection:
                 raise ValueError(
                     f"unknown signal {raw!r} (signals: {allowed}; a joint: q.0 or q.<joint name>)"
                 )
-            start = NF + TICK_VECTORS.index(base) * n
+            start = TickLayout(n).vector(base).start
             if not idx:
                 picked = list(range(n))
             elif idx.isascii() and idx.isdigit() and int(idx) < n:  # not `q.٣`: ASCII digits only
@@ -143,13 +142,20 @@ def status(tel: TelemetryBlock, desc: dict[str, Any], log: dict[str, Any] | None
         out["active_task"] = tasks[tid] if 0 <= tid < len(tasks) else None
         out["task_phase"] = Phase(int(rec[T.PHASE])).name.lower()
         out["resource_status"] = status_names(int(rec[T.STATUS]))
+        at = TickLayout(n)
+        q, dq, tau, cmd = (
+            rec[at.q].tolist(),
+            rec[at.dq].tolist(),
+            rec[at.tau].tolist(),
+            rec[at.cmd].tolist(),
+        )
         out["joints"] = [
             {
                 "name": joints[j],
-                "q_rad": round(float(rec[NF + j]), 5),
-                "dq_rad_s": round(float(rec[NF + n + j]), 5),
-                "tau_nm": round(float(rec[NF + 2 * n + j]), 3),
-                "cmd": round(float(rec[NF + 3 * n + j]), 3),
+                "q_rad": round(q[j], 5),
+                "dq_rad_s": round(dq[j], 5),
+                "tau_nm": round(tau[j], 3),
+                "cmd": round(cmd[j], 3),
             }
             for j in range(n)
         ]

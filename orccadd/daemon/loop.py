@@ -25,10 +25,8 @@ from orccadd.runtime.mailbox import Mailbox
 from orccadd.task.events import EventQueue
 from orccadd.task.loop import ControlLoop
 from orccadd.task.task import ParameterChange, RobotTask
-from orccadd.wire.schema import H, T
+from orccadd.wire.schema import H, T, TickLayout
 from orccadd.wire.telemetry import TelemetryBlock
-
-NF = len(T)
 
 
 class TickReactor(Protocol):
@@ -64,6 +62,7 @@ class SwitchingLoop(ControlLoop):
         self.hold = hold
         self.queue = queue
         self.tel = telemetry
+        self.layout = TickLayout(telemetry.dof)
         self.wake_fd = wake_fd
         self.blend_ticks = blend_ticks
         self.tunes: Mailbox[ParameterChange] = Mailbox(64)
@@ -205,11 +204,11 @@ class SwitchingLoop(ControlLoop):
         rec[T.WROTE] = task.wrote
         rec[T.STATUS] = st.status
         rec[T.MODE] = self.resource.mode
-        n = st.q_rad.shape[0]
-        rec[NF : NF + n] = st.q_rad
-        rec[NF + n : NF + 2 * n] = st.dq_rad_s
-        rec[NF + 2 * n : NF + 3 * n] = st.tau_nm
-        rec[NF + 3 * n : NF + 4 * n] = self.resource.last_command
+        at = self.layout
+        rec[at.q] = st.q_rad
+        rec[at.dq] = st.dq_rad_s
+        rec[at.tau] = st.tau_nm
+        rec[at.cmd] = self.resource.last_command
         hdr = tel.header
         hdr[H.TICKS] = stats.ticks
         hdr[H.OVERRUNS] = stats.overruns

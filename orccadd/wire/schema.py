@@ -150,6 +150,30 @@ def tick_width(dof: int) -> int:
     return len(T) + len(TICK_VECTORS) * dof
 
 
+class TickLayout:
+    """Where each joint vector of a tick record lies, for `dof` joints: the only place that
+    computes an offset into the record (slices of a record, or of an array of records on its
+    last axis: `recs[..., layout.cmd]`)."""
+
+    __slots__ = ("cmd", "dof", "dq", "q", "tau", "width")
+
+    def __init__(self, dof: int) -> None:
+        self.dof = dof
+        self.width = tick_width(dof)
+        self.q, self.dq, self.tau, self.cmd = (self.vector(name) for name in TICK_VECTORS)
+
+    def vector(self, name: str) -> slice:
+        """`q`, `dq`, `tau` or `cmd` (ValueError for another name)."""
+        start = len(T) + TICK_VECTORS.index(name) * self.dof
+        return slice(start, start + self.dof)
+
+    def column(self, name: str, joint: int) -> int:
+        """The column of one joint's value of vector `name`."""
+        if not 0 <= joint < self.dof:
+            raise IndexError(f"joint {joint} of {self.dof}")
+        return int(self.vector(name).start) + joint
+
+
 @dataclass(frozen=True)
 class Layout:
     """Sizes of one telemetry block."""
@@ -189,6 +213,7 @@ __all__ = [
     "S",
     "Status",
     "T",
+    "TickLayout",
     "Trace",
     "status_names",
     "tick_width",

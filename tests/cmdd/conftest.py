@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from orccadd.cmdd import views
-from orccadd.wire.schema import TRACE_IDX, CommandMode, Layout, R, T, Trace
+from orccadd.wire.schema import TRACE_IDX, CommandMode, Layout, R, T, TickLayout, Trace
 from orccadd.wire.telemetry import TelemetryBlock
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -68,12 +68,12 @@ class FakeLoop:
             rec[T.PHASE] = 2
             rec[T.WROTE] = 1
             rec[T.MODE] = self.mode
-            nf = len(T)
+            at = TickLayout(n_j)
             for j in range(n_j):
-                rec[nf + j] = math.sin(seq * PERIOD_S + j)  # q
-                rec[nf + n_j + j] = 0.1 * j  # dq
-                rec[nf + 2 * n_j + j] = 5.0 + j  # tau
-                rec[nf + 3 * n_j + j] = 6.0 + j  # cmd
+                rec[at.column("q", j)] = math.sin(seq * PERIOD_S + j)
+                rec[at.column("dq", j)] = 0.1 * j
+                rec[at.column("tau", j)] = 5.0 + j
+                rec[at.column("cmd", j)] = 6.0 + j
             self.tel.commit_tick(rec, 0)
 
     def trace(

@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from orccadd.wire.schema import TICK_FIELDS, H
+from orccadd.wire.schema import H, T, TickLayout
 from orccadd.wire.telemetry import RingReader, TelemetryBlock
 from tests.daemon.conftest import ROOT, Daemon
 
@@ -38,9 +38,8 @@ def test_demo_mission_recovers_and_every_switch_is_seamless(daemon: Daemon) -> N
     # consecutive ticks, and the first command of the new law continues the old one.
     rec = ticks_of(daemon)
     overruns = int(daemon.status()["overruns"])  # read after the records: counts each of theirs
-    task, wrote, t = rec[:, 4], rec[:, 6], rec[:, 1]
-    nf, n = len(TICK_FIELDS), 6
-    cmd = rec[:, nf + 3 * n : nf + 4 * n]
+    task, wrote, t = rec[:, T.TASK], rec[:, T.WROTE], rec[:, T.T_S]
+    cmd = rec[:, TickLayout(6).cmd]
     switches = np.where(np.diff(task) != 0)[0] + 1
     assert len(switches) >= 6, f"only {len(switches)} switches seen"
     period = 0.002
