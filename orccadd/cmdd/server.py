@@ -32,6 +32,7 @@ from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.wire.commands import (
     COMMANDS,
     MAX_LINE,
+    RT_REPLY_S,
     URGENT_COMMANDS,
     Dispatcher,
     ProtocolError,
@@ -58,11 +59,6 @@ ROLELESS_WAIT_S = 2.0
 # for at once (a newer one closes the oldest), each for its first line this long
 RESERVED_MAX = 4
 RESERVED_WAIT_S = 2.0
-RT_TIMEOUT_S = 5.0
-LOAD_MARGIN_S = 30.0  # beyond the real-time process's own limit, so that its refusal arrives
-# a reset's device work (a protective stop's unlock and script restart, a reconnection to a
-# restarted controller, a servo's reboot) takes seconds: its reply is waited for that long
-RESET_TIMEOUT_S = 30.0
 RT_MAX = 1 << 20
 
 
@@ -103,7 +99,7 @@ class RtLink:
         self.waiting.clear()
 
     async def call(
-        self, cmd: str, args: dict[str, Any], timeout_s: float | None = RT_TIMEOUT_S
+        self, cmd: str, args: dict[str, Any], timeout_s: float | None = RT_REPLY_S
     ) -> dict[str, Any]:
         """The reply to `cmd`, or an error reply (no answer within `timeout_s`; None: until one
         comes or the link is lost)."""
@@ -161,7 +157,7 @@ class CommandDaemon:
         self.dispatch = Dispatcher(self, "cmdd")
         self.readers: dict[asyncio.StreamWriter, asyncio.StreamReader] = {}  # for streams: gone?
 
-    async def refresh(self, timeout_s: float | None = RT_TIMEOUT_S) -> None:
+    async def refresh(self, timeout_s: float | None = RT_REPLY_S) -> None:
         st = read_status(self.tel)
         mark = (int(st[S.MISSION_GEN]), int(st[S.FAULTED]))
         if not self.desc or mark != self.desc_mark:  # a new mission, a new fault, or one cleared
@@ -374,9 +370,7 @@ class CommandDaemon:
             await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
             return
         if spec.where == "rt":
-            load_s = self.cfg.load_timeout_s + LOAD_MARGIN_S
-            timeout = {"load": load_s, "reset": RESET_TIMEOUT_S}.get(cmd, RT_TIMEOUT_S)
-            reply = await self.rt.call(cmd, args, timeout)
+            reply = await self.rt.call(cmd, args, spec.reply_s)
             reply["id"] = rid
             if cmd == "load" and reply.get("ok"):
                 await self.refresh()

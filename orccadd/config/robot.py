@@ -14,6 +14,7 @@ from typing import Any, Literal
 
 from orccadd.config.schema import field, format_range, load_dataclass
 from orccadd.errors import ConfigError
+from orccadd.wire.commands import LOAD_TIMEOUT_MAX_S
 
 INF = math.inf
 
@@ -99,7 +100,7 @@ class DaemonConfig:
     # a `load` compiles and verifies in a process of its own, stopped after this long or when it
     # needs this much more memory than it took to start (the mission refused, saying which;
     # `orccadctl check` has no limit)
-    load_timeout_s: float = field(default=600.0, bounds=(1.0, 3600.0))
+    load_timeout_s: float = field(default=600.0, bounds=(1.0, LOAD_TIMEOUT_MAX_S))
     load_memory_mb: int = field(default=2048, bounds=(256, 1 << 20))
     # full-rate CSV logs go here, created by the command daemon (never a path a client names);
     # "": `logs/` in the socket's directory

@@ -3,7 +3,7 @@
 `format_reply(cmd, result, context)` takes the `result` of a successful reply as the daemon
 sends it (orccadd/daemon/commands.py, orccadd/cmdd/server.py) and, for the commands whose reply
 names things without their context, what orccadctl asked the daemon next (`context_requests`):
-the parameters for `describe` (modules and parameters of each task) and `tune` (the unit).
+the parameters for `describe` (modules and parameters of each task).
 """
 
 from __future__ import annotations
@@ -22,8 +22,6 @@ def context_requests(cmd: str, args: dict[str, Any]) -> dict[str, tuple[str, dic
     arguments). Read-only requests; if one fails the words are shorter, nothing else."""
     if cmd == "describe":
         return {"params": ("params", {})}
-    if cmd == "tune":
-        return {"params": ("params", {"task": str(args["path"]).split(".")[0]})}
     return {}
 
 
@@ -155,13 +153,10 @@ def _start(r: dict[str, Any], ctx: dict[str, Any]) -> str:
 
 
 def _tune(r: dict[str, Any], ctx: dict[str, Any]) -> str:
-    path = str(r["tuned"])
-    task, _, name = path.partition(".")
-    plist = ((ctx.get("params") or {}).get("params") or {}).get(task, [])
-    element = name.partition("[")[0]  # `traj.target_rad[2]`: the unit of `traj.target_rad`
-    unit = next((str(p["unit"]) for p in plist if p["name"] == element), "")
-    unit = "" if unit in ("", "1") else " " + unit
-    return f"{path}: {num(r['previous'])} → {num(r['value'])}{unit} (applied at tick {r['applied_at_tick']})"
+    """In one round trip: the reply names the value applied, its unit and the tick."""
+    unit = "" if r["unit"] in ("", "1") else " " + str(r["unit"])
+    change = f"{num(r['previous'])} → {num(r['value'])}{unit}"
+    return f"{r['tuned']}: {change} (applied at tick {r['applied_at_tick']})"
 
 
 def _stop(r: dict[str, Any], _: dict[str, Any]) -> str:

@@ -16,14 +16,10 @@ from orccadd.ctl.client import Client, ClientError, default_socket
 from orccadd.ctl.format import error_line, format_trace
 from orccadd.ctl.format import format_status as format_status  # the demo prints it
 from orccadd.ctl.human import context_requests, format_reply
-from orccadd.wire.commands import COMMANDS
+from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, client_wait_s
 from orccadd.wire.socketdir import urgent_socket_path
 
 EXIT_OK, EXIT_REFUSED, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
-# a load compiles and verifies for up to `daemon.load_timeout_s` (at most 3600 s), then the command
-# daemon passes its answer on: orccadctl waits for that answer
-CALL_WAIT_S, LOAD_WAIT_S = 10.0, 3700.0
-RESET_WAIT_S = 40.0  # a reset's device work: the command daemon waits up to 30 s for it
 
 
 def add_parsers(sub: Any) -> None:
@@ -146,7 +142,7 @@ def _urgent_reply(a: argparse.Namespace) -> dict[str, Any] | None:
     if not os.path.exists(path):
         return None
     try:
-        with Client(path, timeout_s=CALL_WAIT_S) as c:
+        with Client(path, timeout_s=client_wait_s(a.online)) as c:
             r = c.reply(a.online)
             return r if r.get("id") == c.next_id else None
     except (ClientError, OSError, ValueError):
@@ -158,7 +154,7 @@ def run_online(a: argparse.Namespace) -> int:
     line on stderr (the daemon's own words), Ctrl-C quietly."""
     try:
         cmd, args = _args(a)
-        r = _urgent_reply(a) if a.online in ("abort", "stop") else None
+        r = _urgent_reply(a) if a.online in URGENT_COMMANDS else None
         context: dict[str, Any] = {}
         if r is None:
             online = _online(a, cmd, args)
@@ -186,8 +182,7 @@ def _online(
     """The reply to `cmd` through the command daemon and, for words, the replies that give it
     context (`human.context_requests`); or an exit status for the streaming commands (monitor,
     events --follow, top)."""
-    wait_s = {"load": LOAD_WAIT_S, "reset": RESET_WAIT_S}.get(cmd, CALL_WAIT_S)
-    with Client(a.socket, timeout_s=wait_s) as c:
+    with Client(a.socket, timeout_s=client_wait_s(cmd)) as c:
         if cmd == "monitor":
             return _monitor(c, a)
         if cmd == "events" and a.follow:

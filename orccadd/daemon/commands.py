@@ -270,6 +270,7 @@ class RtCommands:
             )
         i = change.element
         old = change.param.value.tolist() if i is None else float(change.param.value[i])
+        unit = change.param.unit
         loop = self.m.loop
         try:
             seq = loop.tunes.post(change)
@@ -282,7 +283,7 @@ class RtCommands:
             tick = loop.tunes.acked(seq)
             if tick is None:
                 return None
-            return {"tuned": path, "value": value, "previous": old, "applied_at_tick": tick}
+            return {"tuned": path, "value": value, "previous": old, "unit": unit, "applied_at_tick": tick}
 
         def expire() -> Result:
             raise CommandError(

@@ -58,7 +58,6 @@ RESPAWN_DELAY_S = 1.0
 RESPAWN_MAX_S = 60.0
 RESPAWN_STABLE_S = 10.0  # a command daemon that lived this long had started fine
 GIL_SWITCH_INTERVAL_S = 0.0002
-URGENT = URGENT_COMMANDS  # served on arrival, ahead of any queue, not waiting for slack
 URGENT_MAX_BYTES = 4096  # an abort or a stop is a short message; longer ones are not looked into
 RECEIVE_MAX = 256  # messages read per wake-up (the command daemon has fewer in flight)
 SERVE_BUDGET_PERIODS = 0.3  # other requests served per slack; the rest at the next one
@@ -71,7 +70,7 @@ def _is_urgent(data: bytes) -> bool:
         msg = json.loads(data)
     except (ValueError, RecursionError):
         return False
-    return isinstance(msg, dict) and msg.get("cmd") in URGENT
+    return isinstance(msg, dict) and msg.get("cmd") in URGENT_COMMANDS
 
 
 def rt_socket_path(public: str) -> str:

@@ -24,11 +24,13 @@ from orccadd.errors import OrccaddError
 from orccadd.fault import Fault, FaultKind, StopCause
 from orccadd.physres.base import PhysicalResource
 from orccadd.types import Status
+from orccadd.wire.commands import RESET_REPLY_S
 from orccadd.wire.schema import MissionResult
 
 FAULTS_KEPT = 32  # the last stop causes `describe` lists, for the logs' fault records
 RESET_WAIT_S = 2.0  # longest wait for a device to leave its fault after a reset (bus round trips)
 RESET_DEVICE_S = 30.0  # longest a device's reset may take (a controller reconnected, a servo rebooted)
+assert RESET_DEVICE_S + RESET_WAIT_S < RESET_REPLY_S  # its refusal comes before the clients give up
 
 
 class Supervisor:

@@ -56,6 +56,15 @@ class Arg:
     items: tuple[type, ...] = (str,)  # a list argument's item types
 
 
+# how long a reply may take, declared here for every layer: the command daemon waits this long
+# for the real-time process, `orccadctl` a margin more for the command daemon
+RT_REPLY_S = 5.0  # most commands: answered at the automaton thread's next turn
+LOAD_TIMEOUT_MAX_S = 3600.0  # `daemon.load_timeout_s`'s bound: a load's refusal comes within it
+LOAD_REPLY_S = LOAD_TIMEOUT_MAX_S + 30.0
+RESET_REPLY_S = 40.0  # a reset's device work: an unlock, a reconnection, a servo's reboot (≤ 32 s)
+CLIENT_MARGIN_S = 5.0
+
+
 @dataclass(frozen=True)
 class CommandSpec:
     name: str
@@ -64,6 +73,13 @@ class CommandSpec:
     help: str
     args: tuple[Arg, ...] = ()
     stream: bool = False  # replies with stream lines before the final reply
+    urgent: bool = False  # served ahead of everything (the urgent socket, a kept place)
+    reply_s: float = RT_REPLY_S  # the longest its reply may take (a stream's first line)
+
+    @property
+    def client_wait_s(self) -> float:
+        """How long `orccadctl` waits for the reply."""
+        return self.reply_s + CLIENT_MARGIN_S
 
     def arg(self, name: str) -> Arg:
         return next(a for a in self.args if a.name == name)
@@ -129,6 +145,7 @@ COMMANDS: dict[str, CommandSpec] = {
                     required=True,
                 ),
             ),
+            reply_s=LOAD_REPLY_S,
         ),
         CommandSpec(
             "start",
@@ -137,11 +154,17 @@ COMMANDS: dict[str, CommandSpec] = {
             "run the loaded mission's main procedure",
             (Arg("procedure", (str,), "the main procedure's name (checked if given)", default=""),),
         ),
-        CommandSpec("stop", C, "rt", "graceful: the mission's `Stop` operator input"),
-        CommandSpec("abort", C, "rt", "immediate safe stop; the mission ends `aborted`"),
+        CommandSpec("stop", C, "rt", "graceful: the mission's `Stop` operator input", urgent=True),
+        CommandSpec("abort", C, "rt", "immediate safe stop; the mission ends `aborted`", urgent=True),
         CommandSpec("hold", C, "rt", "suspend the mission on the Hold task"),
         CommandSpec("resume", C, "rt", "restart the suspended task from the measured state"),
-        CommandSpec("reset", C, "rt", "clear a safe stop (and a device fault) once the arm is at rest"),
+        CommandSpec(
+            "reset",
+            C,
+            "rt",
+            "clear a safe stop (and a device fault) once the arm is at rest",
+            reply_s=RESET_REPLY_S,
+        ),
         CommandSpec(
             "send",
             C,
@@ -202,7 +225,14 @@ COMMANDS: dict[str, CommandSpec] = {
 
 # served ahead of everything: on the real-time process's urgent socket, and on the command
 # daemon's main socket even when every control place is taken (a place kept for them)
-URGENT_COMMANDS = frozenset({"abort", "stop"})
+URGENT_COMMANDS = frozenset(name for name, spec in COMMANDS.items() if spec.urgent)
+
+
+def client_wait_s(cmd: str) -> float:
+    """How long a client waits for the reply to `cmd` (a composite one of `orccadctl`'s, such
+    as `top`, as a command the real-time process answers)."""
+    spec = COMMANDS.get(cmd)
+    return spec.client_wait_s if spec is not None else RT_REPLY_S + CLIENT_MARGIN_S
 
 
 class ProtocolError(Exception):

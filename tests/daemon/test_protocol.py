@@ -88,6 +88,7 @@ def test_params_and_tune(daemon: Daemon) -> None:
     after = int(daemon.status()["ticks"])  # type: ignore[arg-type]
     # acknowledged once the control thread applied it, with that tick's (telemetry record) number
     assert isinstance(reply, dict) and reply["previous"] == 500.0 and reply["tuned"] == "Reach.ct.kp[2]"
+    assert reply["unit"] == kp["unit"]  # its unit in the same reply: no second request
     assert before <= reply["applied_at_tick"] <= after + 1, (before, reply, after)
     daemon.call("tune", path="Reach.ct.kp[5]", value=400)
     params = daemon.call("params", task="Reach")

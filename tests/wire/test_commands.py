@@ -118,3 +118,15 @@ def test_a_request_of_another_protocol_version_is_refused_naming_both() -> None:
         ProtocolError, match=rf"speaks protocol {PROTOCOL_VERSION}, the client {PROTOCOL_VERSION - 1}"
     ):
         parse_request(old)
+
+
+def test_urgency_and_reply_times_are_declared_once_in_the_table() -> None:
+    from orccadd.config.robot import DaemonConfig
+    from orccadd.wire.commands import CLIENT_MARGIN_S, LOAD_TIMEOUT_MAX_S, URGENT_COMMANDS
+
+    assert {"abort", "stop"} == URGENT_COMMANDS  # the table's `urgent` flags
+    for spec in COMMANDS.values():  # the client always waits longer than the daemon may take
+        assert spec.client_wait_s == spec.reply_s + CLIENT_MARGIN_S > spec.reply_s > 0
+    # a load may take the longest `daemon.load_timeout_s` a config may set: its refusal arrives
+    _, most = DaemonConfig.__dataclass_fields__["load_timeout_s"].metadata["bounds"]
+    assert most == LOAD_TIMEOUT_MAX_S < COMMANDS["load"].reply_s
