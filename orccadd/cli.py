@@ -1,4 +1,6 @@
-"""Console entry points: `orccadd` (the real-time daemon) and `orccadctl` (the client)."""
+"""`orccadctl`, the client: its online commands (`orccadd.ctl`, light: no numpy) and those that
+need no daemon (`orccadd.offline`, imported only when one runs). The daemon's entry point,
+`orccadd`, is `orccadd.daemon.rtproc:main`."""
 
 from __future__ import annotations
 
@@ -6,17 +8,11 @@ import argparse
 import os
 import sys
 
-from orccadd.ctl import offline, online
+from orccadd.ctl import online
 from orccadd.ctl.completion import SHELLS
 from orccadd.wire.version import version_text
 
 EXIT_INTERRUPTED = 130  # Ctrl-C: 128 + SIGINT, as a shell reports it
-
-
-def orccadd_main() -> int:
-    from orccadd.daemon.rtproc import main
-
-    return main()
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -28,7 +24,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--socket", dest="global_socket", default=None, help="the daemon's socket")
     parser.add_argument("--json", dest="global_json", action="store_true", help="print JSON replies")
     sub = parser.add_subparsers(dest="command", required=True)
-    offline.add_parsers(sub)
+    from orccadd.offline.commands import add_parsers as add_offline  # argparse only, until one runs
+
+    add_offline(sub)
     online.add_parsers(sub)
     p = sub.add_parser("completion", help="print a shell completion script (bash, zsh)")
     p.add_argument("shell", choices=SHELLS)
@@ -58,10 +56,12 @@ def _main(argv: list[str] | None) -> int:
         args.socket = args.global_socket
     if args.global_json and hasattr(args, "json"):
         args.json = True
-    if getattr(args, "online", None) or args.command == "plot":
+    if getattr(args, "online", None):
         code: int = args.func(args)
         return code
-    return offline.run(args)
+    from orccadd.offline.commands import run
+
+    return run(args)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ from typing import Any
 from orccadd.ctl.client import Client, ClientError
 from orccadd.ctl.format import format_trace
 from orccadd.ctl.online import copy_to, format_status
-from orccadd.ctl.plot import plot_csv
+from orccadd.offline.plot import plot_csv
 
 ROOT = Path(__file__).resolve().parent.parent
 

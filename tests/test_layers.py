@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import grimp
@@ -92,3 +94,37 @@ def test_orccadctl_online_commands_load_neither_numpy_nor_the_compiler() -> None
     mods = loaded_after(code + "\nimport orccadd.ctl.online")
     assert heavy(mods) == []
     assert "numpy" not in mods
+
+
+def contract_layers() -> list[set[str]]:
+    """The layers of the import-linter contract (pyproject.toml), top first, without `orccadd.`."""
+    conf = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    contract = next(c for c in conf["tool"]["importlinter"]["contracts"] if c["type"] == "layers")
+    return [{m.strip().removeprefix("orccadd.") for m in line.split("|")} for line in contract["layers"]]
+
+
+def documented_layers() -> list[set[str]]:
+    """The packages of each row of docs/architecture.md's layer table, top first: the backticked
+    names of orccadd's own packages, outside the parenthesised remarks."""
+    ours = {p.stem for p in (ROOT / "orccadd").iterdir() if p.suffix == ".py" or (p / "__init__.py").exists()}
+    text = (ROOT / "docs/architecture.md").read_text()
+    table = text.split("| layer | packages | what it may import |", 1)[1].split("\n\n", 1)[0]
+    rows = []
+    for line in table.splitlines()[2:]:
+        cell = line.split(" | ")[1]
+        bare, depth, quoted = [], 0, False
+        for ch in cell:  # drop "( … )" remarks, but not parentheses inside `code`
+            quoted ^= ch == "`"
+            depth += (ch == "(") - (ch == ")") if not quoted else 0
+            bare.append(ch if depth == 0 else "")
+        names = re.findall(r"`([^`]+)`", "".join(bare))
+        rows.append({n.split(".")[0] for n in names} & ours)
+    return rows
+
+
+def test_the_contract_and_the_documented_layers_are_the_same_layers() -> None:
+    assert documented_layers() == contract_layers()
+    every = {
+        p.stem for p in (ROOT / "orccadd").iterdir() if p.suffix == ".py" or (p / "__init__.py").exists()
+    }
+    assert every - {"__init__"} == set().union(*contract_layers())  # each package in exactly one layer

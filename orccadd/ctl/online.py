@@ -80,13 +80,6 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("fault", choices=COMMANDS["inject"].arg("fault").choices)
     p.add_argument("--ticks", type=int, default=20)
     p.add_argument("--extra-ms", type=float, default=0.0)
-    text = "plot a CSV log: a panel per signal group with its unit, the events marked (no daemon needed)"
-    p = sub.add_parser("plot", help=text, description=text)
-    p.add_argument("log")
-    p.add_argument("-o", "--output", required=True)
-    p.add_argument("--signals", default="", help="comma-separated column prefixes (default: all)")
-    p.add_argument("--format", choices=("png", "svg"), help="default: the output's suffix, else png")
-    p.set_defaults(func=run_plot)
     from orccadd.ctl.foxglove import add_parser as add_foxglove
 
     add_foxglove(sub)
@@ -323,16 +316,4 @@ def _top(c: Client, a: argparse.Namespace) -> int:
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         _stdout_gone()
-    return EXIT_OK
-
-
-def run_plot(a: argparse.Namespace) -> int:
-    from orccadd.ctl.plot import plot_csv
-
-    try:
-        info = plot_csv(Path(a.log), Path(a.output), [s for s in a.signals.split(",") if s], a.format)
-    except (OSError, ValueError) as e:
-        print(error_line(str(e)), file=sys.stderr)
-        return EXIT_ERROR
-    print(info)
     return EXIT_OK

@@ -12,8 +12,8 @@ import pytest
 from orccadd.automaton import Automaton, compile_file, compile_text, verify
 from orccadd.automaton.interpreter import Interpreter
 from orccadd.automaton.verify import CheckResult, Report, format_trace
-from orccadd.ctl.offline import cmd_check
 from orccadd.errors import MissionError
+from orccadd.offline.commands import cmd_check
 from orccadd.task.spec import read_task_interface
 from orccadd.types import CommandMode, TaskInterface
 from tests.automaton.conftest import KEEPSTABLE, MISSIONS, TEST_MISSIONS

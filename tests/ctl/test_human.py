@@ -18,8 +18,9 @@ from typing import Any, NamedTuple
 import pytest
 
 from orccadd.cli import build_parser, orccadctl_main
-from orccadd.ctl import foxglove, offline, online
+from orccadd.ctl import foxglove, online
 from orccadd.ctl.format import bounds, num
+from orccadd.offline import commands as offline
 from tests.ctl.test_streams import server  # noqa: F401  (the stand-in stream server)
 from tests.ctl.test_top import EVENTS, RUNNING
 from tests.daemon.conftest import ROOT, start_daemon
@@ -203,9 +204,8 @@ def test_ctrl_c_ends_every_command_quietly_with_130(monkeypatch: pytest.MonkeyPa
     assert subcommands - set(ARGV) == {"completion"}  # a new command gets its line here
     monkeypatch.setattr(online, "Client", interrupt)  # what every online command does first
     monkeypatch.setattr(foxglove, "Client", interrupt)
-    for name in ("cmd_check", "cmd_graph", "cmd_export", "cmd_modules"):
+    for name in ("cmd_check", "cmd_graph", "cmd_export", "cmd_modules", "cmd_plot"):
         monkeypatch.setattr(offline, name, interrupt)
-    monkeypatch.setattr(online, "run_plot", interrupt)
     for name, argv in ARGV.items():
         assert run("--socket", "/nonexistent.sock", *argv) == Out(130, "", ""), name
 

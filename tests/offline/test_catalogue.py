@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from orccadd.cli import orccadctl_main
-from orccadd.ctl.catalogue import catalogue
 from orccadd.modules import MODULES
+from orccadd.offline.catalogue import catalogue
 
 
 def test_every_module_type_is_listed_with_ports_and_parameters() -> None:

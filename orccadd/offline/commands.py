@@ -1,4 +1,5 @@
-"""Commands that need no daemon: check a mission, draw it, export it for spin."""
+"""Commands that need no daemon: check a mission, draw it, export it for spin, the module
+catalogue, plot a log."""
 
 from __future__ import annotations
 
@@ -73,10 +74,29 @@ def add_parsers(sub: Any) -> None:
     m = sub.add_parser("modules", help="the module catalogue: ports, parameters, defaults and bounds")
     m.add_argument("--config", default="sim-ur5e", help="the robot that sizes them (file or shipped name)")
     m.set_defaults(func=cmd_modules)
+    text = "plot a CSV log: a panel per signal group with its unit, the events marked (no daemon needed)"
+    p = sub.add_parser("plot", help=text, description=text)
+    p.add_argument("log")
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--signals", default="", help="comma-separated column prefixes (default: all)")
+    p.add_argument("--format", choices=("png", "svg"), help="default: the output's suffix, else png")
+    p.set_defaults(func=cmd_plot)
+
+
+def cmd_plot(a: argparse.Namespace) -> int:
+    from orccadd.offline.plot import plot_csv
+
+    try:
+        info = plot_csv(Path(a.log), Path(a.output), [s for s in a.signals.split(",") if s], a.format)
+    except (OSError, ValueError) as e:
+        print(error_line(str(e)), file=sys.stderr)
+        return EXIT_ERROR
+    print(info)
+    return EXIT_OK
 
 
 def cmd_modules(args: argparse.Namespace) -> int:
-    from orccadd.ctl.catalogue import catalogue
+    from orccadd.offline.catalogue import catalogue
 
     print(catalogue(args.config))
     return EXIT_OK

@@ -13,7 +13,7 @@ from orccadd.cli import orccadctl_main
 from orccadd.cmdd.csvlog import LogDir
 from orccadd.cmdd.logsession import TelemetryLog
 from orccadd.cmdd.views import SignalSelection
-from orccadd.ctl.plot import output_format, plot_csv, read_log
+from orccadd.offline.plot import output_format, plot_csv, read_log
 from orccadd.wire.schema import CommandMode, Layout, OperatorAction, Trace
 from orccadd.wire.telemetry import TelemetryBlock
 from tests.cmdd.conftest import DESC, PERIOD_S, URDF, FakeLoop, decode
