@@ -10,6 +10,7 @@ import sys
 
 from orccadd.ctl import online
 from orccadd.ctl.completion import SHELLS
+from orccadd.errors import did_you_mean
 from orccadd.wire.version import version_text
 
 EXIT_INTERRUPTED = 130  # Ctrl-C: 128 + SIGINT, as a shell reports it
@@ -21,15 +22,23 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=version_text("orccadctl"))
     # also after the subcommand (`orccadctl status --socket PATH`), where they take precedence
-    parser.add_argument("--socket", dest="global_socket", default=None, help="the daemon's socket")
-    parser.add_argument("--json", dest="global_json", action="store_true", help="print JSON replies")
+    parser.add_argument(
+        "--socket",
+        dest="global_socket",
+        default=None,
+        metavar="PATH",
+        help="the daemon's socket ($ORCCADD_SOCKET)",
+    )
+    parser.add_argument(
+        "--json", dest="global_json", action="store_true", help="print JSON replies (and errors)"
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     from orccadd.offline.commands import add_parsers as add_offline  # argparse only, until one runs
 
     add_offline(sub)
     online.add_parsers(sub)
     p = sub.add_parser("completion", help="print a shell completion script (bash, zsh)")
-    p.add_argument("shell", choices=SHELLS)
+    p.add_argument("shell", choices=SHELLS, help="the shell to complete for")
     return parser
 
 
@@ -46,6 +55,10 @@ def orccadctl_main(argv: list[str] | None = None) -> int:
 
 def _main(argv: list[str] | None) -> int:
     parser = build_parser()
+    unknown = _unknown_command(parser, sys.argv[1:] if argv is None else argv)
+    if unknown:
+        print(f"{parser.prog}: error: {unknown}", file=sys.stderr)
+        return 2
     args = parser.parse_args(argv)
     if args.command == "completion":
         from orccadd.ctl.completion import completion_script
@@ -62,6 +75,22 @@ def _main(argv: list[str] | None) -> int:
     from orccadd.offline.commands import run
 
     return run(args)
+
+
+def _unknown_command(parser: argparse.ArgumentParser, argv: list[str]) -> str:
+    """The words for a command orccadctl does not have, with the nearest ones ("" when known):
+    one line, not the usage and every choice."""
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    words = iter(argv)
+    for word in words:
+        if word == "--socket":
+            next(words, None)  # its value
+        elif not word.startswith("-"):
+            if word in sub.choices:
+                return ""
+            hint = did_you_mean(word, sub.choices) or f"; commands: {', '.join(sub.choices)}"
+            return f"no command {word!r}{hint}"
+    return ""
 
 
 if __name__ == "__main__":

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
+
 
 class OrccaddError(Exception):
     """Root of every error orccadd raises on purpose."""
@@ -65,3 +68,9 @@ class MissionError(OrccaddError):
 
 class VerificationError(OrccaddError):
     """A mission compiled but failed a check; the message holds every failed check's counterexample."""
+
+
+def did_you_mean(word: str, known: Iterable[str]) -> str:
+    """ "; did you mean A or B?" for the known names nearest a mistyped one ("" when none is near)."""
+    near = difflib.get_close_matches(word, list(known), n=3, cutoff=0.6)
+    return f"; did you mean {' or '.join(near)}?" if near else ""

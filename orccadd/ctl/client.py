@@ -17,6 +17,10 @@ def default_socket() -> str:
     return os.environ.get("ORCCADD_SOCKET", DEFAULT_SOCKET)
 
 
+def socket_help() -> str:
+    return f"the daemon's socket (default: $ORCCADD_SOCKET, else {DEFAULT_SOCKET}; now {default_socket()})"
+
+
 class ClientError(Exception):
     """The daemon cannot be reached, or answered with an error (the message is its words)."""
 

@@ -18,7 +18,7 @@ import threading
 import time
 from typing import Any
 
-from orccadd.ctl.client import Client, ClientError, default_socket
+from orccadd.ctl.client import Client, ClientError, socket_help
 from orccadd.ctl.format import error_line
 from orccadd.fault import cause_words
 from orccadd.wire import foxglove_schemas as sch
@@ -34,7 +34,7 @@ def add_parser(sub: Any) -> None:
     """The `foxglove` subcommand (for orccadctl's parser)."""
     text = "serve the live state and events to Foxglove over a WebSocket on 127.0.0.1 (to you only)"
     p = sub.add_parser("foxglove", help=text, description=text)
-    p.add_argument("--socket", default=None, help=f"the daemon's socket (default {default_socket()})")
+    p.add_argument("--socket", default=None, metavar="PATH", help=socket_help())
     p.add_argument("--port", type=int, default=8765, help="the WebSocket's port on 127.0.0.1 (0: any free)")
     p.add_argument("--rate", type=float, default=50.0, help="samples per second")
     p.add_argument(

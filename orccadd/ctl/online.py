@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from orccadd.ctl.client import Client, ClientError, default_socket
+from orccadd.ctl.client import Client, ClientError, default_socket, socket_help
 from orccadd.ctl.format import error_line, format_trace
 from orccadd.ctl.format import format_status as format_status  # the demo prints it
 from orccadd.ctl.human import context_requests, format_reply
@@ -20,6 +20,12 @@ from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, client_wait_s
 from orccadd.wire.socketdir import urgent_socket_path
 
 EXIT_OK, EXIT_REFUSED, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
+SIGNALS_HELP = "q, dq, tau, cmd (all joints), q.3 or q.elbow_joint (one), wake_us, compute_us, status, ..."
+
+
+def table_help(cmd: str, arg: str) -> str:
+    """An argument's help as the command table declares it (one text for the CLI and the docs)."""
+    return COMMANDS[cmd].arg(arg).help
 
 
 def add_parsers(sub: Any) -> None:
@@ -27,7 +33,7 @@ def add_parsers(sub: Any) -> None:
         """A subcommand; its help is the command table's unless given (composite commands)."""
         text = help_ or COMMANDS[name].help.replace("`", "")
         p: argparse.ArgumentParser = sub.add_parser(name, help=text, description=text)
-        p.add_argument("--socket", default=None, help=f"the daemon's socket (default {default_socket()})")
+        p.add_argument("--socket", default=None, metavar="PATH", help=socket_help())
         p.add_argument("--json", action="store_true", help="print the daemon's JSON reply")
         p.set_defaults(func=run_online, online=name)
         return p
@@ -35,40 +41,42 @@ def add_parsers(sub: Any) -> None:
     add("status")
     add("describe")
     p = add("load")
-    p.add_argument("mission")
+    p.add_argument("mission", help="a mission file, or a shipped mission's name (demo, pick_place, ...)")
     p = add("start")
-    p.add_argument("procedure", nargs="?", default="")
+    p.add_argument("procedure", nargs="?", default="", help=table_help("start", "procedure"))
     add("stop")
     add("abort")
     add("hold")
     add("resume")
     add("reset")
     p = add("send")
-    p.add_argument("input")
+    p.add_argument("input", help="an operator input the mission declares (`input` in the mission)")
     p = add("params")
-    p.add_argument("task", nargs="?", default="")
+    p.add_argument("task", nargs="?", default="", help=table_help("params", "task"))
     p = add("tune")
     p.add_argument("path", help="TASK.MODULE.PARAM, or TASK.MODULE.PARAM[i] for one joint's (i from 0)")
     p.add_argument("value", help="a number, or a JSON list with one per joint for a vector")
     p = add("monitor")
-    p.add_argument("signals", nargs="*")
+    p.add_argument("signals", nargs="*", help=SIGNALS_HELP)
     p.add_argument("--rate", type=float, default=10.0, help="samples per second")
     p.add_argument("--count", type=int, default=0, help="stop after N samples")
     p.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
     p = add("events")
-    p.add_argument("--last", type=int, default=50)
-    p.add_argument("--follow", action="store_true")
-    p.add_argument("--duration", type=float, default=0.0)
+    p.add_argument("--last", type=int, default=50, metavar="N", help=table_help("events", "last"))
+    p.add_argument("--follow", action="store_true", help=table_help("events", "follow"))
+    p.add_argument(
+        "--duration", type=float, default=0.0, metavar="S", help=table_help("events", "duration_s")
+    )
     p = add(
         "top",
         "a live terminal view (state, goal, last error, joints, timing, last events); keys: "
         "q quit, p pause the display, h hold, r resume",
     )
-    p.add_argument("--rate", type=float, default=4.0)
+    p.add_argument("--rate", type=float, default=4.0, metavar="HZ", help="refreshes per second")
     p.add_argument("--count", type=int, default=0, help="refreshes before exiting (0: until Ctrl-C)")
     p = add("log")
-    p.add_argument("action", choices=COMMANDS["log"].arg("action").choices)
-    p.add_argument("signals", nargs="*")
+    p.add_argument("action", choices=COMMANDS["log"].arg("action").choices, help=table_help("log", "action"))
+    p.add_argument("signals", nargs="*", help="start: " + SIGNALS_HELP + " (default: q dq tau cmd)")
     p.add_argument("--name", default="", help="start: the log's file name in the daemon's log directory")
     p.add_argument(
         "-o",
@@ -77,9 +85,11 @@ def add_parsers(sub: Any) -> None:
         help="stop: copy the CSV (and its MCAP beside it) here, with your rights; a link there is refused",
     )
     p = add("inject")
-    p.add_argument("fault", choices=COMMANDS["inject"].arg("fault").choices)
-    p.add_argument("--ticks", type=int, default=20)
-    p.add_argument("--extra-ms", type=float, default=0.0)
+    p.add_argument(
+        "fault", choices=COMMANDS["inject"].arg("fault").choices, help=table_help("inject", "fault")
+    )
+    p.add_argument("--ticks", type=int, default=20, help=table_help("inject", "ticks"))
+    p.add_argument("--extra-ms", type=float, default=0.0, metavar="MS", help=table_help("inject", "extra_ms"))
     from orccadd.ctl.foxglove import add_parser as add_foxglove
 
     add_foxglove(sub)
@@ -156,17 +166,26 @@ def run_online(a: argparse.Namespace) -> int:
             r, context = online
         return _report(a, r, context, args)
     except ClientError as e:
-        print(error_line(str(e)), file=sys.stderr)
+        _error(a, str(e))
     except BrokenPipeError:
         _stdout_gone()
         return EXIT_OK
     except OSError as e:  # no reply in time, the connection reset mid-reply
-        print(error_line(f"orccadd at {a.socket or default_socket()}: {e.strerror or e}"), file=sys.stderr)
+        _error(a, f"orccadd at {a.socket or default_socket()}: {e.strerror or e}")
     except ValueError as e:  # a reply that is not JSON
-        print(error_line(f"unreadable reply from orccadd: {e}"), file=sys.stderr)
+        _error(a, f"unreadable reply from orccadd: {e}")
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
     return EXIT_ERROR
+
+
+def _error(a: argparse.Namespace, message: str) -> None:
+    """An error of the client itself (no daemon, no reply): in words on stderr, or with `--json`
+    as the daemon's error replies are (`{"ok": false, "error": …}`) on stdout."""
+    if getattr(a, "json", False):
+        print(json.dumps({"ok": False, "error": message}, indent=1))
+    else:
+        print(error_line(message), file=sys.stderr)
 
 
 def _online(

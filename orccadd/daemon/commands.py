@@ -28,7 +28,7 @@ from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.supervision import Supervisor
-from orccadd.errors import OrccaddError, ParameterError
+from orccadd.errors import OrccaddError, ParameterError, did_you_mean
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.mailbox import MailboxFullError
 from orccadd.task import RobotTask
@@ -246,7 +246,8 @@ class RtCommands:
         for t in tasks:
             if t.name == name:
                 return t
-        raise CommandError(f"no task {name!r} (tasks: {', '.join(t.name for t in tasks)})")
+        names = [t.name for t in tasks]
+        raise CommandError(f"no task {name!r}{did_you_mean(name, names)} (tasks: {', '.join(names)})")
 
     @handles("tune")
     def tune(self, path: str, value: Any) -> Result | Pending:

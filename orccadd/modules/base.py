@@ -136,7 +136,8 @@ class Parameter:
             lo_i = float(np.broadcast_to(lo, bad.shape)[i] if bad.ndim else lo)
             hi_i = float(np.broadcast_to(hi, bad.shape)[i] if bad.ndim else hi)
             where = f" at index {i}" if np.ndim(value) else ""
-            raise self._error(f"(={shown!r}) must be in [{lo_i:g}, {hi_i:g}]{where} {self.unit}".rstrip())
+            unit = "" if self.unit in ("", "1") else f" {self.unit}"  # a ratio's "1" says nothing
+            raise self._error(f"(={shown!r}) must be in [{lo_i:g}, {hi_i:g}]{unit}{where}")
         return arr
 
     def _error(self, detail: str) -> ParameterError:

@@ -17,19 +17,26 @@ from orccadd.errors import MissionError, OrccaddError
 
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
 GRAPH_FULL_MAX = 50  # states a full graph stays readable with
+MISSION_HELP = "a mission file, or a shipped mission's name (demo, pick_place, ...)"
 PROGRESS_LINE_S = 2.0  # a long compilation says how far it is this often (on a terminal)
 
 
 def add_parsers(sub: Any) -> None:
     p = sub.add_parser("check", help="compile a mission and run every check (no daemon needed)")
-    p.add_argument("file")
+    p.add_argument("file", help=MISSION_HELP)
     p.add_argument("--json", action="store_true", help="machine-readable verdicts")
     p.add_argument(
         "--strict",
         action="store_true",
         help="warnings (dead code) fail the check too (the daemon's load keeps them warnings)",
     )
-    p.add_argument("--max-states", type=int, default=200_000)
+    p.add_argument(
+        "--max-states",
+        type=int,
+        default=200_000,
+        metavar="N",
+        help="refuse a mission whose automaton would have more states (default 200000)",
+    )
     p.add_argument(
         "--language-only",
         action="store_true",
@@ -44,7 +51,7 @@ def add_parsers(sub: Any) -> None:
     )
     p.set_defaults(func=cmd_check)
     g = sub.add_parser("graph", help="draw a mission's automaton, or an abstract view of it")
-    g.add_argument("file")
+    g.add_argument("file", help=MISSION_HELP)
     g.add_argument(
         "--abstract",
         default="",
@@ -56,7 +63,7 @@ def add_parsers(sub: Any) -> None:
     g.add_argument("-o", "--output", required=True, help="out.svg, out.png, out.pdf or out.dot")
     g.set_defaults(func=cmd_graph)
     e = sub.add_parser("export-promela", help="write the mission as a Promela model for spin")
-    e.add_argument("file")
+    e.add_argument("file", help=MISSION_HELP)
     e.add_argument("-o", "--output", default="-", help="file, or - for standard output")
     e.add_argument(
         "--property",
@@ -76,8 +83,8 @@ def add_parsers(sub: Any) -> None:
     m.set_defaults(func=cmd_modules)
     text = "plot a CSV log: a panel per signal group with its unit, the events marked (no daemon needed)"
     p = sub.add_parser("plot", help=text, description=text)
-    p.add_argument("log")
-    p.add_argument("-o", "--output", required=True)
+    p.add_argument("log", help="a CSV log (`orccadctl log stop -o run.csv`)")
+    p.add_argument("-o", "--output", required=True, help="out.png or out.svg")
     p.add_argument("--signals", default="", help="comma-separated column prefixes (default: all)")
     p.add_argument("--format", choices=("png", "svg"), help="default: the output's suffix, else png")
     p.set_defaults(func=cmd_plot)

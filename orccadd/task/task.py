@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from orccadd.errors import ParameterError
+from orccadd.errors import ParameterError, did_you_mean
 from orccadd.fault import Fault, FaultKind
 from orccadd.modules.base import Module, Parameter
 from orccadd.physres.base import PhysicalResource
@@ -221,8 +221,10 @@ class RobotTask:
         what is wrong. Not for a tick."""
         name, index = split_index(path)
         if name not in self._tunable:
+            known = sorted(self._tunable)
             raise ParameterError(
-                f"task {self.name} has no parameter {name!r} (parameters: {', '.join(sorted(self._tunable))})"
+                f"task {self.name} has no parameter {name!r}{did_you_mean(name, known)} "
+                f"(parameters: {', '.join(known)})"
             )
         module, param = self._tunable[name]
         if not param.tunable:

@@ -109,6 +109,8 @@ def test_tune_is_checked_before_anything_changes() -> None:
         task.prepare_tune("ct.kp", -3)
     with pytest.raises(ParameterError, match="has no parameter 'ct.gain'"):
         task.prepare_tune("ct.gain", 1.0)
+    with pytest.raises(ParameterError, match=r"has no parameter 'ct.kpp'; did you mean ct\.kp"):
+        task.prepare_tune("ct.kpp", 1.0)  # a typo gets the nearest names
     with pytest.raises(ParameterError, match="must be 6 numbers"):
         task.prepare_tune("ct.kp", [1.0, 2.0])
     change = task.prepare_tune("ct.kp", 500.0)
@@ -125,7 +127,7 @@ def test_one_element_of_a_vector_is_tuned_alone() -> None:
     task.apply_change(change)
     task.apply_change(other)  # writes its element only: the first stays
     assert ct.kp.value.tolist() == [900.0, 900.0, 650.0, 900.0, 350.0, 900.0]
-    with pytest.raises(ParameterError, match=r"must be in \[0, 100000\] at index 2"):
+    with pytest.raises(ParameterError, match=r"must be in \[0, 100000\] 1/s\^2 at index 2"):
         task.prepare_tune("ct.kp[2]", -1.0)
     with pytest.raises(ParameterError, match="has indices 0 to 5"):
         task.prepare_tune("ct.kp[6]", 1.0)
