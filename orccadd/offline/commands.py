@@ -81,9 +81,9 @@ def add_parsers(sub: Any) -> None:
     m = sub.add_parser("modules", help="the module catalogue: ports, parameters, defaults and bounds")
     m.add_argument("--config", default="sim-ur5e", help="the robot that sizes them (file or shipped name)")
     m.set_defaults(func=cmd_modules)
-    text = "plot a CSV log: a panel per signal group with its unit, the events marked (no daemon needed)"
+    text = "plot a log (CSV or MCAP): a panel per signal group with its unit, the events named (no daemon needed)"
     p = sub.add_parser("plot", help=text, description=text)
-    p.add_argument("log", help="a CSV log (`orccadctl log stop -o run.csv`)")
+    p.add_argument("log", help="a log, CSV or MCAP (`orccadctl log stop -o run.csv` copies both)")
     p.add_argument("-o", "--output", required=True, help="out.png or out.svg")
     p.add_argument("--signals", default="", help="comma-separated column prefixes (default: all)")
     p.add_argument("--format", choices=("png", "svg"), help="default: the output's suffix, else png")

@@ -1,9 +1,11 @@
-"""`orccadctl plot LOG -o out.png|out.svg`: one panel per signal group of a CSV log (q, dq, tau,
-cmd, ...), each axis with its unit, the mission's events (automaton instants, task events,
-operator commands) as named vertical marks (matplotlib).
+"""`orccadctl plot LOG -o out.png|out.svg`: one panel per signal group of a log (q, dq, tau, cmd,
+...), each axis with its unit, the mission's events (automaton instants, task events, operator
+commands, safe stops) as vertical marks named in a lane of their own above the panels, in as
+many rows as they need not to overlap (matplotlib); legends beside the panels, not over the data.
 
-Everything comes from the CSV itself (its header's units, its `# event` lines): a log copied
-elsewhere plots the same. A log written before logs had a header plots without units or events.
+A log is its CSV or its MCAP (the same content). Everything comes from the file itself (the
+CSV's header and `# event` lines; the MCAP's channels, their units and `/events`): a log copied
+elsewhere plots the same. A CSV written before logs had a header plots without units or events.
 """
 
 from __future__ import annotations
@@ -17,8 +19,10 @@ from typing import Any
 import numpy as np
 
 FORMATS = ("png", "svg")
-MARKED = {"instant": "tab:blue", "event": "tab:red", "command": "tab:gray"}  # kinds drawn, colours
-MAX_LABELS = 60  # event names written on the figure (every event is marked)
+MARKED = {"instant": "tab:blue", "event": "tab:red", "command": "tab:gray", "fault": "darkred"}
+LANE_ROWS = 6  # rows of event names above the panels; a name that fits in none is counted, not drawn
+LABEL_FONT_PT = 7
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 @dataclass
@@ -33,7 +37,67 @@ class CsvLogData:
 
 
 def read_log(log: Path) -> CsvLogData:
-    """The columns, rows, header and events of a CSV log; `ValueError` if it is not one."""
+    """The columns, rows, header and events of a log, CSV or MCAP; `ValueError` if it is neither."""
+    with log.open("rb") as fh:
+        if fh.read(len(MCAP_MAGIC)) == MCAP_MAGIC:
+            return read_mcap(log)
+    try:
+        return _read_csv(log)
+    except UnicodeDecodeError:
+        raise ValueError(f"{log}: not an orccadd log (neither its CSV nor its MCAP)") from None
+
+
+def read_mcap(log: Path) -> CsvLogData:
+    """An MCAP log as its CSV reads: a column per signal group's field (`q.elbow_joint`, or the
+    group's name for a scalar), the units of the channels, the events of `/events` (the name is
+    the first word of the message) timed from the log's own clock."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    columns: dict[str, dict[float, float]] = {}
+    units: dict[str, Any] = {"time_s": "s"}
+    events: list[tuple[int, str, str]] = []  # (log time ns, kind, name)
+    meta: dict[str, Any] = {}
+    offset_ns: int | None = None  # log time − time_s, from any signal's message
+    try:
+        with log.open("rb") as fh:
+            reader = make_reader(fh)
+            for m in reader.iter_metadata():
+                if m.name == "orccadd.log":
+                    meta = dict(m.metadata)
+            for _, channel, message in reader.iter_messages():
+                body = json.loads(message.data)
+                if channel.topic == "/events":
+                    kind = str(body.get("name", "")).removeprefix("orccadd.")
+                    text = str(body.get("message", ""))
+                    name = text if text.startswith("(") else text.split(" ", 1)[0]
+                    events.append((message.log_time, kind, name))
+                    continue
+                signal = channel.metadata.get("signal")
+                if signal is None or "time_s" not in body:
+                    continue  # /joint_states, /faults, /robot_description
+                t = float(body["time_s"])
+                if offset_ns is None:
+                    offset_ns = message.log_time - round(t * 1e9)
+                units[signal] = channel.metadata.get("unit", "?")
+                for field_name, v in body.items():
+                    if field_name != "time_s" and (isinstance(v, float | int) or v is None):
+                        col = signal if field_name == "value" else f"{signal}.{field_name}"
+                        columns.setdefault(col, {})[t] = float("nan") if v is None else float(v)
+    except (McapError, OSError, ValueError, KeyError) as e:
+        raise ValueError(f"{log}: not a readable MCAP log ({e})") from None
+    if not columns or offset_ns is None:
+        raise ValueError(f"{log}: an MCAP file without an orccadd log's signals")
+    times = sorted({t for c in columns.values() for t in c})
+    names = list(columns)
+    data = np.array([[t, *(columns[c].get(t, np.nan) for c in names)] for t in times])
+    if "cmd" in units:  # the command's unit is its mode's, as in the CSV
+        units["cmd"] = {"position": "rad", "velocity": "rad/s", "torque": "N.m"}
+    timed = [((ns - offset_ns) * 1e-9, kind, name) for ns, kind, name in events]
+    return CsvLogData(["time_s", *names], data, meta or {"format": "mcap"}, units, timed)
+
+
+def _read_csv(log: Path) -> CsvLogData:
     meta: dict[str, Any] = {}
     units: dict[str, Any] = {}
     events: list[tuple[float, str, str]] = []
@@ -63,6 +127,28 @@ def read_log(log: Path) -> CsvLogData:
     if not meta:  # an old log: absolute loop times
         data[:, 0] -= data[0, 0]
     return CsvLogData(columns, data, meta, units, events)
+
+
+def lane_rows(marks: list[tuple[float, str, str]], t0: float, t1: float, width_in: float) -> list[int]:
+    """The lane row of each event name (-1: no room): the first row where the name starts after
+    the previous one there ends, a name's width estimated from its characters at the label font
+    over `width_in` inches of axis spanning [t0, t1] s."""
+    span_s = max(t1 - t0, 1e-9)
+    s_per_char = span_s * (LABEL_FONT_PT * 0.6 / 72.0) / width_in  # ~0.6 em a character
+    ends: list[float] = []  # per row: where its last name ends, s
+    out = []
+    for ts, _, name in marks:
+        end = ts + (len(name) + 1) * s_per_char
+        row = next((i for i, e in enumerate(ends) if ts >= e), len(ends))
+        if row >= LANE_ROWS:
+            out.append(-1)
+            continue
+        if row == len(ends):
+            ends.append(end)
+        else:
+            ends[row] = end
+        out.append(row)
+    return out
 
 
 def axis_unit(group: str, log: CsvLogData) -> str:
@@ -107,8 +193,22 @@ def plot_csv(log: Path, out: Path, prefixes: list[str], fmt: str | None = None) 
     t = d.data[:, 0]
     marks = [(ts, kind, name) for ts, kind, name in d.events if kind in MARKED and t[0] <= ts <= t[-1]]
     mode_changes = [(ts, name) for ts, kind, name in d.events if kind == "mode"]
+    width_in = 10.0
+    rows = lane_rows(marks, float(t[0]), float(t[-1]), width_in * 0.8)
+    n_rows = max(rows, default=-1) + 1
     with plt.rc_context({"svg.fonttype": "none"}):  # SVG text stays text (searchable)
-        fig, axes = plt.subplots(len(groups), 1, sharex=True, figsize=(10, 2.6 * len(groups)), squeeze=False)
+        lane_in = 0.22 * max(n_rows, 1)
+        fig, axes = plt.subplots(
+            len(groups) + 1, 1, sharex=True, figsize=(width_in, lane_in + 2.6 * len(groups)), squeeze=False,
+            gridspec_kw={"height_ratios": [lane_in, *[2.6] * len(groups)]},
+        )  # fmt: skip
+        lane = axes[0, 0]
+        lane.set_ylim(n_rows + 0.2, -0.2)  # row 0 on top
+        lane.axis("off")
+        for (ts, kind, name), row in zip(marks, rows, strict=True):
+            if row >= 0:
+                lane.text(ts, row, name, fontsize=LABEL_FONT_PT, color=MARKED[kind], ha="left", va="center")
+        axes = axes[1:]
         for ax, (base, cols) in zip(axes[:, 0], groups.items(), strict=True):
             for c in cols:
                 ax.plot(t, d.data[:, c], lw=1.0, label=d.columns[c].split(".", 1)[-1])
@@ -121,19 +221,16 @@ def plot_csv(log: Path, out: Path, prefixes: list[str], fmt: str | None = None) 
                             color="tab:green", va="top")  # fmt: skip
             ax.set_ylabel(f"{base} [{axis_unit(base, d)}]")
             ax.grid(True, alpha=0.3)
-            if len(cols) > 1:
-                ax.legend(fontsize=7, ncol=min(len(cols), 4), loc="upper right")
-        top = axes[0, 0]
-        for ts, kind, name in marks[:MAX_LABELS]:
-            top.text(ts, 1.02, name, transform=top.get_xaxis_transform(), rotation=60, fontsize=7,
-                     color=MARKED[kind], ha="left", va="bottom")  # fmt: skip
+            if len(cols) > 1:  # beside the panel: never over the data
+                ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
         axes[-1, 0].set_xlabel("time since the log started [s]" if d.meta else "time from the first row [s]")
         title = log.name + (f" (started {d.meta['start_utc']})" if d.meta.get("start_utc") else "")
         fig.suptitle(title, y=0.995)
         fig.tight_layout()
         fig.savefig(out, dpi=110, format=form)
         plt.close(fig)
-    skipped = f", {len(marks) - MAX_LABELS} more not named" if len(marks) > MAX_LABELS else ""
+    unnamed = sum(1 for r in rows if r < 0)
+    skipped = f", {unnamed} not named (no room)" if unnamed else ""
     return (
         f"{out}: {len(groups)} plots, {len(d.data)} samples over {t[-1] - t[0]:.2f} s, "
         f"{len(marks)} events{skipped} ({form})"

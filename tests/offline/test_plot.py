@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -13,7 +14,7 @@ from orccadd.cli import orccadctl_main
 from orccadd.cmdd.csvlog import LogDir
 from orccadd.cmdd.logsession import TelemetryLog
 from orccadd.cmdd.views import SignalSelection
-from orccadd.offline.plot import output_format, plot_csv, read_log
+from orccadd.offline.plot import LANE_ROWS, lane_rows, output_format, plot_csv, read_log
 from orccadd.wire.schema import CommandMode, Layout, OperatorAction, Trace
 from orccadd.wire.telemetry import TelemetryBlock
 from tests.cmdd.conftest import DESC, PERIOD_S, URDF, FakeLoop, decode
@@ -96,3 +97,59 @@ def test_not_a_log_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="not an orccadd log"):
         plot_csv(bad, tmp_path / "x.png", [])
     assert orccadctl_main(["plot", str(bad), "-o", str(tmp_path / "x.png")]) == 2
+
+
+def test_the_mcap_of_a_log_reads_and_plots_as_its_csv(log: Path, tmp_path: Path) -> None:
+    csv_log, mcap_log = read_log(log), read_log(log.with_suffix(".mcap"))
+    assert mcap_log.columns == csv_log.columns
+    assert mcap_log.data == pytest.approx(csv_log.data)  # same rows, same times since the start
+    assert {k: v for k, v in mcap_log.units.items() if k in csv_log.units} == csv_log.units
+    named = [(kind, name) for _, kind, name in csv_log.events]
+    assert [(kind, name) for _, kind, name in mcap_log.events] == named
+    assert [t for t, _, _ in mcap_log.events] == pytest.approx([t for t, _, _ in csv_log.events], abs=1e-6)
+    out = tmp_path / "from_mcap.svg"
+    assert orccadctl_main(["plot", str(log.with_suffix(".mcap")), "-o", str(out)]) == 0
+    assert "cmd [N.m | rad]" in out.read_text()
+
+
+def test_a_file_neither_csv_nor_mcap_is_refused_in_words(tmp_path: Path) -> None:
+    binary = tmp_path / "x.mcap"
+    binary.write_bytes(b"\x89MCAP0\r\n" + b"\xff" * 64)  # the magic, then nothing readable
+    with pytest.raises(ValueError, match="not a readable MCAP log"):
+        read_log(binary)
+    blob = tmp_path / "x.bin"
+    blob.write_bytes(bytes(range(256)))
+    with pytest.raises(ValueError, match="neither its CSV nor its MCAP"):
+        read_log(blob)
+
+
+def test_event_names_close_together_take_rows_of_their_own() -> None:
+    # the demo's events at 0, 0.8, 1.75 and 3.1 s over 8 s, with long names: they used to pile up
+    marks = [
+        (t, "instant", f"Reach.T2.TrackingLost+Home.done #{i}") for i, t in enumerate((0, 0.05, 0.1, 3.1))
+    ]
+    rows = lane_rows(marks, 0.0, 8.0, 8.0)
+    assert rows == [0, 1, 2, 0]  # three close ones stacked, the far one back on the first row
+    crowd = [(i * 0.001, "event", "X.T1.Slow") for i in range(40)]
+    crowded = lane_rows(crowd, 0.0, 8.0, 8.0)
+    assert max(crowded) == LANE_ROWS - 1 and crowded.count(-1) == 40 - LANE_ROWS  # counted, not drawn
+
+
+def test_legends_stand_beside_the_panels(log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from matplotlib.figure import Figure
+
+    saved: list[Figure] = []
+    real = Figure.savefig
+
+    def keep(fig: Figure, *args: Any, **kwargs: Any) -> None:
+        fig.canvas.draw()
+        saved.append(fig)
+        real(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    plot_csv(log, tmp_path / "run.png", ["q", "tau"])
+    panels = [ax for ax in saved[0].axes if ax.get_legend() is not None]
+    assert len(panels) == 2
+    for ax in panels:  # the legend's box starts right of the panel's: it covers no trace
+        legend = ax.get_legend()
+        assert legend is not None and legend.get_window_extent().x0 >= ax.get_window_extent().x1
