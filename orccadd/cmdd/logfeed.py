@@ -20,7 +20,7 @@ import numpy.typing as npt
 from orccadd.cmdd import views
 from orccadd.fault import StopCause
 from orccadd.wire.foxglove_schemas import CMD_UNIT
-from orccadd.wire.schema import CommandMode, H, R, T, exception_of
+from orccadd.wire.schema import CommandMode, H, R, T, exception_of, tune_words
 from orccadd.wire.telemetry import RingReader, TelemetryBlock
 
 FloatArray = npt.NDArray[np.float64]
@@ -108,6 +108,9 @@ def decode_event(rec: FloatArray, decode: Decoder, origin: LogOrigin) -> LogEven
             return LogEvent(t, d["seq"], "fault", f"#{cause['n']}", "(safe stop; cause no longer kept)", 3)
         c = StopCause.from_wire(cause)
         return LogEvent(t, d["seq"], "fault", c.event or c.fault.kind.value, str(c.fault), 3, cause)
+    tune = d.get("tune")
+    if tune:  # which parameter, before → after, the tick that applied it
+        return LogEvent(t, d["seq"], "command", "tune", f"(operator) {tune_words(tune)}")
     return LogEvent(t, d["seq"], "command", str(d["command"]), "(operator)")
 
 

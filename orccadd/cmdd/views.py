@@ -27,6 +27,7 @@ from orccadd.wire.schema import (
     T,
     TickLayout,
     Trace,
+    TuneRecord,
     status_names,
 )
 from orccadd.wire.telemetry import TelemetryBlock, read_status
@@ -206,7 +207,24 @@ def decode_trace(
     else:
         known_action = code in OperatorAction._value2member_map_
         out["command"] = OperatorAction(code).name.lower() if known_action else code
+        if code == OperatorAction.TUNE and int(rec[R.N_IN]) >= 5:
+            out["tune"] = _tune(rec, desc, mission)
     return out
+
+
+def _tune(rec: np.ndarray, desc: dict[str, Any], mission: dict[str, Any]) -> dict[str, Any]:
+    """A tune record in names: `TASK.MODULE.PARAM[i]`, the values before and after, the tick."""
+    base = len(R)
+    values = rec[base + TRACE_IDX : base + TRACE_IDX + int(rec[R.N_ACT])].tolist()
+    r = TuneRecord.decode(rec[base : base + 5].tolist(), values)
+    hold = (desc.get("tasks") or ["Hold"])[0]  # task id 0, the same whatever mission is loaded
+    tasks = [hold, *mission.get("tasks", [])]
+    tunables = [desc.get("hold_tunables", []), *mission.get("tunables", [])]
+    task = tasks[r.task] if 0 <= r.task < len(tasks) else f"#{r.task}"
+    names = tunables[r.task] if 0 <= r.task < len(tunables) else []
+    param = names[r.param] if 0 <= r.param < len(names) else f"#{r.param}"
+    path = f"{task}.{param}" + (f"[{r.element}]" if r.element >= 0 else "")
+    return {"path": path, "old": r.old, "new": r.new, "n": r.n, "tick": r.tick}
 
 
 def _clock(wall_s: float) -> str:

@@ -8,6 +8,7 @@ from collections.abc import Iterable
 from typing import Any
 
 from orccadd.fault import cause_words
+from orccadd.wire.schema import tune_words
 
 PROG = "orccadctl"
 
@@ -27,6 +28,8 @@ def format_trace(e: dict[str, Any]) -> str:
         return f"{head}  event   {e['event']}"
     if e["kind"] == "fault":
         return f"{head}  fault   {cause_words(e['fault'])}"
+    if e.get("tune"):
+        return f"{head}  command tune {tune_words(e['tune'])}"
     return f"{head}  command {e['command']}"
 
 

@@ -18,6 +18,8 @@ import time
 from pathlib import Path
 from typing import Any, Protocol
 
+import numpy as np
+
 from orccadd.automaton import Automaton, Report
 from orccadd.config.robot import RobotConfig
 from orccadd.config.shipped import is_bare_name, is_file
@@ -34,8 +36,9 @@ from orccadd.runtime.mailbox import MailboxFullError
 from orccadd.task import RobotTask
 from orccadd.task.events import EventQueue, EventRegistry
 from orccadd.task.spec import TaskSpec
+from orccadd.task.task import ParameterChange, split_index
 from orccadd.wire.commands import handles
-from orccadd.wire.schema import PROTOCOL_VERSION, MachineState, OperatorAction, Trace
+from orccadd.wire.schema import PROTOCOL_VERSION, MachineState, OperatorAction, Trace, TuneRecord
 
 MAX_INJECTED_MS = 5000.0  # longest injected tick: a stall, not a hang
 TUNE_WAIT_S = 1.0  # a tune not applied within this (or 100 periods) is reported as such
@@ -73,6 +76,19 @@ class RtCommands:
         if child is not None and child.poll() is None:
             child.kill()
             child.wait()
+
+    def _trace_tune(
+        self, t_s: float, task: RobotTask, name: str, change: ParameterChange, old: Any, tick: int
+    ) -> None:
+        """The operator's tune as the logs tell it: which parameter of which task, which element,
+        the values before and after, the tick that applied it (`TuneRecord`)."""
+        tid = next(i for i, t in enumerate(self.m.mission.tasks()) if t is task)
+        rec = TuneRecord(
+            tid, task.tunable_names.index(name), -1 if change.element is None else change.element, tick,
+            [float(x) for x in np.atleast_1d(old)], [float(x) for x in np.atleast_1d(change.value)],
+        )  # fmt: skip
+        head, values = rec.encode()
+        self.m.pub.trace(Trace.COMMAND, t_s, OperatorAction.TUNE, inputs=head, actions=values)
 
     def _trace(self, action: OperatorAction) -> float:
         t = self.m.now_s()
@@ -277,13 +293,14 @@ class RtCommands:
             seq = loop.tunes.post(change)
         except MailboxFullError as e:
             raise CommandError(f"tune {path}: not accepted: {e}") from None
-        self._trace(OperatorAction.TUNE)
         self.m.note(f"tune {path} = {value}")
+        t_posted = self.m.now_s()
 
         def poll() -> Result | None:
             tick = loop.tunes.acked(seq)
             if tick is None:
                 return None
+            self._trace_tune(t_posted, task, split_index(rest)[0], change, old, tick)
             return {"tuned": path, "value": value, "previous": old, "unit": unit, "applied_at_tick": tick}
 
         def expire() -> Result:

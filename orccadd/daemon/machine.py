@@ -138,6 +138,7 @@ class Machine:
             "resource": describe_resource(self),
             "generation": mc.generation,
             "tasks": [t.name for t in mc.tasks()],
+            "hold_tunables": mc.hold.tunable_names,  # the Hold task's (task id 0 of a tune record)
             "events": self.registry.names(),
             "event_kinds": [k.name.lower() for k in self.registry.kinds()],  # post, t1, t2, t3, sync, pre
             "mission": mc.mission.describe() if mc.mission else None,

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 from orccadd.wire.schema import TRACE_IDX, R, S, Trace
 from orccadd.wire.telemetry import TelemetryBlock
@@ -23,8 +24,8 @@ class Publisher:
         code: int = 0,
         s_from: int = -1,
         s_to: int = -1,
-        inputs: list[int] | None = None,
-        actions: list[int] | None = None,
+        inputs: Sequence[float] | None = None,
+        actions: Sequence[float] | None = None,
     ) -> None:
         """One trace record: an automaton instant, a task event or an operator action."""
         rec = self.tel.begin_trace()
@@ -34,8 +35,8 @@ class Publisher:
         rec[R.STATE_FROM] = s_from
         rec[R.STATE_TO] = s_to
         rec[R.CODE] = code
-        ins = (inputs or [])[:TRACE_IDX]
-        acts = (actions or [])[:TRACE_IDX]
+        ins = list(inputs or [])[:TRACE_IDX]
+        acts = list(actions or [])[:TRACE_IDX]
         rec[R.N_IN] = len(ins)
         rec[R.N_ACT] = len(acts)
         rec[R.MISSION_GEN] = self.mission_gen

@@ -81,7 +81,7 @@ def add_parsers(sub: Any) -> None:
     m = sub.add_parser("modules", help="the module catalogue: ports, parameters, defaults and bounds")
     m.add_argument("--config", default="sim-ur5e", help="the robot that sizes them (file or shipped name)")
     m.set_defaults(func=cmd_modules)
-    text = "plot a log (CSV or MCAP): a panel per signal group with its unit, the events named (no daemon needed)"
+    text = "plot a log (CSV or MCAP): a panel per signal group with its unit, the events named (no daemon)"
     p = sub.add_parser("plot", help=text, description=text)
     p.add_argument("log", help="a log, CSV or MCAP (`orccadctl log stop -o run.csv` copies both)")
     p.add_argument("-o", "--output", required=True, help="out.png or out.svg")

@@ -215,6 +215,11 @@ class RobotTask:
         self.phase = Phase.IDLE
         self.wrote = False
 
+    @property
+    def tunable_names(self) -> list[str]:
+        """`MODULE.PARAM` of every parameter `tune` may name, sorted (the trace numbers them so)."""
+        return sorted(self._tunable)
+
     def prepare_tune(self, path: str, value: Any) -> ParameterChange:
         """Check `MODULE.PARAM = value`, or `MODULE.PARAM[i] = number` for one element of a
         vector (name, tunable, index, bounds, shape), without applying it. `ParameterError` says

@@ -67,6 +67,17 @@ class Trace(IntEnum):
     FAULT = 3  # the arm safe-stopped: `code` numbers its cause (`describe`'s "faults")
 
 
+def tune_words(tune: Mapping[str, Any]) -> str:
+    """A decoded tune record in words: `Reach.ct.kp[2]: 500 → 600 (tick 48213)`; a vector the
+    record had to cut says how long it was."""
+
+    def values(v: list[float]) -> str:
+        return f"{v[0]:g}" if len(v) == 1 else "[" + ", ".join(f"{x:g}" for x in v) + "]"
+
+    cut = f" (first {len(tune['new'])} of {tune['n']})" if tune["n"] > len(tune["new"]) else ""
+    return f"{tune['path']}: {values(tune['old'])} → {values(tune['new'])}{cut} (tick {tune['tick']})"
+
+
 def exception_of(event: Mapping[str, Any]) -> int:
     """A decoded trace record's exception class, from the kinds it carries (never its names):
     3 for a type 3 exception or a safe stop's cause, 2 for a type 2, 0 for anything else."""
@@ -143,6 +154,33 @@ class R(IntEnum):
 
 
 TRACE_WIDTH = len(R) + 2 * TRACE_IDX
+
+
+@dataclass(frozen=True)
+class TuneRecord:
+    """A tune as its trace record (a COMMAND, code TUNE) carries it: in the input slots the task's
+    telemetry id, the parameter's index in that task's `tunables`, the element (-1: the whole
+    parameter), the tick that applied it and how many values; in the action slots the values
+    before, then after (at most `TRACE_IDX // 2` of each: a longer vector is cut, `n` says so)."""
+
+    task: int
+    param: int
+    element: int
+    tick: int
+    old: list[float]
+    new: list[float]
+    n: int = 0  # how many values the parameter took (0: len(new))
+
+    def encode(self) -> tuple[list[float], list[float]]:
+        k = min(len(self.new), TRACE_IDX // 2)
+        head = [self.task, self.param, self.element, self.tick, self.n or len(self.new)]
+        return [float(x) for x in head], [*self.old[:k], *self.new[:k]]
+
+    @staticmethod
+    def decode(head: list[float], values: list[float]) -> TuneRecord:
+        task, param, element, tick, n = (int(x) for x in head[:5])
+        k = len(values) // 2
+        return TuneRecord(task, param, element, tick, values[:k], values[k:], n)
 
 
 def tick_width(dof: int) -> int:

@@ -5,7 +5,7 @@ with known values, trace records, a command mode to switch; and the names the da
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +38,14 @@ DESC: dict[str, Any] = {
             "text": "measured position of elbow_joint 3.2 rad outside [-3.1, 3.1]",
         }
     ],
-    "mission": {"name": "m", "inputs": ["start", "Approach.done"], "actions": ["Approach", "Stop"]},
+    "hold_tunables": ["pd.kd", "pd.kp"],
+    "mission": {
+        "name": "m",
+        "inputs": ["start", "Approach.done"],
+        "actions": ["Approach", "Stop"],
+        "tasks": ["Approach"],
+        "tunables": [["ct.kd", "ct.kp", "traj.target_rad"]],
+    },
 }
 
 
@@ -77,7 +84,7 @@ class FakeLoop:
             self.tel.commit_tick(rec, 0)
 
     def trace(
-        self, kind: Trace, code: int = 0, inputs: tuple[int, ...] = (), actions: tuple[int, ...] = ()
+        self, kind: Trace, code: int = 0, inputs: Sequence[float] = (), actions: Sequence[float] = ()
     ) -> None:
         """A trace record at the time of the last tick."""
         rec = self.tel.begin_trace()

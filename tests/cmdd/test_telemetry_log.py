@@ -22,7 +22,7 @@ from orccadd.cmdd.mcaplog import seal
 from orccadd.cmdd.urdf import urdf_path
 from orccadd.cmdd.views import SignalSelection
 from orccadd.config.robot import read_robot_config
-from orccadd.wire.schema import CommandMode, OperatorAction, Trace
+from orccadd.wire.schema import CommandMode, OperatorAction, Trace, TuneRecord
 from orccadd.wire.telemetry import TelemetryBlock
 from tests.cmdd.conftest import DESC, PERIOD_S, ROOT, URDF, FakeLoop, decode
 
@@ -264,3 +264,27 @@ def test_the_csv_reads_with_the_csv_module_skipping_comments(tmp_path: Path, loo
         rows: list[dict[str, Any]] = list(csv.DictReader(line for line in fh if not line.startswith("#")))
     assert len(rows) == 3 and float(rows[0]["time_s"]) == pytest.approx(PERIOD_S)
     shutil.rmtree(tmp_path / "logs")
+
+
+def test_a_tune_in_the_log_names_the_parameter_its_values_and_the_tick(
+    tmp_path: Path, loop: FakeLoop
+) -> None:
+    loop.ticks(5)
+    rec = start(tmp_path, loop.tel)
+    loop.ticks(10)
+    # Approach (task id 1) ct.kp (index 1) element 2: 500 → 600, applied at tick 15; then the whole
+    # target of 9 joints (a vector longer than the record keeps: the first 8 of 9)
+    for tune in (TuneRecord(1, 1, 2, 15, [500.0], [600.0]), TuneRecord(1, 2, -1, 16, [0.0] * 9, [0.5] * 9)):
+        head, values = tune.encode()
+        loop.trace(Trace.COMMAND, OperatorAction.TUNE, inputs=head, actions=values)
+    loop.ticks(10)
+    rec.close()
+    _, _, _, events = read_csv(tmp_path / "logs/run.csv")
+    tunes = [e[5] for e in events if e[4] == "tune"]
+    eight = "[" + ", ".join(["0.5"] * 8) + "]"
+    assert tunes == [
+        "(operator) Approach.ct.kp[2]: 500 → 600 (tick 15)",
+        f"(operator) Approach.traj.target_rad: [{', '.join(['0'] * 8)}] → {eight} (first 8 of 9) (tick 16)",
+    ]
+    msgs = [m["message"] for _, m in mcap_messages(tmp_path / "logs/run.mcap")["/events"]]
+    assert "tune (operator) Approach.ct.kp[2]: 500 → 600 (tick 15)" in msgs

@@ -90,7 +90,19 @@ def test_params_and_tune(daemon: Daemon) -> None:
     assert isinstance(reply, dict) and reply["previous"] == 500.0 and reply["tuned"] == "Reach.ct.kp[2]"
     assert reply["unit"] == kp["unit"]  # its unit in the same reply: no second request
     assert before <= reply["applied_at_tick"] <= after + 1, (before, reply, after)
-    daemon.call("tune", path="Reach.ct.kp[5]", value=400)
+    applied = daemon.call("tune", path="Reach.ct.kp[5]", value=400)
+    # the trace (and every log) says which parameter, before → after, and the tick that applied it
+    tunes = [e["tune"] for e in daemon.call("events", last=10)["events"] if e.get("tune")]  # type: ignore[index]
+    assert tunes[-2:] == [
+        {"path": "Reach.ct.kp[2]", "old": [500.0], "new": [600.0], "n": 1, "tick": reply["applied_at_tick"]},
+        {
+            "path": "Reach.ct.kp[5]",
+            "old": [500.0],
+            "new": [400.0],
+            "n": 1,
+            "tick": applied["applied_at_tick"],
+        },  # type: ignore[index]
+    ]
     params = daemon.call("params", task="Reach")
     kp = next(p for p in params["params"]["Reach"] if p["name"] == "ct.kp")["value"]
     assert kp == [500.0, 500.0, 600.0, 500.0, 500.0, 400.0]
