@@ -31,7 +31,8 @@ $(SYSTEM_STAMP): | $(VENV)/bin/python
 	fi
 	touch $@
 
-demo: setup
+# the demo needs the Python packages only (no system tool: no graph, no spin, no cyclictest)
+demo: $(STAMP)
 	$(PY) -m orccadd.demo
 
 lint: setup
