@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The wheel as a user gets it (CI runs this after `make test`): built from this checkout,
+# The wheel as a user gets it (CI runs this after `make test`): built from this checkout's HEAD,
 # installed with every bus extra into an empty virtual environment, then, from outside the
 # checkout: --version, `orccadctl check` on every shipped mission (its tasks built on sim-ur5e),
 # the service files, completion, the module catalogue, orccadd on the shipped
@@ -14,8 +14,7 @@ trap cleanup EXIT
 python3 -m venv "$work/venv"
 bin="$work/venv/bin"
 "$bin/python" -m pip install --quiet --upgrade pip
-"$here/.venv/bin/python" -m pip wheel --quiet --no-deps -w "$work/dist" "$here"
-wheel="$(ls "$work"/dist/orccadd-*.whl)"
+wheel="$("$here/packaging/build-wheel.sh" "$work/dist")"  # what the repository holds, nothing untracked
 "$bin/python" -m pip install --quiet "${wheel}[all]"
 
 cd "$work"  # nothing of the checkout from here on
