@@ -20,6 +20,7 @@ wheel="$("$here/packaging/build-wheel.sh" "$work/dist")"  # what the repository 
 cd "$work"  # nothing of the checkout from here on
 "$bin/orccadd" --version
 "$bin/orccadctl" --version
+"$bin/orccadd-vcan" --help >/dev/null  # the CANopen tour's virtual bus, from the wheel
 "$bin/orccadd" --list-configs
 share="$work/venv/share/orccadd/configs"
 for mission in "$share"/missions/*.mission; do

@@ -17,8 +17,8 @@ import can
 
 from orccadd.drivesim.process import DriveSimProcess
 from orccadd.drivesim.socketcand import QueuedSocketcandBus
+from orccadd.vcan.process import HOST, HubProcess, vcan_available
 from tests.conftest import ROOT, eds
-from tools.virtual_can.process import HOST, HubProcess, vcan_available
 
 CANOPEN_6AXIS = ROOT / "configs/robots/canopen-6axis.toml"
 CANOPEN_2BUS = ROOT / "configs/robots/canopen-2bus.toml"  # six axes on two buses, 1 kHz

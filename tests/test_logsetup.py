@@ -90,7 +90,7 @@ def test_a_bad_level_variable_is_a_clear_error() -> None:
 
 def test_a_process_started_with_a_bad_level_says_so_and_exits_2() -> None:
     env = {**os.environ, ENV_LEVEL: "loud"}
-    cmd = [sys.executable, "-m", "tools.virtual_can.hub", "--port", "0"]
+    cmd = [sys.executable, "-m", "orccadd.vcan", "--port", "0"]
     p = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=30)
     assert p.returncode == 2 and "ORCCADD_LOG_LEVEL='loud' is not a log level" in p.stderr, p.stderr
     assert "Traceback" not in p.stderr and p.stdout == ""

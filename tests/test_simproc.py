@@ -16,7 +16,7 @@ from tests.conftest import ROOT
 PARENT = """
 import os, sys
 sys.path.insert(0, {root!r})
-from tools.virtual_can.process import HubProcess
+from orccadd.vcan.process import HubProcess
 hub = HubProcess()
 print(hub.proc.pid, flush=True)
 os._exit(0)
@@ -43,13 +43,11 @@ def test_a_child_dies_with_its_parent() -> None:
     assert not _running(pid)
 
 
-@pytest.mark.parametrize(
-    "module", ["orccadd.drivesim", "orccadd.dxlsim", "orccadd.ursim", "tools.virtual_can.hub"]
-)
+@pytest.mark.parametrize("module", ["orccadd.drivesim", "orccadd.dxlsim", "orccadd.ursim", "orccadd.vcan"])
 def test_a_simulators_usage_names_the_command_that_runs_it(
     module: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    main = importlib.import_module(module if module.endswith("hub") else f"{module}.__main__").main
+    main = importlib.import_module(f"{module}.__main__").main
     with pytest.raises(SystemExit):
         main(["--help"])
     assert capsys.readouterr().out.startswith(f"usage: python -m {module} ")

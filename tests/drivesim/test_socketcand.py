@@ -10,9 +10,9 @@ import can
 import pytest
 
 from orccadd.drivesim.socketcand import QueuedSocketcandBus
+from orccadd.vcan.hub import HOLD_OFF_S
+from orccadd.vcan.process import HOST, HubProcess
 from tests.canopen_rig import receive
-from tools.virtual_can.hub import HOLD_OFF_S
-from tools.virtual_can.process import HOST, HubProcess
 
 logging.getLogger("can.interfaces.socketcand.socketcand").setLevel(logging.ERROR)
 

@@ -13,9 +13,9 @@ import pytest
 
 from orccadd.drivers.canopen.port import BatchingSocketcandBus, BusPort
 from orccadd.drivers.canopen.settings import Bus
+from orccadd.vcan.hub import HOLD_OFF_S
+from orccadd.vcan.process import HOST, HubProcess
 from tests.canopen_rig import receive
-from tools.virtual_can.hub import HOLD_OFF_S
-from tools.virtual_can.process import HOST, HubProcess
 
 logging.getLogger("can.interfaces.socketcand.socketcand").setLevel(logging.ERROR)
 

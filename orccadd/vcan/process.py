@@ -13,7 +13,7 @@ HOST = "127.0.0.1"
 
 
 def vcan_available(iface: str = "vcan0") -> bool:
-    """True where the kernel has SocketCAN and `iface` exists (tools/virtual_can/setup_vcan.sh)."""
+    """True where the kernel has SocketCAN and `iface` exists (tools/setup_vcan.sh)."""
     if not hasattr(socket, "AF_CAN") or not Path(f"/sys/class/net/{iface}").is_dir():
         return False
     try:
@@ -24,12 +24,12 @@ def vcan_available(iface: str = "vcan0") -> bool:
 
 
 class HubProcess(ChildProcess):
-    """`python -m tools.virtual_can.hub --port 0` as a child; `port` once it listens."""
+    """`python -m orccadd.vcan --port 0` as a child; `port` once it listens."""
 
     def __init__(self, *extra: str, startup_timeout_s: float = 30.0) -> None:
         args = ["--port", "0", *extra]
         super().__init__(
-            "tools.virtual_can.hub",
+            "orccadd.vcan",
             args,
             what="virtual CAN hub",
             ready="listening on",

@@ -16,7 +16,7 @@ instead of silently losing frames for everyone). Frames reach a new client only 
 hold-off following its `< ok >` to `rawmode` (kept, not lost), because python-can reads the
 handshake replies with single `recv` calls that must not carry frames as well.
 
-Run: `python -m tools.virtual_can.hub [--port 0]`; it prints `virtual_can: listening on
+Run: `python -m orccadd.vcan [--port 0]`; it prints `virtual_can: listening on
 127.0.0.1:PORT` once ready (`--port-file F` also writes PORT to F).
 """
 
@@ -179,7 +179,7 @@ async def run(port: int, port_file: str, max_backlog: int) -> None:
         with open(tmp, "w") as fh:
             fh.write(f"{bound}\n")
         os.replace(tmp, port_file)
-    print(f"virtual_can: listening on {HOST}:{bound}", flush=True)
+    print(f"orccadd.vcan: listening on {HOST}:{bound}", flush=True)
     async with server:
         await stop.wait()
     log.info("stopped after %d frames", hub.frames)
@@ -187,7 +187,7 @@ async def run(port: int, port_file: str, max_backlog: int) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
-        prog="python -m tools.virtual_can.hub",
+        prog="python -m orccadd.vcan",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

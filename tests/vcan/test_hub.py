@@ -13,8 +13,8 @@ from pathlib import Path
 import can
 import pytest
 
-from tools.virtual_can.hub import HOLD_OFF_S
-from tools.virtual_can.process import HOST, HubProcess
+from orccadd.vcan.hub import HOLD_OFF_S
+from orccadd.vcan.process import HOST, HubProcess
 
 # python-can warns on every TCP read that ends mid-message; it then waits for the rest
 logging.getLogger("can.interfaces.socketcand.socketcand").setLevel(logging.ERROR)
