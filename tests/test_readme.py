@@ -1,0 +1,141 @@
+"""The README's tours run as written: each bus's commands, in order, in a shell, with the paths
+made absolute and the sockets in the test's directory. A background command (`… &`) is waited
+for as a person would before typing the next line: a simulator until it says it is ready, orccadd
+until its socket answers. The mission each tour starts must end in success."""
+
+from __future__ import annotations
+
+import os
+import re
+import select
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from orccadd.ctl.client import Client, ClientError
+from tests.conftest import ROOT
+
+README = (ROOT / "README.md").read_text()
+INTERACTIVE = ("orccadctl top", "kill %")  # a terminal's view, and the shell's own job control
+READY_WORDS = ("ready", "listening on")
+
+
+def tours() -> dict[str, str]:
+    """Each tour's shell block, by its bold title's first words."""
+    tour = README.split("## A five-minute tour", 1)[1].split("\n## ", 1)[0]
+    found = re.findall(r"\*\*([^*]+)\*\*.*?```sh\n(.*?)```", tour, re.S)
+    return {title.split(",")[0].split(" (")[0]: block for title, block in found}
+
+
+def test_the_readme_has_a_tour_per_bus() -> None:
+    assert list(tours()) == [
+        "The simulated arm",
+        "A UR arm over RTDE",
+        "A Dynamixel chain",
+        "CANopen CiA 402 drives",
+    ]
+
+
+def localised(line: str, tmp: Path) -> str:
+    line = line.split("  #")[0].strip()
+    line = re.sub(r"/tmp/(\w+)\.sock", lambda m: str(tmp / f"{m.group(1)}.sock"), line)
+    line = re.sub(r"(^|\s|=)\.venv/", lambda m: f"{m.group(1)}{ROOT}/.venv/", line)
+    return re.sub(r"(^|\s)configs/", lambda m: f"{m.group(1)}{ROOT}/configs/", line)
+
+
+class Shell:
+    """The tour's commands in order, its background processes stopped at the end (orccadd first:
+    the daemon's clients before the simulators they talk to)."""
+
+    def __init__(self, tmp: Path) -> None:
+        self.tmp = tmp
+        self.env = {**os.environ}
+        self.background: list[tuple[str, subprocess.Popen[bytes]]] = []
+
+    def run(self, line: str) -> None:
+        if line.startswith("export "):
+            name, _, value = line.removeprefix("export ").partition("=")
+            self.env[name] = value
+            return
+        if line.endswith("&"):
+            self._start(line.removesuffix("&").strip())
+            return
+        r = subprocess.run(["bash", "-c", line], cwd=self.tmp, env=self.env, capture_output=True, timeout=120)
+        assert r.returncode == 0, f"{line}\n{r.stdout.decode()[-2000:]}\n{r.stderr.decode()[-2000:]}"
+
+    def _start(self, line: str) -> None:
+        p = subprocess.Popen(
+            ["bash", "-c", f"exec {line}"], cwd=self.tmp, env=self.env, start_new_session=True,
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        self.background.append((line, p))
+        socket = re.search(r"--socket (\S+)", line)
+        if "orccadd --config" in line and socket:
+            self._wait_daemon(socket.group(1), p)
+        else:
+            self._wait_ready(line, p)
+
+    def _wait_ready(self, line: str, p: subprocess.Popen[bytes], timeout_s: float = 60.0) -> None:
+        assert p.stdout is not None
+        end, seen = time.monotonic() + timeout_s, b""
+        while not any(w.encode() in seen for w in READY_WORDS):
+            assert p.poll() is None and time.monotonic() < end, f"{line}: not ready\n{seen.decode()[-2000:]}"
+            if select.select([p.stdout], [], [], 0.2)[0]:
+                seen += os.read(p.stdout.fileno(), 4096)
+
+    def _wait_daemon(self, socket: str, p: subprocess.Popen[bytes], timeout_s: float = 90.0) -> None:
+        end = time.monotonic() + timeout_s
+        while True:
+            try:
+                with Client(socket, timeout_s=5.0) as c:
+                    c.call("ping")
+                    return
+            except (ClientError, OSError) as e:
+                assert p.poll() is None and time.monotonic() < end, (
+                    f"orccadd at {socket} did not come up: {e}"
+                )
+                time.sleep(0.2)
+
+    def close(self) -> None:
+        for _, p in sorted(self.background, key=lambda lp: "orccadd --config" not in lp[0]):
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGTERM)
+                try:
+                    p.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    os.killpg(p.pid, signal.SIGKILL)
+                    p.wait(timeout=10)
+
+
+@pytest.fixture
+def shell(tmp_path: Path) -> Iterator[Shell]:
+    s = Shell(tmp_path)
+    try:
+        yield s
+    finally:
+        s.close()
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("tour", list(tours()))
+def test_each_tour_runs_as_written_and_its_mission_succeeds(tour: str, shell: Shell, tmp_path: Path) -> None:
+    lines = [localised(x, tmp_path) for x in tours()[tour].splitlines() if x.strip()]
+    socket = ""
+    for line in lines:
+        if any(word in line for word in INTERACTIVE):
+            continue
+        shell.run(line)
+        if m := re.search(r"--socket (\S+)", line):
+            socket = m.group(1)
+        socket = shell.env.get("ORCCADD_SOCKET", socket)
+    assert socket, "the tour names no socket"
+    end = time.monotonic() + 120
+    with Client(socket, timeout_s=10.0) as c:
+        while (s := c.call("status"))["state"] == "running":
+            assert time.monotonic() < end, s
+            time.sleep(0.2)
+    assert s["result"] == "success" and not s["faulted"], s
