@@ -34,7 +34,11 @@ class Client:
             self.sock.connect(self.path)
         except OSError as e:
             self.sock.close()
-            raise ClientError(f"cannot reach orccadd at {self.path}: {e.strerror or e}") from None
+            why = f"cannot reach orccadd at {self.path}: {e.strerror or e}"
+            if isinstance(e, FileNotFoundError | ConnectionRefusedError):
+                # orccadd opens its socket once the arm is configured: a bus's startup takes seconds
+                why += " (orccadd is not running there, or is still starting up)"
+            raise ClientError(why) from None
         self.file = self.sock.makefile("rb")
         self.next_id = 0
 

@@ -99,7 +99,8 @@ def test_no_daemon_is_one_line_too() -> None:
     assert r.code == 2 and r.out == ""
     assert (
         r.err
-        == "orccadctl: error: cannot reach orccadd at /nonexistent/orccadd.sock: No such file or directory\n"
+        == "orccadctl: error: cannot reach orccadd at /nonexistent/orccadd.sock: No such file or directory "
+        "(orccadd is not running there, or is still starting up)\n"
     )
     bad = run("--socket", "/nonexistent/orccadd.sock", "tune", "A.b.c", "high")
     assert bad.err == "orccadctl: error: tune: value 'high' is not a number or a JSON list\n"
