@@ -41,6 +41,7 @@ from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.robot import create_resource, load_robot_config, with_backend
 from orccadd.runtime import enter_realtime, leave_realtime
+from orccadd.runtime.threads import ThreadGroup
 from orccadd.task import load_task_file
 from orccadd.task.loop import resource_clock
 from orccadd.types import CommandMode, Status
@@ -58,6 +59,7 @@ RESPAWN_DELAY_S = 1.0
 RESPAWN_MAX_S = 60.0
 RESPAWN_STABLE_S = 10.0  # a command daemon that lived this long had started fine
 GIL_SWITCH_INTERVAL_S = 0.0002
+JOIN_S = 2.0  # how long shutdown waits for a thread (one stuck in a device call is named, then left)
 URGENT_MAX_BYTES = 4096  # an abort or a stop is a short message; longer ones are not looked into
 RECEIVE_MAX = 256  # messages read per wake-up (the command daemon has fewer in flight)
 SERVE_BUDGET_PERIODS = 0.3  # other requests served per slack; the rest at the next one
@@ -97,6 +99,7 @@ class RealtimeProcess:
         self.control_error = ""
         self.stop_requested = ""
         self.thread: threading.Thread | None = None
+        self.threads = ThreadGroup("orccadd")  # the control thread
         self.inbox: deque[bytes] = deque()  # requests waiting for the loop's slack
         self.inbox_since_ns = 0
         self.pending: list[tuple[Any, Pending]] = []  # (request id, reply to complete)
@@ -130,8 +133,8 @@ class RealtimeProcess:
             allow_fault_injection=self.args.allow_fault_injection,
         )
         self.urgent = UrgentSocket(urgent_socket_path(self.socket_path), cfg.daemon, self.gid, self._urgent)
-        self.thread = threading.Thread(target=self._control_main, name="control", daemon=True)
-        self.thread.start()  # the arm is held (the Hold task) while the startup mission loads
+        # the arm is held (the Hold task) while the startup mission loads
+        self.thread = self.threads.start(self._control_main, name="control")
         if self.args.mission:
             reply = self.machine.command("load", {"path": str(Path(self.args.mission).resolve())})
             while isinstance(reply, Pending):  # the automaton thread has not started serving yet
@@ -436,7 +439,7 @@ class RealtimeProcess:
         """Undo a failed `start` (nothing moved yet): release what was acquired."""
         if self.thread is not None:
             self.machine.loop.executor.stop()
-            self.thread.join(timeout=2.0)
+            self.threads.join(JOIN_S)
         if self.cmdd is not None:
             self.cmdd.terminate()
             self.cmdd.wait()
@@ -467,8 +470,8 @@ class RealtimeProcess:
             time.sleep(0.01)
         m.loop.executor.stop()
         m.rt_commands.close()
-        if self.thread is not None:
-            self.thread.join(timeout=2.0)
+        self.threads.join(JOIN_S)
+        m.supervisor.threads.join(JOIN_S)  # a reset under way: its device work
         m.mission.state = MachineState.IDLE
         m.publish()
         m.loop.close()

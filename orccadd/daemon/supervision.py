@@ -10,7 +10,6 @@ in a thread of its own, and the automaton thread answers with a `Pending` reply 
 
 from __future__ import annotations
 
-import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -23,6 +22,7 @@ from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.errors import OrccaddError
 from orccadd.fault import Fault, FaultKind, StopCause
 from orccadd.physres.base import PhysicalResource
+from orccadd.runtime.threads import ThreadGroup
 from orccadd.types import Status
 from orccadd.wire.commands import RESET_REPLY_S
 from orccadd.wire.schema import MissionResult
@@ -52,6 +52,7 @@ class Supervisor:
         self.history: deque[tuple[int, StopCause]] = deque(maxlen=FAULTS_KEPT)  # (number, cause)
         self.on_cause: Callable[[int], None] = lambda n: None  # a new cause recorded, its number
         self._resetting: _DeviceReset | None = None  # the device's last reset
+        self.threads = ThreadGroup("supervisor")  # a reset's device work
 
     def on_t3(self, event: str, fault: Fault | None) -> None:
         """The type 3 exception `event` safe-stopped the arm, about `fault` (the task's)."""
@@ -100,7 +101,7 @@ class Supervisor:
         if self._resetting is not None and self._resetting.running():
             raise CommandError("a reset is already under way")
         wait_s = max(100 * self.cfg.control_period_s, RESET_WAIT_S)
-        device = self._resetting = _DeviceReset(res, self.loop, wait_s)
+        device = self._resetting = _DeviceReset(self.threads, res, self.loop, wait_s)
 
         def poll() -> Result | None:
             if not device.done():
@@ -123,12 +124,11 @@ class _DeviceReset:
     command is stale: the arm may be elsewhere now, after a controller's restart), then the
     stop cleared. `done()` re-raises its error as a CommandError."""
 
-    def __init__(self, resource: PhysicalResource, loop: SwitchingLoop, wait_s: float) -> None:
+    def __init__(
+        self, threads: ThreadGroup, resource: PhysicalResource, loop: SwitchingLoop, wait_s: float
+    ) -> None:
         self._error = ""
-        self._thread = threading.Thread(
-            target=self._run, args=(resource, loop, wait_s), name="device-reset", daemon=True
-        )
-        self._thread.start()
+        self._thread = threads.start(self._run, resource, loop, wait_s, name="device-reset")
 
     def _run(self, res: PhysicalResource, loop: SwitchingLoop, wait_s: float) -> None:
         try:

@@ -46,6 +46,7 @@ from orccadd.physres.sim import SimSettings, load_sim_settings
 from orccadd.robot import load_robot_config
 from orccadd.runtime import Summary
 from orccadd.runtime.rt import realtime_device_process
+from orccadd.runtime.threads import ThreadGroup
 
 log = logging.getLogger("orccadd.drivesim")
 
@@ -62,14 +63,17 @@ def plant_config(cfg: RobotConfig, plant_file: str) -> RobotConfig:
     return replace(cfg, resource=resource, backend_settings=settings)
 
 
-def serve_control(sim: DriveSimulator, srv: socket.socket, stop: threading.Event) -> None:
+def serve_control(sim: DriveSimulator, srv: socket.socket, threads: ThreadGroup) -> None:
+    """Accept control clients (each in a thread of `threads`) until the group is stopping."""
     srv.settimeout(0.2)
-    while not stop.is_set():
+    while not threads.stopping.is_set():
         try:
             conn, _ = srv.accept()
         except TimeoutError:
             continue
-        threading.Thread(target=_client, args=(sim, conn), daemon=True).start()
+        except OSError:
+            return  # closed
+        threads.start(_client, sim, conn, name="control-client")
 
 
 def _client(sim: DriveSimulator, conn: socket.socket) -> None:
@@ -176,7 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     srv = socket.create_server(("127.0.0.1", args.control_port))
-    threading.Thread(target=serve_control, args=(sim, srv, stop), daemon=True).start()
+    threads = ThreadGroup("drivesim")
+    threads.start(serve_control, sim, srv, threads, name="control")
     if args.nice:
         try:
             os.nice(args.nice)
@@ -189,14 +194,13 @@ def main(argv: list[str] | None = None) -> int:
     # collector's full passes skip them (they stalled this loop for up to ~0.1 s)
     gc.collect()
     gc.freeze()
-    runner = threading.Thread(target=sim.run, args=(stop.is_set,), daemon=True)
-    runner.start()
+    runner = threads.start(sim.run, stop.is_set, name="bus")
     print(f"drivesim: ready, control 127.0.0.1:{srv.getsockname()[1]}", flush=True)
     while not stop.wait(0.2):
         if not runner.is_alive():
             break
     stop.set()
-    runner.join(5)
+    threads.join(5.0)  # the bus loop, the control server and its clients
     srv.close()
     for bus in opened:
         bus.shutdown()

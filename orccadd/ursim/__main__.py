@@ -26,10 +26,12 @@ from orccadd.config.robot import read_robot_config, read_toml
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.runtime.rt import realtime_device_process
+from orccadd.runtime.threads import ThreadGroup
 from orccadd.ursim.faults import serve_control
 from orccadd.ursim.series import CB3, E_SERIES
 from orccadd.ursim.simulator import DEFAULT_PORTS, UrSimulator
 
+JOIN_S = 5.0  # how long the exit waits for the control clients' threads
 log = logging.getLogger("orccadd.ursim")
 
 UR_DOF = 6
@@ -138,7 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    threading.Thread(target=serve_control, args=(sim, control), name="ursim-control", daemon=True).start()
+    threads = ThreadGroup("ursim")
+    threads.start(serve_control, sim, control, threads, name="control")
     gc.collect()
     gc.freeze()  # the model and tables are long-lived: keep the collector's passes short
     # the cycle's thread waits at most this long for the interpreter when a server thread holds
@@ -159,6 +162,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         control.close()
         sim.close()
+        threads.join(JOIN_S)
+        sim.threads.join(JOIN_S)
     log.info("stopped after %d cycles", sim.ctl.cycles)
     return 0
 

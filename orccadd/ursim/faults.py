@@ -19,9 +19,9 @@ from __future__ import annotations
 import json
 import logging
 import socket
-import threading
 from typing import Any
 
+from orccadd.runtime.threads import ThreadGroup
 from orccadd.ursim.simulator import UrSimulator
 
 log = logging.getLogger("orccadd.ursim")
@@ -40,14 +40,14 @@ def handle_request(sim: UrSimulator, req: Any) -> dict[str, Any]:
     raise ValueError('a request has "inject" or "status"')
 
 
-def serve_control(sim: UrSimulator, srv: socket.socket) -> None:
-    """Accept control clients until `srv` is closed."""
+def serve_control(sim: UrSimulator, srv: socket.socket, threads: ThreadGroup) -> None:
+    """Accept control clients (each in a thread of `threads`) until `srv` is closed."""
     while True:
         try:
             conn, _ = srv.accept()
         except OSError:
             return
-        threading.Thread(target=_client, args=(sim, conn), name="ursim-control", daemon=True).start()
+        threads.start(_client, sim, conn, name="control-client")
 
 
 def _client(sim: UrSimulator, conn: socket.socket) -> None:

@@ -15,10 +15,12 @@ import threading
 from collections.abc import Callable
 
 from orccadd.errors import OrccaddError
+from orccadd.runtime.threads import ThreadGroup
 
 log = logging.getLogger("orccadd.ursim")
 
 HOSTS = ("127.0.0.1", "localhost")
+JOIN_S = 5.0  # how long `close` waits for the accept and connection threads
 
 
 class PortTakenError(OrccaddError):
@@ -54,6 +56,7 @@ class Server:
         self._srv: socket.socket | None = None
         self._conns: set[socket.socket] = set()
         self._lock = threading.Lock()
+        self._threads = ThreadGroup(name)
         self.accepted = 0
 
     def open(self) -> None:
@@ -61,9 +64,8 @@ class Server:
         self._srv = listen(self.host, self.port)
         if self.port == 0:
             self.port = self._srv.getsockname()[1]
-        threading.Thread(
-            target=self._accept, args=(self._srv,), name=f"{self.name}-accept", daemon=True
-        ).start()
+        self._threads = ThreadGroup(self.name)  # a new group for each opening (a restart reopens)
+        self._threads.start(self._accept, self._srv, name="accept")
 
     def _accept(self, srv: socket.socket) -> None:
         while True:
@@ -75,7 +77,7 @@ class Server:
             with self._lock:
                 self._conns.add(conn)
                 self.accepted += 1
-            threading.Thread(target=self._serve, args=(conn,), name=f"{self.name}-conn", daemon=True).start()
+            self._threads.start(self._serve, conn, name="connection")
 
     def _serve(self, conn: socket.socket) -> None:
         try:
@@ -105,10 +107,11 @@ class Server:
         return len(conns)
 
     def close(self) -> None:
-        """Stop listening and drop every connection."""
+        """Stop listening, drop every connection, and wait for their threads to end."""
         if self._srv is not None:
             with contextlib.suppress(OSError):
                 self._srv.shutdown(socket.SHUT_RDWR)
             self._srv.close()
             self._srv = None
         self.drop_connections()
+        self._threads.join(JOIN_S)

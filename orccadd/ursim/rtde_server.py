@@ -21,6 +21,7 @@ guide says the controller does.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import socket
 import struct
@@ -28,9 +29,11 @@ import threading
 import time
 from collections.abc import Callable
 
+from orccadd.runtime.threads import ThreadGroup
 from orccadd.ursim.controller import UrController
 from orccadd.ursim.fields import IN_USE, NOT_FOUND, InputRecipe, OutputRecipe, RtdeType
 
+SENDER_JOIN_S = 2.0  # a session's sender, woken by its close, ends within a send
 log = logging.getLogger("orccadd.ursim")
 
 PROTOCOL_VERSION = 2
@@ -101,8 +104,10 @@ class RtdeSession:
 
     # ---- the connection -------------------------------------------------------------------
     def serve(self) -> None:
-        sender = threading.Thread(target=self._send_loop, name="rtde-send", daemon=True)
-        sender.start()
+        """The client's requests, in this (the connection's) thread; its packages are sent by a
+        thread of the session's own, ended and joined with it."""
+        sender = ThreadGroup("rtde-session")
+        sender.start(self._send_loop, name="send")
         try:
             while True:
                 size, kind = HEADER.unpack(_recv_exact(self.conn, HEADER.size))
@@ -114,6 +119,9 @@ class RtdeSession:
             pass
         finally:
             self._close()
+            with contextlib.suppress(OSError):  # a sender blocked in a send to a full socket ends too
+                self.conn.shutdown(socket.SHUT_RDWR)
+            sender.join(SENDER_JOIN_S)
 
     def _close(self) -> None:
         self._closed = True

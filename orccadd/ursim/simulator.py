@@ -23,6 +23,7 @@ from typing import Any
 from orccadd.config.robot import RobotConfig
 from orccadd.errors import OrccaddError
 from orccadd.runtime import PeriodicExecutor, WallClock
+from orccadd.runtime.threads import ThreadGroup
 from orccadd.ursim.arm import UrArm
 from orccadd.ursim.controller import UrController
 from orccadd.ursim.dashboard import dashboard_handler
@@ -72,6 +73,7 @@ class UrSimulator:
             self.servers[name] = Server(name, host, p[name], script_handler(self.ctl, p[name]))
         self.executor = PeriodicExecutor(WallClock(), self.ctl.period_s, self._step)
         self._down = False
+        self.threads = ThreadGroup("ursim-faults")  # an injected restart's (joined at the exit)
 
     def open(self) -> None:
         """Listen on every port; on `PortTakenError` none stays open."""
@@ -123,7 +125,7 @@ class UrSimulator:
                 self.servers[name].drop_connections()
         elif fault == "controller_restart":
             down = float(params.get("down_s", 1.0))
-            threading.Thread(target=self._restart, args=(down,), daemon=True).start()
+            self.threads.start(self._restart, down, name="restart")
         else:
             raise ValueError(f"unknown fault {fault!r} (faults: {', '.join(FAULTS)})")
         log.info("fault injected: %s %s", fault, params or "")
