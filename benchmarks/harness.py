@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import re
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -15,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orccadd.demo import wait_up
+from orccadd.launch import DaemonProcess
 
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:  # the CANopen rig of the tests (bus hub + simulated drives)
@@ -38,23 +37,11 @@ def running_daemon(config: Path = UR5E, *extra: str, new_session: bool = False) 
     `new_session`: in a session of its own, so a Ctrl-C at the terminal reaches the benchmark
     alone, which then stops the daemon itself (after its own teardown)."""
     tmp = Path(tempfile.mkdtemp(prefix="orccadd-bench-"))
-    sock = str(tmp / "orccadd.sock")
-    log = tmp / "orccadd.log"
-    cmd = [sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(config), "--socket", sock, *extra]
-    proc = subprocess.Popen(
-        cmd, stdout=log.open("w"), stderr=subprocess.STDOUT, start_new_session=new_session
-    )
+    d = DaemonProcess(config, tmp / "orccadd.sock", tmp / "orccadd.log", *extra, new_session=new_session)
     try:
-        wait_up(sock, proc)
-        yield RunningDaemon(proc, sock, tmp, log)
+        yield RunningDaemon(d.proc, d.socket, tmp, d.log)
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        d.stop()
 
 
 def config_with(config: Path, tmp: Path, daemon_lines: str) -> Path:

@@ -12,9 +12,6 @@ from __future__ import annotations
 
 import argparse
 import shutil
-import signal
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -23,24 +20,10 @@ from typing import Any
 from orccadd.ctl.client import Client, ClientError
 from orccadd.ctl.format import format_trace
 from orccadd.ctl.online import copy_to, format_status
+from orccadd.launch import DaemonError, DaemonProcess
 from orccadd.offline.plot import plot_csv
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def wait_up(sock: str, proc: subprocess.Popen[bytes], timeout_s: float = 90.0) -> None:
-    end = time.monotonic() + timeout_s
-    while True:
-        if proc.poll() is not None:
-            raise SystemExit(f"orccadd exited with code {proc.returncode}")
-        try:
-            with Client(sock) as c:
-                c.call("ping")
-            return
-        except (ClientError, OSError):
-            if time.monotonic() > end:
-                raise SystemExit("orccadd did not come up") from None
-            time.sleep(0.2)
 
 
 def follow(c: Client, seen: int, tuned: list[bool]) -> tuple[int, dict[str, Any]]:
@@ -85,13 +68,15 @@ def main(argv: list[str] | None = None) -> int:
     tmp = tempfile.mkdtemp(prefix="orccadd-demo-")
     sock = f"{tmp}/orccadd.sock"
     daemon_log = out / "orccadd.log"
-    cmd = [sys.executable, "-m", "orccadd.daemon.rtproc", "--config", args.robot, "--socket", sock]
     print(f"$ orccadd --config {args.robot} --socket {sock}", flush=True)
-    proc = subprocess.Popen(cmd, stdout=daemon_log.open("w"), stderr=subprocess.STDOUT)
+    try:
+        daemon = DaemonProcess(args.robot, sock, daemon_log)
+    except DaemonError as e:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise SystemExit(str(e)) from None
     code = 1
     try:
-        wait_up(sock, proc)
-        with Client(sock, timeout_s=120) as c:
+        with daemon.client(timeout_s=120) as c:
             print(format_status(c.call("status")))
             print(f"$ orccadctl load {args.mission}")
             print(c.call("load", path=args.mission)["report"])
@@ -127,13 +112,8 @@ def main(argv: list[str] | None = None) -> int:
             print(plot_csv(csv, png, ["q", "tau", "wake_us"]))
             code = 0 if s["result"] == "success" else 1
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                rc = proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                rc = proc.wait()
+        if daemon.proc.poll() is None:
+            rc = daemon.stop()
             print(f"orccadd stopped (exit {rc}): {daemon_log.read_text().strip().splitlines()[-1]}")
             code = code or (1 if rc else 0)
         shutil.rmtree(tmp, ignore_errors=True)  # its socket and the daemon's log directory

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from orccadd.ctl.client import Client
+from orccadd.launch import DaemonError
 from orccadd.wire.socketdir import urgent_socket_path
 from tests.daemon.conftest import ROBOT, ROOT, Daemon, start_daemon
 from tests.daemon.test_protocol import _as_nobody_many, _reachable_by_nobody
@@ -178,5 +179,5 @@ def test_a_peer_without_the_control_role_is_refused(tmp_path: Path) -> None:
 def test_a_squatted_urgent_path_stops_the_daemon_before_anything_starts(tmp_path: Path) -> None:
     (tmp_path / "run").mkdir(mode=0o750)
     Path(urgent_socket_path(str(tmp_path / "run" / "orccadd.sock"))).write_text("mine")
-    with pytest.raises(AssertionError, match="exists and is not a socket"):
+    with pytest.raises(DaemonError, match="exists and is not a socket"):
         start_daemon(tmp_path)

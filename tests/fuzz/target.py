@@ -12,14 +12,11 @@ import json
 import math
 import os
 import socket
-import subprocess
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from orccadd.ctl.client import ClientError
 from tests.daemon.conftest import Daemon, robot_config
 from tests.fuzz.strategies import Frame
 
@@ -35,24 +32,7 @@ def start_fuzz_daemon(tmp: Path) -> Daemon:
     home = tmp / "daemon"
     (home / "missions").mkdir(parents=True, exist_ok=True)
     config = robot_config(home)  # mission_dirs: the shipped and test directories, and `home`
-    sock = str(home / "run" / "orccadd.sock")
-    log = home / "orccadd.log"
-    cmd = [sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(config), "--socket", sock]
-    with log.open("w") as out:
-        proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT)
-    d = Daemon(proc, sock, log)
-    end = time.monotonic() + 60
-    while True:
-        if proc.poll() is not None:
-            raise AssertionError(f"orccadd exited ({proc.returncode}):\n{log.read_text()}")
-        try:
-            d.call("ping")
-            return d
-        except (ClientError, OSError):
-            if time.monotonic() > end:
-                d.stop()
-                raise AssertionError(f"orccadd did not come up:\n{log.read_text()}") from None
-            time.sleep(0.2)
+    return Daemon(config, home / "run" / "orccadd.sock", home / "orccadd.log", up_timeout_s=60.0)
 
 
 def hostile_paths(tmp: Path) -> list[str]:
