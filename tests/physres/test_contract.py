@@ -23,6 +23,8 @@ from tests.conftest import ROOT, UR5E, variant_text
 from tests.physres.test_dynamixel import DxlRig, dxl_rig
 
 BACKENDS = ["sim", "sim_process", "canopen402", "dynamixel", "ur_rtde"]
+# the shipped config each backend's description is read from at collection (`describe` needs no
+# device): a test in a mode the backend does not declare is not generated for it at all
 UR_SIM = ROOT / "configs/robots/ur5e-rtde-sim.toml"
 UNLOCK_DELAY_S = 1  # the simulated UR controller's: a protective stop can be unlocked 1 s after it
 
@@ -151,9 +153,8 @@ def test_activate_reports_the_measured_position(resource: PhysicalResource) -> N
     assert not resource.state.status & (Status.FAULT | Status.COMM_LOST | Status.LIMIT_VIOLATION)
 
 
+@pytest.mark.applies(mode=CommandMode.TORQUE)
 def test_torque_beyond_limit_is_clamped(resource: PhysicalResource) -> None:
-    if CommandMode.TORQUE not in resource.description.modes:
-        pytest.skip(f"{resource.description.backend} declares no torque mode")
     resource.activate(CommandMode.TORQUE)
     resource.read(time.monotonic())
     flags = resource.write(time.monotonic(), np.full(resource.dof, 1e4))
@@ -230,10 +231,9 @@ def test_device_fault_is_reported_and_reset(
     assert not resource.state.status & (Status.FAULT | Status.STOPPED | Status.STOPPING)
 
 
+@pytest.mark.applies(mode="mode")  # the `mode` parameter's
 @pytest.mark.parametrize("mode", [CommandMode.TORQUE, CommandMode.POSITION])
 def test_a_command_with_nan_or_inf_is_not_sent(resource: PhysicalResource, mode: CommandMode) -> None:
-    if mode not in resource.description.modes:
-        pytest.skip(f"{resource.description.backend} declares no {mode.name.lower()} mode")
     resource.activate(mode)
     st = resource.read(time.monotonic())
     good = np.zeros(resource.dof) if mode is CommandMode.TORQUE else st.q_rad.copy()
