@@ -45,7 +45,7 @@ from orccadd.runtime.threads import ThreadGroup
 from orccadd.task import load_task_file
 from orccadd.task.loop import resource_clock
 from orccadd.types import CommandMode, Status
-from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, ProtocolError, check_args, request_id
+from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, ProtocolError, parse_request
 from orccadd.wire.schema import H, Layout, MachineState, MissionResult, OperatorAction, Trace
 from orccadd.wire.socketdir import check_socket_path, prepare_socket_dir, urgent_socket_path
 from orccadd.wire.telemetry import TelemetryBlock
@@ -65,14 +65,16 @@ RECEIVE_MAX = 256  # messages read per wake-up (the command daemon has fewer in 
 SERVE_BUDGET_PERIODS = 0.3  # other requests served per slack; the rest at the next one
 
 
-def _is_urgent(data: bytes) -> bool:
-    if len(data) > URGENT_MAX_BYTES:
-        return False
+Request = tuple[Any, str, dict[str, Any]]  # (id, cmd, args), decoded and checked once
+
+
+def decode(data: bytes) -> Request | dict[str, Any]:
+    """A request as `parse_request` reads it (once per message in this process), or the error
+    reply to send for it."""
     try:
-        msg = json.loads(data)
-    except (ValueError, RecursionError):
-        return False
-    return isinstance(msg, dict) and msg.get("cmd") in URGENT_COMMANDS
+        return parse_request(data)
+    except ProtocolError as e:
+        return {"id": e.rid, "ok": False, "error": str(e)}
 
 
 def rt_socket_path(public: str) -> str:
@@ -100,7 +102,7 @@ class RealtimeProcess:
         self.stop_requested = ""
         self.thread: threading.Thread | None = None
         self.threads = ThreadGroup("orccadd")  # the control thread
-        self.inbox: deque[bytes] = deque()  # requests waiting for the loop's slack
+        self.inbox: deque[Request] = deque()  # requests waiting for the loop's slack
         self.inbox_since_ns = 0
         self.pending: list[tuple[Any, Pending]] = []  # (request id, reply to complete)
         self.urgent: UrgentSocket | None = None
@@ -317,13 +319,17 @@ class RealtimeProcess:
             if flags & socket.MSG_TRUNC:
                 self._send({"id": None, "ok": False, "error": f"request longer than {RT_MAX} bytes"})
                 continue
-            if _is_urgent(data):
-                self._serve(data)
+            req = decode(data)
+            if isinstance(req, dict):
+                self._send(req)
+                continue
+            if req[1] in URGENT_COMMANDS and len(data) <= URGENT_MAX_BYTES:
+                self._serve(req)  # on arrival, ahead of any queue
                 continue
             if not self.inbox:
                 self.inbox_since_ns = time.monotonic_ns()
                 self.machine.loop.want_slack()
-            self.inbox.append(data)
+            self.inbox.append(req)
 
     def _serve_inbox(self) -> None:
         """Handle queued requests right after a tick ended (or, if the loop is stopped or late,
@@ -345,8 +351,8 @@ class RealtimeProcess:
             self.inbox_since_ns = time.monotonic_ns()
             loop.want_slack()
 
-    def _serve(self, data: bytes) -> None:
-        rid, reply = self._handle(data)
+    def _serve(self, req: Request) -> None:
+        rid, reply = self._handle(req)
         if isinstance(reply, Pending):
             self.pending.append((rid, reply))
         else:
@@ -383,36 +389,23 @@ class RealtimeProcess:
             with contextlib.suppress(BlockingIOError, OSError):
                 self.conn.send(json.dumps(reply, default=str).encode())
 
-    def _urgent(self, line: bytes) -> dict[str, Any]:
+    def _urgent(self, req: Request) -> dict[str, Any]:
         """An abort or a stop from the urgent socket (never a Pending: both act at once)."""
-        rid, reply = self._handle(line)
+        rid, reply = self._handle(req)
         return reply if isinstance(reply, dict) else {"id": rid, "ok": False, "error": "not served here"}
 
-    def _handle(self, data: bytes) -> tuple[Any, dict[str, Any] | Pending]:
+    def _handle(self, req: Request) -> tuple[Any, dict[str, Any] | Pending]:
         """(request id, reply or Pending). Any failure becomes an error reply with the id."""
-        rid = None
+        rid, cmd, args = req
+        if COMMANDS[cmd].where != "rt":
+            return rid, {"id": rid, "ok": False, "error": f"not a command of the real-time process: {cmd!r}"}
         try:
-            msg = json.loads(data)
-            rid = request_id(msg)
-            if not isinstance(msg, dict) or not isinstance(msg.get("cmd"), str):
-                return rid, {"id": rid, "ok": False, "error": "a request is an object with a string 'cmd'"}
-            cmd, args = msg["cmd"], msg.get("args", {})
-            spec = COMMANDS.get(cmd)
-            if spec is None or spec.where != "rt" or not isinstance(args, dict):
-                return rid, {
-                    "id": rid,
-                    "ok": False,
-                    "error": f"not a command of the real-time process: {cmd!r}",
-                }
-            check_args(spec, args)
             result: Result | Pending = self.machine.command(cmd, args)
             return rid, result if isinstance(result, Pending) else {"id": rid, "ok": True, "result": result}
-        except (CommandError, ProtocolError) as e:
+        except CommandError as e:
             return rid, {"id": rid, "ok": False, "error": str(e)}
-        except (ValueError, RecursionError) as e:
-            return rid, {"id": rid, "ok": False, "error": f"not JSON: {type(e).__name__}"}
         except Exception as e:  # a bug must not take the automaton thread down
-            log.exception("command failed: %r", data[:200])
+            log.exception("command %s failed", cmd)
             return rid, {"id": rid, "ok": False, "error": f"internal error: {type(e).__name__}: {e}"}
 
     def _cmdd_exited(self) -> None:

@@ -28,7 +28,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from orccadd.wire.commands import URGENT_COMMANDS, Role, request_id
+from orccadd.wire.commands import URGENT_COMMANDS, ProtocolError, Role, parse_request
 from orccadd.wire.roles import RoleConfig, Roles, peer_credentials
 
 log = logging.getLogger("orccadd")
@@ -56,7 +56,11 @@ class UrgentSocket:
     """The listener and its connections, served from the automaton thread's poll loop."""
 
     def __init__(
-        self, path: str, roles: RoleConfig, gid: int, handle: Callable[[bytes], dict[str, Any]]
+        self,
+        path: str,
+        roles: RoleConfig,
+        gid: int,
+        handle: Callable[[tuple[Any, str, dict[str, Any]]], dict[str, Any]],
     ) -> None:
         self.path = path
         self.roles = Roles(roles)
@@ -147,17 +151,14 @@ class UrgentSocket:
             self._close(fd, f"request longer than {LINE_MAX} bytes")
 
     def _answer(self, fd: int, conn: socket.socket, line: bytes) -> None:
-        rid: Any = None
         try:
-            msg = json.loads(line)
-            rid = request_id(msg)
-            cmd = msg.get("cmd") if isinstance(msg, dict) else None
-        except (ValueError, RecursionError):
-            cmd = None
+            rid, cmd, args = parse_request(line)  # decoded once, here
+        except ProtocolError as e:
+            rid, cmd, args = e.rid, None, {}
         if cmd not in URGENT_COMMANDS:
             self._close(fd, "this socket takes abort and stop only (other commands: the main socket)", rid)
             return
-        reply = self.handle(line)
+        reply = self.handle((rid, cmd, args))
         log.info("%s from the urgent socket: %s", cmd, "ok" if reply.get("ok") else reply.get("error"))
         self._send(conn, reply)
 
