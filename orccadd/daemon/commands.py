@@ -8,6 +8,7 @@ changed nothing.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import os
 import pickle
 import shutil
@@ -195,6 +196,10 @@ class RtCommands:
         except OrccaddError as e:
             raise CommandError(str(e)) from None
         mc.install(loaded)
+        # the replaced mission's tasks hold reference cycles (modules and their ports, compiled
+        # ticks) and native state (Ruckig, Pinocchio data); the automatic collector is off in
+        # this process (no pause in a tick): free them here, outside any tick (~1 ms)
+        gc.collect()
         self._trace(OperatorAction.LOAD)
         self.m.note(f"loaded mission {loaded.name} ({loaded.automaton.n_states} states, all checks passed)")
         return {"mission": loaded.describe(), "report": loaded.report.format()}
