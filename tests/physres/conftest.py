@@ -4,6 +4,8 @@ more than it would the daemon's. Below the simulators' (70): they are the hardwa
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 from collections.abc import Iterator
 from typing import Any
@@ -48,7 +50,8 @@ def _modes(backend: str) -> frozenset[Any]:
     from orccadd.robot import backend_class, load_robot_config, with_backend
     from tests.conftest import ROOT
 
-    cfg = load_robot_config(ROOT / DESCRIBED_BY[backend])
+    with contextlib.redirect_stderr(io.StringIO()):  # its config's warnings: said where it runs
+        cfg = load_robot_config(ROOT / DESCRIBED_BY[backend])
     if cfg.resource.backend != backend:
         cfg = with_backend(cfg, backend)
     return frozenset(backend_class(backend, cfg.source).describe(cfg).modes)
