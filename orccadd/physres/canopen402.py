@@ -44,6 +44,7 @@ from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, Quantity, ResourceDescription, Source
+from orccadd.runtime.rt import ThreadsStartedHere
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Status
 
@@ -109,7 +110,9 @@ class Canopen402Arm(PhysicalResource):
 
     # ---- lifecycle ------------------------------------------------------------------------
     def _on_configure(self) -> None:
-        for w in self.master.start():
+        with ThreadsStartedHere(self.master.s.io_priority) as started:  # the buses' I/O threads
+            warnings = self.master.start()
+        for w in [*warnings, *started.warnings]:
             logging.getLogger("orccadd.canopen").warning("%s: %s", self.name, w)
         modes = frozenset.intersection(*(a.modes for a in self.master.axes))
         self.supported_modes = frozenset(COMMAND_OF[m] for m in modes)

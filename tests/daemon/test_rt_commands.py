@@ -10,7 +10,7 @@ import pytest
 
 from orccadd.daemon.machine import Machine
 from orccadd.daemon.replies import CommandError, Pending
-from orccadd.daemon.rtproc import RealtimeProcess
+from orccadd.daemon.rtproc import RealtimeProcess, decode
 from tests.daemon.conftest import ROOT
 
 
@@ -28,9 +28,13 @@ class Broken:
 
 
 def handle(msg: object) -> tuple[Any, dict[str, Any]]:
+    """The message as it arrives: decoded and checked once (`decode`), then handled."""
     proc = RealtimeProcess.__new__(RealtimeProcess)
     proc.machine = Broken()  # type: ignore[assignment]
-    rid, reply = proc._handle(json.dumps(msg).encode())
+    req = decode(json.dumps(msg).encode())
+    if isinstance(req, dict):  # refused by the checks: never reaches the machine
+        return req["id"], req
+    rid, reply = proc._handle(req)
     assert isinstance(reply, dict)
     return rid, reply
 
