@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import os
 import re
-import select
 import signal
 import subprocess
 import time
@@ -68,24 +67,24 @@ class Shell:
         assert r.returncode == 0, f"{line}\n{r.stdout.decode()[-2000:]}\n{r.stderr.decode()[-2000:]}"
 
     def _start(self, line: str) -> None:
-        p = subprocess.Popen(
-            ["bash", "-c", f"exec {line}"], cwd=self.tmp, env=self.env, start_new_session=True,
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-        )  # fmt: skip
+        out = self.tmp / f"background-{len(self.background)}.out"  # a file: never a full pipe
+        with out.open("wb") as f:
+            p = subprocess.Popen(
+                ["bash", "-c", f"exec {line}"], cwd=self.tmp, env=self.env, start_new_session=True,
+                stdout=f, stderr=subprocess.STDOUT,
+            )  # fmt: skip
         self.background.append((line, p))
         socket = re.search(r"--socket (\S+)", line)
         if "orccadd --config" in line and socket:
             self._wait_daemon(socket.group(1), p)
         else:
-            self._wait_ready(line, p)
+            self._wait_ready(line, p, out)
 
-    def _wait_ready(self, line: str, p: subprocess.Popen[bytes], timeout_s: float = 60.0) -> None:
-        assert p.stdout is not None
-        end, seen = time.monotonic() + timeout_s, b""
-        while not any(w.encode() in seen for w in READY_WORDS):
-            assert p.poll() is None and time.monotonic() < end, f"{line}: not ready\n{seen.decode()[-2000:]}"
-            if select.select([p.stdout], [], [], 0.2)[0]:
-                seen += os.read(p.stdout.fileno(), 4096)
+    def _wait_ready(self, line: str, p: subprocess.Popen[bytes], out: Path, timeout_s: float = 60.0) -> None:
+        end = time.monotonic() + timeout_s
+        while not any(w in (seen := out.read_text(errors="replace")) for w in READY_WORDS):
+            assert p.poll() is None and time.monotonic() < end, f"{line}: not ready\n{seen[-2000:]}"
+            time.sleep(0.1)
 
     def _wait_daemon(self, socket: str, p: subprocess.Popen[bytes], timeout_s: float = 90.0) -> None:
         end = time.monotonic() + timeout_s
