@@ -118,9 +118,10 @@ class CanopenSettings:
     mode_display_timeout_s: float = field(default=0.5, bounds=(0.01, 10.0))
     startup_timeout_s: float = field(default=5.0, bounds=(0.1, 120.0))
     # the bus's I/O threads (canopen's receiver, the startup heartbeat producer) at SCHED_FIFO
-    # (0: time-shared): just below the control thread (daemon.control_priority, 80). Time-shared,
+    # (0: time-shared): below the control thread (daemon.control_priority, 80) and below the
+    # simulated devices and bus hub of the tests (70), above anything time-shared. Time-shared,
     # they starved on a busy machine and the drives watching our heartbeat faulted (EMCY 0x8130)
-    io_priority: int = field(default=79, bounds=(0, 98))
+    io_priority: int = field(default=65, bounds=(0, 98))
     emcy_type2_codes: tuple[int, ...] = field(default=(), bounds=(0, 0xFFFF))
     buses: tuple[BusConfig, ...] = field(default=())  # further buses (the first: the keys above)
     eds_paths: tuple[str, ...] = field(default=())  # resolved (absolute) by the loader
