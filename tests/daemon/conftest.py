@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
@@ -10,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from orccadd.daemon.machine import Machine
+from orccadd.daemon.replies import Pending
 from orccadd.launch import DaemonProcess
 from orccadd.robot import create_resource, load_robot_config, with_backend
 from orccadd.runtime import WallClock
@@ -91,3 +93,16 @@ def machine(tmp_path: Path) -> Iterator[Machine]:
         res.shutdown()
         os.close(r)
         os.close(w)
+
+
+def load_in(machine: Machine, path: Path, timeout_s: float = 60.0) -> object:
+    """`load` on an in-process machine (the automaton thread's part played here), its reply once
+    the compile child answered; `CommandError` if refused."""
+    with machine.reactor.held():
+        reply = machine.command("load", {"path": str(path)})
+    deadline = time.monotonic() + timeout_s
+    while isinstance(reply, Pending):
+        assert time.monotonic() < deadline, "the load did not end"
+        time.sleep(0.05)
+        reply = reply.poll() or (reply.expire() if time.monotonic_ns() > reply.deadline_ns else reply)
+    return reply

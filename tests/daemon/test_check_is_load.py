@@ -4,7 +4,6 @@ the good ones pass both, every bad one of the test suite fails both (a new user 
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -12,8 +11,8 @@ import pytest
 
 from orccadd.cli import orccadctl_main
 from orccadd.daemon.machine import Machine
-from orccadd.daemon.replies import CommandError, Pending
-from tests.daemon.conftest import ROBOT, ROOT
+from orccadd.daemon.replies import CommandError
+from tests.daemon.conftest import ROBOT, ROOT, load_in
 
 DEMO = (ROOT / "configs/missions/demo.mission").read_text().replace('"../tasks/', f'"{ROOT}/configs/tasks/')
 HOME_GOAL = "set traj.target_rad = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]"
@@ -48,13 +47,7 @@ def check_passes(path: Path) -> bool:
 
 def load_passes(machine: Machine, path: Path) -> bool:
     try:
-        with machine.reactor.held():
-            reply = machine.command("load", {"path": str(path)})
-        deadline = time.monotonic() + 60
-        while isinstance(reply, Pending):
-            assert time.monotonic() < deadline, "the load did not end"
-            time.sleep(0.05)
-            reply = reply.poll() or (reply.expire() if time.monotonic_ns() > reply.deadline_ns else reply)
+        load_in(machine, path)
     except CommandError:
         return False
     return True

@@ -7,17 +7,15 @@ and Dwell, each ended by its postcondition: every switch is read back from the t
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from orccadd.daemon.machine import Machine
-from orccadd.daemon.replies import Pending
 from orccadd.types import Phase
 from orccadd.wire.schema import H, R, T, Trace
-from tests.daemon.conftest import ROOT
+from tests.daemon.conftest import ROOT, load_in
 
 MISSION = (ROOT / "benchmarks/missions/switching.mission").read_text()
 
@@ -25,13 +23,7 @@ MISSION = (ROOT / "benchmarks/missions/switching.mission").read_text()
 def load_and_start(machine: Machine, tmp: Path) -> None:
     path = tmp / "switching.mission"  # the benchmark's mission, its task files found from here
     path.write_text(MISSION.replace('"../../configs/', f'"{ROOT}/configs/'))
-    with machine.reactor.held():
-        reply = machine.command("load", {"path": str(path)})
-    deadline = time.monotonic() + 60
-    while isinstance(reply, Pending):
-        assert time.monotonic() < deadline, "the mission did not compile"
-        time.sleep(0.05)
-        reply = reply.poll() or reply
+    load_in(machine, path)
     with machine.reactor.held():
         machine.command("start", {})
 
