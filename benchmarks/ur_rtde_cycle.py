@@ -57,8 +57,9 @@ import numpy as np
 from harness import ROOT, cyclictest, figures
 
 from orccadd.daemon.rtproc import GIL_SWITCH_INTERVAL_S
+from orccadd.drivers.ur.link import POLL_S
 from orccadd.physres.base import PhysicalResource
-from orccadd.physres.ur_rtde import POLL_S, UrRtdeArm
+from orccadd.physres.ur_rtde import UrRtdeArm
 from orccadd.robot import create_resource, load_robot_config
 from orccadd.runtime import enter_realtime, leave_realtime
 from orccadd.runtime.clock import Clock
@@ -253,7 +254,7 @@ def run_ours(sim: UrSimProcess, duration_s: float, priority: int) -> Run:
     try:  # ur_rtde's clients go (s.close) before the simulator does
         arm.configure()
         arm.activate(CommandMode.POSITION)
-        loop.recv = arm.receive = TimedReceive(arm.receive)
+        loop.recv = arm.link.receive = TimedReceive(arm.link.receive)
         loop.active = task
         task.activate()
         loop.executor.run(max_ticks=int(round(WARMUP_S / period)))

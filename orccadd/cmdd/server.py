@@ -51,7 +51,6 @@ from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 log = logging.getLogger("orccadd.cmdd")
 NICE = -10
 MONITOR_MIN_HZ = 0.01
-GONE_CHECK_S = 0.25  # how soon a stream notices its client has gone
 
 ROLELESS_MAX = 8  # peers without a role waited for at once (each gets one refusal)
 ROLELESS_WAIT_S = 2.0
@@ -60,6 +59,24 @@ ROLELESS_WAIT_S = 2.0
 RESERVED_MAX = 4
 RESERVED_WAIT_S = 2.0
 RT_MAX = 1 << 20
+
+
+class ClientReader(asyncio.StreamReader):
+    """A client's stream reader that says, as an event to wait on, when the client's end has
+    closed (or the daemon is stopping): a stream that writes nothing for a while must still not
+    keep a slot for nobody."""
+
+    def __init__(self, limit: int) -> None:
+        super().__init__(limit=limit)
+        self.ended = asyncio.Event()
+
+    def feed_eof(self) -> None:
+        super().feed_eof()
+        self.ended.set()
+
+    def set_exception(self, exc: Exception) -> None:
+        super().set_exception(exc)
+        self.ended.set()
 
 
 class RtLink:
@@ -155,7 +172,7 @@ class CommandDaemon:
         self.done = asyncio.Event()
         self.sock_ino = 0
         self.dispatch = Dispatcher(self, "cmdd")
-        self.readers: dict[asyncio.StreamWriter, asyncio.StreamReader] = {}  # for streams: gone?
+        self.readers: dict[asyncio.StreamWriter, ClientReader] = {}  # for streams: gone?
 
     async def refresh(self, timeout_s: float | None = RT_REPLY_S) -> None:
         st = read_status(self.tel)
@@ -200,13 +217,17 @@ class CommandDaemon:
             log.info("the real-time process is gone before serving; exiting")
             return
         sock = self._prepare_socket()
-        self.server = await asyncio.start_unix_server(self._client, sock=sock, limit=MAX_LINE)
         loop = asyncio.get_running_loop()
+        self.server = await loop.create_unix_server(
+            lambda: asyncio.StreamReaderProtocol(ClientReader(MAX_LINE), self._client), sock=sock
+        )
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, self.done.set)
         self._resume_log()
         pump = asyncio.create_task(self._pump())
         await self.done.wait()
+        for reader in self.readers.values():  # streams end now
+            reader.ended.set()
         pump.cancel()
         self.server.close()
         if self.recording is not None:
@@ -263,6 +284,7 @@ class CommandDaemon:
                 await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
                 return
             self.slots[role] += 1
+            assert isinstance(reader, ClientReader)
             self.readers[writer] = reader
             try:
                 await self._serve_client(reader, writer, role, uid)
@@ -442,21 +464,16 @@ class CommandDaemon:
         return {"samples": sent}
 
     async def _wait_while_connected(self, writer: asyncio.StreamWriter, seconds: float) -> bool:
-        """Sleep `seconds` (in short steps); False as soon as the client has gone (its end closed:
-        a stream must not keep a slot for nobody) or the daemon is stopping."""
+        """Wait `seconds`; False as soon as the client has gone (its end closed: a stream must not
+        keep a slot for nobody) or the daemon is stopping."""
         reader = self.readers.get(writer)
-        end = time.monotonic() + seconds
-        while True:
-            if (
-                self.done.is_set()
-                or writer.transport.is_closing()
-                or (reader is not None and reader.at_eof())
-            ):
-                return False
-            left = end - time.monotonic()
-            if left <= 0:
-                return True
-            await asyncio.sleep(min(left, GONE_CHECK_S))
+        if reader is None or reader.ended.is_set() or self.done.is_set() or writer.transport.is_closing():
+            return False
+        try:
+            await asyncio.wait_for(reader.ended.wait(), max(0.0, seconds))
+        except TimeoutError:
+            return not writer.transport.is_closing()
+        return False
 
     @handles("events")
     async def do_events(

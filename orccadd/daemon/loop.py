@@ -184,7 +184,7 @@ class SwitchingLoop(ControlLoop):
         if old is not None and old is not new:
             old.deactivate()
         if mode is not res.mode:
-            res.switch_mode(mode)
+            res.perform_mode_switch(mode)
         new.activate()
         if continues and old is not None:
             new.continue_from(old.sent, self.blend_ticks)

@@ -84,11 +84,8 @@ class DriveTrainArm(SimulatedArm):
         out += err
         np.clip(out, self._neg_tau_max, self.model.tau_max_nm, out=out)
 
-    def _update_friction(self, h: float) -> None:
-        dv = self._dv_friction
-        np.add(self._coulomb, self._brake_on, out=dv)
-        dv *= self._minv_diag
-        dv *= h
+    def _holding_torque(self, out: np.ndarray) -> None:
+        out[:] = self._brake_on
 
 
 OFF, TORQUE, VELOCITY, POSITION = (int(m) for m in Drive)  # plain ints for the per-step arithmetic

@@ -21,7 +21,6 @@ import numpy as np
 
 from orccadd.config.robot import RobotConfig
 from orccadd.dxlsim import table as T
-from orccadd.dxlsim.arm import ArmDynamics
 from orccadd.dxlsim.models import MODELS
 from orccadd.dxlsim.protocol import (
     BROADCAST_ID,
@@ -34,8 +33,10 @@ from orccadd.dxlsim.protocol import (
 from orccadd.dxlsim.servo import OVERHEATING, OVERLOAD, RESET_ALL, Servo
 from orccadd.dxlsim.settings import ChainSettings
 from orccadd.model import RobotModel
+from orccadd.physres.arm_dynamics import ArmDynamics
 
 SERVO_PERIOD_S = 0.001  # the servos' control period and the arm's integration step
+INERTIA_EVERY = 10  # steps between two looks at the arm's inertia (it changes slowly with the pose)
 VISCOUS_NM_S_RAD = 0.01
 FAULTS = ("overload", "overheating", "unplug", "replug", "noise", "late", "clear")
 READS = (Instruction.READ, Instruction.SYNC_READ, Instruction.BULK_READ)
@@ -69,7 +70,15 @@ class Chain:
         friction = np.array([m.friction_nm for m in models]) * gear
         model = RobotModel.from_config(cfg)
         q0 = np.array(q0_rad if q0_rad is not None else model.home_rad, dtype=np.float64)
-        self.arm = ArmDynamics(model, reflected, friction, np.full(len(models), VISCOUS_NM_S_RAD), q0)
+        self.arm = ArmDynamics(
+            model,
+            q0,
+            viscous_nm_s_rad=np.full(len(models), VISCOUS_NM_S_RAD),
+            coulomb_nm=friction,
+            armature_kg_m2=reflected,
+            hard_stops=True,
+        )
+        self._tau_nm = np.zeros(len(models))
         self.t_s: float | None = None
         self.last_packet_s = 0.0
         self.noise_rate = 0.0
@@ -95,14 +104,18 @@ class Chain:
             self.t_s = now_s - max_catch_up_s
         h = SERVO_PERIOD_S
         k, offset, servos = self._k, self._offset, self.servos
-        tau = [0.0] * len(servos)
+        arm, tau = self.arm, self._tau_nm
+        steps = 0
         while self.t_s + h <= now_s:
-            q, dq = self.arm.q.tolist(), self.arm.dq.tolist()
+            if steps % INERTIA_EVERY == 0:  # the inertia changes slowly with the pose
+                arm.refresh_inertia()
+            q, dq = arm.q.tolist(), arm.dq.tolist()
             idle = self.t_s - self.last_packet_s
             for j, servo in enumerate(servos):
                 tau[j] = k[j] * servo.step(k[j] * (q[j] - offset[j]), k[j] * dq[j], h, idle)
-            self.arm.step(tau, h)
+            arm.step(tau, h)
             self.t_s += h
+            steps += 1
 
     def _sample(self) -> None:
         """Give every servo its horn's angle and speed (before a read, at start)."""

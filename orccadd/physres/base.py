@@ -90,6 +90,7 @@ class PhysicalResource(ABC):
         self._velocity_guard = VelocityGuard(model, config.control_period_s) if torque else None
         self.clamp_count = 0
         self.rejected_count = 0  # commands with a NaN or an infinity, never sent
+        self._prepared_modes: set[CommandMode] = set()  # `prepare_mode_switch` done
 
     # ---- declaration and settings ---------------------------------------------------------
     @classmethod
@@ -138,15 +139,35 @@ class PhysicalResource(ABC):
         self._last_pos_cmd[:] = self.state.q_rad
         self._transition("activate")
 
-    def switch_mode(self, mode: CommandMode) -> None:
-        """Change the command mode while active (between tasks, not within a tick)."""
-        if self.lifecycle is not Lifecycle.ACTIVE:
-            raise LifecycleError(f"resource {self.name!r}: switch_mode needs an active resource")
+    def prepare_mode_switch(self, mode: CommandMode) -> None:
+        """A mode switch's first phase, outside the tick (when a mission's tasks are built): check
+        that the device can take `mode` while enabled and prepare what the switch sends, so that
+        `perform_mode_switch` only sends it (ros2_control's `prepare_command_mode_switch`).
+        `ResourceError` if it cannot; once per mode."""
         if mode not in self.supported_modes:
-            raise ResourceError(f"resource {self.name!r} cannot command {mode.name.lower()}")
-        self._on_switch_mode(mode)
+            allowed = ", ".join(m.name.lower() for m in sorted(self.supported_modes))
+            raise ResourceError(
+                f"resource {self.name!r} cannot command {mode.name.lower()} (supported: {allowed})"
+            )
+        if mode not in self._prepared_modes:
+            self._on_prepare_mode_switch(mode)
+            self._prepared_modes.add(mode)
+
+    def perform_mode_switch(self, mode: CommandMode) -> None:
+        """A mode switch's second phase, in the tick (between two tasks' commands): the device
+        takes the prepared `mode` (ros2_control's `perform_command_mode_switch`)."""
+        if self.lifecycle is not Lifecycle.ACTIVE:
+            raise LifecycleError(f"resource {self.name!r}: a mode switch needs an active resource")
+        if mode not in self._prepared_modes:
+            raise LifecycleError(f"resource {self.name!r}: switch to {mode.name.lower()} mode not prepared")
+        self._on_perform_mode_switch(mode)
         self.mode = mode
         self._last_pos_cmd[:] = self.state.q_rad
+
+    def switch_mode(self, mode: CommandMode) -> None:
+        """Both phases at once, for a caller outside the tick."""
+        self.prepare_mode_switch(mode)
+        self.perform_mode_switch(mode)
 
     def deactivate(self) -> None:
         """Disable the motors (brakes on where the device has them)."""
@@ -336,8 +357,11 @@ class PhysicalResource(ABC):
         """Enable the device; leave the current measured position in `self.state.q_rad`
         (the position-mode rate limit starts from it)."""
 
-    def _on_switch_mode(self, mode: CommandMode) -> None:
-        """Change the device's mode while enabled; default: nothing to do."""
+    def _on_prepare_mode_switch(self, mode: CommandMode) -> None:
+        """Check and prepare a switch to `mode` (not for a tick); default: nothing to prepare."""
+
+    def _on_perform_mode_switch(self, mode: CommandMode) -> None:
+        """Change the device's mode while enabled, as prepared (tick); default: nothing to do."""
 
     @abstractmethod
     def _on_deactivate(self) -> None: ...

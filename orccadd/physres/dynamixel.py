@@ -51,7 +51,6 @@ from orccadd.drivers.dynamixel.errors import ALERT, hardware_error_text
 from orccadd.drivers.dynamixel.goals import Goals
 from orccadd.drivers.dynamixel.models import MODE_NAMES, MODELS
 from orccadd.drivers.dynamixel.port import check_latency
-from orccadd.drivers.dynamixel.ramp import StopRamp
 from orccadd.drivers.dynamixel.settings import DynamixelSettings, load_dynamixel_settings
 from orccadd.drivers.dynamixel.startup import eeprom_targets, goal_item, operating_modes
 from orccadd.errors import ResourceError
@@ -59,6 +58,7 @@ from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, Quantity, ResourceDescription, Source
+from orccadd.physres.stop_ramp import StopRamp
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Status
 
@@ -125,6 +125,7 @@ class DynamixelArm(PhysicalResource):
         self._fault_key: tuple[object, ...] = ()
         self._op_modes = [MODE_NAMES[v.operating_mode] for v in s.servos]
         self._ramp = StopRamp(n)
+        self._mode_targets: dict[CommandMode, list[int]] = {}  # each servo's Operating Mode, per mode
         self._holding = False  # ticks without a command since the last one (keep-alive holds)
         self._rest_ticks = 0
         self._stop_t0 = 0.0
@@ -197,8 +198,11 @@ class DynamixelArm(PhysicalResource):
         self._ramp.hold(self.state.q_rad.tolist(), now)
         self._holding = False
 
-    def _on_switch_mode(self, mode: CommandMode) -> None:
-        target = operating_modes(self.settings, self.config, mode)
+    def _on_prepare_mode_switch(self, mode: CommandMode) -> None:
+        self._mode_targets[mode] = operating_modes(self.settings, self.config, mode)
+
+    def _on_perform_mode_switch(self, mode: CommandMode) -> None:
+        target = self._mode_targets[mode]
         try:
             self._switch(mode, target)
             self._check_switch(target)

@@ -30,6 +30,7 @@ from orccadd.config.schema import field, load_dataclass
 from orccadd.errors import ConfigError
 from orccadd.fault import Fault, FaultKind
 from orccadd.model import RobotModel
+from orccadd.physres.arm_dynamics import ArmDynamics
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, ResourceDescription
 from orccadd.state import FloatArray, JointState
@@ -143,12 +144,16 @@ class SimulatedArm(PhysicalResource):
 
         self._pin = model.model
         self._data = model.new_data()
-        self._viscous = vec(s.viscous_friction_nm_s_rad)
-        self._coulomb = vec(s.coulomb_friction_nm)
         self._brake = vec(s.brake_torque_nm)
         self._rng = np.random.default_rng(s.seed)
-        self.q: FloatArray = vec(s.initial_q_rad) if s.initial_q_rad else model.home_rad.copy()
-        self.dq: FloatArray = np.zeros(n)
+        self.arm = ArmDynamics(
+            model,
+            vec(s.initial_q_rad) if s.initial_q_rad else model.home_rad,
+            viscous_nm_s_rad=vec(s.viscous_friction_nm_s_rad),
+            coulomb_nm=vec(s.coulomb_friction_nm),
+        )
+        self.q: FloatArray = self.arm.q  # the same arrays, moved in place by the core
+        self.dq: FloatArray = self.arm.dq
         self.tau_applied: FloatArray = np.zeros(n)
         self.t_sim_s: float | None = None
         self.brakes_engaged = True
@@ -176,11 +181,6 @@ class SimulatedArm(PhysicalResource):
         self._ring_i = 0
         self._ring_filled = False
         self._noise = np.zeros(n)
-        self._minv_diag = np.ones(n)
-        self._tau_total = np.zeros(n)
-        self._tmp = np.zeros(n)
-        self._dv_friction = np.zeros(n)
-        self._stuck = np.zeros(n, dtype=np.bool_)
         self._neg_tau_max = -model.tau_max_nm
 
     # ---- lifecycle hooks ------------------------------------------------------------------
@@ -197,7 +197,7 @@ class SimulatedArm(PhysicalResource):
         self.brakes_engaged = False
         self.torque_on = True
 
-    def _on_switch_mode(self, mode: CommandMode) -> None:
+    def _on_perform_mode_switch(self, mode: CommandMode) -> None:
         self._set_hold_command(mode)
 
     def _set_hold_command(self, mode: CommandMode) -> None:
@@ -301,11 +301,12 @@ class SimulatedArm(PhysicalResource):
         steps = int((t_s - self.t_sim_s) / h + 1e-9)
         if steps <= 0:
             return
-        pin.computeMinverse(self._pin, self._data, self.q)
-        np.copyto(self._minv_diag, np.diag(self._data.Minv))
+        arm = self.arm
+        arm.refresh_inertia()
         for _ in range(steps):
-            self._update_friction(h)
-            self._substep(h)
+            self._holding_torque(arm.holding_nm)
+            self._motor_torque(self.tau_applied)
+            arm.step(self.tau_applied, h)
         self.t_sim_s += steps * h
 
     def _motor_torque(self, out: FloatArray) -> None:
@@ -358,31 +359,9 @@ class SimulatedArm(PhysicalResource):
             else:
                 self._engage_brakes()
 
-    def _update_friction(self, h: float) -> None:
-        """Velocity change Coulomb friction (and engaged brakes) can remove in one sub-step."""
-        dv = self._dv_friction
+    def _holding_torque(self, out: FloatArray) -> None:
+        """The holding brakes' torque on each joint this sub-step (0 where released)."""
         if self.brakes_engaged:
-            np.add(self._coulomb, self._brake, out=dv)
+            out[:] = self._brake
         else:
-            dv[:] = self._coulomb
-        dv *= self._minv_diag
-        dv *= h
-
-    def _substep(self, h: float) -> None:
-        tau, tmp, dq = self._tau_total, self._tmp, self.dq
-        self._motor_torque(self.tau_applied)
-        np.multiply(self._viscous, dq, out=tau)
-        np.subtract(self.tau_applied, tau, out=tau)
-        ddq = pin.aba(self._pin, self._data, self.q, dq, tau)
-        np.multiply(ddq, h, out=tmp)
-        dq += tmp
-        # Coulomb friction (and brakes) as a velocity-level projection: joints really stick.
-        dv, stuck = self._dv_friction, self._stuck
-        np.abs(dq, out=tmp)
-        np.less_equal(tmp, dv, out=stuck)
-        np.sign(dq, out=tmp)
-        tmp *= dv
-        dq -= tmp
-        np.putmask(dq, stuck, 0.0)
-        np.multiply(dq, h, out=tmp)
-        self.q += tmp
+            out[:] = 0.0

@@ -175,7 +175,7 @@ class SimProcessArm(PhysicalResource):
         self.state.q_rad[:] = self._buf[1 : 1 + n]
         self._wrote = True
 
-    def _on_switch_mode(self, mode: CommandMode) -> None:
+    def _on_perform_mode_switch(self, mode: CommandMode) -> None:
         self._request(Request.SWITCH_MODE, int(mode))
 
     def _on_deactivate(self) -> None:

@@ -1,7 +1,7 @@
 """`ur_rtde` backend: a Universal Robots arm (e-Series at 500 Hz, CB3 at 125 Hz) over RTDE, through
-the `ur-rtde` package: `RTDEReceiveInterface` (the controller's stream), `RTDEControlInterface` (the
-control script it uploads: servoJ, speedJ, servoStop, speedStop) and `DashboardClient` (power,
-brakes, protective-stop unlock, version and model).
+the `ur-rtde` package, whose three clients (the RTDE stream, the control script, the dashboard)
+the driver object `drivers.ur.link.UrLink` owns with their threads and lock; this resource is the
+tick over it: state, faults, commands and the stop.
 
 - configure: the dashboard first: controller version and robot model checked against the config,
   the controller's period against the control period; power on and brake release only if the
@@ -23,8 +23,6 @@ brakes, protective-stop unlock, version and model).
 
 from __future__ import annotations
 
-import logging
-import threading
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -32,31 +30,20 @@ from typing import Any
 import numpy as np
 
 from orccadd.config.robot import RobotConfig
-from orccadd.drivers.ur.controller import (
-    ROBOT_PROGRAM_RUNNING,
-    Condition,
-    RobotMode,
-    SafetyMode,
-    Version,
-    condition,
-    parse_polyscope_version,
-    robot_model_name,
-)
+from orccadd.drivers.ur.controller import RobotMode, SafetyMode, condition, parse_polyscope_version
+from orccadd.drivers.ur.link import UrLink
 from orccadd.drivers.ur.settings import UrRtdeSettings
 from orccadd.errors import ConfigError, ResourceError
 from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, ClockSource, Quantity, ResourceDescription, Source
-from orccadd.runtime.rt import ThreadsStartedHere
+from orccadd.physres.stop_ramp import StopRamp
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Status
 
-log = logging.getLogger("orccadd.ur")
-
 E_SERIES = ("UR3e", "UR5e", "UR10e", "UR16e", "UR20", "UR30")
 AT_REST_RAD_S = 0.01
-POLL_S = 0.0001  # wait_for_cycle: how often the controller's timestamp is looked at
 
 
 def _period_of(model: str) -> float:
@@ -105,11 +92,7 @@ class UrRtdeArm(PhysicalResource):
         super().__init__(config, model)
         self.settings: UrRtdeSettings = config.backend_settings
         self.period_s = config.control_period_s
-        self.receive: Any = None
-        self.control: Any = None
-        self.dashboard: Any = None
-        self.version: Version | None = None
-        self.robot_model = ""
+        self.link = UrLink(self.settings, self.period_s, self.name)
         self._last_stamp = -1.0
         self._last_new_s = 0.0  # tick time at which the last new package was seen
         self._comm_lost = ""
@@ -117,106 +100,21 @@ class UrRtdeArm(PhysicalResource):
         self._off_by_us = False  # our category 1 stop powered the arm off: not a fault
         self._hold = np.zeros(self.dof)  # the command kept while waiting (position mode)
         self._cmd_v = np.zeros(self.dof)  # the servoJ targets' velocity (position mode)
-        self._ramp_v = np.zeros(self.dof)  # safe stop: current ramp velocity
-        self._ramp_q = np.zeros(self.dof)
-        self._ramp_t = 0.0
+        self._ramp = StopRamp(self.dof)
+        self._zero = np.zeros(self.dof)  # the velocity held while waiting
         self._stop_t0 = 0.0  # tick time the safe stop began
         self.packets_missed = 0
-        # `reset` and `clear_stop` come from the daemon's command thread while the control thread
-        # ticks: they hold this lock over their dashboard/script work and link replacement, and a
-        # tick that finds it taken leaves the links alone (the arm is at rest: reset needs it)
-        self._io = threading.Lock()
         self._flags = 0  # the last read's status flags, repeated while a reset holds the links
-        self._watchdog_armed = False
 
     # ---- lifecycle ------------------------------------------------------------------------
     def _on_configure(self) -> None:
         self._connect()
 
     def _connect(self) -> None:
-        """The dashboard (controller, model, period; power when configured), then RTDE and the
-        control script with the controller's watchdog on our commands."""
-        import dashboard_client
-
-        s = self.settings
-        self.dashboard = dashboard_client.DashboardClient(s.host)
-        self._try(self.dashboard.connect, f"the dashboard server at {s.host}:29999")
-        self.version = parse_polyscope_version(self.dashboard.polyscopeVersion())
-        self.robot_model = robot_model_name(self.dashboard.getRobotModel(), self.version)
-        self._check_controller(self.version, self.robot_model)
-        if s.power_on:
-            self._power_on()
-        mode = self._dashboard_robot_mode()
-        if mode is not RobotMode.RUNNING:
-            raise ResourceError(
-                f"{self.name}: the arm is {mode.name} (power it on and release the brakes at the pendant, "
-                "or set power_on = true in [resource.settings])"
-            )
-        self._open_rtde()
-
-    def _check_controller(self, version: Version, model: str) -> None:
-        s = self.settings
-        if model != s.model:
-            raise ResourceError(
-                f"{self.name}: the controller drives a {model}, the config describes a {s.model}"
-            )
-        least = parse_polyscope_version(s.min_version)
-        if (version.major, version.minor) < (least.major, least.minor):
-            raise ResourceError(
-                f"{self.name}: controller software {version} is older than min_version {s.min_version}"
-            )
-        if abs(version.period_s - self.period_s) > 1e-9:
-            raise ResourceError(
-                f"{self.name}: control_period_s = {self.period_s:g} s, but the controller ({version}) "
-                f"runs at {1 / version.period_s:g} Hz: set control_period_s = {version.period_s:g}"
-            )
-
-    def _power_on(self) -> None:
-        d = self.dashboard
-        d.powerOn()
-        self._wait_mode({RobotMode.IDLE, RobotMode.RUNNING}, "power on")
-        d.brakeRelease()
-        self._wait_mode({RobotMode.RUNNING}, "brake release")
-
-    def _wait_mode(self, modes: set[RobotMode], what: str) -> None:
-        end = time.monotonic() + self.settings.connect_timeout_s
-        while (mode := self._dashboard_robot_mode()) not in modes:
-            if time.monotonic() > end:
-                raise ResourceError(f"{self.name}: {what}: the arm stayed {mode.name}")
-            time.sleep(0.1)
-
-    def _dashboard_robot_mode(self) -> RobotMode:
-        reply = str(self.dashboard.robotmode())  # "Robotmode: RUNNING"
-        name = reply.split(":")[-1].strip().upper()
-        return RobotMode[name] if name in RobotMode.__members__ else RobotMode.DISCONNECTED
-
-    def _open_rtde(self) -> None:
-        import rtde_control
-        import rtde_receive
-
-        host, hz, prio = self.settings.host, 1.0 / self.period_s, self.settings.rtde_priority
-        # ur_rtde sets its threads' priority on a PREEMPT_RT kernel only: ours sets it on any
-        with ThreadsStartedHere(prio) as started:
-            self.receive = self._try(
-                lambda: rtde_receive.RTDEReceiveInterface(host, hz, [], False, False, prio),
-                f"RTDE at {host}:30004",
-            )
-            flags = rtde_control.RTDEControlInterface.FLAG_UPLOAD_SCRIPT
-            self.control = self._try(
-                lambda: rtde_control.RTDEControlInterface(host, hz, flags, 50002, prio), "the control script"
-            )
-        for w in started.warnings:
-            log.warning("%s: %s", self.name, w)
-        self._watchdog_armed = False
+        self.link.connect()
         self._last_stamp = -1.0
         self._last_new_s = 0.0
         self._comm_lost = ""
-
-    def _try(self, fn: Any, what: str) -> Any:
-        try:
-            return fn()
-        except RuntimeError as e:
-            raise ResourceError(f"{self.name}: cannot reach {what}: {e}") from None
 
     def _on_activate(self, mode: CommandMode) -> None:
         self._read_into(time.monotonic(), self.state)
@@ -226,18 +124,18 @@ class UrRtdeArm(PhysicalResource):
         self._hold[:] = self.state.q_rad
         self._cmd_v[:] = 0.0
 
-    def _on_switch_mode(self, mode: CommandMode) -> None:
+    def _on_perform_mode_switch(self, mode: CommandMode) -> None:
         self._hold_here()
 
     def _on_deactivate(self) -> None:
-        if self.control is not None and not self._comm_lost:
-            self.control.servoStop(self.config.safe_stop.deceleration_rad_s2)
+        if self.link.control is not None and not self._comm_lost:
+            self.link.control.servoStop(self.config.safe_stop.deceleration_rad_s2)
 
     def _on_shutdown(self) -> None:
-        self._close_links()
+        self.link.close()
 
     def _on_clear_stop(self) -> None:
-        with self._io:
+        with self.link.lock:
             self._clear_stop_locked()
 
     def _clear_stop_locked(self) -> None:
@@ -245,13 +143,13 @@ class UrRtdeArm(PhysicalResource):
             # `reset` has restarted its script already; a second restart raced the next commands)
             if not self.settings.power_on:
                 raise ResourceError(f"{self.name}: powered off by the stop: power it on at the pendant")
-            self._power_on()
-            self._restart_script()
+            self.link.power_on()
+            self.link.restart_script()
             self._off_by_us = False
         self._hold_here()
 
     def _on_reset_fault(self) -> None:
-        with self._io:
+        with self.link.lock:
             self._reset_fault_locked()
 
     def _reset_fault_locked(self) -> None:
@@ -259,34 +157,24 @@ class UrRtdeArm(PhysicalResource):
             self._reconnect()
             return
         st = self.state
-        if self._off_by_us and int(self.receive.getSafetyMode()) == SafetyMode.NORMAL:
+        if self._off_by_us and int(self.link.receive.getSafetyMode()) == SafetyMode.NORMAL:
             return  # nothing but our own power-off: `clear_stop` powers it on
-        cond = self._condition()
+        cond = self.link.condition()
         if cond is None:
             return
         if cond.needs:
             raise ResourceError(f"{self.name}: {cond.what}: `reset` cannot clear it ({cond.needs})")
         if cond.unlockable:  # the controller allows it 5 s after the stop began, and says so
-            try:
-                self.dashboard.unlockProtectiveStop()
-            except RuntimeError as e:
-                raise ResourceError(f"{self.name}: protective stop: {e}: reset again then") from None
-            self.dashboard.closeSafetyPopup()
-        self._restart_script()
+            self.link.unlock_protective_stop()
+        self.link.restart_script()
         self.fault = None
         st.fault_code = 0
-
-    def _restart_script(self) -> None:
-        """The script stopped with the controller's stop: start it again, its watchdog too."""
-        self.control.stopScript()  # ur_rtde clears the command registers (no stale servoJ target)
-        self.control.reuploadScript()
-        self._watchdog_armed = False
 
     def _reconnect(self) -> None:
         """After CommLost, with the arm safe-stopped: every link closed and opened again as at
         startup (the controller may have been restarted: model, version and period checked
         again), the state read afresh, and the stop's hold taken from where the arm now is."""
-        self._close_links()
+        self.link.close()
         self._connect()
         self._flags = self._read_locked(time.monotonic(), self.state)
         if self._comm_lost:
@@ -296,57 +184,28 @@ class UrRtdeArm(PhysicalResource):
         self.fault = None
         self.state.fault_code = 0
 
-    def _close_links(self) -> None:
-        """Every link dropped, ur_rtde's control interface first (left connected to a dead
-        controller, it reconnects by itself from its own thread). Dropping the last reference is
-        the disconnect: ur_rtde's destructors disconnect (0.5 s each, joining their threads), so
-        an explicit disconnect() before would cost it twice. Nothing else holds them: the
-        clock's wait looks `receive` up at every poll."""
-        self.control = None
-        self.receive = None
-        self.dashboard = None
-
     # ---- the device's clock ---------------------------------------------------------------
     def wait_for_cycle(self, timeout_s: float) -> int:
         """Until ur_rtde's receive thread has a package with a new controller timestamp."""
-        if self.receive is None or self._io.locked():  # no link, or a reset replacing it
-            time.sleep(timeout_s)
-            return -1
-        end = time.monotonic() + timeout_s
-        last = self._last_stamp
-        while True:
-            receive = self.receive  # looked up each time: a reset may drop it meanwhile
-            if receive is None:
-                return -1
-            try:
-                if receive.getTimestamp() != last:
-                    return time.monotonic_ns()
-            except RuntimeError:
-                return -1
-            del receive
-            if time.monotonic() >= end:
-                return -1
-            time.sleep(POLL_S)
+        return self.link.wait_for_package(self._last_stamp, timeout_s)
 
     # ---- tick -----------------------------------------------------------------------------
-    def _script_running(self) -> bool:
-        return bool(int(self.receive.getRobotStatus()) & ROBOT_PROGRAM_RUNNING)
-
     def _read_into(self, t_s: float, state: JointState) -> int:
-        if not self._io.acquire(blocking=False):
+        if not self.link.lock.acquire(blocking=False):
             return self._flags
         try:
             self._flags = self._read_locked(t_s, state)
         finally:
-            self._io.release()
+            self.link.lock.release()
         return self._flags
 
     def _read_locked(self, t_s: float, state: JointState) -> int:
-        r = self.receive
+        link = self.link
+        r = link.receive
         if r is None:  # a reconnection failed: nothing to read until the next `reset`
             return int(Status.COMM_LOST)
         try:  # ur_rtde's control link first: a command sent on a dead link blocks while it reconnects
-            connected = self.control.isConnected() and r.isConnected()
+            connected = link.control.isConnected() and r.isConnected()
             stamp = r.getTimestamp()
         except RuntimeError:
             connected, stamp = False, self._last_stamp
@@ -365,7 +224,7 @@ class UrRtdeArm(PhysicalResource):
         state.dq_rad_s[:] = r.getActualQd()
         state.tau_nm[:] = r.getTargetMoment()
         robot_mode, safety_mode = int(r.getRobotMode()), int(r.getSafetyMode())
-        cond = condition(robot_mode, safety_mode, int(r.getRuntimeState()), self._script_running())
+        cond = condition(robot_mode, safety_mode, int(r.getRuntimeState()), link.script_running())
         self._controller_stopped = cond is not None
         if cond is None:
             return 0
@@ -382,12 +241,12 @@ class UrRtdeArm(PhysicalResource):
         return flags
 
     def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
-        if not self._io.acquire(blocking=False):
+        if not self.link.lock.acquire(blocking=False):
             return 0
         try:
             return self._send(mode, command)
         finally:
-            self._io.release()
+            self.link.lock.release()
 
     def _lose(self, why: str) -> None:
         """CommLost, said as first seen (the type 3 reports the message of its tick)."""
@@ -397,19 +256,14 @@ class UrRtdeArm(PhysicalResource):
 
     def _control_ready(self) -> bool:
         """The control link is up (a command sent on a dead one blocks while ur_rtde reconnects)
-        and the controller's watchdog armed: the first tick of a (re)started script arms it, so
-        that no startup gap between configure and the loop trips it. From then on the controller
-        stops the script, and the arm, when our commands stop coming for `watchdog_s`: this
-        process killed or stalled, the link cut (mid-speedJ above all)."""
-        c = self.control
+        and the controller's watchdog armed (`UrLink.arm_watchdog`)."""
+        c = self.link.control
         if c is None or self._comm_lost:
             return False
         if not c.isConnected():
             self._lose("the RTDE connection is closed")
             return False
-        if not self._watchdog_armed:
-            c.setWatchdog(1.0 / self.settings.watchdog_s)  # one round trip to the script, once
-            self._watchdog_armed = True
+        self.link.arm_watchdog(self.settings.watchdog_s)
         return True
 
     def _send(self, mode: CommandMode, command: FloatArray) -> int:
@@ -422,39 +276,33 @@ class UrRtdeArm(PhysicalResource):
                 self._cmd_v /= self.period_s
                 self._hold[:] = command
                 q = command.tolist()
-                ok = self.control.servoJ(q, 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
+                ok = self.link.control.servoJ(q, 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
             else:
-                ok = self.control.speedJ(command.tolist(), s.speedj_acceleration_rad_s2, self.period_s)
+                ok = self.link.control.speedJ(command.tolist(), s.speedj_acceleration_rad_s2, self.period_s)
         except RuntimeError as e:  # after its own reconnection attempt failed (ur_rtde's)
             self._lose(f"the RTDE connection is closed ({e})")
             return int(Status.COMM_LOST)
         if ok:
             return 0
         if self.fault is None:  # the type 3 says why, even when this comes before the read
-            cond = self._condition()
+            cond = self.link.condition()
             why = cond.what if cond else "no stop reported yet"
             self._set_fault(FaultKind.DEVICE, f"the controller refused the command ({why})")
         return int(Status.FAULT)
-
-    def _condition(self) -> Condition | None:
-        r = self.receive
-        return condition(
-            int(r.getRobotMode()), int(r.getSafetyMode()), int(r.getRuntimeState()), self._script_running()
-        )
 
     def _on_keep_alive(self, t_s: float) -> None:
         if self._comm_lost:  # nothing reaches the controller: its watchdog stops the script
             if self._stop_flags & Status.STOPPING and t_s - self._stop_t0 > self.config.safe_stop.timeout_s:
                 self._mark_stopped(torque_off=False)
             return
-        if not self._io.acquire(blocking=False):
+        if not self.link.lock.acquire(blocking=False):
             return
         try:
             self._keep_alive_locked(t_s)
         except RuntimeError as e:  # the link died under the stop's ramp (ur_rtde raises)
             self._lose(f"the RTDE connection is closed ({e})")
         finally:
-            self._io.release()
+            self.link.lock.release()
 
     def _keep_alive_locked(self, t_s: float) -> None:
         if not self._control_ready():
@@ -462,50 +310,47 @@ class UrRtdeArm(PhysicalResource):
         if self._stop_flags & Status.STOPPING:
             self._ramp_step(t_s)
         elif self._stop_flags:  # at rest after the stop: no command, the watchdog still fed
-            self.control.kickWatchdog()
+            self.link.control.kickWatchdog()
         else:
-            self._send(self.mode, self._hold if self.mode is CommandMode.POSITION else self._ramp_v * 0)
+            self._send(self.mode, self._hold if self.mode is CommandMode.POSITION else self._zero)
 
     def _begin_safe_stop(self) -> None:
+        st = self.state
         if self.mode is CommandMode.POSITION:  # from the servoJ target and its velocity: the arm
-            self._ramp_q[:] = self._hold  # lags it by the lookahead, and a target pulled back
-            self._ramp_v[:] = self._cmd_v  # to it is a deceleration step (a protective stop)
+            # lags it by the lookahead, and a target pulled back to it is a deceleration step
+            self._ramp.start(self._hold.tolist(), self._cmd_v.tolist(), st.t_s)
         else:
-            self._ramp_q[:] = self.state.q_rad
-            self._ramp_v[:] = self.state.dq_rad_s
-        self._ramp_t = self._stop_t0 = self.state.t_s
+            self._ramp.start(st.q_rad.tolist(), st.dq_rad_s.tolist(), st.t_s)
+        self._stop_t0 = st.t_s
 
     def _ramp_step(self, t_s: float) -> None:
-        """One period of the stop: every joint's speed down at the configured deceleration,
-        together (the path is kept), through the active mode's stream. When the controller has
-        stopped the arm itself (a protective stop, its script halted), it is only watched."""
+        """One period of the stop (`StopRamp`), through the active mode's stream. When the
+        controller has stopped the arm itself (a protective stop, its script halted), it is only
+        watched."""
+        at_rest = float(np.abs(self.state.dq_rad_s).max()) < AT_REST_RAD_S
         if self._controller_stopped:
-            if float(np.abs(self.state.dq_rad_s).max()) < AT_REST_RAD_S:
+            if at_rest:
                 self._mark_stopped(self.config.safe_stop.category == 1)
             return
-        dt = max(0.0, t_s - self._ramp_t) or self.period_s
-        self._ramp_t = t_s
-        peak = float(np.abs(self._ramp_v).max())
+        ramp, s, control = self._ramp, self.settings, self.link.control
         decel = self.config.safe_stop.deceleration_rad_s2
-        if peak > 0.0:
-            self._ramp_v *= max(0.0, peak - decel * dt) / peak
-        self._ramp_q += self._ramp_v * dt
-        s = self.settings
+        ramp.step(t_s, decel)
         if self.mode is CommandMode.POSITION:
-            self.control.servoJ(self._ramp_q.tolist(), 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
+            control.servoJ(ramp.q_rad, 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
         else:
-            self.control.speedJ(self._ramp_v.tolist(), decel, self.period_s)
-        if peak == 0.0 and float(np.abs(self.state.dq_rad_s).max()) < AT_REST_RAD_S:
+            control.speedJ(ramp.dq_rad_s, decel, self.period_s)
+        if ramp.done and at_rest:
             self._at_rest()
 
     def _at_rest(self) -> None:
+        control, decel = self.link.control, self.config.safe_stop.deceleration_rad_s2
         if self.mode is CommandMode.POSITION:
-            self.control.servoStop(self.config.safe_stop.deceleration_rad_s2)
+            control.servoStop(decel)
         else:
-            self.control.speedStop(self.config.safe_stop.deceleration_rad_s2)
+            control.speedStop(decel)
         torque_off = self.config.safe_stop.category == 1
         if torque_off:
-            self.dashboard.powerOff()
+            self.link.power_off()
             self._off_by_us = True
         self._mark_stopped(torque_off)
 
@@ -513,23 +358,12 @@ class UrRtdeArm(PhysicalResource):
     def _details(self) -> dict[str, float | int | str]:
         return {
             **super()._details(),
-            "controller": f"{self.robot_model} {self.version}" if self.version else "",
+            "controller": f"{self.link.robot_model} {self.link.version}" if self.link.version else "",
             "packets_missed": self.packets_missed,
             "comm": self._comm_lost or "ok",
+            **self._measured(),
             **self._measured(),
         }
 
     def _measured(self) -> dict[str, float | int | str]:
-        """What the controller measures beyond the joint state (not for a tick): its time, the
-        joints' actual currents and the TCP pose (base frame, axis-angle)."""
-        r = self.receive
-        if r is None or self._comm_lost:
-            return {}
-        try:
-            return {
-                "controller_time_s": float(r.getTimestamp()),
-                "actual_current_a": " ".join(f"{i:.3f}" for i in r.getActualCurrent()),
-                "tcp_pose_m_rad": " ".join(f"{x:.4f}" for x in r.getActualTCPPose()),
-            }
-        except RuntimeError:
-            return {}
+        return {} if self._comm_lost else self.link.measured()

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orccadd.errors import ConfigError, ParameterError, WiringError
+from orccadd.errors import ConfigError, ParameterError, ResourceError, WiringError
 from orccadd.modules import MODULES, Module, ModuleContext, Port, module_class
 from orccadd.modules.base import Parameter
 from orccadd.physres.base import PhysicalResource
@@ -87,6 +87,10 @@ def build_task(
             "task.command",
             f"(={h.command!r}) is not supported by resource {resource.name!r} (supported: {allowed})",
         )
+    try:  # the switch's first phase, here outside the tick: the loop performs it in one
+        resource.prepare_mode_switch(mode)
+    except ResourceError as e:
+        raise ConfigError(src, "task.command", f"(={h.command!r}): {e}") from None
     joints = resource.model.joint_names
     for i, j in enumerate(h.joints):
         if j not in joints:

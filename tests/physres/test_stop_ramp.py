@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from orccadd.drivers.dynamixel.ramp import StopRamp
+from orccadd.physres.stop_ramp import StopRamp
 
 
 def test_the_fastest_joint_stops_at_the_deceleration_and_the_path_is_kept() -> None:

@@ -1,7 +1,9 @@
-"""The safe stop's deceleration: a reference that leaves the measured state at the stop and
-slows every joint together at the configured deceleration (the path is kept: the joints' speeds
-shrink by one factor), then stands still. The backend streams it as goals (positions, or
-velocities and torques that track it), then holds its end.
+"""The safe stop's deceleration for every backend that streams its own stop (Dynamixel, UR): a
+reference that leaves the commanded or measured state at the stop and slows every joint together
+at the configured deceleration (the path is kept: the joints' speeds shrink by one factor), then
+stands still. The backend streams it as goals (positions, or velocities and torques that track
+it), then holds its end. Backends whose device ramps by itself (CiA 402 quick stop) or whose plant
+is simulated do not use it.
 
 Pure arithmetic on lists, one step per tick; time is the tick's.
 """
