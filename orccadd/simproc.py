@@ -4,7 +4,9 @@
 would block it once full), waits for its ready line on stdout, and stops it (SIGTERM, then
 SIGKILL after `STOP_TIMEOUT_S`). The child gets SIGTERM when its parent dies (Linux
 `PR_SET_PDEATHSIG`): a test killed half-way, even by pytest-timeout's `os._exit`, leaves no
-simulator running at real-time priority behind it. Standard library only.
+simulator running at real-time priority behind it. `SimulatorProcess` adds the device
+simulators' control channel (`orccadd.runtime.sim_control`'s protocol: inject, status). Standard
+library only.
 """
 
 from __future__ import annotations
@@ -12,13 +14,19 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import ctypes.util
+import json
 import os
 import select
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
+import time
+from collections.abc import Callable
 from pathlib import Path
+from types import TracebackType
+from typing import Any, Self
 
 PR_SET_PDEATHSIG = 1
 STOP_TIMEOUT_S = 10.0
@@ -86,3 +94,79 @@ class ChildProcess:
             with contextlib.suppress(OSError):
                 self.proc.stdout.close()
         return int(self.proc.returncode)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+
+
+def ready_fields(line: str) -> dict[str, str]:
+    """`NAME: ready, port /dev/pts/3, control 127.0.0.1:4711` -> {"port": ..., "control": ...}."""
+    _, _, rest = line.partition(": ready")
+    pairs = (part.strip().split(" ", 1) for part in rest.split(",") if part.strip())
+    return {p[0]: p[1] for p in pairs if len(p) == 2}
+
+
+class SimulatorProcess(ChildProcess):
+    """A device simulator (`python -m MODULE --config CONFIG ...`) and its control channel: the
+    `control` address of its ready line, `127.0.0.1:PORT` or a UNIX socket's path."""
+
+    module = ""
+    what = ""
+
+    def __init__(
+        self, config: str | Path, *extra: str, env: dict[str, str] | None = None, timeout_s: float = 60.0
+    ) -> None:
+        args = ["--config", str(config), *extra]
+        super().__init__(self.module, args, what=self.what, ready="ready", env=env, timeout_s=timeout_s)
+        self.fields = ready_fields(self.ready_line)
+        self.control = self.fields["control"]
+
+    def _connect(self, timeout_s: float) -> socket.socket:
+        if self.control.startswith("/"):
+            s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            s.settimeout(timeout_s)
+            try:
+                s.connect(self.control)
+            except OSError:
+                s.close()
+                raise
+            return s
+        host, _, port = self.control.rpartition(":")
+        return socket.create_connection((host, int(port)), timeout=timeout_s)
+
+    def request(self, req: dict[str, Any], timeout_s: float = 10.0) -> dict[str, Any]:
+        """One request, its reply; `RuntimeError` with the simulator's words if it refused."""
+        with self._connect(timeout_s) as s, s.makefile("rwb") as f:
+            f.write(json.dumps(req).encode() + b"\n")
+            f.flush()
+            reply: dict[str, Any] = json.loads(f.readline())
+        if not reply.get("ok"):
+            raise RuntimeError(f"{self.what}: {reply.get('error')}")
+        return reply
+
+    def inject(self, fault: str, device: int | None = None, **params: Any) -> None:
+        """`fault` into the simulator (into one of its devices: a node id, a servo ID), with the
+        fault's parameters (the simulator's `--help` and module documentation list them)."""
+        self.request({"inject": fault, **({"device": device} if device is not None else {}), **params})
+
+    def status(self) -> dict[str, Any]:
+        """`q_rad`, `dq_rad_s`, `devices` ({"id", "state", "fault"} each) and the simulator's own."""
+        return self.request({"status": True})
+
+    def wait_for(
+        self, predicate: Callable[[dict[str, Any]], bool], timeout_s: float = 10.0
+    ) -> dict[str, Any]:
+        """Poll `status()` until `predicate` holds; that status (`TimeoutError` if it never does)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            st = self.status()
+            if predicate(st):
+                return st
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"{self.what}: condition not met in {timeout_s:g} s; status {st}")
+            time.sleep(0.02)

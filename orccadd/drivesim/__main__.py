@@ -2,11 +2,13 @@
 
 It reads the same robot config as orccadd (bus, node ids, EDS/DCF files, encoder and gear
 units; the URDF for the arm), joins the bus, boots every node and answers like the drives
-would. A control port on 127.0.0.1 takes one JSON object per line, for tests:
+would. A control port on 127.0.0.1 speaks the simulators' control protocol
+(`orccadd.runtime.sim_control`), for tests:
 
-    {"inject": "overcurrent" | "following_error" | "heartbeat_silence" | "node_silence" | "clear", "node": 3}
-    {"inject": ..., "node": 1, "bus": "can1"}   (the bus's channel, when node ids repeat across buses)
-    {"status": true}   -> positions (rad), CiA 402 states, SYNCs seen (in all and per bus)
+    {"inject": FAULT, "device": 3}   overcurrent | following_error | heartbeat_silence | node_silence
+                                     | sto | clear
+    {"inject": ..., "device": 1, "bus": "can1"}   (the bus's channel, when node ids repeat across buses)
+    {"status": true}   -> positions (rad), each drive's CiA 402 state, SYNCs seen (in all and per bus)
 
 A config with several buses (`[[resource.settings.buses]]`) gets one simulator on all of them:
 the drives of every bus move the one arm.
@@ -22,13 +24,13 @@ from __future__ import annotations
 
 import argparse
 import gc
-import json
 import logging
 import os
 import signal
 import socket
 import threading
 from dataclasses import fields, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +46,7 @@ from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.physres.sim import SimSettings, load_sim_settings
 from orccadd.robot import load_robot_config
-from orccadd.runtime import Summary
+from orccadd.runtime import Summary, sim_control
 from orccadd.runtime.rt import realtime_device_process
 from orccadd.runtime.threads import ThreadGroup
 
@@ -63,44 +65,31 @@ def plant_config(cfg: RobotConfig, plant_file: str) -> RobotConfig:
     return replace(cfg, resource=resource, backend_settings=settings)
 
 
-def serve_control(sim: DriveSimulator, srv: socket.socket, threads: ThreadGroup) -> None:
-    """Accept control clients (each in a thread of `threads`) until the group is stopping."""
-    srv.settimeout(0.2)
-    while not threads.stopping.is_set():
-        try:
-            conn, _ = srv.accept()
-        except TimeoutError:
-            continue
-        except OSError:
-            return  # closed
-        threads.start(_client, sim, conn, name="control-client")
+def _inject(sim: DriveSimulator, req: sim_control.Injection) -> None:
+    if req.device is None:
+        raise ValueError('a drive fault names its drive: "device": NODE_ID')
+    unknown = set(req.params) - {"bus"}
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {sorted(unknown)} (a drive fault takes: bus)")
+    sim.inject(req.fault, req.device, str(req.params.get("bus", "")))
 
 
-def _client(sim: DriveSimulator, conn: socket.socket) -> None:
-    with conn, conn.makefile("rwb") as f:
-        for line in f:
-            try:
-                req = json.loads(line)
-                if "inject" in req:
-                    sim.inject(int(req["node"]), str(req["inject"]), str(req.get("bus", "")))
-                    reply: dict[str, Any] = {"ok": True}
-                else:
-                    with sim.lock:
-                        reply = {
-                            "ok": True,
-                            "q_rad": [float(x) for x in sim.arm.q],
-                            "states": [ax.sm.state.name for ax in sim.axes],
-                            "syncs": sim.syncs,
-                            "bus_syncs": dict(zip(sim.bus_names, sim.bus_syncs, strict=True)),
-                            "bus_error": sim.bus_error,
-                            "frame_age_ms": _figures_ms(list(sim.frame_age_s)),
-                            "longest_loop_gap_ms": sim.longest_gap_s * 1e3,
-                            "paused_ms": sim.arm.paused_s * 1e3,
-                        }
-            except (ValueError, KeyError, TypeError) as e:
-                reply = {"ok": False, "error": str(e)}
-            f.write(json.dumps(reply).encode() + b"\n")
-            f.flush()
+def _status(sim: DriveSimulator) -> dict[str, Any]:
+    with sim.lock:
+        return {
+            "q_rad": [float(x) for x in sim.arm.q],
+            "dq_rad_s": [float(x) for x in sim.arm.dq],
+            "devices": [
+                sim_control.device(ax.node.node_id, ax.sm.state.name, ax.fault_text()) for ax in sim.axes
+            ],
+            "states": [ax.sm.state.name for ax in sim.axes],
+            "syncs": sim.syncs,
+            "bus_syncs": dict(zip(sim.bus_names, sim.bus_syncs, strict=True)),
+            "bus_error": sim.bus_error,
+            "frame_age_ms": _figures_ms(list(sim.frame_age_s)),
+            "longest_loop_gap_ms": sim.longest_gap_s * 1e3,
+            "paused_ms": sim.arm.paused_s * 1e3,
+        }
 
 
 def _figures_ms(values_s: list[float]) -> dict[str, float]:
@@ -181,7 +170,9 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(sig, lambda *_: stop.set())
     srv = socket.create_server(("127.0.0.1", args.control_port))
     threads = ThreadGroup("drivesim")
-    threads.start(serve_control, sim, srv, threads, name="control")
+    threads.start(
+        sim_control.serve, srv, partial(_inject, sim), partial(_status, sim), threads, name="control"
+    )
     if args.nice:
         try:
             os.nice(args.nice)

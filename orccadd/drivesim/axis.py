@@ -156,6 +156,17 @@ class Axis:
         if t == 11:
             self._begin_stop()
 
+    def fault_text(self) -> str:
+        """The drive's fault as a status reply says it: its error code, an injected silence, STO."""
+        parts = [f"error 0x{self.fault_code:04X}"] if self.fault_code else []
+        if self.node.silent:
+            parts.append("node silent")
+        elif self.node.heartbeat_silent:
+            parts.append("heartbeat silent")
+        if self.sto:
+            parts.append("Safe Torque Off")
+        return ", ".join(parts)
+
     def fault(self, code: int, register: int = ERR_REG_GENERIC) -> None:
         """A drive fault: EMCY, then the fault reaction (a controlled stop), then FAULT."""
         if self.sm.fault() is None:

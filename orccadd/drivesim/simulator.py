@@ -232,7 +232,7 @@ class DriveSimulator:
             )
         raise ValueError(f"node id {node_id} is on several buses: name the bus")
 
-    def inject(self, node_id: int, fault: str, bus: str = "") -> None:
+    def inject(self, fault: str, node_id: int, bus: str = "") -> None:
         """Fault injection: overcurrent / following_error (EMCY, fault reaction), heartbeat_silence
         (no more heartbeats), node_silence (nothing at all), sto (its Safe Torque Off input active:
         Enable Operation refused, the drive stays SWITCHED ON), clear (silences and STO end)."""

@@ -1,9 +1,11 @@
-"""The simulator's control channel: a UNIX stream socket taking one JSON object per line.
+"""The simulator's control channel: a UNIX stream socket speaking the simulators' control protocol
+(`orccadd.runtime.sim_control`), "device" being a servo's ID:
 
-    {"inject": "overload", "id": 3}       Hardware Error Status bit 5: torque off, alert bit set
-    {"inject": "overheating", "id": 3}    temperature held above Temperature Limit(31): bit 2
-    {"inject": "unplug", "id": 3}         no power, no answer (torque off, the arm joint is free)
-    {"inject": "replug", "id": 3}         power back: the servo boots (RAM at power-on values)
+    {"inject": "overload", "device": 3}   Hardware Error Status bit 5: torque off, alert bit set
+    {"inject": "overheating", "device": 3}
+                                          temperature held above Temperature Limit(31): bit 2
+    {"inject": "unplug", "device": 3}     no power, no answer (torque off, the arm joint is free)
+    {"inject": "replug", "device": 3}     power back: the servo boots (RAM at power-on values)
     {"inject": "noise", "rate": 0.01}     each byte of every status packet gets one bit flipped
                                           at this probability (0: off)
     {"inject": "late", "ms": 6, "packets": 3}
@@ -13,8 +15,7 @@
                                           hardware errors stay until a reboot, as on a servo
     {"status": true}                      the arm and each servo (see `status`)
 
-Each line gets one line back: `{"ok": true, ...}` or `{"ok": false, "error": "..."}`. The socket
-is made with mode 0600 (only its owner may inject faults). Served from the simulator's loop: a
+The socket is made with mode 0600 (only its owner may inject faults). Served from the simulator's loop: a
 request is handled between two bus transactions, never during one.
 """
 
@@ -28,6 +29,7 @@ from typing import Any
 
 from orccadd.dxlsim import table as T
 from orccadd.dxlsim.chain import Chain
+from orccadd.runtime import sim_control
 
 MAX_LINE = 4096
 
@@ -36,16 +38,17 @@ PID = (T.POSITION_P_GAIN, T.POSITION_I_GAIN, T.POSITION_D_GAIN)
 
 
 def status(chain: Chain) -> dict[str, Any]:
-    servos = []
+    servos, devices = [], []
     for s in chain.servos:
         s.loop.refresh(chain.t_s or 0.0)
+        torque, error = s.table.get(T.TORQUE_ENABLE), s.table.get(T.HARDWARE_ERROR_STATUS)
         servos.append(
             {
                 "id": s.dxl_id,
                 "model": s.model.name,
                 "plugged": s.plugged,
-                "torque_enable": s.table.get(T.TORQUE_ENABLE),
-                "hardware_error_status": s.table.get(T.HARDWARE_ERROR_STATUS),
+                "torque_enable": torque,
+                "hardware_error_status": error,
                 "operating_mode": s.table.get(T.OPERATING_MODE),
                 "present_position": s.table.get(T.PRESENT_POSITION),
                 "goal_position": s.table.get(T.GOAL_POSITION),
@@ -55,10 +58,13 @@ def status(chain: Chain) -> dict[str, Any]:
                 "present_temperature": s.table.get(T.PRESENT_TEMPERATURE),
             }
         )
+        state = "torque on" if torque else "torque off"
+        fault = f"hardware error status 0x{error:02X}" if error else ""
+        devices.append(sim_control.device(s.dxl_id, state if s.plugged else "unplugged", fault))
     return {
-        "ok": True,
         "q_rad": [float(x) for x in chain.arm.q],
         "dq_rad_s": [float(x) for x in chain.arm.dq],
+        "devices": devices,
         "servos": servos,
         "packets": chain.packets,
         "crc_errors": chain.crc_errors,
@@ -114,24 +120,21 @@ class ControlServer:
 
     @staticmethod
     def _answer(line: bytes, chain: Chain, now_s: float) -> dict[str, Any]:
-        try:
-            req = json.loads(line)
-            if not isinstance(req, dict):
-                raise ValueError("a request is a JSON object")
-            if req.get("inject") == "late":
-                chain.make_late(float(req["ms"]) * 1e-3, int(req.get("packets", 1)))
-                return {"ok": True}
-            if "inject" in req:
-                dxl_id = req.get("id")
-                rate = float(req.get("rate", 0.0))
-                chain.inject(str(req["inject"]), None if dxl_id is None else int(dxl_id), rate, now_s)
-                return {"ok": True}
-            if req.get("status"):
-                chain.advance_to(now_s)
-                return status(chain)
-            raise ValueError('unknown request: {"inject": ...} or {"status": true}')
-        except (ValueError, TypeError, KeyError) as e:
-            return {"ok": False, "error": str(e)}
+        def inject(req: sim_control.Injection) -> None:
+            p = req.params
+            allowed = {"late": {"ms", "packets"}, "noise": {"rate"}}.get(req.fault, set())
+            if set(p) - allowed:
+                raise ValueError(f"{req.fault}: unknown parameter(s) {sorted(set(p) - allowed)}")
+            if req.fault == "late":
+                chain.make_late(float(p["ms"]) * 1e-3, int(p.get("packets", 1)))
+            else:
+                chain.inject(req.fault, req.device, float(p.get("rate", 0.0)), now_s)
+
+        def state() -> dict[str, Any]:
+            chain.advance_to(now_s)
+            return status(chain)
+
+        return sim_control.answer(line, inject, state)
 
     @staticmethod
     def _reply(conn: socket.socket, reply: dict[str, Any]) -> None:

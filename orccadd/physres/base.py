@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from math import isfinite
 from operator import add, sub
+from time import monotonic_ns
 from typing import Any, ClassVar
 
 import numpy as np
@@ -91,6 +92,8 @@ class PhysicalResource(ABC):
         self.clamp_count = 0
         self.rejected_count = 0  # commands with a NaN or an infinity, never sent
         self._prepared_modes: set[CommandMode] = set()  # `prepare_mode_switch` done
+        self._read_at_ns = 0  # when a tick last read the resource (CLOCK_MONOTONIC)
+        self._ticking_within_ns = int((3 * config.control_period_s + 0.01) * 1e9)
 
     # ---- declaration and settings ---------------------------------------------------------
     @classmethod
@@ -230,6 +233,7 @@ class PhysicalResource(ABC):
     def read(self, t_s: float) -> JointState:
         """Measure the state at time `t_s` (tick). Sets LIMIT_VIOLATION if outside limits."""
         st = self.state
+        self._read_at_ns = monotonic_ns()
         st.status = self._read_into(t_s, st) | self._stop_flags
         st.t_s = t_s
         q_dq = st.q_dq.tolist()
@@ -237,6 +241,13 @@ class PhysicalResource(ABC):
             st.status |= LIMIT_VIOLATION
             self.fault = self._beyond(FaultKind.LIMIT, "measured", q_dq, self._limit_lo, self._limit_hi)
         return st
+
+    @property
+    def loop_ticking(self) -> bool:
+        """A control loop ticks this resource (it read it within the last three periods, or
+        10 ms): lifecycle work on another thread (enable, reset) leaves the cyclic exchange to the
+        ticks and waits for what they show, instead of running cycles of its own."""
+        return monotonic_ns() - self._read_at_ns < self._ticking_within_ns
 
     @property
     def fault_message(self) -> str:

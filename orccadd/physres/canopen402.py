@@ -157,11 +157,6 @@ class Canopen402Arm(PhysicalResource):
         self.fault = None
 
     # ---- helpers for the blocking phases (the loop may or may not be ticking) -------------
-    def _ticking(self) -> bool:
-        t0 = self.master.tick
-        time.sleep(3 * self.config.control_period_s)
-        return self.master.tick != t0
-
     def _pump(self, seconds: float) -> None:
         """Run read cycles ourselves for `seconds` when no control loop does."""
         end = time.monotonic() + seconds
@@ -180,7 +175,7 @@ class Canopen402Arm(PhysicalResource):
 
     def _wait(self, done: Any, what: str) -> None:
         end = time.monotonic() + self.settings.startup_timeout_s
-        looped = self.master.tick > 0 and self._ticking()
+        looped = self.loop_ticking
         while not done():
             if time.monotonic() > end:
                 states = ", ".join(

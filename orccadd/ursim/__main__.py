@@ -20,14 +20,16 @@ import signal
 import socket
 import sys
 import threading
+from functools import partial
 from pathlib import Path
 
 from orccadd.config.robot import read_robot_config, read_toml
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
+from orccadd.runtime import sim_control
 from orccadd.runtime.rt import realtime_device_process
 from orccadd.runtime.threads import ThreadGroup
-from orccadd.ursim.faults import serve_control
+from orccadd.ursim import faults
 from orccadd.ursim.series import CB3, E_SERIES
 from orccadd.ursim.simulator import DEFAULT_PORTS, UrSimulator
 
@@ -141,7 +143,9 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     threads = ThreadGroup("ursim")
-    threads.start(serve_control, sim, control, threads, name="control")
+    threads.start(
+        sim_control.serve, control, partial(faults.inject, sim), sim.status, threads, name="control"
+    )
     gc.collect()
     gc.freeze()  # the model and tables are long-lived: keep the collector's passes short
     # the cycle's thread waits at most this long for the interpreter when a server thread holds

@@ -20,16 +20,12 @@ This module imports only the standard library (and `orccadd.simproc`, which does
 from __future__ import annotations
 
 import fcntl
-import json
-import socket
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
-from types import TracebackType
-from typing import IO, Any
+from typing import IO
 
-from orccadd.simproc import ChildProcess
+from orccadd.simproc import SimulatorProcess
 
 PORTS_LOCK = Path(tempfile.gettempdir()) / "orccadd-ursim-ports.lock"
 
@@ -58,8 +54,11 @@ class PortsLock:
             self._f = None
 
 
-class UrSimProcess(ChildProcess):
-    """A running simulator: its control channel (`inject`, `status`) and its log."""
+class UrSimProcess(SimulatorProcess):
+    """The UR controller simulator, holding UR's ports (`PortsLock`) while it runs."""
+
+    module = "orccadd.ursim"
+    what = "UR simulator"
 
     def __init__(
         self,
@@ -72,58 +71,10 @@ class UrSimProcess(ChildProcess):
     ) -> None:
         self.lock = PortsLock(lock_timeout_s) if lock else None
         try:
-            super().__init__(
-                "orccadd.ursim",
-                ["--config", str(config), *extra],
-                what="UR simulator",
-                ready="ready",
-                env=env,
-                timeout_s=timeout_s,
-            )
+            super().__init__(config, *extra, env=env, timeout_s=timeout_s)
         except BaseException:
             self._release()
             raise
-        self.control_port = int(self.ready_line.rsplit(":", 1)[1])
-
-    def __enter__(self) -> UrSimProcess:
-        return self
-
-    def __exit__(
-        self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
-
-    def request(self, req: dict[str, Any]) -> dict[str, Any]:
-        with (
-            socket.create_connection(("127.0.0.1", self.control_port), timeout=10) as s,
-            s.makefile("rwb") as f,
-        ):
-            f.write(json.dumps(req).encode() + b"\n")
-            f.flush()
-            reply: dict[str, Any] = json.loads(f.readline())
-        if not reply.get("ok"):
-            raise RuntimeError(f"UR simulator: {reply.get('error')}")
-        return reply
-
-    def inject(self, fault: str, **params: Any) -> None:
-        """Inject a fault (`orccadd.ursim.faults` lists them and their parameters)."""
-        self.request({"inject": fault, **params})
-
-    def status(self) -> dict[str, Any]:
-        return self.request({"status": True})
-
-    def wait_for(
-        self, predicate: Callable[[dict[str, Any]], bool], timeout_s: float = 10.0
-    ) -> dict[str, Any]:
-        """Poll `status()` until `predicate` holds; the last status (`TimeoutError` if it never does)."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            st = self.status()
-            if predicate(st):
-                return st
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"UR simulator: condition not met in {timeout_s:g} s; status {st}")
-            time.sleep(0.02)
 
     def stop(self) -> int:
         code = super().stop()

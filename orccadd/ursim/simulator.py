@@ -23,6 +23,7 @@ from typing import Any
 from orccadd.config.robot import RobotConfig
 from orccadd.errors import OrccaddError
 from orccadd.runtime import PeriodicExecutor, WallClock
+from orccadd.runtime.sim_control import device
 from orccadd.runtime.threads import ThreadGroup
 from orccadd.ursim.arm import UrArm
 from orccadd.ursim.controller import UrController
@@ -151,14 +152,17 @@ class UrSimulator:
     def status(self) -> dict[str, Any]:
         ctl = self.ctl
         with ctl.lock:
+            safety = ctl.safety_mode.name
             return {
+                "q_rad": ctl.arm.q_rad.tolist(),
+                "dq_rad_s": ctl.arm.dq_rad_s.tolist(),
+                "devices": [device("controller", ctl.robot_mode.name, "" if safety == "NORMAL" else safety)],
                 "robot_mode": ctl.robot_mode.name,
                 "safety_mode": ctl.safety_mode.name,
                 "runtime_state": ctl.runtime_state.name,
                 "program": ctl.program_name if ctl.program is not None else "",
                 "stop_reason": ctl.stop_reason,
                 "protective_stops": ctl.protective_stops,
-                "q_rad": ctl.arm.q_rad.tolist(),
                 "target_q_rad": ctl.target.q.tolist(),
                 "cycles": ctl.cycles,
                 "rate_hz": ctl.series.rate_hz,

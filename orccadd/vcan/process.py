@@ -45,9 +45,3 @@ class HubProcess(ChildProcess):
     def stderr_text(self) -> str:
         """What the hub logged so far."""
         return self.log_text()
-
-    def __enter__(self) -> HubProcess:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()

@@ -67,7 +67,7 @@ def test_drive_fault_type_3_quick_stop_then_reset_through_orccadctl(rig_daemon: 
     d.call("load", path=MISSION)
     d.call("start")
     d.wait(lambda s: s["active_task"] == "Reach")
-    rig.drives.inject(2, "following_error")
+    rig.drives.inject("following_error", device=2)
     s = d.wait(lambda s: s["faulted"] and "stopped" in s.get("resource_status", []), timeout_s=30)
     states = rig.drives.status()["states"]
     assert states[1] == "FAULT" and all(st in ("SWITCH_ON_DISABLED", "FAULT") for st in states)

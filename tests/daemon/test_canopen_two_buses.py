@@ -43,7 +43,7 @@ def test_a_drive_fault_on_one_bus_stops_every_axis_then_reset(rig_daemon: tuple[
     d.call("load", path=MISSION)
     d.call("start")
     d.wait(lambda s: s["active_task"] == "Reach")
-    rig.drives.inject(3, "overcurrent", bus="can1")  # wrist_3_joint
+    rig.drives.inject("overcurrent", device=3, bus="can1")  # wrist_3_joint
     d.wait(lambda s: s["faulted"] and "stopped" in s.get("resource_status", []), timeout_s=30)
     states = rig.drives.status()["states"]
     assert states[5] == "FAULT" and states[:5] == ["SWITCH_ON_DISABLED"] * 5  # can0's too

@@ -106,7 +106,7 @@ def test_an_overload_mid_motion_safe_stops_holds_and_a_reset_reboots_the_servo(
     assert r.returncode == 0, r.stderr
     d.call("start")
     d.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
-    rig.sim.inject("overload", 1)  # the waist: its torque goes off, it coasts on its friction
+    rig.sim.inject("overload", device=1)  # the waist: its torque goes off, it coasts on its friction
     s = d.wait(_safe_stopped, timeout_s=30)
     assert _t3_inputs(d) == ["Reach.T3.ResourceFault"]
     assert "servo 1 (waist, XM540-W270): hardware error: overload (bit 5)" in str(s["fault"]), s["fault"]
@@ -136,7 +136,7 @@ def test_an_unplugged_servo_is_comm_lost_naming_it_and_the_arm_safe_stops(
     d.call("load", path=DEMO)
     d.call("start")
     d.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
-    rig.sim.inject("unplug", 5)  # wrist_angle: no answer, no torque
+    rig.sim.inject("unplug", device=5)  # wrist_angle: no answer, no torque
     s = d.wait(_safe_stopped, timeout_s=30)
     assert "comm_lost" in _resource(s), _resource(s)
     assert _t3_inputs(d) == ["Reach.T3.CommLost"]

@@ -178,7 +178,7 @@ def test_cst_torque_reaches_the_joint(elmo: Rig) -> None:
 
 def test_an_injected_fault_sends_emcy_and_the_drive_ends_in_fault(elmo: Rig) -> None:
     node = _cyclic_node(elmo, 0x607A, 8)
-    elmo.sim.inject(1, "overcurrent")
+    elmo.sim.inject("overcurrent", 1)
     deadline = time.monotonic() + 3
     while node.state != "FAULT" and time.monotonic() < deadline:
         time.sleep(0.02)
@@ -239,18 +239,18 @@ def test_silences(elmo: Rig) -> None:
     elmo.network.add_node(node)
     node.sdo[0x1017].raw = 20
     node.nmt.wait_for_heartbeat(1.0)
-    elmo.sim.inject(2, "heartbeat_silence")
+    elmo.sim.inject("heartbeat_silence", 2)
     time.sleep(0.1)
     with pytest.raises(canopen.nmt.NmtError):
         node.nmt.wait_for_heartbeat(0.3)
     assert node.sdo[0x1000].raw  # SDO still answers
-    elmo.sim.inject(2, "node_silence")
+    elmo.sim.inject("node_silence", 2)
     with pytest.raises(canopen.SdoCommunicationError):
         node.sdo[0x1000].raw  # noqa: B018
-    elmo.sim.inject(2, "clear")
+    elmo.sim.inject("clear", 2)
     node.nmt.wait_for_heartbeat(1.0)
     with pytest.raises(ValueError, match="no drive with node id 9"):
-        elmo.sim.inject(9, "overcurrent")
+        elmo.sim.inject("overcurrent", 9)
 
 
 def test_a_stall_of_the_simulator_pauses_the_arm_instead_of_integrating_stale_references() -> None:

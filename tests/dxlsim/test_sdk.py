@@ -197,7 +197,7 @@ def test_ping_and_read_take_the_wire_time_of_the_baud_rate(
 
 def test_reboot_clears_an_injected_overload(sim: DxlSimProcess, bus: Bus) -> None:
     bus.torque_on((3,))
-    sim.inject("overload", 3)
+    sim.inject("overload", device=3)
     value, result, error = bus.ph.read1ByteTxRx(bus.port, 3, HARDWARE_ERROR)
     assert (value, result, error) == (0x20, COMM_SUCCESS, 0x80)  # overload bit; alert in the status
     assert bus.ph.read1ByteTxRx(bus.port, 3, TORQUE_ENABLE) == (0, COMM_SUCCESS, 0x80)  # shut down
@@ -223,7 +223,7 @@ def test_factory_reset_restores_the_defaults(bus: Bus) -> None:
 
 
 def test_an_unplugged_servo_times_out_and_answers_again_once_replugged(sim: DxlSimProcess, bus: Bus) -> None:
-    sim.inject("unplug", 5)
+    sim.inject("unplug", device=5)
     try:
         assert bus.ph.ping(bus.port, 5)[1] == COMM_RX_TIMEOUT
         assert bus.ph.ping(bus.port, 6)[1] == COMM_SUCCESS
@@ -235,7 +235,7 @@ def test_an_unplugged_servo_times_out_and_answers_again_once_replugged(sim: DxlS
         read.removeParam(5)
         assert read.fastSyncRead() == COMM_SUCCESS
     finally:
-        sim.inject("replug", 5)
+        sim.inject("replug", device=5)
     deadline = time.monotonic() + 3.0
     while bus.ph.ping(bus.port, 5)[1] != COMM_SUCCESS:
         assert time.monotonic() < deadline, "no answer after the replug"

@@ -145,7 +145,7 @@ def test_the_shipped_description_starts_watches_our_heartbeat_and_moves(tmp_path
 @pytest.mark.parametrize("rig", [CONSUMING_ELMO], indirect=True)
 def test_drive_fault_emcy_then_fault_reset_and_a_new_motion(rig: Rig, arm: Canopen402Arm) -> None:
     run(arm, 0.2, lambda t: arm.state.q_rad.copy())
-    rig.drives.inject(3, "overcurrent")
+    rig.drives.inject("overcurrent", device=3)
     wait_for(arm, Status.FAULT, 2.0)
     assert arm.state.fault_code == 0x2310 and "node 3 (elbow_joint)" in arm.fault_message
     assert "over-current" in arm.fault_message
@@ -168,7 +168,7 @@ def test_a_silent_heartbeat_is_comm_lost_within_three_periods(rig: Rig, arm: Can
     heartbeat_ms = arm.settings.heartbeat_ms  # the rig's 250 ms, not the file's 100 ms
     timeout_s = 3 * heartbeat_ms / 1000  # the master's consumer timeout: 3 silent heartbeat periods
     assert not run(arm, 0.3) & Status.COMM_LOST, arm.fault_message  # every drive's heartbeat arrives
-    rig.drives.inject(4, "heartbeat_silence")
+    rig.drives.inject("heartbeat_silence", device=4)
     wait_for(arm, Status.COMM_LOST, 10 * timeout_s)  # reported within an order of magnitude of it
     now = time.monotonic()
     assert "node 4 (wrist_1_joint): heartbeat lost (" in arm.fault_message
@@ -182,7 +182,7 @@ def test_a_silent_heartbeat_is_comm_lost_within_three_periods(rig: Rig, arm: Can
 @pytest.mark.parametrize("rig", [CONSUMING_ELMO], indirect=True)
 def test_a_node_silent_on_pdos_is_comm_lost(rig: Rig, arm: Canopen402Arm) -> None:
     run(arm, 0.3)
-    rig.drives.inject(6, "node_silence")
+    rig.drives.inject("node_silence", device=6)
     wait_for(arm, Status.COMM_LOST, 3.0)
     assert "node 6 (wrist_3_joint) silent: no TPDO" in arm.fault_message
 
@@ -247,7 +247,7 @@ def test_a_drive_that_never_enables_is_a_fault_naming_it_and_its_statusword(tmp_
     statusword and what was awaited (before: it waited in SWITCHED ON for ever, without a word);
     once STO is released, `reset` enables every drive."""
     with canopen_rig(tmp_path, settings_extra="startup_timeout_s = 1.5") as rig:
-        rig.drives.inject(2, "sto")
+        rig.drives.inject("sto", device=2)
         res = new_arm(rig)
         try:
             res.configure()
@@ -257,7 +257,7 @@ def test_a_drive_that_never_enables_is_a_fault_naming_it_and_its_statusword(tmp_
             msg = res.fault_message
             assert "node 2 (shoulder_lift_joint) did not reach OPERATION_ENABLED within 1.5 s" in msg, msg
             assert "statusword 0x" in msg and "SWITCHED_ON" in msg, msg
-            rig.drives.inject(2, "clear")
+            rig.drives.inject("clear", device=2)
             res.safe_stop()
             wait_for(res, Status.STOPPED, 5.0)
             res.reset_fault()

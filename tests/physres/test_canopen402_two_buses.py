@@ -78,7 +78,7 @@ def test_two_buses_start_hold_and_move_in_csp(rig: Rig, arm: Canopen402Arm) -> N
 def test_a_fault_on_one_bus_quick_stops_every_axis_on_both(rig: Rig, arm: Canopen402Arm) -> None:
     run(arm, 0.3, lambda t: arm.state.q_rad.copy())
     assert all(a.state is State.OPERATION_ENABLED for a in arm.master.axes)
-    rig.drives.inject(2, "overcurrent", bus="can1")  # wrist_2_joint
+    rig.drives.inject("overcurrent", device=2, bus="can1")  # wrist_2_joint
     wait_for(arm, Status.FAULT, 2.0)
     assert arm.state.fault_code == 0x2310 and "node 2 (wrist_2_joint)" in arm.fault_message
     arm.safe_stop()  # what the task does on a type 3: quick stop on every axis, on every bus

@@ -98,12 +98,12 @@ def inject_device_fault(
         return (lambda: resource.inject_fault("device", "over-current")), ""
     if resource.description.backend == "dynamixel":
         dxl: DxlRig = request.getfixturevalue("dxl")
-        return (lambda: dxl.sim.inject("overload", 3)), third  # ID 3: the third joint
+        return (lambda: dxl.sim.inject("overload", device=3)), third  # ID 3: the third joint
     if resource.description.backend == "ur_rtde":
         sim: UrSimProcess = request.getfixturevalue("ur_sim")[1]
         return (lambda: sim.inject("protective_stop")), ""  # the controller stops the whole arm
     rig: Rig = request.getfixturevalue("can_rig")
-    return (lambda: rig.drives.inject(3, "overcurrent")), third  # node 3: the third joint
+    return (lambda: rig.drives.inject("overcurrent", device=3)), third  # node 3: the third joint
 
 
 def hold_mode(res: PhysicalResource) -> CommandMode:

@@ -259,7 +259,7 @@ def test_an_overload_mid_motion_faults_stops_and_a_reset_reboots_the_servo(
     res = session.resource
     task, loop = move(session, TARGET)
     loop.run_for(0.2)  # moving
-    rig.sim.inject("overload", 1)
+    rig.sim.inject("overload", device=1)
     loop.executor.run(max_ticks=60)
     assert task.phase is Phase.FAULT
     assert [n for n in session.event_names() if ".T3." in n] == ["MoveJointsCSP.T3.ResourceFault"]
@@ -286,7 +286,7 @@ def test_an_unplugged_servo_is_comm_lost_naming_it(rig: DxlRig, session: Session
     res = session.resource
     task, loop = move(session, TARGET)
     loop.run_for(0.2)
-    rig.sim.inject("unplug", 5)
+    rig.sim.inject("unplug", device=5)
     loop.executor.run(max_ticks=60)
     assert task.phase is Phase.FAULT
     assert [n for n in session.event_names() if ".T3." in n] == ["MoveJointsCSP.T3.CommLost"]
@@ -389,7 +389,7 @@ def test_the_plain_sync_read_names_a_missing_servo_too(rig: DxlRig) -> None:
             res.keep_alive(now)
             time.sleep(0.005)
         assert not seen & (Status.FAULT | Status.COMM_LOST), res.fault_message
-        rig.sim.inject("unplug", 2)
+        rig.sim.inject("unplug", device=2)
         for _ in range(20):
             now = time.monotonic()
             if res.read(now).status & Status.COMM_LOST:
