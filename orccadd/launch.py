@@ -1,21 +1,21 @@
 """`DaemonProcess`: orccadd (the real-time process and its command daemon) in a child process on
 a socket of its own, up and answering once constructed, stopped as a service manager stops it
-(SIGTERM, then SIGKILL after a timeout). One helper for the demo, the benchmarks and the tests.
+(SIGTERM: a safe stop first, then the hardware released; SIGKILL after a timeout). One helper for
+the demo, the benchmarks and the tests, on the simulators' `ChildProcess`.
 """
 
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 from orccadd.ctl.client import Client, ClientError
+from orccadd.simproc import ChildProcess
 
 UP_TIMEOUT_S = 90.0  # a CANopen bus's startup, on a busy machine
 STOP_TIMEOUT_S = 20.0  # a safe stop and the hardware released, before SIGKILL
@@ -25,7 +25,7 @@ class DaemonError(Exception):
     """The daemon did not come up, or exited; the message ends with its log."""
 
 
-class DaemonProcess:
+class DaemonProcess(ChildProcess):
     """`orccadd --config CONFIG --socket SOCKET EXTRA…`, its output in `log`. `new_session`: in
     a session of its own (as a service or a shell job is: a Ctrl-C at the terminal reaches its
     parent alone). Raises `DaemonError` if it exits or does not answer within `up_timeout_s`."""
@@ -41,20 +41,16 @@ class DaemonProcess:
     ) -> None:
         self.socket = str(socket)
         self.log = log
-        cmd = [
-            sys.executable,
-            "-m",
+        args = ["--config", str(config), "--socket", self.socket, *extra]
+        super().__init__(
             "orccadd.daemon.rtproc",
-            "--config",
-            str(config),
-            "--socket",
-            self.socket,
-        ]
-        with log.open("w") as out:
-            self.proc = subprocess.Popen(
-                [*cmd, *extra], stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
-                start_new_session=new_session,
-            )  # fmt: skip
+            args,
+            what="orccadd",
+            ready=None,  # up once it answers
+            log_path=log,
+            new_session=new_session,
+            stop_timeout_s=STOP_TIMEOUT_S,
+        )
         try:
             self._wait_up(up_timeout_s)
         except BaseException:
@@ -65,22 +61,16 @@ class DaemonProcess:
         end = time.monotonic() + timeout_s
         while True:
             if self.proc.poll() is not None:
-                raise DaemonError(f"orccadd exited (code {self.proc.returncode}):\n{self.log_text()}")
+                raise DaemonError(f"orccadd exited (code {self.proc.returncode}):\n{self.log_text(20_000)}")
             try:
                 self.call("ping")
                 return
             except (ClientError, OSError):
                 if time.monotonic() > end:
                     raise DaemonError(
-                        f"orccadd did not answer within {timeout_s:g} s:\n{self.log_text()}"
+                        f"orccadd did not answer within {timeout_s:g} s:\n{self.log_text(20_000)}"
                     ) from None
                 time.sleep(0.05)
-
-    def log_text(self, last_chars: int = 20_000) -> str:
-        try:
-            return self.log.read_text(errors="replace")[-last_chars:]
-        except OSError as e:
-            return f"(its log {self.log}: {e.strerror})"
 
     # ---- talking to it --------------------------------------------------------------------
     def client(self, timeout_s: float = 60.0) -> Client:
@@ -104,38 +94,13 @@ class DaemonProcess:
     def wait(self, pred: Callable[[dict[str, Any]], bool], timeout_s: float = 30.0) -> dict[str, Any]:
         """The first status for which `pred` holds; `DaemonError` (with the last status and the
         log) after `timeout_s`."""
-        end = time.monotonic() + timeout_s
-        while True:
-            s = self.status()
-            if pred(s):
-                return s
-            if time.monotonic() > end:
-                raise DaemonError(f"timed out; last status: {s}\nlog:\n{self.log_text()}")
-            time.sleep(0.05)
+        return self.wait_for(pred, timeout_s, interval_s=0.05)
+
+    def timed_out(self, why: str) -> Exception:
+        return DaemonError(f"timed out: {why}\nlog:\n{self.log_text(20_000)}")
 
     def ctl(self, *argv: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]:
         """`orccadctl ARGV…` as a process of its own, on this daemon's socket."""
         env = {**os.environ, "ORCCADD_SOCKET": self.socket}
         cmd = [sys.executable, "-m", "orccadd.cli", *argv]
         return subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout_s)
-
-    # ---- stopping it ----------------------------------------------------------------------
-    def stop(self, timeout_s: float = STOP_TIMEOUT_S) -> int:
-        """SIGTERM (a safe stop first, then the hardware released), SIGKILL after `timeout_s`;
-        its exit code."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                return self.proc.wait(timeout=timeout_s)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        return int(self.proc.returncode)
-
-    def __enter__(self) -> DaemonProcess:
-        return self
-
-    def __exit__(
-        self, t: type[BaseException] | None, e: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()

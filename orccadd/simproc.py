@@ -32,15 +32,31 @@ PR_SET_PDEATHSIG = 1
 STOP_TIMEOUT_S = 10.0
 
 
+def _prctl() -> Any:
+    """libc's prctl, looked up once in the parent: a forked child must not load a library
+    (the loader's lock may be held by another thread of the parent at the fork)."""
+    global _PRCTL
+    if _PRCTL is None:
+        with contextlib.suppress(OSError, AttributeError):
+            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+            _PRCTL = libc.prctl
+    return _PRCTL
+
+
+_PRCTL: Any = None
+
+
 def die_with_parent() -> None:
     """In the child, between fork and exec: SIGTERM when the parent dies (only a prctl)."""
-    with contextlib.suppress(OSError, AttributeError):
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    if _PRCTL is not None:
+        _PRCTL(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 class ChildProcess:
-    """A running child: `ready_line` is the line it printed once serving."""
+    """A running child, `python -m MODULE ARGS`. With `ready`, it is up once it has printed a
+    line containing `ready` on stdout (that line is `ready_line`; stderr goes to the log); without,
+    its stdout and stderr both go to the log and the caller decides when it is up. The log is
+    `log_path` if given (kept), else a temporary file."""
 
     def __init__(
         self,
@@ -48,22 +64,34 @@ class ChildProcess:
         args: list[str],
         *,
         what: str,
-        ready: str,
+        ready: str | None,
         env: dict[str, str] | None = None,
         cwd: str | Path | None = None,
         timeout_s: float = 60.0,
+        log_path: Path | None = None,
+        new_session: bool = False,
+        stop_timeout_s: float = STOP_TIMEOUT_S,
     ) -> None:
         self.what = what
-        self.log = tempfile.TemporaryFile("w+")  # noqa: SIM115 - lives as long as the process
+        self.stop_timeout_s = stop_timeout_s
+        # lives as long as the process
+        opened = log_path.open("w+", errors="replace") if log_path else None
+        self._log = opened or tempfile.TemporaryFile("w+", errors="replace")  # noqa: SIM115
+        _prctl()
         self.proc = subprocess.Popen(
             [sys.executable, "-m", module, *args],
-            stdout=subprocess.PIPE,
-            stderr=self.log,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE if ready is not None else self._log,
+            stderr=self._log if ready is not None else subprocess.STDOUT,
             text=True,
             cwd=cwd,
             env={**os.environ, **(env or {})},
             preexec_fn=die_with_parent,
+            start_new_session=new_session,
         )
+        self.ready_line = ""
+        if ready is None:
+            return
         assert self.proc.stdout is not None
         readable, _, _ = select.select([self.proc.stdout], [], [], timeout_s)
         self.ready_line = self.proc.stdout.readline() if readable else ""
@@ -71,10 +99,32 @@ class ChildProcess:
             self.stop()
             raise RuntimeError(f"{what} did not start: {self.ready_line!r} {self.log_text()}")
 
-    def log_text(self) -> str:
-        """What the child logged so far."""
-        self.log.seek(0)
-        return self.log.read()
+    def log_text(self, last_chars: int = 0) -> str:
+        """What the child logged so far (its last `last_chars` characters, if given)."""
+        self._log.flush()
+        self._log.seek(0)
+        text = self._log.read()
+        return text[-last_chars:] if last_chars else text
+
+    def status(self) -> dict[str, Any]:
+        """The child's state as it reports it (subclasses that have a way to ask)."""
+        raise NotImplementedError(f"{self.what} reports no status")
+
+    def wait_for(
+        self, predicate: Callable[[dict[str, Any]], bool], timeout_s: float = 10.0, interval_s: float = 0.02
+    ) -> dict[str, Any]:
+        """Poll `status()` until `predicate` holds; that status (`timed_out` if it never does)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            st = self.status()
+            if predicate(st):
+                return st
+            if time.monotonic() > deadline:
+                raise self.timed_out(f"condition not met in {timeout_s:g} s; last status {st}")
+            time.sleep(interval_s)
+
+    def timed_out(self, why: str) -> Exception:
+        return TimeoutError(f"{self.what}: {why}")
 
     def kill(self) -> None:
         """SIGKILL, at once (a device or bus that dies, for fault tests)."""
@@ -82,11 +132,12 @@ class ChildProcess:
             self.proc.kill()
             self.proc.wait()
 
-    def stop(self) -> int:
+    def stop(self, timeout_s: float | None = None) -> int:
+        """SIGTERM, SIGKILL after `timeout_s` (default: `stop_timeout_s`); its exit code."""
         if self.proc.poll() is None:
             self.proc.terminate()
             try:
-                self.proc.wait(timeout=STOP_TIMEOUT_S)
+                self.proc.wait(timeout=self.stop_timeout_s if timeout_s is None else timeout_s)
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
@@ -157,16 +208,3 @@ class SimulatorProcess(ChildProcess):
     def status(self) -> dict[str, Any]:
         """`q_rad`, `dq_rad_s`, `devices` ({"id", "state", "fault"} each) and the simulator's own."""
         return self.request({"status": True})
-
-    def wait_for(
-        self, predicate: Callable[[dict[str, Any]], bool], timeout_s: float = 10.0
-    ) -> dict[str, Any]:
-        """Poll `status()` until `predicate` holds; that status (`TimeoutError` if it never does)."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            st = self.status()
-            if predicate(st):
-                return st
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"{self.what}: condition not met in {timeout_s:g} s; status {st}")
-            time.sleep(0.02)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
@@ -45,6 +46,12 @@ class Client:
     def close(self) -> None:
         self.file.close()
         self.sock.close()
+
+    def interrupt(self) -> None:
+        """End the connection under a thread blocked reading a stream on it (a close alone
+        would not wake it): its read ends as if the daemon had closed."""
+        with contextlib.suppress(OSError):
+            self.sock.shutdown(socket.SHUT_RDWR)
 
     def __enter__(self) -> Client:
         return self

@@ -133,13 +133,16 @@ class LiveView:
         self.server.stop()
 
 
-def _follow_events(socket: str | None, view: LiveView) -> None:
+JOIN_S = 5.0  # the events follower, once its connection is closed
+
+
+def _follow_events(events: Client, view: LiveView) -> None:
+    """The daemon's events into the view, until the connection ends (closed by the owner)."""
     try:
-        with Client(socket) as c:
-            for e in c.stream("events", last=0, follow=True):
-                view.event(e)
+        for e in events.stream("events", last=0, follow=True):
+            view.event(e)
     except (ClientError, OSError, ValueError):
-        return  # the samples' stream says why, if anything went wrong
+        return  # closed by the owner; or the samples' stream says why, if anything went wrong
 
 
 def run_foxglove(a: argparse.Namespace) -> int:
@@ -157,9 +160,16 @@ def run_foxglove(a: argparse.Namespace) -> int:
             try:
                 print(f"foxglove: ws://{HOST}:{view.port} (Foxglove: Open connection > Foxglove WebSocket)")
                 sys.stdout.flush()
-                threading.Thread(target=_follow_events, args=(a.socket, view), daemon=True).start()
-                for item in items:
-                    view.sample(float(item["t_s"]), list(item["values"]))
+                events = Client(a.socket)
+                follower = threading.Thread(target=_follow_events, args=(events, view), name="events")
+                follower.start()
+                try:
+                    for item in items:
+                        view.sample(float(item["t_s"]), list(item["values"]))
+                finally:  # its connection ended, the follower's stream ends: joined
+                    events.interrupt()
+                    follower.join(timeout=JOIN_S)
+                    events.close()
             finally:
                 view.stop()
     except KeyboardInterrupt:

@@ -76,8 +76,8 @@ class UrSimProcess(SimulatorProcess):
             self._release()
             raise
 
-    def stop(self) -> int:
-        code = super().stop()
+    def stop(self, timeout_s: float | None = None) -> int:
+        code = super().stop(timeout_s)
         self._release()
         return code
 
