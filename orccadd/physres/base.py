@@ -93,7 +93,7 @@ class PhysicalResource(ABC):
         self.rejected_count = 0  # commands with a NaN or an infinity, never sent
         self._prepared_modes: set[CommandMode] = set()  # `prepare_mode_switch` done
         self._read_at_ns = 0  # when a tick last read the resource (CLOCK_MONOTONIC)
-        self._ticking_within_ns = int((3 * config.control_period_s + 0.01) * 1e9)
+        self._ticking_within_ns = int((3 * config.control_period_s + 0.05) * 1e9)
 
     # ---- declaration and settings ---------------------------------------------------------
     @classmethod
@@ -244,8 +244,8 @@ class PhysicalResource(ABC):
 
     @property
     def loop_ticking(self) -> bool:
-        """A control loop ticks this resource (it read it within the last three periods, or
-        10 ms): lifecycle work on another thread (enable, reset) leaves the cyclic exchange to the
+        """A control loop ticks this resource (it read it within the last three periods and
+        50 ms): lifecycle work on another thread (enable, reset) leaves the cyclic exchange to the
         ticks and waits for what they show, instead of running cycles of its own."""
         return monotonic_ns() - self._read_at_ns < self._ticking_within_ns
 

@@ -175,7 +175,6 @@ class Canopen402Arm(PhysicalResource):
 
     def _wait(self, done: Any, what: str) -> None:
         end = time.monotonic() + self.settings.startup_timeout_s
-        looped = self.loop_ticking
         while not done():
             if time.monotonic() > end:
                 states = ", ".join(
@@ -183,7 +182,7 @@ class Canopen402Arm(PhysicalResource):
                 )
                 limit = self.settings.startup_timeout_s
                 raise ResourceError(f"resource {self.name!r}: no {what} within {limit:g} s (drives {states})")
-            if looped:
+            if self.loop_ticking:  # asked at every step: a loop that stops is taken over
                 time.sleep(self.config.control_period_s)
             else:
                 self._cycle_without_loop()
