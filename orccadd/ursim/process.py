@@ -48,6 +48,12 @@ class PortsLock:
                     ) from None
                 time.sleep(0.1)
 
+    def __enter__(self) -> PortsLock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
     def release(self) -> None:
         if self._f is not None:
             self._f.close()
