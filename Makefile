@@ -42,10 +42,8 @@ lint: setup
 typecheck: setup
 	$(VENV)/bin/mypy
 
-# two workers, one per core (a test file stays on one worker; tests marked `alone` run with
-# nothing beside them: tests/conftest.py)
 unit: setup
-	$(PY) -m pytest -q -n 2 --dist loadfile
+	$(PY) -m pytest -q
 
 test: lint typecheck unit
 

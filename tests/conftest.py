@@ -3,10 +3,7 @@
 from __future__ import annotations
 
 import compileall
-import fcntl
-import os
-import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -25,32 +22,6 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     caches what it compiles, so each compiled every module it imports again (~0.1 s a process)."""
     for package in ("orccadd", "tools"):
         compileall.compile_dir(ROOT / package, quiet=2)
-
-
-@pytest.fixture(autouse=True)
-def _alone_or_together(request: pytest.FixtureRequest) -> Iterator[None]:
-    """With `pytest -n 2` (make test), two workers run tests side by side. A test marked `alone`
-    (its figures are real-time timings that another worker's real-time processes would disturb)
-    runs with nothing beside it: a readers-writer lock between the workers, by `flock` on two
-    files, the turnstile keeping new tests out while an `alone` test waits for the running one."""
-    run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
-    if run is None:  # one process: nothing runs beside anything
-        yield
-        return
-    alone = request.node.get_closest_marker("alone") is not None
-    base = Path(tempfile.gettempdir()) / f"orccadd-tests-{run}"
-    with open(f"{base}.turnstile", "a") as turnstile, open(f"{base}.lock", "a") as lock:
-        fcntl.flock(turnstile, fcntl.LOCK_EX)
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
-        finally:
-            if not alone:
-                fcntl.flock(turnstile, fcntl.LOCK_UN)
-        try:
-            yield
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
-            fcntl.flock(turnstile, fcntl.LOCK_UN)
 
 
 def variant_text(base: Path, *edits: tuple[str, str]) -> str:
@@ -86,6 +57,8 @@ def task_variant(tmp_path: Path) -> Callable[..., Path]:
 def _testdata_dir() -> Path | None:
     """The shared public test data (EDS/DCF files): $ORCCADD_TESTDATA, or ../shared/testdata
     next to the project, or /work/shared/testdata (these machines)."""
+    import os
+
     for cand in (
         os.environ.get("ORCCADD_TESTDATA", ""),
         ROOT.parent / "shared/testdata",

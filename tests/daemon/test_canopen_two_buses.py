@@ -15,8 +15,6 @@ from tests.canopen_rig import CANOPEN_2BUS, Rig
 from tests.daemon.conftest import Daemon
 from tests.daemon.test_canopen import rig_and_daemon
 
-pytestmark = pytest.mark.alone  # real-time timings: nothing beside it (tests/conftest.py)
-
 MISSION = str(Path(__file__).resolve().parent / "missions/canopen.mission")
 
 

@@ -11,7 +11,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from orccadd.daemon.machine import Machine
 from orccadd.types import Phase
@@ -85,7 +84,6 @@ def test_the_new_law_commands_the_tick_of_the_event(machine: Machine, tmp_path: 
     assert machine.mission.instants >= len(seen)  # booked by the automaton thread afterwards
 
 
-@pytest.mark.alone
 def test_with_the_automaton_thread_busy_the_switch_comes_one_tick_later(
     machine: Machine, tmp_path: Path
 ) -> None:

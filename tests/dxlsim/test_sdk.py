@@ -165,7 +165,6 @@ def test_bulk_read_and_fast_bulk_read(bus: Bus) -> None:
         assert 0 < got[3] < 4096
 
 
-@pytest.mark.alone
 def test_ping_and_read_take_the_wire_time_of_the_baud_rate(
     sim: DxlSimProcess, bus: Bus, workdir: Path
 ) -> None:

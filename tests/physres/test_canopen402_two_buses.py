@@ -18,8 +18,6 @@ from orccadd.types import Status
 from tests.canopen_rig import CANOPEN_2BUS, COB_SYNC, BusRecorder, Rig, canopen_rig
 from tests.physres.test_canopen402 import active_arm, run, wait_for
 
-pytestmark = pytest.mark.alone  # real-time timings: nothing beside it (tests/conftest.py)
-
 WRISTS = slice(3, 6)  # on can1
 
 
