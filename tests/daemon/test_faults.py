@@ -94,7 +94,8 @@ def test_plant_killed_mid_motion_stops_and_a_reset_starts_a_new_one(daemon: Daem
     q_before = [j["q_rad"] for j in daemon.status()["joints"]]  # type: ignore[union-attr]
     os.kill(plant, signal.SIGKILL)
     s = daemon.wait(lambda s: "stopped" in s.get("resource_status", []))
-    assert "exited" in str(s["fault"]) and "CommLost" in str(s["fault"]), s
+    # the first silent reads may come before the kernel has reaped it ("exited (code -9)" after)
+    assert "the plant process stopped answering" in str(s["fault"]) and "CommLost" in str(s["fault"]), s
     if s["state"] == "running":  # the safe procedure waits for the operator's Stop
         daemon.call("stop")
     daemon.wait(lambda s: s["state"] == "ready")
