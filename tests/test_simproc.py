@@ -51,3 +51,11 @@ def test_a_simulators_usage_names_the_command_that_runs_it(
     with pytest.raises(SystemExit):
         main(["--help"])
     assert capsys.readouterr().out.startswith(f"usage: python -m {module} ")
+
+
+@pytest.mark.parametrize("module", ["plantsim", "drivesim", "dxlsim", "ursim", "vcan"])
+def test_each_simulators_usage_names_the_command_that_runs_it(module: str) -> None:
+    r = subprocess.run(
+        [sys.executable, "-m", f"orccadd.{module}", "--help"], capture_output=True, text=True, timeout=60
+    )
+    assert r.returncode == 0 and r.stdout.startswith(f"usage: python -m orccadd.{module} "), r.stdout[:200]

@@ -145,7 +145,7 @@ def main() -> int:
 
     from orccadd.logsetup import LogSetupError, setup_logging
 
-    ap = argparse.ArgumentParser(description=main.__doc__)
+    ap = argparse.ArgumentParser(prog="python -m orccadd.plantsim", description=main.__doc__)
     ap.add_argument("--shm", required=True)
     ap.add_argument("--watchdog-periods", type=int, required=True)
     ap.add_argument("--priority", type=int, default=0)
