@@ -7,6 +7,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
+from typing import cast
 
 import pytest
 
@@ -106,3 +107,9 @@ def load_in(machine: Machine, path: Path, timeout_s: float = 60.0) -> object:
         time.sleep(0.05)
         reply = reply.poll() or (reply.expire() if time.monotonic_ns() > reply.deadline_ns else reply)
     return reply
+
+
+def moving(s: dict[str, object], above_rad_s: float = 0.1) -> bool:
+    """A status in which some joint moves faster than `above_rad_s`."""
+    joints = cast(list[dict[str, float]], s["joints"])
+    return max(abs(j["dq_rad_s"]) for j in joints) > above_rad_s

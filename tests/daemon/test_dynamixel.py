@@ -16,7 +16,7 @@ from typing import cast
 
 import pytest
 
-from tests.daemon.conftest import ROOT, Daemon, mission_dirs, start_daemon_with
+from tests.daemon.conftest import ROOT, Daemon, mission_dirs, moving, start_daemon_with
 from tests.physres.test_dynamixel import DxlRig, dxl_rig
 
 DEMO = str(ROOT / "configs/missions/demo_position.mission")
@@ -52,11 +52,6 @@ def rig_daemon(tmp_path: Path) -> Iterator[tuple[DxlRig, Daemon]]:
             yield rig, d
         finally:
             d.stop()
-
-
-def _moving(s: dict[str, object]) -> bool:
-    joints = cast(list[dict[str, float]], s["joints"])
-    return max(abs(j["dq_rad_s"]) for j in joints) > 0.1
 
 
 def _resource(s: dict[str, object]) -> list[str]:
@@ -105,7 +100,7 @@ def test_an_overload_mid_motion_safe_stops_holds_and_a_reset_reboots_the_servo(
     r = d.ctl("load", DEMO)
     assert r.returncode == 0, r.stderr
     d.call("start")
-    d.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
+    d.wait(lambda s: s["active_task"] == "Reach" and moving(s))
     rig.sim.inject("overload", device=1)  # the waist: its torque goes off, it coasts on its friction
     s = d.wait(_safe_stopped, timeout_s=30)
     assert _t3_inputs(d) == ["Reach.T3.ResourceFault"]
@@ -135,7 +130,7 @@ def test_an_unplugged_servo_is_comm_lost_naming_it_and_the_arm_safe_stops(
     rig, d = rig_daemon
     d.call("load", path=DEMO)
     d.call("start")
-    d.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
+    d.wait(lambda s: s["active_task"] == "Reach" and moving(s))
     rig.sim.inject("unplug", device=5)  # wrist_angle: no answer, no torque
     s = d.wait(_safe_stopped, timeout_s=30)
     assert "comm_lost" in _resource(s), _resource(s)

@@ -15,7 +15,7 @@ from mcap.reader import make_reader
 from orccadd.ctl.client import ClientError
 from orccadd.physres.shm_channel import Ctl, PlantChannel
 from orccadd.types import Status
-from tests.daemon.conftest import ROBOT, ROOT, Daemon, start_daemon
+from tests.daemon.conftest import ROBOT, ROOT, Daemon, moving, start_daemon
 from tests.safety import assert_commands_within_limits, assert_safe_stop_in_time, from_telemetry, status_shows
 
 DEMO = str(ROOT / "configs/missions/demo.mission")
@@ -23,10 +23,6 @@ DEMO = str(ROOT / "configs/missions/demo.mission")
 
 def _telemetry(daemon: Daemon) -> str:
     return str(daemon.call("describe")["telemetry"])  # type: ignore[index]
-
-
-def _moving(s: dict[str, object]) -> bool:
-    return max(abs(j["dq_rad_s"]) for j in s["joints"]) > 0.1  # type: ignore[attr-defined]
 
 
 def test_consecutive_overruns_raise_type_3_and_the_safe_procedure(daemon: Daemon) -> None:
@@ -57,7 +53,7 @@ def test_consecutive_overruns_raise_type_3_and_the_safe_procedure(daemon: Daemon
 def test_resource_fault_raises_type_3_then_reset_and_move_again(daemon: Daemon) -> None:
     daemon.call("load", path=DEMO)
     daemon.call("start")
-    daemon.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
+    daemon.wait(lambda s: s["active_task"] == "Reach" and moving(s))
     daemon.call("inject", fault="resource")
     daemon.wait(lambda s: "stopped" in s.get("resource_status", []))
     ticks = from_telemetry(_telemetry(daemon))
@@ -80,7 +76,7 @@ def test_resource_fault_raises_type_3_then_reset_and_move_again(daemon: Daemon) 
     daemon.call("reset")
     daemon.wait(lambda s: not s["faulted"])
     daemon.call("start")
-    daemon.wait(lambda s: s["active_task"] == "Home" and _moving(s))
+    daemon.wait(lambda s: s["active_task"] == "Home" and moving(s))
 
 
 def test_plant_killed_mid_motion_stops_and_a_reset_starts_a_new_one(daemon: Daemon) -> None:
@@ -89,7 +85,7 @@ def test_plant_killed_mid_motion_stops_and_a_reset_starts_a_new_one(daemon: Daem
     stopping` for ever, `reset` refused, SIGTERM ending in "safe stop not confirmed"."""
     daemon.call("load", path=DEMO)
     daemon.call("start")
-    daemon.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
+    daemon.wait(lambda s: s["active_task"] == "Reach" and moving(s))
     plant = int(daemon.status()["helper_pid"])  # type: ignore[arg-type]
     q_before = [j["q_rad"] for j in daemon.status()["joints"]]  # type: ignore[union-attr]
     os.kill(plant, signal.SIGKILL)
@@ -105,7 +101,7 @@ def test_plant_killed_mid_motion_stops_and_a_reset_starts_a_new_one(daemon: Daem
     q_after = [j["q_rad"] for j in s["joints"]]  # type: ignore[union-attr]
     assert max(abs(a - b) for a, b in zip(q_before, q_after, strict=True)) < 0.5  # where it was
     daemon.call("start")
-    daemon.wait(lambda s: s["active_task"] == "Home" and _moving(s))
+    daemon.wait(lambda s: s["active_task"] == "Home" and moving(s))
     assert daemon.stop() == 0
     assert "safe stop not confirmed" not in daemon.log.read_text()
 
@@ -145,7 +141,7 @@ def test_command_daemon_loss_safe_stops_when_configured(tmp_path: Path) -> None:
 def test_realtime_process_killed_the_arm_stops(daemon: Daemon) -> None:
     daemon.call("load", path=DEMO)
     daemon.call("start")
-    daemon.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
+    daemon.wait(lambda s: s["active_task"] == "Reach" and moving(s))
     plant_pid = int(daemon.status()["helper_pid"])  # type: ignore[arg-type]
     shm = daemon.call("describe")["resource"]["diagnostics"]["details"]["plant_channel"]  # type: ignore[index]
     ch = PlantChannel(6, name=str(shm))
@@ -287,7 +283,7 @@ def _assert_every_log_file_readable(logs: Path) -> None:
 def test_abort_mid_motion_safe_stops_within_two_ticks_of_its_handling(daemon: Daemon) -> None:
     daemon.call("load", path=DEMO)
     daemon.call("start")
-    daemon.wait(lambda s: s["active_task"] == "Reach" and _moving(s))
+    daemon.wait(lambda s: s["active_task"] == "Reach" and moving(s))
     daemon.call("abort")
     s = daemon.wait(lambda s: "stopped" in s.get("resource_status", []))
     assert s["result"] == "aborted" and s["faulted"]

@@ -473,7 +473,10 @@ def test_abort_is_not_held_up_by_a_load_under_way(daemon: Daemon) -> None:
 
     t = threading.Thread(target=load)
     t.start()
-    time.sleep(0.1)  # the load is under way (its compiler process takes about half a second)
+    end = time.monotonic() + 10
+    while not _compilers(str(DEMO)):  # the load is under way: its compiler runs
+        assert time.monotonic() < end and t.is_alive(), "no compiler process seen"
+        time.sleep(0.002)
     t0 = time.monotonic()
     assert daemon.call("abort") == {"aborted": True}
     abort_s = time.monotonic() - t0
@@ -506,8 +509,10 @@ def test_a_client_that_stops_reading_is_cut_off_and_its_connection_freed(tmp_pat
                 b'{"id": 1, "cmd": "monitor", "args": {"rate_hz": 500, "signals": ["q", "dq", "tau"]}}\n'
             )
             stalled.append(s)  # never read: the daemon's buffer for it fills
-        time.sleep(0.5)
-        assert _sockets_of(cmdd) >= before + 4
+        end = time.monotonic() + 10
+        while _sockets_of(cmdd) < before + 4:  # each accepted
+            assert time.monotonic() < end, _sockets_of(cmdd) - before
+            time.sleep(0.02)
         end = time.monotonic() + 20
         while _sockets_of(cmdd) > before:
             assert time.monotonic() < end, f"{_sockets_of(cmdd) - before} stalled connections still held"

@@ -14,7 +14,7 @@ import pytest
 
 from orccadd.types import Status
 from orccadd.ursim.process import UrSimProcess
-from tests.daemon.conftest import ROOT, Daemon, start_daemon_with
+from tests.daemon.conftest import ROOT, Daemon, moving, start_daemon_with
 from tests.daemon.test_same_mission import local_config
 from tests.safety import assert_commands_within_limits, assert_safe_stop_in_time, from_telemetry, status_shows
 
@@ -66,8 +66,7 @@ def start_mission_until_reach(d: Daemon) -> None:
     r = d.ctl("load", MISSION)
     assert r.returncode == 0, r.stderr
     d.call("start")
-    d.wait(lambda s: s["active_task"] == "Reach", timeout_s=30)
-    time.sleep(0.3)  # mid-motion
+    d.wait(lambda s: s["active_task"] == "Reach" and moving(s), timeout_s=30)  # mid-motion
 
 
 def acknowledge(d: Daemon) -> None:
