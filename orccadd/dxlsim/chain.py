@@ -38,7 +38,7 @@ from orccadd.physres.arm_dynamics import ArmDynamics
 SERVO_PERIOD_S = 0.001  # the servos' control period and the arm's integration step
 INERTIA_EVERY = 10  # steps between two looks at the arm's inertia (it changes slowly with the pose)
 VISCOUS_NM_S_RAD = 0.01
-FAULTS = ("overload", "overheating", "unplug", "replug", "noise", "late", "clear")
+FAULTS = ("overload", "overheating", "unplug", "replug", "noise", "late", "object", "remove_object", "clear")
 READS = (Instruction.READ, Instruction.SYNC_READ, Instruction.BULK_READ)
 FAST_READS = (Instruction.FAST_SYNC_READ, Instruction.FAST_BULK_READ)
 
@@ -53,6 +53,26 @@ class Reply:
 
 def _word(b: bytes, i: int) -> int:
     return b[i] | b[i + 1] << 8
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """Something a joint meets (an object between a gripper's fingers, a workpiece): beyond
+    `at_rad` in its `closing` sense (+1: growing angles) the joint is pushed back by a spring of
+    `stiffness_nm_rad` with a little damping, as a compliant object pushes back on the fingers."""
+
+    joint: int
+    at_rad: float
+    stiffness_nm_rad: float
+    closing: int
+    damping_nm_s_rad: float = 0.2
+
+    def torque_nm(self, q_rad: float, dq_rad_s: float) -> float:
+        depth = self.closing * (q_rad - self.at_rad)
+        if depth <= 0.0:
+            return 0.0
+        push = self.stiffness_nm_rad * depth + self.damping_nm_s_rad * self.closing * dq_rad_s
+        return -self.closing * max(0.0, push)
 
 
 class Chain:
@@ -79,6 +99,7 @@ class Chain:
             hard_stops=True,
         )
         self._tau_nm = np.zeros(len(models))
+        self.obstacles: dict[int, Obstacle] = {}  # by joint
         self.t_s: float | None = None
         self.last_packet_s = 0.0
         self.noise_rate = 0.0
@@ -113,6 +134,8 @@ class Chain:
             idle = self.t_s - self.last_packet_s
             for j, servo in enumerate(servos):
                 tau[j] = k[j] * servo.step(k[j] * (q[j] - offset[j]), k[j] * dq[j], h, idle)
+            for j, obstacle in self.obstacles.items():
+                tau[j] += obstacle.torque_nm(q[j], dq[j])
             arm.step(tau, h)
             self.t_s += h
             steps += 1
@@ -303,6 +326,27 @@ class Chain:
         self.late_packets -= 1
         return self.late_s
 
+    def place_object(self, dxl_id: int | None, at_rad: float, stiffness_nm_rad: float, closing: int) -> None:
+        """An object the joint of servo `dxl_id` meets at `at_rad` (joint angle) when it moves in
+        the `closing` sense (+1 or -1), pushing back with `stiffness_nm_rad`."""
+        j = self._joint_of(dxl_id)
+        if closing not in (1, -1) or not stiffness_nm_rad > 0.0 or not math.isfinite(at_rad):
+            raise ValueError(
+                f"object: closing (={closing!r}) must be 1 or -1, stiffness_nm_rad (={stiffness_nm_rad!r}) "
+                f"> 0, at_rad (={at_rad!r}) finite"
+            )
+        self.obstacles[j] = Obstacle(j, at_rad, stiffness_nm_rad, closing)
+
+    def remove_object(self, dxl_id: int | None) -> None:
+        self.obstacles.pop(self._joint_of(dxl_id), None)
+
+    def _joint_of(self, dxl_id: int | None) -> int:
+        for j, s in enumerate(self.servos):
+            if s.dxl_id == dxl_id:
+                return j
+        ids = ", ".join(str(s.dxl_id) for s in self.servos)
+        raise ValueError(f"no servo with id {dxl_id!r} (ids: {ids})")
+
     def inject(self, fault: str, dxl_id: int | None, rate: float, now_s: float) -> None:
         """Inject `fault` (one of `FAULTS`) into servo `dxl_id` (noise: at `rate` per byte)."""
         if fault == "noise":
@@ -312,6 +356,7 @@ class Chain:
             return
         if fault == "clear":
             self.noise_rate = 0.0
+            self.obstacles.clear()
             for s in self.servos:
                 s.held_temperature_c = None
                 s.replug(now_s)

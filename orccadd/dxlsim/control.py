@@ -11,7 +11,12 @@
     {"inject": "late", "ms": 6, "packets": 3}
                                           the next 3 status packets each come 6 ms later than
                                           their wire time (a busy host, a USB adapter's hiccup)
-    {"inject": "clear"}                   ends noise, held temperatures and unplugs; latched
+    {"inject": "object", "device": 6, "at_rad": 0.3, "stiffness_nm_rad": 20, "closing": 1}
+                                          servo 6's joint meets an object at 0.3 rad moving in its
+                                          closing sense (+1: growing angles), which pushes back
+                                          like a spring (a part between a gripper's fingers)
+    {"inject": "remove_object", "device": 6}
+    {"inject": "clear"}                   ends noise, held temperatures, unplugs and objects; latched
                                           hardware errors stay until a reboot, as on a servo
     {"status": true}                      the arm and each servo (see `status`)
 
@@ -122,11 +127,24 @@ class ControlServer:
     def _answer(line: bytes, chain: Chain, now_s: float) -> dict[str, Any]:
         def inject(req: sim_control.Injection) -> None:
             p = req.params
-            allowed = {"late": {"ms", "packets"}, "noise": {"rate"}}.get(req.fault, set())
+            allowed = {
+                "late": {"ms", "packets"},
+                "noise": {"rate"},
+                "object": {"at_rad", "stiffness_nm_rad", "closing"},
+            }.get(req.fault, set())
             if set(p) - allowed:
                 raise ValueError(f"{req.fault}: unknown parameter(s) {sorted(set(p) - allowed)}")
             if req.fault == "late":
                 chain.make_late(float(p["ms"]) * 1e-3, int(p.get("packets", 1)))
+            elif req.fault == "object":
+                chain.advance_to(now_s)
+                closing = int(p.get("closing", 1))
+                chain.place_object(
+                    req.device, float(p["at_rad"]), float(p.get("stiffness_nm_rad", 20.0)), closing
+                )
+            elif req.fault == "remove_object":
+                chain.advance_to(now_s)
+                chain.remove_object(req.device)
             else:
                 chain.inject(req.fault, req.device, float(p.get("rate", 0.0)), now_s)
 

@@ -261,3 +261,45 @@ def test_the_link_and_the_control_socket_go_with_the_process(workdir: Path) -> N
     assert port.is_symlink() and control.is_socket()
     assert p.stop() == 0
     assert not port.exists() and not port.is_symlink() and not control.exists()
+
+
+def test_an_object_stops_a_current_limited_joint_and_its_current_shows_the_grip(
+    sim: DxlSimProcess, bus: Bus
+) -> None:
+    """A gripper's grasp as its servo sees it: in current-based position mode (5) with a current
+    limit, a goal beyond an object stops at the object, pressing it with the limited current; the
+    object removed, the joint goes on to its goal."""
+    servo, operating_mode, goal_current, present_current = 6, 11, 102, 126
+    assert bus.ph.write1ByteTxRx(bus.port, servo, TORQUE_ENABLE, 0) == (COMM_SUCCESS, 0)
+    assert bus.ph.write1ByteTxRx(bus.port, servo, operating_mode, 5) == (COMM_SUCCESS, 0)
+    limit = 120  # × 2.69 mA: about 0.32 A
+    assert bus.ph.write2ByteTxRx(bus.port, servo, goal_current, limit) == (COMM_SUCCESS, 0)
+    start = bus.positions()[servo - 1]
+    ticks_per_rad = 4096 / (2 * math.pi)
+    q0 = (start - 2048) / ticks_per_rad
+    sim.inject("object", device=servo, at_rad=q0 + 0.2, stiffness_nm_rad=20.0, closing=1)
+    try:
+        bus.torque_on((servo,))
+        goal = start + round(0.6 * ticks_per_rad)
+        assert bus.ph.write4ByteTxRx(bus.port, servo, GOAL_POSITION, goal) == (COMM_SUCCESS, 0)
+        deadline = time.monotonic() + 5.0
+        while True:  # until it rests against the object, pressing it
+            st = sim.status()
+            q, dq = st["q_rad"][servo - 1], st["dq_rad_s"][servo - 1]
+            current, _, _ = bus.ph.read2ByteTxRx(bus.port, servo, present_current)
+            current = current - 65536 if current >= 32768 else current
+            if q > q0 + 0.15 and abs(dq) < 0.01 and abs(current) >= 0.8 * limit:
+                break
+            assert time.monotonic() < deadline, (q - q0, dq, current)
+            time.sleep(0.02)
+        assert 0.2 <= q - q0 < 0.3, q - q0  # at the object, a little into it: not at the goal
+        assert abs(current) <= 1.05 * limit  # pressing with the limited current, no more
+        sim.inject("remove_object", device=servo)
+        deadline = time.monotonic() + 5.0
+        while abs(bus.positions()[servo - 1] - goal) > 40:
+            assert time.monotonic() < deadline, bus.positions()[servo - 1] - goal
+            time.sleep(0.02)
+    finally:
+        sim.inject("remove_object", device=servo)
+        bus.ph.write1ByteTxRx(bus.port, servo, TORQUE_ENABLE, 0)
+        bus.ph.write1ByteTxRx(bus.port, servo, operating_mode, 3)
