@@ -145,3 +145,57 @@ class TimeoutWatch(Watcher):
             return debounce(t_s - self._t0 >= float(timeout) - 1e-9)
 
         return timed_out
+
+
+class _GraspWatch(Watcher):
+    """A gripper closing on its goal with a limited force (current-based position mode): its
+    joints' torque and speed tell whether something is between the fingers."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        n = ctx.dof
+        self.q = self.add_input("q", (n,), "rad")
+        self.dq = self.add_input("dq", (n,), "rad/s")
+        self.tau = self.add_input("tau", (n,), "N.m")
+        self.q_goal = self.add_input("q_goal", (n,), "rad")
+        self.grip = self.add_parameter(
+            "grip_torque_nm", 0.2, bounds=(1e-4, 1e4), unit="N.m", tunable=True,
+        )  # fmt: skip
+        self.tol = self.add_parameter("tolerance_rad", 0.02, bounds=(1e-6, 1.0), unit="rad", tunable=True)
+        self.vtol = self.add_parameter(
+            "velocity_tolerance_rad_s", 0.02, bounds=(1e-6, 10.0), unit="rad/s", tunable=True
+        )
+
+
+@register("grasp_watch")
+class GraspWatch(_GraspWatch):
+    """Postcondition `Grasped`: at rest short of the goal (by more than `tolerance_rad`), pressing
+    with at least `grip_torque_nm` on some joint: an object holds the fingers apart."""
+
+    def kernel(self) -> Kernel:
+        grip, tol, vtol, debounce = self.grip.value, self.tol.value, self.vtol.value, self._debounce
+
+        def grasped(
+            t_s: float, q: list[float], dq: list[float], tau: list[float], q_goal: list[float]
+        ) -> tuple[bool]:
+            held = max_abs(tau) >= float(grip) and max_abs_diff(q_goal, q) > float(tol)
+            return debounce(held and max_abs(dq) < float(vtol))
+
+        return grasped
+
+
+@register("grasp_missed_watch")
+class GraspMissedWatch(_GraspWatch):
+    """Type 2 `Missed`: closed to the goal (within `tolerance_rad`, at rest) pressing on nothing
+    (torque below `grip_torque_nm`): the object was not there."""
+
+    def kernel(self) -> Kernel:
+        grip, tol, vtol, debounce = self.grip.value, self.tol.value, self.vtol.value, self._debounce
+
+        def missed(
+            t_s: float, q: list[float], dq: list[float], tau: list[float], q_goal: list[float]
+        ) -> tuple[bool]:
+            closed = max_abs_diff(q_goal, q) <= float(tol) and max_abs(tau) < float(grip)
+            return debounce(closed and max_abs(dq) < float(vtol))
+
+        return missed

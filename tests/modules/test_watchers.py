@@ -7,6 +7,8 @@ import numpy as np
 from orccadd.model import RobotModel
 from orccadd.modules import ModuleContext
 from orccadd.modules.watchers import (
+    GraspMissedWatch,
+    GraspWatch,
     JointLimitWatch,
     TargetReached,
     TimeoutWatch,
@@ -80,3 +82,39 @@ def test_timeout_fires_after_timeout_s() -> None:
     w = TimeoutWatch("w", CTX)
     w.configure({"timeout_s": 0.05})
     assert first_fired(w, lambda k: None) == 25  # 25 × 2 ms
+
+
+def _closing(w, object_at: float | None):  # type: ignore[no-untyped-def]
+    """A gripper closing from 0 to 0.6 rad at 1 rad/s with a 0.3 N.m limit; an object at
+    `object_at` stops it there, pressing (None: nothing between the fingers)."""
+    goal = np.full(MODEL.dof, 0.6)
+
+    def feed(k: int) -> None:
+        q = min(0.6, 0.01 * k)
+        stopped = object_at is not None and q >= object_at
+        q = object_at if stopped else q
+        at_rest = stopped or q >= 0.6
+        w.q_goal.value[:] = goal
+        w.q.value[:] = q
+        w.dq.value[:] = 0.0 if at_rest else 1.0
+        w.tau.value[:] = 0.3 if stopped else 0.05  # the current limit reached only against it
+
+    return feed
+
+
+def test_grasp_watch_fires_at_rest_short_of_the_goal_pressing() -> None:
+    w = GraspWatch("g", CTX)
+    w.configure({"grip_torque_nm": 0.25, "ticks": 3})
+    assert first_fired(w, _closing(w, object_at=0.3)) == 32  # at 0.3 from k = 30, 3 ticks in a row
+    w = GraspWatch("g", CTX)
+    w.configure({"grip_torque_nm": 0.25, "ticks": 3})
+    assert first_fired(w, _closing(w, object_at=None)) is None  # closed on nothing
+
+
+def test_grasp_missed_watch_fires_closed_on_nothing() -> None:
+    w = GraspMissedWatch("m", CTX)
+    w.configure({"grip_torque_nm": 0.25, "ticks": 3})
+    assert first_fired(w, _closing(w, object_at=None)) == 62  # closed at k = 60
+    w = GraspMissedWatch("m", CTX)
+    w.configure({"grip_torque_nm": 0.25, "ticks": 3})
+    assert first_fired(w, _closing(w, object_at=0.3)) is None  # holding something
