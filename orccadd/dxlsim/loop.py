@@ -142,15 +142,16 @@ class ServoLoop:
             if mode == 16:
                 duty = self.t.get(T.GOAL_PWM) / PWM_FULL
             elif mode == 0:
-                duty = self._current_loop(self.t.get(T.GOAL_CURRENT) * m.current_unit_a, w_user)
+                duty = self._current_loop(self._current_goal() * m.current_unit_a, w_user)
             elif mode == 1:
                 duty = self._velocity_pi(h_s)
             else:
                 self.profile.step(h_s)
                 u = self._position_pid(h_s)
                 if mode == 5:
-                    cap = abs(self.t.get(T.GOAL_CURRENT))
-                    saturated = abs(u) >= cap
+                    # held at the current cap is a grip, not an overload: only a motor at its
+                    # full output (the PWM's saturation, below) overloads
+                    cap = abs(self._current_goal())
                     duty = self._current_loop(max(-cap, min(cap, u)) * m.current_unit_a, w_user)
                 else:
                     duty = u / PWM_FULL
@@ -162,6 +163,13 @@ class ServoLoop:
             self.current_a = 0.0
         self._watch_load(saturated and abs(w_user) < 0.1, h_s)
         return s * self.current_a * m.torque_constant_nm_a
+
+    def _current_goal(self) -> int:
+        """Goal Current(102) within Current Limit(38): lowering the limit lowers the torque in
+        torque and current-based position modes (e-Manual, Current Limit), whatever Goal Current
+        was written before."""
+        goal, limit = self.t.get(T.GOAL_CURRENT), self.t.get(T.CURRENT_LIMIT)
+        return max(-limit, min(limit, goal))
 
     def _current_loop(self, current_a: float, w_user: float) -> float:
         return current_a / self.model.stall_current_a + w_user

@@ -303,3 +303,39 @@ def test_an_object_stops_a_current_limited_joint_and_its_current_shows_the_grip(
         sim.inject("remove_object", device=servo)
         bus.ph.write1ByteTxRx(bus.port, servo, TORQUE_ENABLE, 0)
         bus.ph.write1ByteTxRx(bus.port, servo, operating_mode, 3)
+
+
+def test_a_lowered_current_limit_caps_the_grip_whatever_goal_current_says(
+    sim: DxlSimProcess, bus: Bus
+) -> None:
+    """Current Limit(38) caps the current in current-based position mode (e-Manual): lowered
+    after Goal Current(102) was set higher, the grip is the limit's."""
+    servo, operating_mode, current_limit, goal_current, present_current = 6, 11, 38, 102, 126
+    assert bus.ph.write1ByteTxRx(bus.port, servo, TORQUE_ENABLE, 0) == (COMM_SUCCESS, 0)
+    assert bus.ph.write1ByteTxRx(bus.port, servo, operating_mode, 5) == (COMM_SUCCESS, 0)
+    assert bus.ph.write2ByteTxRx(bus.port, servo, goal_current, 300) == (COMM_SUCCESS, 0)
+    assert bus.ph.write2ByteTxRx(bus.port, servo, current_limit, 60) == (COMM_SUCCESS, 0)
+    start = bus.positions()[servo - 1]
+    ticks_per_rad = 4096 / (2 * math.pi)
+    sim.inject("object", device=servo, at_rad=(start - 2048) / ticks_per_rad + 0.1, stiffness_nm_rad=20.0)
+    try:
+        bus.torque_on((servo,))
+        assert bus.ph.write4ByteTxRx(bus.port, servo, GOAL_POSITION, start + 400) == (COMM_SUCCESS, 0)
+        currents: list[int] = []
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline:
+            value, result, _ = bus.ph.read2ByteTxRx(bus.port, servo, present_current)
+            assert result == COMM_SUCCESS
+            currents.append(value - 65536 if value >= 32768 else value)
+            time.sleep(0.02)
+        st = sim.status()
+        assert 50 <= max(abs(c) for c in currents[-20:]) <= 63, (
+            currents[-20:],
+            st["servos"][servo - 1],
+            st["q_rad"][servo - 1],
+        )  # pressing at the limit
+    finally:
+        sim.inject("remove_object", device=servo)
+        bus.ph.write1ByteTxRx(bus.port, servo, TORQUE_ENABLE, 0)
+        bus.ph.write2ByteTxRx(bus.port, servo, current_limit, 1193)
+        bus.ph.write1ByteTxRx(bus.port, servo, operating_mode, 3)
