@@ -10,6 +10,7 @@ there, before anyone else hears of it.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -180,6 +181,13 @@ class RobotTask:
         self._blend_ticks = 0
         self._blend_left = 0
         self._holding_previous = False
+        # position commands: a blend never steps faster than the joints may move (the resource
+        # would clamp that step as a limit violation); 0.9 of it, per robot period
+        position = signature.command is CommandMode.POSITION
+        model, robot_period_s = resource.model, resource.config.control_period_s
+        self._blend_step_rad: list[float] = (
+            (model.v_max_rad_s * robot_period_s * 0.9).tolist() if position else []
+        )
         self._out: npt.NDArray[np.float64] | None = None  # compute's command, for commit
         # the schedule and the shell's events as one generated function (None: interpreted)
         self.compiled: Callable[[float], None] | None = None
@@ -388,6 +396,11 @@ class RobotTask:
             self._holding_previous = False
             if self._blend_ticks:
                 np.subtract(self.sent, cmd, out=self._offset)
+                if self._blend_step_rad:  # long enough that no step outruns the joints (a switch)
+                    need = max(
+                        abs(o) / s for o, s in zip(self._offset.tolist(), self._blend_step_rad, strict=True)
+                    )
+                    self._blend_ticks = self._blend_left = max(self._blend_ticks, math.ceil(need))
         if self._blend_left:
             np.multiply(self._offset, self._blend_left / self._blend_ticks, out=self._blended)
             np.add(self._blended, cmd, out=self._blended)
