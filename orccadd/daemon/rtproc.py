@@ -41,6 +41,7 @@ from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.robot import create_resource, load_robot_config, with_backend
 from orccadd.runtime import enter_realtime, leave_realtime
+from orccadd.runtime.rt import RealtimeReport, lock_memory_early
 from orccadd.runtime.threads import ThreadGroup
 from orccadd.task import load_task_file
 from orccadd.task.loop import resource_clock
@@ -102,6 +103,7 @@ class RealtimeProcess:
         self.stop_requested = ""
         self.thread: threading.Thread | None = None
         self.threads = ThreadGroup("orccadd")  # the control thread
+        self.memory_locked = False  # by `lock_memory_early` at startup
         self.inbox: deque[Request] = deque()  # requests waiting for the loop's slack
         self.inbox_since_ns = 0
         self.pending: list[tuple[Any, Pending]] = []  # (request id, reply to complete)
@@ -123,6 +125,10 @@ class RealtimeProcess:
             # it binds the public socket only once this process answers it (`run`): no client
             # reaches a daemon that cannot answer yet. A failed start ends it (`abandon`).
             self._spawn_cmdd()
+        refused = lock_memory_early()  # before any bus's I/O threads run (runtime.rt)
+        for w in refused:
+            log.warning("%s", w)
+        self.memory_locked = not refused
         self.resource.configure()
         self.resource.activate(CommandMode[hold.task.command.upper()])  # the Hold task's mode
         self.wake_r, self.wake_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
@@ -170,9 +176,16 @@ class RealtimeProcess:
         except OSError:
             self.cmdd_pidfd = -1
 
+    def _enter_realtime(self, priority: int) -> RealtimeReport:
+        """SCHED_FIFO `priority` for the calling thread; the memory was locked and collected at
+        startup, before the buses' threads ran (`lock_memory_early`): not again."""
+        rt = enter_realtime(priority, lock_memory=not self.memory_locked, collect_gc=False)
+        rt.memory_locked = rt.memory_locked or self.memory_locked
+        return rt
+
     # ---- the control thread ----------------------------------------------------------------
     def _control_main(self) -> None:
-        rt = enter_realtime(self.cfg.daemon.control_priority)
+        rt = self._enter_realtime(self.cfg.daemon.control_priority)
         for w in rt.warnings:
             log.warning("control thread: %s", w)
         try:
@@ -188,7 +201,7 @@ class RealtimeProcess:
 
     # ---- the automaton thread (main) ------------------------------------------------------
     def run(self) -> int:
-        rt = enter_realtime(self.cfg.daemon.automaton_priority)
+        rt = self._enter_realtime(self.cfg.daemon.automaton_priority)
         for w in rt.warnings:
             log.warning("automaton thread: %s", w)
         sig_r, sig_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)

@@ -49,16 +49,46 @@ class RealtimeReport:
         )
 
 
+def lock_memory_early() -> list[str]:
+    """For a process whose devices run I/O threads: lock its memory (`mlockall`, current and
+    future pages) and collect its garbage *before* they start. Done later, in `enter_realtime`,
+    both stall those threads while they must keep a device's watchdog fed: `mlockall` holds the
+    process's memory map while it brings every page in (a thread that faults waits), a full
+    collection holds the interpreter (a Python I/O thread waits): a CANopen drive then missed our
+    heartbeat at startup (EMCY 0x8130). Warnings, if refused."""
+    rep = RealtimeReport()
+    _lock_memory(rep)
+    gc.collect()
+    return rep.warnings
+
+
+def _lock_memory(rep: RealtimeReport) -> None:
+    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+    if libc.mlockall(MCL_CURRENT | MCL_FUTURE) == 0:
+        rep.memory_locked = True
+    else:
+        err = ctypes.get_errno()
+        rep.warnings.append(
+            f"mlockall refused ({os.strerror(err)}): page faults may stall the loop; "
+            "grant LimitMEMLOCK=infinity (systemd) / memlock (limits.conf)"
+        )
+
+
 def enter_realtime(
     priority: int = 80,
     lock_memory: bool = True,
     freeze_gc: bool = True,
+    collect_gc: bool = True,
     cpus: set[int] | None = None,
     cpu_dma_latency_us: int | None = 0,
 ) -> RealtimeReport:
     """Make the calling thread real-time where permitted (optionally pinned to `cpus`). Not for a tick.
 
     `cpu_dma_latency_us` (None: leave the CPUs' idle states alone) is held until `leave_realtime`.
+    After `lock_memory_early`, pass `lock_memory=False, collect_gc=False`: the memory is locked
+    already (its future pages too), and what was collected before is all there was to collect but
+    the startup's own garbage, frozen with the rest (a full collection now would stall the
+    devices' threads).
     """
     rep = RealtimeReport()
     if cpu_dma_latency_us is not None:
@@ -81,17 +111,10 @@ def enter_realtime(
                 "priority; run as root or grant LimitRTPRIO (systemd) / rtprio (limits.conf)"
             )
     if lock_memory:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        if libc.mlockall(MCL_CURRENT | MCL_FUTURE) == 0:
-            rep.memory_locked = True
-        else:
-            err = ctypes.get_errno()
-            rep.warnings.append(
-                f"mlockall refused ({os.strerror(err)}): page faults may stall the loop; "
-                "grant LimitMEMLOCK=infinity (systemd) / memlock (limits.conf)"
-            )
+        _lock_memory(rep)
     if freeze_gc:
-        gc.collect()
+        if collect_gc:
+            gc.collect()
         gc.freeze()
         gc.disable()
         rep.gc_frozen = True
