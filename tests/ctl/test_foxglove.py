@@ -6,6 +6,7 @@ streams of a stand-in daemon (the protocol's framing, no real daemon)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import pwd
@@ -78,7 +79,8 @@ def daemon(tmp_path: Path) -> Iterator[str]:
             lines = [{"id": rid, "ok": True, "stream": i} for i in items] + [
                 {"id": rid, "ok": True, "result": {}}
             ]
-            conn.sendall(b"".join((json.dumps(x) + "\n").encode() for x in lines))
+            with contextlib.suppress(BrokenPipeError, ConnectionResetError):  # the viewer may be gone
+                conn.sendall(b"".join((json.dumps(x) + "\n").encode() for x in lines))
 
     def serve() -> None:
         while True:
