@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The wheel as a user gets it (CI runs this after `make test`): built from this checkout's HEAD,
 # installed with every bus extra into an empty virtual environment, then, from outside the
-# checkout: --version, `orccadctl check` on every shipped mission (its tasks built on sim-ur5e),
+# checkout: --version, `orccadctl check` on every shipped mission (its tasks built on sim-ur5e, a gripper's on gripper-sim),
 # the service files, completion, the module catalogue, orccadd on the shipped
 # sim-ur5e config for two seconds, status, and a SIGTERM that must end it cleanly (exit 0).
 set -euo pipefail
@@ -25,8 +25,10 @@ cd "$work"  # nothing of the checkout from here on
 share="$work/venv/share/orccadd/configs"
 for mission in "$share"/missions/*.mission; do
     if grep -q '^task .* from "' "$mission"; then
-        "$bin/orccadctl" check "$mission" --config sim-ur5e >/dev/null  # every task built on it
-        echo "checked $(basename "$mission") (and its tasks on sim-ur5e)"
+        robot=sim-ur5e  # the arm's missions; a gripper's on the shipped gripper
+        if grep -q '^resource gripper' "$mission"; then robot=gripper-sim; fi
+        "$bin/orccadctl" check "$mission" --config "$robot" >/dev/null  # every task built on it
+        echo "checked $(basename "$mission") (and its tasks on $robot)"
     else  # the seed's KEEPSTABLE (an underwater vehicle): no task files for an arm
         "$bin/orccadctl" check --language-only "$mission" >/dev/null
         echo "checked $(basename "$mission") (language and automaton: it has no task files)"
