@@ -125,16 +125,6 @@ class Canopen402Arm(PhysicalResource):
         self._hold_here()
         self._walk(cia402.State.OPERATION_ENABLED)
 
-    def _on_prepare_mode_switch(self, mode: CommandMode) -> None:
-        """Every drive's RPDO must carry the mode's target (checked once the drives are known)."""
-        code = MODE_OF[mode]
-        lacking = [f"node {a.node_id}" for a in self.master.axes if code not in a.modes]
-        if lacking:
-            raise ResourceError(
-                f"{self.name}: {mode.name.lower()} mode: the RPDO of {', '.join(lacking)} "
-                "carries no target for it"
-            )
-
     def _on_perform_mode_switch(self, mode: CommandMode) -> None:
         self.master.write_mode(MODE_OF[mode])
 

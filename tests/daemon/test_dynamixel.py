@@ -17,7 +17,7 @@ from typing import cast
 import pytest
 
 from tests.daemon.conftest import ROOT, Daemon, mission_dirs, moving, start_daemon_with
-from tests.physres.test_dynamixel import DxlRig, dxl_rig
+from tests.physres.test_dynamixel import SIM, DxlRig, dxl_rig
 
 DEMO = str(ROOT / "configs/missions/demo_position.mission")
 SIM_PRIORITY = 70  # as the other simulators in the daemon tests (canopen_rig, UrSimProcess)
@@ -26,7 +26,7 @@ pytestmark = pytest.mark.timeout(180, method="thread")
 
 
 @contextmanager
-def dxl_daemon_rig(tmp: Path, *edits: tuple[str, str]) -> Iterator[DxlRig]:
+def dxl_daemon_rig(tmp: Path, *edits: tuple[str, str], base: Path = SIM) -> Iterator[DxlRig]:
     """`dxl_rig` (the simulator on a pseudo-terminal under `tmp`) with a config orccadd runs from
     `tmp`: the hold task's path made absolute, the shipped and the tests' missions allowed."""
     daemon = (
@@ -40,7 +40,7 @@ def dxl_daemon_rig(tmp: Path, *edits: tuple[str, str]) -> Iterator[DxlRig]:
     # normal priority the simulator (one thread) was starved beside orccadd's SCHED_FIFO loop
     # and its mission compiler on this 2-core VM: 5 sync reads in a row (25 ms) unanswered,
     # CommLost. So it runs at SCHED_FIFO, as the other simulators of the daemon tests.
-    with dxl_rig(tmp, *daemon, *edits, sim_args=("--priority", str(SIM_PRIORITY))) as rig:
+    with dxl_rig(tmp, *daemon, *edits, sim_args=("--priority", str(SIM_PRIORITY)), base=base) as rig:
         yield rig
 
 

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from orccadd.dxlsim.process import DxlSimProcess
-from tests.conftest import variant_text
 from tests.daemon.conftest import ROOT, Daemon, start_daemon_with
+from tests.daemon.test_dynamixel import dxl_daemon_rig
 
 GRIPPER = ROOT / "configs/robots/gripper-sim.toml"
 MISSION = str(ROOT / "configs/missions/grasp.mission")
@@ -23,20 +23,10 @@ pytestmark = pytest.mark.timeout(180, method="thread")
 
 @pytest.fixture
 def gripper(tmp_path: Path) -> Iterator[tuple[DxlSimProcess, Daemon]]:
-    config = tmp_path / "gripper.toml"
-    dirs = f'mission_dirs = ["{ROOT}/configs/missions"]\ntask_dirs = ["{ROOT}/configs/tasks"]\n'
-    config.write_text(
-        variant_text(
-            GRIPPER,
-            ('port = "/tmp/orccadd-gripper"', f'port = "{tmp_path}/ttyDXL"'),
-            ('hold_task = "../tasks/', f'hold_task = "{ROOT}/configs/tasks/'),
-            ("[daemon]\n", f"[daemon]\n{dirs}"),
-        )
-    )
-    with DxlSimProcess(config, "--priority", "70") as sim:
-        d = start_daemon_with(tmp_path, config)
+    with dxl_daemon_rig(tmp_path, base=GRIPPER) as rig:
+        d = start_daemon_with(tmp_path, rig.config)
         try:
-            yield sim, d
+            yield rig.sim, d
         finally:
             d.stop()
 

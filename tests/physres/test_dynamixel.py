@@ -5,6 +5,7 @@ Timing is checked to orders of magnitude only (a shared 2-core VM)."""
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -55,12 +56,15 @@ class DxlRig:
 
 
 @contextmanager
-def dxl_rig(tmp: Path, *edits: tuple[str, str], sim_args: tuple[str, ...] = ()) -> Iterator[DxlRig]:
-    """dxl-6axis-sim.toml with `edits`, its port under `tmp`, and the simulator serving it
-    (started with `sim_args`)."""
+def dxl_rig(
+    tmp: Path, *edits: tuple[str, str], sim_args: tuple[str, ...] = (), base: Path = SIM
+) -> Iterator[DxlRig]:
+    """`base` (dxl-6axis-sim.toml) with `edits`, its port under `tmp`, and the simulator serving
+    it (started with `sim_args`)."""
     config = tmp / "dxl.toml"
-    port = tmp / "ttyDXL"
-    config.write_text(variant_text(SIM, ('port = "/tmp/orccadd-dxl-6axis"', f'port = "{port}"'), *edits))
+    port_line = re.search(r'^port = "[^"]*"$', base.read_text(), re.M)
+    assert port_line, f"{base} names no port"
+    config.write_text(variant_text(base, (port_line[0], f'port = "{tmp / "ttyDXL"}"'), *edits))
     # the servos are hardware: at real-time priority, above the test's loop (tests/physres/conftest.py)
     priority = () if "--priority" in sim_args else ("--priority", "70")
     sim = DxlSimProcess(config, *priority, *sim_args)
