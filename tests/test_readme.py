@@ -100,6 +100,13 @@ class Shell:
                 )
                 time.sleep(0.2)
 
+    def background_output(self, tail_bytes: int = 3000) -> str:
+        out = []
+        for i, (line, _) in enumerate(self.background):
+            text = (self.tmp / f"background-{i}.out").read_text(errors="replace")
+            out.append(f"--- {line}\n{text[-tail_bytes:]}")
+        return "\n".join(out)
+
     def __enter__(self) -> Shell:
         return self
 
@@ -124,7 +131,10 @@ def test_each_tour_runs_as_written_and_its_mission_succeeds(tour: str, tmp_path:
     # other off them while this tour's own runs
     ports = PortsLock(300.0) if "orccadd.ursim" in tours()[tour] else contextlib.nullcontext()
     with ports, Shell(tmp_path) as shell:
-        run_tour(tour, shell, tmp_path)
+        try:
+            run_tour(tour, shell, tmp_path)
+        except AssertionError as e:  # what the background processes said, to find out why
+            raise AssertionError(f"{e}\n{shell.background_output()}") from None
 
 
 def run_tour(tour: str, shell: Shell, tmp_path: Path) -> None:

@@ -126,17 +126,20 @@ def realtime_device_process(priority: int) -> list[str]:
     on (inherited: no reset-on-fork here), for a simulated device: hardware answers whatever the
     host's load, so its simulator must not wait behind time-shared work. (`enter_realtime` is
     for one loop thread: the threads a loop's process starts later run at normal priority.)
-    Returns the warnings; nothing is changed where the system refuses."""
+    Its memory is locked too (a page fault in a reply's path delays it by milliseconds, as a real
+    device's never is). Returns the warnings; nothing is changed where the system refuses."""
     if priority <= 0:
         return []
+    rep = RealtimeReport()
+    _lock_memory(rep)
     try:
         _fifo(_thread_ids(), priority)
     except OSError as e:
-        return [
+        rep.warnings.append(
             f"SCHED_FIFO {priority} refused ({e.strerror or e}): the simulator runs at normal "
             "priority and may answer late on a busy machine"
-        ]
-    return []
+        )
+    return rep.warnings
 
 
 class ThreadsStartedHere:

@@ -68,7 +68,10 @@ def daemon(tmp_path: Path) -> Iterator[str]:
 
     def answer(conn: socket.socket) -> None:
         with conn:
-            req = json.loads(conn.makefile("rb").readline())
+            line = conn.makefile("rb").readline()
+            if not line:  # a client gone before asking (the viewer stopped meanwhile)
+                return
+            req = json.loads(line)
             rid = req["id"]
             if req["cmd"] == "monitor":
                 items = [{"signals": ["t_s", *LABELS]}] + [
