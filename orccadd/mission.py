@@ -3,13 +3,14 @@ for the daemon's `load`, and the tasks built against a robot (`build_mission_tas
 `load`, and `orccadctl check --config ROBOT`).
 
 Compile (parse, elaborate, build the automaton: `MissionError` at file:line:col), then the
-verifier's checks with the execution machine's own (one Robot-Task active at a time, every task
+verifier's checks with the execution machine's own (one Robot-Task active at a time on each
+resource, every task
 from a task file): the `Report`, whose failures the caller refuses with their counterexamples.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -68,7 +69,7 @@ def check_mission(
         automaton = compile_file(path, max_states, files.interface, progress)
     else:
         automaton = compile_text(text, str(path), max_states, files.interface, progress)
-    report = verify(automaton, one_task_at_a_time=True)
+    report = verify(automaton, one_task_per_resource=True)
     report.results.append(_check_task_files(automaton))
     return automaton, report
 
@@ -83,28 +84,33 @@ def _check_task_files(automaton: Automaton) -> CheckResult:
     return CheckResult("task files", True, "every task is built from a task file")
 
 
+Bindings = Mapping[str, tuple[PhysicalResource, EventQueue]]  # resource name → it, its loop's events
+
+
 def build_mission_tasks(
     automaton: Automaton,
-    resource: PhysicalResource,
+    bindings: Bindings,
     registry: EventRegistry,
-    queue: EventQueue,
     task_spec: Callable[[Path], TaskSpec] = load_task_file,
 ) -> tuple[tuple[RobotTask, ...], dict[int, int]]:
-    """Every task of a compiled mission built for this robot's resource (modules instantiated,
-    ports bound, the mission's `set` lines applied), and event registry id → the automaton's
-    input bit. `MissionError` at the task's or `set` line's place, `OrccaddError` otherwise.
-    `task_spec` gives a task file's spec (default: read it; the daemon: the specs its compiler
-    read). Needs no hardware: the resource is built, not configured. Not for a tick."""
+    """Every task of a compiled mission built for the robot's resource it runs on (`bindings`:
+    by name, each with the event queue of its control loop; modules instantiated, ports bound,
+    the mission's `set` lines applied), and event registry id → the automaton's input bit.
+    `MissionError` at the task's or `set` line's place, `OrccaddError` otherwise. `task_spec`
+    gives a task file's spec (default: read it; the daemon: the specs its compiler read). Needs
+    no hardware: the resources are built, not configured. Not for a tick."""
     p = automaton.program
     text = p.text
+    have = ", ".join(f"`{n}`" for n in bindings)
     for decl in p.ast.tasks:
-        if decl.resource != resource.name:
+        if decl.resource not in bindings:
+            what = "resource is" if len(bindings) == 1 else "resources are"
             raise _err(
-                decl.loc,
-                text,
-                f"task {decl.name} runs on `{decl.resource}`, but this robot's resource is `{resource.name}`",
+                decl.loc, text, f"task {decl.name} runs on `{decl.resource}`, but this robot's {what} {have}"
             )
-    tasks = tuple(_build(decl, p.file, text, resource, registry, queue, task_spec) for decl in p.ast.tasks)
+    tasks = tuple(
+        _build(decl, p.file, text, *bindings[decl.resource], registry, task_spec) for decl in p.ast.tasks
+    )
     bits: dict[int, int] = {}
     for i, name in enumerate(p.inputs):
         if p.input_task[i] < 0:
@@ -127,8 +133,8 @@ def _build(
     file: str,
     text: str,
     resource: PhysicalResource,
-    registry: EventRegistry,
     queue: EventQueue,
+    registry: EventRegistry,
     task_spec: Callable[[Path], TaskSpec],
 ) -> RobotTask:
     src = Path(decl.source)
@@ -159,15 +165,16 @@ def _build(
     return task
 
 
-def check_on_robot(automaton: Automaton, resource: PhysicalResource, robot: str) -> CheckResult:
+def check_on_robot(automaton: Automaton, resources: Sequence[PhysicalResource], robot: str) -> CheckResult:
     """Whether every task of the mission builds on this robot (`orccadctl check --config`):
     a misspelt module parameter, a missing gain or a joint the robot lacks, before `load`."""
     try:
-        tasks, _ = build_mission_tasks(automaton, resource, EventRegistry(), EventQueue())
+        bindings = {r.name: (r, EventQueue()) for r in resources}
+        tasks, _ = build_mission_tasks(automaton, bindings, EventRegistry())
     except OrccaddError as e:
         return CheckResult(f"robot {robot}", False, str(e).splitlines()[0], explanation=_rest(e))
-    built = ", ".join(f"{t.name} ({len(t.modules)} modules)" for t in tasks)
-    return CheckResult(f"robot {robot}", True, f"every task builds on {resource.name}: {built}")
+    built = ", ".join(f"{t.name} on {t.resource.name} ({len(t.modules)} modules)" for t in tasks)
+    return CheckResult(f"robot {robot}", True, f"every task builds: {built}")
 
 
 def _rest(e: OrccaddError) -> str:

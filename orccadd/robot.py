@@ -11,7 +11,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from orccadd.config.cell import CellConfig, override_key, read_cell_config
 from orccadd.config.robot import RobotConfig, read_robot_config
+from orccadd.errors import ConfigError
 from orccadd.model import RobotModel
 from orccadd.physres import PhysicalResource, backend_class
 from orccadd.physres.description import check_description
@@ -36,6 +38,34 @@ def load_robot_config(path: str | Path, *, check_model: bool = True) -> RobotCon
     backend = backend_class(cfg.resource.backend, cfg.source)
     settings = backend.load_settings(cfg.resource.settings or {}, cfg, cfg.source)
     return _checked(replace(cfg, backend_settings=settings), backend, check_model)
+
+
+def load_cell_config(path: str | Path, *, check_model: bool = True) -> CellConfig:
+    """Read a cell config (or a one-resource robot config: a cell of one), each resource checked
+    as `load_robot_config` checks one, and none claiming what another holds (a serial port, a
+    CAN bus, a controller). `ConfigError` naming the file, key, value and what was allowed."""
+    cell = read_cell_config(path)
+    out: list[RobotConfig] = []
+    claimed: dict[str, int] = {}
+    for i, cfg in enumerate(cell.resources):
+        backend = backend_class(cfg.resource.backend, cfg.source)
+        try:
+            settings = backend.load_settings(cfg.resource.settings or {}, cfg, cfg.source)
+        except ConfigError as e:
+            raise override_key(cell, i, e) from None
+        cfg = _checked(replace(cfg, backend_settings=settings), backend, check_model)
+        for claim in backend.claims(cfg):
+            if claim in claimed:
+                j = claimed[claim]
+                raise ConfigError(
+                    cell.source,
+                    f"resources[{i}]",
+                    f"(={cfg.resource.name!r}) claims {claim}, which resources[{j}] "
+                    f"(={cell.resources[j].resource.name!r}) holds: one device, one resource",
+                )
+            claimed[claim] = i
+        out.append(cfg)
+    return cell.with_resources(tuple(out))
 
 
 def _checked(cfg: RobotConfig, backend: type[PhysicalResource], check_model: bool) -> RobotConfig:

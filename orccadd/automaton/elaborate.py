@@ -229,11 +229,6 @@ class _Elaborator:
                 raise self.err(
                     ps.loc, f"task {t.name}: {path} has no module {ps.module!r} (modules: {known})"
                 )
-        if spec.resource != t.resource:
-            raise self.err(
-                t.resource_loc,
-                f"signature mismatch: {path} runs on resource `{spec.resource}`, not `{t.resource}`",
-            )
         for kind, names in has.items():
             for n in sorted(names):
                 if (kind, n) not in {(k, nm) for k, nm, _ in declared}:

@@ -244,7 +244,7 @@ _RANK = {ERROR: 0, WARNING: 1, NOTE: 2}
 
 
 def verify_network(
-    net: Network, *, one_task_at_a_time: bool = False, max_states: int = DEFAULT_MAX_STATES
+    net: Network, *, one_task_per_resource: bool = False, max_states: int = DEFAULT_MAX_STATES
 ) -> Report:
     """Every check of `verify`, on the products the module docstring describes. A product that
     does not compile (an instant with no reaction that the mission can reach) raises
@@ -259,7 +259,7 @@ def verify_network(
     coverage: list[str] = []
     for members, props in groups.items():
         a = compile_program(product_program(net, members, tuple(props)), max_states)
-        checked.append((members, a, verify(a, one_task_at_a_time=one_task_at_a_time, dead_code=False)))
+        checked.append((members, a, verify(a, one_task_per_resource=one_task_per_resource, dead_code=False)))
         try:
             executed |= executed_sites(a)
         except CoverageError as e:

@@ -142,9 +142,10 @@ class _Graph:
                 yield s, inputs, n, actions
 
 
-def verify(a: Automaton, *, one_task_at_a_time: bool = False, dead_code: bool = True) -> Report:
-    """Every check; `one_task_at_a_time` adds the execution machine's own need (the daemon runs
-    one Robot-Task at a time on its robot: `orccadd.mission.check_mission`). `dead_code=False`
+def verify(a: Automaton, *, one_task_per_resource: bool = False, dead_code: bool = True) -> Report:
+    """Every check; `one_task_per_resource` adds the execution machine's own need (the daemon runs
+    one Robot-Task at a time on each resource, one law per control loop:
+    `orccadd.mission.check_mission`). `dead_code=False`
     leaves that check to the caller (a network's, over all its products)."""
     g = _Graph(a)
     results = [
@@ -157,7 +158,7 @@ def verify(a: Automaton, *, one_task_at_a_time: bool = False, dead_code: bool = 
         _check_strong_liveness(a, g),
         _check_conflicts(a, g),
     ]
-    if one_task_at_a_time:
+    if one_task_per_resource:
         results.append(_check_one_task(a, g))
     results.extend(_check_property(a, g, prop) for prop in a.program.properties)
     if dead_code:
@@ -300,14 +301,23 @@ def _check_conflicts(a: Automaton, g: _Graph) -> CheckResult:
 
 
 def _check_one_task(a: Automaton, g: _Graph) -> CheckResult:
+    tasks = a.program.tasks
     for s in sorted(g.parent):
-        if len(a.active[s]) > 1:
-            names = " and ".join(a.program.tasks[i].name for i in a.active[s])
-            return CheckResult(
-                "one task", False, f"{names} active at once: the daemon runs one Robot-Task at a time",
-                g.path(s), f"at: {a.where[s]}",
-            )  # fmt: skip
-    return CheckResult("one task", True, "at most one Robot-Task is active in any state (the daemon's need)")
+        on: dict[str, list[str]] = {}
+        for i in a.active[s]:
+            on.setdefault(tasks[i].resource, []).append(tasks[i].name)
+        for resource, names in on.items():
+            if len(names) > 1:
+                return CheckResult(
+                    "one task per resource", False,
+                    f"{' and '.join(names)} active at once on {resource}: the daemon runs one "
+                    "Robot-Task at a time on each resource",
+                    g.path(s), f"at: {a.where[s]}",
+                )  # fmt: skip
+    return CheckResult(
+        "one task per resource", True,
+        "at most one Robot-Task is active on each resource in any state (the daemon's need)",
+    )  # fmt: skip
 
 
 def _warnings(a: Automaton, g: _Graph) -> list[str]:

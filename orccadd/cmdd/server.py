@@ -27,7 +27,8 @@ from orccadd.cmdd import views
 from orccadd.cmdd.csvlog import LogDir
 from orccadd.cmdd.logsession import TelemetryLog
 from orccadd.cmdd.urdf import urdf_path
-from orccadd.config.robot import DaemonConfig, read_robot_config
+from orccadd.config.cell import read_cell_config
+from orccadd.config.robot import DaemonConfig
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.wire.commands import (
     COMMANDS,
@@ -607,10 +608,12 @@ def main(argv: list[str] | None = None) -> int:
     except LogSetupError as e:
         ap.exit(2, f"{ap.prog}: error: {e}\n")
     _above_clients()
-    cfg = read_robot_config(args.config)
-    log_dir = cfg.resolve(cfg.daemon.log_dir) if cfg.daemon.log_dir else None
+    cell = read_cell_config(args.config)
+    log_dir = cell.resolve(cell.daemon.log_dir) if cell.daemon.log_dir else None
     try:
-        d = CommandDaemon(cfg.daemon, args.socket, args.rt_socket, args.telemetry, log_dir, urdf_path(cfg))
+        d = CommandDaemon(
+            cell.daemon, args.socket, args.rt_socket, args.telemetry, log_dir, urdf_path(cell.resources[0])
+        )
     except (OSError, ValueError) as e:
         log.error("cannot attach to the real-time process: %s", e)
         return 2

@@ -168,6 +168,9 @@ def _stop(r: dict[str, Any], _: dict[str, Any]) -> str:
 def _reset(r: dict[str, Any], _: dict[str, Any]) -> str:
     if not r["reset"]:
         return f"reset: {r.get('detail') or 'nothing done'}"
+    if r.get("resources"):
+        names = ", ".join(r["resources"])
+        return f"reset: {names}: the safe stops are cleared; each Hold task holds its resource"
     return "reset: the safe stop is cleared; the Hold task holds the arm"
 
 
@@ -221,5 +224,5 @@ FORMATTERS: dict[str, Formatter] = {
     "send": lambda r, _: f"sent {r['sent']}",
     "tune": _tune,
     "log": _log,
-    "inject": lambda r, _: f"injected fault: {r['injected']}",
+    "inject": lambda r, _: f"injected fault: {r['injected']} on {r.get('resource', 'the arm')}",
 }

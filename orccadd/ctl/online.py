@@ -48,7 +48,8 @@ def add_parsers(sub: Any) -> None:
     add("abort")
     add("hold")
     add("resume")
-    add("reset")
+    p = add("reset")
+    p.add_argument("resource", nargs="?", default="", help=table_help("reset", "resource"))
     p = add("send")
     p.add_argument("input", help="an operator input the mission declares (`input` in the mission)")
     p = add("params")
@@ -90,6 +91,7 @@ def add_parsers(sub: Any) -> None:
     )
     p.add_argument("--ticks", type=int, default=20, help=table_help("inject", "ticks"))
     p.add_argument("--extra-ms", type=float, default=0.0, metavar="MS", help=table_help("inject", "extra_ms"))
+    p.add_argument("--resource", default="", help=table_help("inject", "resource"))
     from orccadd.ctl.foxglove import add_parser as add_foxglove
 
     add_foxglove(sub)
@@ -129,7 +131,10 @@ def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
             raise ClientError(f"log stop: takes no signals (got {' '.join(a.signals)[:80]})")
         return cmd, args
     if cmd == "inject":
-        return cmd, {"fault": a.fault, "ticks": a.ticks, "extra_ms": a.extra_ms}
+        args = {"fault": a.fault, "ticks": a.ticks, "extra_ms": a.extra_ms}
+        return cmd, {**args, "resource": a.resource} if a.resource else args
+    if cmd == "reset":
+        return cmd, {"resource": a.resource} if a.resource else {}
     if cmd == "events":
         return cmd, {"last": a.last}
     return cmd, {}

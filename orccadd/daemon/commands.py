@@ -16,6 +16,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -45,22 +46,54 @@ MAX_INJECTED_MS = 5000.0  # longest injected tick: a stall, not a hang
 TUNE_WAIT_S = 1.0  # a tune not applied within this (or 100 periods) is reported as such
 
 
+class UnitView(Protocol):
+    """What the handlers use of one resource's unit (`orccadd.daemon.machine.Unit`)."""
+
+    cfg: RobotConfig
+    resource: PhysicalResource
+    queue: EventQueue
+    loop: SwitchingLoop
+    supervisor: Supervisor
+
+    @property
+    def name(self) -> str: ...
+
+
 class Machine(Protocol):
     """What the handlers use of the execution machine (`orccadd.daemon.machine.Machine`)."""
 
     cfg: RobotConfig
     resource: PhysicalResource
     registry: EventRegistry
-    queue: EventQueue
     loop: SwitchingLoop
     pub: Publisher
     mission: MissionControl
-    supervisor: Supervisor
     allow_fault_injection: bool
 
+    @property
+    def units(self) -> Sequence[UnitView]: ...
+    def unit(self, name: str) -> UnitView: ...
+    def unit_of(self, task: RobotTask) -> UnitView: ...
+    def abort(self, why: str) -> None: ...
     def now_s(self) -> float: ...
     def note(self, msg: str) -> None: ...
     def describe(self) -> dict[str, Any]: ...
+
+
+def _then(reply: Result | Pending, on_done: Callable[[], None]) -> Result | Pending:
+    """`reply`, calling `on_done` once it is complete."""
+    if not isinstance(reply, Pending):
+        on_done()
+        return reply
+    inner = reply
+
+    def poll() -> Result | None:
+        got = inner.poll()
+        if got is not None:
+            on_done()
+        return got
+
+    return Pending(poll, inner.deadline_ns, inner.expire)
 
 
 class RtCommands:
@@ -190,9 +223,8 @@ class RtCommands:
         mc = self.m.mission
         mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
         try:
-            loaded = prepare_mission(
-                path, automaton, report, self.m.resource, self.m.registry, self.m.queue, specs
-            )
+            bindings = {u.name: (u.resource, u.queue) for u in self.m.units}
+            loaded = prepare_mission(path, automaton, report, bindings, self.m.registry, specs)
         except OrccaddError as e:
             raise CommandError(str(e)) from None
         mc.install(loaded)
@@ -208,8 +240,10 @@ class RtCommands:
     def start(self, procedure: str) -> Result:
         mc = self.m.mission
         mc.need(MachineState.READY, what="start")
-        if self.m.supervisor.fault:
-            raise CommandError(f"the arm was safe-stopped ({self.m.supervisor.fault}): `reset` first")
+        for u in self.m.units:
+            if u.supervisor.fault:
+                what = "the arm" if len(self.m.units) == 1 else f"resource {u.name}"
+                raise CommandError(f"{what} was safe-stopped ({u.supervisor.fault}): `reset` first")
         t = self._trace(OperatorAction.START)
         main = mc.start(t, procedure)
         assert mc.mission is not None
@@ -240,7 +274,7 @@ class RtCommands:
     @handles("abort")
     def abort(self) -> Result:
         self._trace(OperatorAction.ABORT)
-        self.m.supervisor.abort("aborted by the operator")
+        self.m.abort("aborted by the operator")
         return {"aborted": True}
 
     @handles("hold")
@@ -256,11 +290,45 @@ class RtCommands:
         return {"resumed": resumed}
 
     @handles("reset")
-    def reset(self) -> Result | Pending:
+    def reset(self, resource: str) -> Result | Pending:
         def traced() -> None:
             self._trace(OperatorAction.RESET)
 
-        return self.m.supervisor.begin_reset(traced)
+        return self._reset(self.m.units if not resource else [self.m.unit(resource)], traced)
+
+    def _reset(self, among: Sequence[UnitView], on_done: Callable[[], None]) -> Result | Pending:
+        """The reset of each safe-stopped resource `among` (each refused as it would be alone:
+        nothing is reset then); one reply once all are done."""
+        units = [u for u in among if u.supervisor.fault or u.resource.stopping_or_stopped]
+        if not units:
+            return {"reset": False, "detail": "nothing to reset"}
+        for u in units:
+            u.supervisor.check_reset()
+        replies = [u.supervisor.begin_reset(lambda: None) for u in units]
+        if len(self.m.units) == 1:
+            return _then(replies[0], on_done)
+        names = [u.name for u in units]
+        results: dict[int, Result] = {}
+
+        def poll() -> Result | None:
+            for i, r in enumerate(replies):
+                if i not in results:
+                    got = r.poll() if isinstance(r, Pending) else r
+                    if got is not None:
+                        results[i] = got
+            if len(results) < len(replies):
+                return None
+            on_done()
+            return {"reset": True, "resources": names}
+
+        def expire() -> Result:
+            late = [names[i] for i in range(len(replies)) if i not in results]
+            raise CommandError(f"the reset of {', '.join(late)} did not end in time")
+
+        deadline = max(
+            (r.deadline_ns for r in replies if isinstance(r, Pending)), default=time.monotonic_ns()
+        )
+        return Pending(poll, deadline, expire)
 
     def _task(self, name: str) -> RobotTask:
         tasks = self.m.mission.tasks()
@@ -293,7 +361,8 @@ class RtCommands:
         i = change.element
         old = change.param.value.tolist() if i is None else float(change.param.value[i])
         unit = change.param.unit
-        loop = self.m.loop
+        on = self.m.unit_of(task)
+        loop = on.loop
         try:
             seq = loop.tunes.post(change)
         except MailboxFullError as e:
@@ -313,17 +382,18 @@ class RtCommands:
                 f"tune {path}: accepted, but the control loop has not applied it (not running?)"
             )
 
-        wait_s = max(100 * self.m.cfg.control_period_s, TUNE_WAIT_S)
+        wait_s = max(100 * on.cfg.control_period_s, TUNE_WAIT_S)
         return Pending(poll, time.monotonic_ns() + int(wait_s * 1e9), expire)
 
     @handles("inject")
-    def inject(self, fault: str, ticks: int, extra_ms: float) -> Result:
+    def inject(self, fault: str, ticks: int, extra_ms: float, resource: str) -> Result:
         """Fault injection for commissioning and tests (only with --allow-fault-injection)."""
         if not self.m.allow_fault_injection:
             raise CommandError("fault injection is disabled (start orccadd with --allow-fault-injection)")
+        on = self.m.unit(resource) if resource else self.m.units[0]
         if fault == "resource":
             try:
-                self.m.resource.inject_fault("device", "injected fault")
+                on.resource.inject_fault("device", "injected fault")
             except OrccaddError as e:
                 raise CommandError(str(e)) from None
         else:
@@ -331,15 +401,14 @@ class RtCommands:
                 raise CommandError(f"inject: extra_ms (={extra_ms:g}) must be in [0, {MAX_INJECTED_MS:g}]")
             if not 1 <= ticks <= 10_000:
                 raise CommandError(f"inject: ticks (={ticks}) must be in [1, 10000]")
-            period_ms = self.m.cfg.control_period_s * 1e3
-            self.m.loop.inject_overrun(ticks, int((extra_ms or 1.5 * period_ms) * 1e6))
+            period_ms = on.cfg.control_period_s * 1e3
+            on.loop.inject_overrun(ticks, int((extra_ms or 1.5 * period_ms) * 1e6))
         self._trace(OperatorAction.INJECT)
-        self.m.note(f"injected fault: {fault}")
-        return {"injected": fault}
+        self.m.note(f"injected fault: {fault} on {on.name}")
+        return {"injected": fault, "resource": on.name}
 
 
-def describe_resource(machine: Machine) -> dict[str, Any]:
-    res = machine.resource
+def describe_resource(res: PhysicalResource) -> dict[str, Any]:
     return {
         **res.description.as_dict(),
         "diagnostics": dataclasses.asdict(res.diagnostics()),

@@ -34,11 +34,11 @@ class TickReactor(Protocol):
 
     def react(
         self,
+        loop: SwitchingLoop,
         t_s: float,
         first: int,
         end: int,
         active: RobotTask,
-        requests_applied: Callable[[], bool],
         switch: Callable[[RobotTask], None],
     ) -> bool: ...
 
@@ -97,11 +97,10 @@ class SwitchingLoop(ControlLoop):
         """The control thread has applied switch request `request` (or a later one)."""
         return self._applied >= request
 
-    def set_mission_tasks(self, tasks: tuple[RobotTask, ...]) -> None:
-        """Telemetry task ids: 0 the Hold task, k the mission's task k-1."""
-        ids = {id(self.hold): 0}
-        ids.update({id(t): i for i, t in enumerate(tasks, start=1)})
-        self._task_ids = ids  # one store: the control thread sees the old or the new dict
+    def set_task_ids(self, ids: dict[int, int]) -> None:
+        """Telemetry task ids by id(task) (`MissionControl.tasks`: the Hold tasks, then the
+        mission's)."""
+        self._task_ids = dict(ids)  # one store: the control thread sees the old or the new dict
 
     def inject_overrun(self, ticks: int, extra_ns: int) -> None:
         """Fault injection: spin `extra_ns` more in each of the next `ticks` ticks."""
@@ -145,11 +144,7 @@ class SwitchingLoop(ControlLoop):
         task.compute(t_s)
         end = self.queue.pushed
         reactor = self.reactor  # the automaton's reaction to this tick's events, in this tick
-        if (
-            end != first
-            and reactor
-            and reactor.react(t_s, first, end, task, self._requests_applied, self._switch_in_tick)
-        ):
+        if end != first and reactor and reactor.react(self, t_s, first, end, task, self._switch_in_tick):
             task = self.active
             assert task is not None
         task.commit(t_s)
@@ -164,7 +159,8 @@ class SwitchingLoop(ControlLoop):
             with contextlib.suppress(BlockingIOError):  # wake-ups already pending
                 os.write(self.wake_fd, b"e")
 
-    def _requests_applied(self) -> bool:
+    def requests_applied(self) -> bool:
+        """Every switch request applied (read by any thread)."""
         return self._request[0] == self._applied
 
     def _switch_in_tick(self, new: RobotTask) -> None:

@@ -18,9 +18,11 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import replace
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
+from orccadd.config.cell import CellConfig
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.commands import RtCommands, describe_resource
 from orccadd.daemon.inline import InlineReactor
@@ -28,67 +30,143 @@ from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError, Pending, Result
-from orccadd.daemon.supervision import Supervisor
-from orccadd.fault import Fault
+from orccadd.daemon.supervision import FaultHistory, Supervisor
+from orccadd.fault import Fault, FaultKind, StopCause
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
-from orccadd.task import EventQueue, EventRegistry, build_task, load_task_file
+from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
 from orccadd.task.events import EventKind
 from orccadd.wire.commands import COMMANDS, Dispatcher, with_defaults
-from orccadd.wire.schema import S, Trace
+from orccadd.wire.schema import MissionResult, S, Trace, status_names
 from orccadd.wire.telemetry import TelemetryBlock
 
 log = logging.getLogger("orccadd.machine")
 NOTES_KEPT = 50
 
 
+@dataclass
+class Unit:
+    """One resource and its clock domain: its control loop (one thread of its own), Hold task,
+    event queue (the loop's events, one producer), telemetry block and supervisor."""
+
+    cfg: RobotConfig
+    resource: PhysicalResource
+    clock: Clock
+    tel: TelemetryBlock
+    queue: EventQueue
+    loop: SwitchingLoop
+    supervisor: Supervisor
+
+    @property
+    def name(self) -> str:
+        return self.resource.name
+
+
+def hold_task(
+    cfg: RobotConfig, resource: PhysicalResource, registry: EventRegistry, queue: EventQueue, name: str
+) -> RobotTask:
+    """The resource's own task, which holds it for as long as nothing else commands it."""
+    spec = load_task_file(cfg.resolve(cfg.daemon.hold_task))
+    spec = replace(spec, task=replace(spec.task, name=name, timeout_s=float("inf")))
+    return build_task(spec, resource, registry, queue)
+
+
 class Machine:
-    """Missions, the automaton and commands. Methods run in the automaton thread only."""
+    """Missions, the automaton and commands, over every resource of the robot (`units`, in the
+    config's order; `loop`, `resource`, `tel`, ... are the first's, which carries the status area
+    and the trace). Methods run in the automaton thread only."""
 
     def __init__(
         self,
-        cfg: RobotConfig,
-        resource: PhysicalResource,
-        clock: Clock,
-        telemetry: TelemetryBlock,
+        cell: CellConfig,
+        resources: Sequence[PhysicalResource],
+        clocks: Sequence[Clock],
+        telemetry: Sequence[TelemetryBlock],
         wake_fd: int,
         *,
         allow_fault_injection: bool = False,
     ) -> None:
-        self.cfg = cfg
-        self.resource = resource
-        self.clock = clock
-        self.tel = telemetry
-        self.pub = Publisher(telemetry)
+        self.cell = cell
+        self.cfg = cell.resources[0]
+        self.pub = Publisher(telemetry[0])
         self.registry = EventRegistry()
-        self.queue = EventQueue(4096)
-        hold_spec = load_task_file(cfg.resolve(cfg.daemon.hold_task))
-        # the daemon's own task holds for as long as nothing else commands the arm
-        hold_spec = replace(hold_spec, task=replace(hold_spec.task, timeout_s=float("inf")))
-        hold = build_task(hold_spec, resource, self.registry, self.queue)
-        self.loop = SwitchingLoop(
-            resource,
-            clock,
-            hold,
-            self.queue,
-            telemetry,
-            wake_fd,
-            overrun_limit=cfg.daemon.overrun_limit,
-            blend_ticks=int(round(cfg.daemon.switch_blend_s / cfg.control_period_s)),
-        )
+        self.faults = FaultHistory()
+        self.faults.on_cause = lambda n: self.pub.trace(Trace.FAULT, self.now_s(), code=n)
+        loops: list[SwitchingLoop] = []
+        queues: list[EventQueue] = []
+        for cfg, res, clock, tel in zip(cell.resources, resources, clocks, telemetry, strict=True):
+            queue = EventQueue(4096)
+            name = f"Hold_{res.name}" if cell.listed else "Hold"  # events and tunes name it
+            loops.append(
+                SwitchingLoop(
+                    res,
+                    clock,
+                    hold_task(cfg, res, self.registry, queue, name),
+                    queue,
+                    tel,
+                    wake_fd,
+                    overrun_limit=cfg.daemon.overrun_limit,
+                    blend_ticks=int(round(cfg.daemon.switch_blend_s / cfg.control_period_s)),
+                )
+            )
+            queues.append(queue)
         self.allow_fault_injection = allow_fault_injection
         self.notes: list[str] = []  # recent notable happenings (bounded), for `describe`
-        self.mission = MissionControl(self.loop, self.pub, self.note, self._abort)
-        self.reactor = InlineReactor(self.mission, self.registry, self.queue)
-        self.loop.reactor = self.reactor
-        self.supervisor = Supervisor(cfg, resource, self.loop, self.mission, self.note)
-        self.supervisor.on_cause = lambda n: self.pub.trace(Trace.FAULT, self.now_s(), code=n)
+        self.mission = MissionControl(loops, self.pub, self.note, self.abort)
+        self.reactor = InlineReactor(self.mission, self.registry)
+        self.units = tuple(
+            Unit(
+                cfg,
+                res,
+                clock,
+                tel,
+                queue,
+                loop,
+                Supervisor(cfg, res, loop, self.mission, self.note, self.faults),
+            )
+            for cfg, res, clock, tel, queue, loop in zip(
+                cell.resources, resources, clocks, telemetry, queues, loops, strict=True
+            )
+        )
+        for u in self.units:
+            u.loop.reactor = self.reactor
+        self.mission._publish_task_ids()
+        first = self.units[0]
+        self.resource, self.clock, self.tel, self.loop, self.queue = (
+            first.resource, first.clock, first.tel, first.loop, first.queue,
+        )  # fmt: skip
+        self.supervisor = first.supervisor
         self.rt_commands = RtCommands(self)
         self.commands = Dispatcher(self.rt_commands, "rt")
         self.publish()
 
-    def _abort(self, why: str) -> None:
-        self.supervisor.abort(why)
+    def unit(self, name: str) -> Unit:
+        """The resource `name`'s unit; `CommandError` naming those there are."""
+        for u in self.units:
+            if u.name == name:
+                return u
+        raise CommandError(f"no resource {name!r} (resources: {', '.join(u.name for u in self.units)})")
+
+    def unit_of(self, task: RobotTask) -> Unit:
+        return self.unit(task.resource.name)
+
+    @property
+    def fault(self) -> StopCause | None:
+        """The first resource's stop cause (None if none is safe-stopped)."""
+        return next((u.supervisor.fault for u in self.units if u.supervisor.fault), None)
+
+    def abort(self, why: str, kind: FaultKind = FaultKind.ABORT) -> None:
+        """Safe-stop every resource at its next tick, remembering why; end the run (`aborted`)."""
+        for u in self.units:
+            u.supervisor.stop(why, kind)
+        self.note(f"abort: {why}", logging.WARNING)
+        self.mission.end(MissionResult.ABORTED)
+
+    def link_lost(self, why: str) -> None:
+        """The command daemon's link is gone: noted; the run aborted if the config says so."""
+        self.note(why, logging.WARNING)
+        if self.cfg.daemon.on_command_daemon_loss == "safe_stop" and self.mission.running:
+            self.abort(f"{why} (on_command_daemon_loss = safe_stop)")
 
     # ---- helpers ------------------------------------------------------------------------
     def now_s(self) -> float:
@@ -109,7 +187,7 @@ class Machine:
                 S.MISSION_GEN: float(mc.generation),
                 S.INSTANTS: float(mc.instants),
                 S.RESULT: float(mc.result),
-                S.FAULTED: float(self.supervisor.faults) if self.supervisor.fault else 0.0,
+                S.FAULTED: float(self.faults.count) if self.fault else 0.0,
                 S.HELPER_PID: float(self.resource.helper_pid()),
             }
         )
@@ -117,25 +195,16 @@ class Machine:
     def describe(self) -> dict[str, Any]:
         mc = self.mission
         return {
-            "robot": self.cfg.name,
-            "config": self.cfg.source,
+            "robot": self.cell.name,
+            "config": self.cell.source,
             "dof": self.cfg.dof,
             "joints": list(self.cfg.joint_names),
             # the limits the controller enforces, per joint (SI units in the keys)
-            "joint_limits": [
-                {
-                    "name": j.name,
-                    "position_min_rad": j.position_min_rad,
-                    "position_max_rad": j.position_max_rad,
-                    "max_velocity_rad_s": j.max_velocity_rad_s,
-                    "max_acceleration_rad_s2": j.max_acceleration_rad_s2,
-                    "max_torque_nm": j.max_torque_nm,
-                }
-                for j in self.cfg.joints
-            ],
+            "joint_limits": joint_limits(self.cfg),
             "period_s": self.cfg.control_period_s,
             "telemetry": self.tel.name,
-            "resource": describe_resource(self),
+            "resource": describe_resource(self.resource),
+            "resources": [self._describe_unit(u) for u in self.units],
             "generation": mc.generation,
             "tasks": [t.name for t in mc.tasks()],
             "hold_tunables": mc.hold.tunable_names,  # the Hold task's (task id 0 of a tune record)
@@ -144,36 +213,71 @@ class Machine:
             "mission": mc.mission.describe() if mc.mission else None,
             "missions": mc.loaded,  # the last ones loaded: the trace names its records by them
             "log": self.notes[-10:],
-            "fault": self.supervisor.fault.to_wire() if self.supervisor.fault else None,
-            "faults": self.supervisor.recent(),
+            "fault": self.fault.to_wire() if self.fault else None,
+            "faults": self.faults.recent(),
         }
 
-    # ---- events from the control thread ---------------------------------------------------
+    def _describe_unit(self, u: Unit) -> dict[str, Any]:
+        """One resource as an operator sees it: backend, clock, joints, state, fault, telemetry."""
+        st = u.resource.state
+        return {
+            "name": u.name,
+            "backend": u.cfg.resource.backend,
+            "config": u.cfg.source,
+            "clock": u.resource.description.clock.value,  # paced by the device or by our loop
+            "period_s": u.cfg.control_period_s,
+            "joints": list(u.cfg.joint_names),
+            "joint_limits": joint_limits(u.cfg),
+            "status": status_names(int(st.status)),
+            "task": u.loop.active.name if u.loop.active is not None else None,
+            "hold_task": u.loop.hold.name,
+            "fault": u.supervisor.fault.to_wire() if u.supervisor.fault else None,
+            "telemetry": u.tel.name,
+        }
+
+    # ---- events from the control threads --------------------------------------------------
     def on_events(self) -> None:
-        """The control thread's events: type 3 to the supervisor, the rest to the automaton,
-        but for those it reacted to in their tick (`InlineReactor`: booked here)."""
+        """The control threads' events, every resource's pending ones, in the robot config's
+        order of resources and each resource's order of ticks: type 3 to that resource's
+        supervisor; the rest to the automaton as the inputs of one instant, but for those a
+        control thread reacted to in their tick (`InlineReactor`: booked here)."""
         self.reactor.book()
         mc = self.mission
         mission = mc.mission
         inputs = 0
         t_last = 0.0
-        index, upto = self.queue.tail, self.reactor.upto
-        for t_s, eid in self.queue.drain():
-            info = self.registry.info(eid)
-            if info.kind is EventKind.T3:
-                self.supervisor.on_t3(info.name, self._task_fault(info.task))
-            bit = mission.event_bits.get(eid, 0) if mission is not None and mc.running else 0
-            reacted = index < upto
-            index += 1
-            if bit:
-                if not reacted:
-                    inputs |= bit
-                    t_last = t_s
-            else:
-                self.pub.trace(Trace.EVENT, t_s, code=eid)
+        held_fault = ""  # a type 3 of a resource the run had on its Hold task
+        holds = {lp.hold.name for lp in mc.loops}
+        for k, u in enumerate(self.units):
+            index, upto = u.queue.tail, self.reactor.upto[k]
+            for t_s, eid in u.queue.drain():
+                info = self.registry.info(eid)
+                if info.kind is EventKind.T3:
+                    new = u.supervisor.fault is None  # not a stopped resource's Hold, again
+                    u.supervisor.on_t3(info.name, self._task_fault(info.task))
+                    if new and info.task in holds and mc.running and len(self.units) > 1:
+                        held_fault = f"{u.name} safe-stopped while the run held it ({info.name})"
+                bit = mission.event_bits.get(eid, 0) if mission is not None and mc.running else 0
+                reacted = index < upto
+                index += 1
+                if bit:
+                    if not reacted:
+                        inputs |= bit
+                        t_last = max(t_last, t_s)
+                else:
+                    self.pub.trace(Trace.EVENT, t_s, code=eid)
         if inputs:
             mc.react(t_last, inputs)
+        if held_fault and mc.running:
+            self._end_on_held_fault(held_fault)
         self.publish()
+
+    def _end_on_held_fault(self, why: str) -> None:
+        """A resource with no task of the run safe-stopped (its Hold task's type 3): the mission
+        has no input for it (its events are its tasks'), so the run ends here, aborted, and every
+        other resource is back on its Hold task at its next tick: held where it is, not stopped."""
+        self.note(f"run ended: {why}; the other resources are held", logging.WARNING)
+        self.mission.end(MissionResult.ABORTED)
 
     def _task_fault(self, task: str) -> Fault | None:
         """What task `task`'s last type 3 was about (set in its tick, before the event was queued)."""
@@ -189,3 +293,17 @@ class Machine:
         reply: Result | Pending = self.commands.handler(cmd)(**with_defaults(spec, args))
         self.publish()
         return reply
+
+
+def joint_limits(cfg: RobotConfig) -> list[dict[str, Any]]:
+    return [
+        {
+            "name": j.name,
+            "position_min_rad": j.position_min_rad,
+            "position_max_rad": j.position_max_rad,
+            "max_velocity_rad_s": j.max_velocity_rad_s,
+            "max_acceleration_rad_s2": j.max_acceleration_rad_s2,
+            "max_torque_nm": j.max_torque_nm,
+        }
+        for j in cfg.joints
+    ]

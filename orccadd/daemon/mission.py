@@ -12,15 +12,14 @@ from pathlib import Path
 
 from orccadd.automaton import Automaton, Report
 from orccadd.errors import OrccaddError, VerificationError
-from orccadd.mission import TaskFiles, build_mission_tasks, check_mission
-from orccadd.physres.base import PhysicalResource
-from orccadd.task import EventQueue, EventRegistry, RobotTask
+from orccadd.mission import Bindings, TaskFiles, build_mission_tasks, check_mission
+from orccadd.task import EventRegistry, RobotTask
 from orccadd.task.spec import TaskSpec
 
 
 @dataclass(frozen=True)
 class LoadedMission:
-    """A verified mission with its tasks built for this robot's resource."""
+    """A verified mission with its tasks built for this robot's resources."""
 
     file: str
     automaton: Automaton
@@ -49,13 +48,11 @@ class LoadedMission:
         }
 
 
-def load_mission(
-    path: str | Path, resource: PhysicalResource, registry: EventRegistry, queue: EventQueue
-) -> LoadedMission:
+def load_mission(path: str | Path, bindings: Bindings, registry: EventRegistry) -> LoadedMission:
     """Compile, verify, check against this robot, build the tasks. Raises `OrccaddError`
     (MissionError with file:line:col, or VerificationError with the counterexamples)."""
     automaton, report = compile_and_verify(path)
-    return prepare_mission(path, automaton, report, resource, registry, queue)
+    return prepare_mission(path, automaton, report, bindings, registry)
 
 
 def compile_and_verify(
@@ -76,16 +73,16 @@ def prepare_mission(
     path: str | Path,
     automaton: Automaton,
     report: Report,
-    resource: PhysicalResource,
+    bindings: Bindings,
     registry: EventRegistry,
-    queue: EventQueue,
     specs: dict[str, TaskSpec] | None = None,
 ) -> LoadedMission:
-    """Check a verified mission against this robot and build its tasks (milliseconds). `specs`:
-    the task files as the compiler read them (path → spec), so the tasks built are the ones it
-    checked and no file is read again here; None: read them."""
+    """Check a verified mission against this robot's resources and build its tasks
+    (milliseconds). `bindings`: each resource by name with its control loop's event queue.
+    `specs`: the task files as the compiler read them (path → spec), so the tasks built are the
+    ones it checked and no file is read again here; None: read them."""
     if specs is None:
-        tasks, bits = build_mission_tasks(automaton, resource, registry, queue)
+        tasks, bits = build_mission_tasks(automaton, bindings, registry)
     else:
 
         def spec(p: Path) -> TaskSpec:
@@ -93,5 +90,5 @@ def prepare_mission(
                 raise OrccaddError(f"{p}: not among the task files the compiler read")
             return specs[str(p)]
 
-        tasks, bits = build_mission_tasks(automaton, resource, registry, queue, spec)
+        tasks, bits = build_mission_tasks(automaton, bindings, registry, spec)
     return LoadedMission(str(path), automaton, report, tasks, bits)

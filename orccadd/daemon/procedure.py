@@ -1,14 +1,14 @@
 """The mission's lifecycle in the automaton thread: loaded, started, held, resumed, ended.
 
 It owns the loaded mission and its `Runner`, turns task events into the automaton's inputs,
-applies each reaction's actions (one switch request per reaction: stops, then the task the
-automaton wants active), and reports the end of a run. It asks the control thread for switches
-through `SwitchingLoop.request_switch` only.
+applies each reaction's actions (per resource, one switch request per reaction: the task the
+automaton wants active on it, or its Hold task), and reports the end of a run. It asks each
+resource's control thread for switches through its `SwitchingLoop.request_switch` only.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from logging import INFO, WARNING
 from typing import NamedTuple
 
@@ -48,13 +48,16 @@ def _bits(mask: int) -> list[int]:
 class MissionControl:
     def __init__(
         self,
-        loop: SwitchingLoop,
+        loops: Sequence[SwitchingLoop],
         publisher: Publisher,
         note: Callable[..., None],
         abort: Callable[[str], None],
     ) -> None:
-        self.loop = loop
-        self.hold = loop.hold
+        self.loops = tuple(loops)  # one per resource, in the robot config's order
+        self.loop = loops[0]
+        self.hold = loops[0].hold
+        self.holds = tuple(lp.hold for lp in loops)
+        self._by_resource = {lp.resource.name: i for i, lp in enumerate(loops)}
         self.pub = publisher
         self.note = note
         self._abort = abort  # the supervisor's: safe stop, fault, end of the run
@@ -66,7 +69,8 @@ class MissionControl:
         self.loaded: list[dict[str, object]] = []  # the last missions loaded, names for the trace
         self.instants = 0
         self.result = MissionResult.NONE
-        self.current: RobotTask | None = None  # the mission task the automaton wants active
+        # per resource (loop index): the mission task the automaton wants active on it
+        self.current: list[RobotTask | None] = [None] * len(self.loops)
 
     @property
     def running(self) -> bool:
@@ -78,14 +82,23 @@ class MissionControl:
             raise CommandError(f"cannot {what} while {self.state.name.lower()} (only when {allowed})")
 
     def tasks(self) -> list[RobotTask]:
-        """The Hold task, then the mission's tasks (telemetry ids 0, 1, ...)."""
-        return [self.hold, *(self.mission.tasks if self.mission else ())]
+        """The Hold tasks (one per resource), then the mission's tasks: their telemetry ids."""
+        return [*self.holds, *(self.mission.tasks if self.mission else ())]
+
+    def loop_of(self, task: RobotTask) -> SwitchingLoop:
+        """The control loop of the resource `task` runs on."""
+        return self.loops[self._by_resource[task.resource.name]]
+
+    def _publish_task_ids(self) -> None:
+        ids = {id(t): i for i, t in enumerate(self.tasks())}
+        for lp in self.loops:
+            lp.set_task_ids(ids)
 
     # ---- lifecycle ----------------------------------------------------------------------------
     def install(self, loaded: LoadedMission) -> None:
         self.need(MachineState.IDLE, MachineState.READY, what="load a mission")
-        self.loop.set_mission_tasks(loaded.tasks)
         self.mission = loaded
+        self._publish_task_ids()
         self.generation += 1
         self.pub.mission_gen = self.generation
         self.loaded = [
@@ -127,26 +140,33 @@ class MissionControl:
     def hold_mission(self) -> None:
         self.need(MachineState.RUNNING, what="hold")
         self.state = MachineState.HOLDING
-        self.loop.request_switch(self.hold)
+        for lp in self.loops:
+            lp.request_switch(lp.hold)
         self.note("hold")
 
     def resume(self) -> str | None:
+        """Back to the tasks the automaton wants active (each restarted from the measured
+        state); their names, or None if none runs."""
         self.need(MachineState.HOLDING, what="resume")
         self.state = MachineState.RUNNING
-        if self.current is not None:
-            self.loop.request_switch(self.current)  # restarts from the measured state
+        for lp, task in zip(self.loops, self.current, strict=True):
+            if task is not None:
+                lp.request_switch(task)
         self.note("resume")
-        return self.current.name if self.current else None
+        names = [t.name for t in self.current if t is not None]
+        return ", ".join(names) if names else None
 
     def end(self, result: MissionResult | None = None) -> None:
-        """The run is over (or aborted): back to READY (IDLE without a mission), on the Hold task."""
+        """The run is over (or aborted): back to READY (IDLE without a mission), every resource
+        on its Hold task."""
         if result is not None and self.running:
             self.result = result
         self.state = MachineState.READY if self.mission else MachineState.IDLE
-        self.current = None
+        self.current = [None] * len(self.loops)
         self.runner = None
-        if self.loop.active is not self.hold:
-            self.loop.request_switch(self.hold)
+        for lp in self.loops:
+            if lp.active is not lp.hold:
+                lp.request_switch(lp.hold)
 
     # ---- reactions ----------------------------------------------------------------------------
     def plan(self, inputs: int) -> list[Instant]:
@@ -189,19 +209,25 @@ class MissionControl:
         )
         self._apply(instant.actions, request)
 
-    def target_of(self, state: int, actions: int) -> tuple[RobotTask | None, bool] | None:
-        """The mission task the automaton makes active in `state`, reached with `actions` (None
-        once the run ends), and whether it (re)starts; None if two tasks would be active. Pure:
-        the control thread calls it too (`InlineReactor`)."""
+    def target_of(self, state: int, actions: int) -> list[tuple[RobotTask | None, bool]] | None:
+        """Per resource (loop index): the mission task the automaton makes active on it in
+        `state`, reached with `actions` (None: none, or the run ends), and whether it (re)starts;
+        None if two tasks would be active on one resource. Pure: the control threads call it too
+        (`InlineReactor`)."""
         mission = self.mission
         assert mission is not None
         a = mission.automaton
-        active = a.active[state]
-        if len(set(active)) > 1:
-            return None
-        if not active or actions & (a.success_bit | a.failed_bit | a.safe_done_bit):
-            return None, False
-        return mission.tasks[active[0]], bool(a.starts(actions) >> active[0] & 1)
+        out: list[tuple[RobotTask | None, bool]] = [(None, False)] * len(self.loops)
+        if actions & (a.success_bit | a.failed_bit | a.safe_done_bit):
+            return out
+        starts = a.starts(actions)
+        for i in set(a.active[state]):
+            task = mission.tasks[i]
+            k = self._by_resource[task.resource.name]
+            if out[k][0] is not None:
+                return None
+            out[k] = (task, bool(starts >> i & 1))
+        return out
 
     def _apply(self, actions: int, request: bool = True) -> None:
         mission, runner = self.mission, self.runner
@@ -210,19 +236,19 @@ class MissionControl:
         decided = self.target_of(runner.state, actions)
         if decided is None:  # the verifier excludes it; activation asserts it again
             names = ", ".join(mission.tasks[i].name for i in sorted(set(a.active[runner.state])))
-            self._abort(f"activation refused: {names} would be active at once")
+            self._abort(f"activation refused: {names} would be active at once on one resource")
             return
-        target, restart = decided
         ended = actions & (a.success_bit | a.failed_bit | a.safe_done_bit)
         if a.stops(actions) or a.starts(actions):
             self.note(", ".join(a.describe_actions(actions)))
         if actions & a.safe_bit:
             self.note("entering the safe procedure", WARNING)
-        self.current = target
+        self.current = [target for target, _ in decided]
         if request and self.state is not MachineState.HOLDING:
-            want = target if target is not None else self.hold
-            if want is not self.loop.active or restart:
-                self.loop.request_switch(want)
+            for lp, (target, restart) in zip(self.loops, decided, strict=True):
+                want = target if target is not None else lp.hold
+                if want is not lp.active or restart:
+                    lp.request_switch(want)
         if ended:
             result = (
                 MissionResult.SUCCESS

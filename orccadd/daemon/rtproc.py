@@ -1,10 +1,12 @@
 """`orccadd`: the real-time process.
 
-Two threads, both real-time where permitted, and nothing else:
+Real-time threads where permitted, and nothing else:
 
-- the control thread (SCHED_FIFO `control_priority`) ticks the active Robot-Task every period;
+- a control thread per resource, its clock domain (SCHED_FIFO `control_priority`): it ticks the
+  resource's active Robot-Task every period of that resource, on the resource's clock (our own
+  deadlines, or the device's cycle);
 - the main thread is the automaton thread (SCHED_FIFO `automaton_priority`, above the control
-  thread): it sleeps in `poll()` on the control thread's event pipe, the command daemon's
+  threads): it sleeps in `poll()` on the control threads' event pipe, the command daemon's
   connection, signals and the command daemon's pidfd, and reacts.
 
 Commands arrive from the companion command daemon (`orccadd.cmdd`, a separate process this one
@@ -31,15 +33,15 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
-from orccadd.config.robot import RobotConfig
+from orccadd.config.cell import CellConfig
 from orccadd.config.shipped import list_configs, robot_config_path
-from orccadd.daemon.machine import Machine
+from orccadd.daemon.machine import Machine, Unit
 from orccadd.daemon.notify import Notifier
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.urgent import UrgentSocket
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
-from orccadd.robot import create_resource, load_robot_config, with_backend
+from orccadd.robot import create_resource, load_cell_config, with_backend
 from orccadd.runtime import enter_realtime, leave_realtime
 from orccadd.runtime.rt import RealtimeReport, lock_memory_early
 from orccadd.runtime.threads import ThreadGroup
@@ -83,14 +85,18 @@ def rt_socket_path(public: str) -> str:
 
 
 class RealtimeProcess:
-    def __init__(self, cfg: RobotConfig, socket_path: str, args: argparse.Namespace) -> None:
-        self.cfg = cfg
+    def __init__(self, cell: CellConfig, socket_path: str, args: argparse.Namespace) -> None:
+        self.cell = cell
+        self.cfg = cell.resources[0]  # the first resource's: its telemetry carries the status and trace
         self.args = args
         self.socket_path = socket_path
         self.rt_path = rt_socket_path(socket_path)
         self.notifier = Notifier()
-        self.resource = create_resource(cfg)
-        self.clock = resource_clock(self.resource, spin_margin_s=args.spin_us * 1e-6)
+        self.resources = [create_resource(cfg) for cfg in cell.resources]
+        self.resource = self.resources[0]
+        spin_s = args.spin_us * 1e-6
+        self.clocks = [resource_clock(r, spin_margin_s=spin_s) for r in self.resources]
+        self.tels: list[TelemetryBlock] = []
         self.tel: TelemetryBlock | None = None
         self.listener: socket.socket | None = None
         self.conn: socket.socket | None = None
@@ -101,8 +107,8 @@ class RealtimeProcess:
         self.cmdd_started = 0.0
         self.control_error = ""
         self.stop_requested = ""
-        self.thread: threading.Thread | None = None
-        self.threads = ThreadGroup("orccadd")  # the control thread
+        self.control_threads: list[threading.Thread] = []
+        self.threads = ThreadGroup("orccadd")  # the control threads
         self.memory_locked = False  # by `lock_memory_early` at startup
         self.inbox: deque[Request] = deque()  # requests waiting for the loop's slack
         self.inbox_since_ns = 0
@@ -116,9 +122,13 @@ class RealtimeProcess:
         self.gid = prepare_socket_dir(Path(self.socket_path).parent, cfg.daemon.socket_group)
         check_socket_path(Path(self.socket_path))
         check_socket_path(Path(urgent_socket_path(self.socket_path)))
-        hold = load_task_file(cfg.resolve(cfg.daemon.hold_task))  # checked before anything moves
-        ticks = int(TICK_RING_S / cfg.control_period_s)
-        self.tel = TelemetryBlock.create(Layout(cfg.dof, ticks, 8192), cfg.control_period_s)
+        holds = [load_task_file(c.resolve(c.daemon.hold_task)) for c in self.cell.resources]  # checked first
+        for i, c in enumerate(self.cell.resources):
+            ticks = int(TICK_RING_S / c.control_period_s)
+            # the first carries the trace too (the automaton's, of every resource)
+            layout = Layout(c.dof, ticks, 8192 if i == 0 else 16)
+            self.tels.append(TelemetryBlock.create(layout, c.control_period_s))
+        self.tel = self.tels[0]
         self._open_socket()
         if not self.args.no_command_daemon:
             # started while the resource configures (it starts up meanwhile, on the other core);
@@ -129,20 +139,28 @@ class RealtimeProcess:
         for w in refused:
             log.warning("%s", w)
         self.memory_locked = not refused
-        self.resource.configure()
-        self.resource.activate(CommandMode[hold.task.command.upper()])  # the Hold task's mode
+        for res, hold in zip(self.resources, holds, strict=True):
+            try:
+                res.configure()
+                res.activate(CommandMode[hold.task.command.upper()])  # its Hold task's mode
+            except OrccaddError as e:
+                if len(self.resources) == 1:
+                    raise
+                raise type(e)(f"resource {res.name}: {e}") from None
         self.wake_r, self.wake_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self.machine = Machine(
-            cfg,
-            self.resource,
-            self.clock,
-            self.tel,
+            self.cell,
+            self.resources,
+            self.clocks,
+            self.tels,
             self.wake_w,
             allow_fault_injection=self.args.allow_fault_injection,
         )
         self.urgent = UrgentSocket(urgent_socket_path(self.socket_path), cfg.daemon, self.gid, self._urgent)
-        # the arm is held (the Hold task) while the startup mission loads
-        self.thread = self.threads.start(self._control_main, name="control")
+        # each resource is held (its Hold task) while the startup mission loads
+        for u in self.machine.units:
+            name = "control" if len(self.resources) == 1 else f"control-{u.name}"
+            self.control_threads.append(self.threads.start(self._control_main, u, name=name))
         if self.args.mission:
             reply = self.machine.command("load", {"path": str(Path(self.args.mission).resolve())})
             while isinstance(reply, Pending):  # the automaton thread has not started serving yet
@@ -164,7 +182,7 @@ class RealtimeProcess:
     def _spawn_cmdd(self) -> None:
         assert self.tel is not None
         cmd = [
-            sys.executable, "-m", "orccadd.cmdd", "--config", self.cfg.source, "--socket", self.socket_path,
+            sys.executable, "-m", "orccadd.cmdd", "--config", self.cell.source, "--socket", self.socket_path,
             "--rt-socket", self.rt_path, "--telemetry", self.tel.name,
         ]  # fmt: skip
         # its own process group: a group-wide SIGTERM/SIGINT reaches this process alone, which
@@ -184,16 +202,16 @@ class RealtimeProcess:
         return rt
 
     # ---- the control thread ----------------------------------------------------------------
-    def _control_main(self) -> None:
+    def _control_main(self, unit: Unit) -> None:
         rt = self._enter_realtime(self.cfg.daemon.control_priority)
         for w in rt.warnings:
-            log.warning("control thread: %s", w)
+            log.warning("control thread of %s: %s", unit.name, w)
         try:
-            self.machine.loop.executor.run()
+            unit.loop.executor.run()
         except BaseException as e:
-            self.control_error = f"control thread failed: {type(e).__name__}: {e}"
-            self.resource.safe_stop()
-            log.exception("control thread failed")
+            self.control_error = f"control thread of {unit.name} failed: {type(e).__name__}: {e}"
+            unit.resource.safe_stop()
+            log.exception("control thread of %s failed", unit.name)
             with contextlib.suppress(OSError):
                 os.write(self.wake_w, b"x")
         finally:
@@ -209,11 +227,13 @@ class RealtimeProcess:
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, self._on_signal)
         log.info(
-            "%s (%d joints, %s), period %g ms, socket %s, %s",
-            self.cfg.name,
-            self.cfg.dof,
-            self.cfg.resource.backend,
-            self.cfg.control_period_s * 1e3,
+            "%s (%s), socket %s, %s",
+            self.cell.name,
+            "; ".join(
+                f"{c.resource.name}: {c.dof} joints, {c.resource.backend}, "
+                f"period {c.control_period_s * 1e3:g} ms"
+                for c in self.cell.resources
+            ),
             self.socket_path,
             rt.describe(),
         )
@@ -281,10 +301,14 @@ class RealtimeProcess:
         self.stop_requested = signal.Signals(signum).name
 
     def _healthy(self) -> bool:
-        assert self.tel is not None
-        age_ns = time.monotonic_ns() - int(self.tel.header[H.HEARTBEAT_NS])
-        stale = self.cfg.daemon.watchdog_stale_periods * self.cfg.control_period_s
-        return self.thread is not None and self.thread.is_alive() and age_ns < stale * 1e9
+        """Every control thread alive, each one's heartbeat fresh (in its own periods)."""
+        now = time.monotonic_ns()
+        for c, tel, thread in zip(self.cell.resources, self.tels, self.control_threads, strict=True):
+            age_ns = now - int(tel.header[H.HEARTBEAT_NS])
+            stale = self.cfg.daemon.watchdog_stale_periods * c.control_period_s
+            if not thread.is_alive() or age_ns >= stale * 1e9:
+                return False
+        return bool(self.control_threads)
 
     def _ping(self) -> float:
         """WATCHDOG=1 only while the control loop is healthy; returns when to ping next."""
@@ -326,7 +350,7 @@ class RealtimeProcess:
             if not data:
                 conn.close()
                 self.conn = None
-                self.machine.supervisor.link_lost("command daemon disconnected")
+                self.machine.link_lost("command daemon disconnected")
                 self.machine.publish()
                 return
             if flags & socket.MSG_TRUNC:
@@ -430,7 +454,7 @@ class RealtimeProcess:
         if self.cmdd_pidfd >= 0:
             os.close(self.cmdd_pidfd)
             self.cmdd_pidfd = -1
-        self.machine.supervisor.link_lost(f"command daemon exited (code {code})")
+        self.machine.link_lost(f"command daemon exited (code {code})")
         self.machine.publish()
         # one that dies at once (its socket unusable) is retried ever more slowly, not in a loop
         short_lived = time.monotonic() - self.cmdd_started < RESPAWN_STABLE_S
@@ -443,8 +467,9 @@ class RealtimeProcess:
     # ---- shutdown -------------------------------------------------------------------------
     def abandon(self) -> None:
         """Undo a failed `start` (nothing moved yet): release what was acquired."""
-        if self.thread is not None:
-            self.machine.loop.executor.stop()
+        if self.control_threads:
+            for u in self.machine.units:
+                u.loop.executor.stop()
             self.threads.join(JOIN_S)
         if self.cmdd is not None:
             self.cmdd.terminate()
@@ -453,34 +478,40 @@ class RealtimeProcess:
             self.listener.close()
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(self.rt_path)
-        with contextlib.suppress(OrccaddError):
-            self.resource.shutdown()
-        if self.tel is not None:
-            self.tel.close()
+        for res in self.resources:
+            with contextlib.suppress(OrccaddError):
+                res.shutdown()
+        for tel in self.tels:
+            tel.close()
 
     def shutdown(self) -> int:
-        m, res = self.machine, self.resource
+        m = self.machine
         why = self.stop_requested or self.control_error
         log.log(logging.ERROR if self.control_error else logging.INFO, "stopping (%s): safe stop first", why)
         self.notifier.send("STOPPING=1", f"STATUS=stopping ({why})")
         if m.mission.running:
             m.mission.result = MissionResult.STOPPED
         m.pub.trace(Trace.COMMAND, m.now_s(), OperatorAction.SHUTDOWN)
-        res.safe_stop()
-        deadline = time.monotonic() + self.cfg.safe_stop.timeout_s + 1.0
+        for res in self.resources:
+            res.safe_stop()
+        timeout_s = max(c.safe_stop.timeout_s for c in self.cell.resources) + 1.0
+        deadline = time.monotonic() + timeout_s
         stopped = False
-        while time.monotonic() < deadline and self.thread is not None and self.thread.is_alive():
-            if res.state.status & Status.STOPPED:
+        while time.monotonic() < deadline and all(t.is_alive() for t in self.control_threads):
+            if all(res.state.status & Status.STOPPED for res in self.resources):
                 stopped = True
                 break
             time.sleep(0.01)
-        m.loop.executor.stop()
+        for u in m.units:
+            u.loop.executor.stop()
         m.rt_commands.close()
         self.threads.join(JOIN_S)
-        m.supervisor.threads.join(JOIN_S)  # a reset under way: its device work
+        for u in m.units:
+            u.supervisor.threads.join(JOIN_S)  # a reset under way: its device work
         m.mission.state = MachineState.IDLE
         m.publish()
-        m.loop.close()
+        for u in m.units:
+            u.loop.close()
         if self.cmdd is not None:
             self.cmdd.terminate()
             try:
@@ -495,11 +526,12 @@ class RealtimeProcess:
             self.urgent.close()
         with contextlib.suppress(FileNotFoundError):
             os.unlink(self.rt_path)
-        res.shutdown()
-        if self.tel is not None:
-            self.tel.close()
+        for res in self.resources:
+            res.shutdown()
+        for tel in self.tels:
+            tel.close()
         if stopped:
-            log.info("arm at rest, hardware released")
+            log.info("%s at rest, hardware released", "arm" if len(self.resources) == 1 else "every resource")
         else:
             log.error("safe stop not confirmed, hardware released")
         return 1 if self.control_error or not stopped else 0
@@ -530,11 +562,16 @@ def main(argv: list[str] | None = None) -> int:
     # hand the GIL to the control thread within a fraction of a period, not the default 5 ms.
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     try:
-        cfg = load_robot_config(robot_config_path(args.config))
-        if cfg.resource.backend == "sim" and not args.in_process_sim:
-            # the simulated arm lives in its own process, like a real arm outside the controller
-            cfg = with_backend(cfg, "sim_process")
-        proc = RealtimeProcess(cfg, args.socket or cfg.daemon.socket, args)
+        cell = load_cell_config(robot_config_path(args.config))
+        if not args.in_process_sim:
+            # a simulated arm lives in its own process, like a real arm outside the controller
+            cell = cell.with_resources(
+                tuple(
+                    with_backend(c, "sim_process") if c.resource.backend == "sim" else c
+                    for c in cell.resources
+                )
+            )
+        proc = RealtimeProcess(cell, args.socket or cell.daemon.socket, args)
     except OrccaddError as e:
         log.error("%s", e)
         return 2

@@ -25,7 +25,6 @@ from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.threads import ThreadGroup
 from orccadd.types import Status
 from orccadd.wire.commands import RESET_REPLY_S
-from orccadd.wire.schema import MissionResult
 
 FAULTS_KEPT = 32  # the last stop causes `describe` lists, for the logs' fault records
 RESET_WAIT_S = 2.0  # longest wait for a device to leave its fault after a reset (bus round trips)
@@ -33,7 +32,28 @@ RESET_DEVICE_S = 30.0  # longest a device's reset may take (a controller reconne
 assert RESET_DEVICE_S + RESET_WAIT_S < RESET_REPLY_S  # its refusal comes before the clients give up
 
 
+class FaultHistory:
+    """The stop causes of every resource, numbered in one sequence (the trace's fault records
+    name them by number): a new fault is a new number, even with the same words."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.history: deque[tuple[int, StopCause]] = deque(maxlen=FAULTS_KEPT)  # (number, cause)
+        self.on_cause: Callable[[int], None] = lambda n: None  # a new cause recorded, its number
+
+    def record(self, cause: StopCause) -> None:
+        self.count += 1
+        self.history.append((self.count, cause))
+        self.on_cause(self.count)
+
+    def recent(self) -> list[dict[str, object]]:
+        """The last causes, numbered."""
+        return [{"n": n, **c.to_wire()} for n, c in self.history]
+
+
 class Supervisor:
+    """One resource's: its safe stop's cause, its reset."""
+
     def __init__(
         self,
         cfg: RobotConfig,
@@ -41,6 +61,7 @@ class Supervisor:
         loop: SwitchingLoop,
         mission: MissionControl,
         note: Callable[..., None],
+        history: FaultHistory | None = None,
     ) -> None:
         self.cfg = cfg
         self.resource = resource
@@ -48,9 +69,7 @@ class Supervisor:
         self.mission = mission
         self.note = note
         self.fault: StopCause | None = None  # why the resource was safe-stopped (None when not)
-        self.faults = 0  # safe stops so far: a new fault is a new number, even with the same words
-        self.history: deque[tuple[int, StopCause]] = deque(maxlen=FAULTS_KEPT)  # (number, cause)
-        self.on_cause: Callable[[int], None] = lambda n: None  # a new cause recorded, its number
+        self.history = history if history is not None else FaultHistory()
         self._resetting: _DeviceReset | None = None  # the device's last reset
         self.threads = ThreadGroup("supervisor")  # a reset's device work
 
@@ -62,28 +81,16 @@ class Supervisor:
             self._record(StopCause(event, fault))
             self.note(f"type 3: {event}: safe stop ({fault})", WARNING)
 
-    def abort(self, why: str, kind: FaultKind = FaultKind.ABORT) -> None:
-        """Safe stop at the next tick, remember why, end the run (`aborted`)."""
+    def stop(self, why: str, kind: FaultKind = FaultKind.ABORT) -> None:
+        """Safe stop at the resource's next tick, remembering why (an abort: the machine's, which
+        ends the run)."""
         self.loop.request_safe_stop()
         if self.fault is None:
             self._record(StopCause("", Fault(kind, self.resource.name, why)))
-        self.note(f"abort: {why}", WARNING)
-        self.mission.end(MissionResult.ABORTED)
 
     def _record(self, cause: StopCause) -> None:
-        self.faults += 1
         self.fault = cause
-        self.history.append((self.faults, cause))
-        self.on_cause(self.faults)
-
-    def recent(self) -> list[dict[str, object]]:
-        """The last causes, numbered (the trace's fault records name them by number)."""
-        return [{"n": n, **c.to_wire()} for n, c in self.history]
-
-    def link_lost(self, why: str) -> None:
-        self.note(why, WARNING)
-        if self.cfg.daemon.on_command_daemon_loss == "safe_stop" and self.mission.running:
-            self.abort(f"{why} (on_command_daemon_loss = safe_stop)")
+        self.history.record(cause)
 
     def begin_reset(self, on_done: Callable[[], None]) -> Result | Pending:
         """Clear a safe stop once the arm is at rest: the device's fault first (if it has one),
@@ -94,12 +101,7 @@ class Supervisor:
         res = self.resource
         if not (self.fault or res.stopping_or_stopped):
             return {"reset": False, "detail": "nothing to reset"}
-        if self.mission.running:
-            raise CommandError("the mission is still running (its safe procedure): stop or abort it first")
-        if not res.state.status & Status.STOPPED:
-            raise CommandError("the safe stop is still under way: wait until the arm is at rest")
-        if self._resetting is not None and self._resetting.running():
-            raise CommandError("a reset is already under way")
+        self.check_reset()
         wait_s = max(100 * self.cfg.control_period_s, RESET_WAIT_S)
         device = self._resetting = _DeviceReset(self.threads, res, self.loop, wait_s)
 
@@ -107,7 +109,7 @@ class Supervisor:
             if not device.done():
                 return None
             self.fault = None
-            self.note("reset: stop cleared, holding")
+            self.note(f"reset: {res.name}: stop cleared, holding")
             on_done()
             return {"reset": True}
 
@@ -115,6 +117,17 @@ class Supervisor:
             raise CommandError(f"the reset did not end within {RESET_DEVICE_S + wait_s:g} s")
 
         return Pending(poll, time.monotonic_ns() + int((RESET_DEVICE_S + wait_s) * 1e9), expire)
+
+    def check_reset(self) -> None:
+        """`CommandError` if a reset cannot begin now (a run or the stop still under way)."""
+        if self.mission.running:
+            raise CommandError("the mission is still running (its safe procedure): stop or abort it first")
+        if not self.resource.state.status & Status.STOPPED:
+            raise CommandError(
+                f"the safe stop of {self.resource.name} is still under way: wait until it is at rest"
+            )
+        if self._resetting is not None and self._resetting.running():
+            raise CommandError("a reset is already under way")
 
 
 class _DeviceReset:

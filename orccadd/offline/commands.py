@@ -165,7 +165,7 @@ def _on_robot(a: Any, config: str | None) -> Any:
     from orccadd.automaton.verify import WARNING, CheckResult
     from orccadd.config.shipped import SERVICE_CONFIG, robot_config_path
     from orccadd.mission import check_on_robot
-    from orccadd.robot import load_robot
+    from orccadd.robot import create_resource, load_cell_config
 
     if config is None and not SERVICE_CONFIG.is_file():
         return CheckResult(
@@ -178,8 +178,8 @@ def _on_robot(a: Any, config: str | None) -> Any:
             level=WARNING,
         )
     path = robot_config_path(config) if config is not None else SERVICE_CONFIG
-    robot = load_robot(path)  # ConfigError: exit 2, naming file and key
-    return check_on_robot(a, robot.resource, robot.config.name)
+    cell = load_cell_config(path, check_model=False)  # ConfigError: exit 2, naming file and key
+    return check_on_robot(a, [create_resource(r) for r in cell.resources], cell.name)
 
 
 def cmd_graph(args: argparse.Namespace) -> int:

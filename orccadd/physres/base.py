@@ -103,6 +103,12 @@ class PhysicalResource(ABC):
         before anything is opened: see `orccadd.physres.description`."""
 
     @classmethod
+    def claims(cls, config: RobotConfig) -> tuple[str, ...]:
+        """What this resource holds alone (a serial port, a CAN node on its bus, a controller's
+        address), in words: a cell refuses two resources that claim the same. Default: none."""
+        return ()
+
+    @classmethod
     def load_settings(cls, raw: Mapping[str, Any], cfg: RobotConfig, file: str) -> Any:
         """Check `[resource.settings]` strictly into `cls.Settings`. Override to cross-check."""
         from orccadd.config.schema import load_dataclass

@@ -61,6 +61,17 @@ class Canopen402Arm(PhysicalResource):
     Settings = CanopenSettings
 
     @classmethod
+    def claims(cls, config: RobotConfig) -> tuple[str, ...]:
+        """Each drive's node id on its bus (two resources may share a bus, not a node), and the
+        bus's SYNC and heartbeat, which one master produces: the bus itself."""
+        s: CanopenSettings = config.backend_settings
+        buses = s.bus_list()
+        out = [f"CAN bus {b.where()} (its SYNC producer)" for b in buses]
+        for b in buses:
+            out.extend(f"CAN node {s.axes[i].node_id} on {b.where()}" for i in b.axes)
+        return tuple(out)
+
+    @classmethod
     def describe(cls, config: RobotConfig) -> ResourceDescription:
         """The configured mode and its partner (CSP with CST): the RPDO carries both targets,
         so the drives switch between them while enabled. The set narrows at configure, to what

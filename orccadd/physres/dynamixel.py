@@ -77,6 +77,11 @@ class DynamixelArm(PhysicalResource):
     Settings = DynamixelSettings
 
     @classmethod
+    def claims(cls, config: RobotConfig) -> tuple[str, ...]:
+        s: DynamixelSettings = config.backend_settings
+        return (f"serial port {s.port}",)  # one chain per port (servos of one chain: one resource)
+
+    @classmethod
     def describe(cls, config: RobotConfig) -> ResourceDescription:
         s: DynamixelSettings = config.backend_settings
         modes = {CommandMode.POSITION, CommandMode.VELOCITY}

@@ -54,6 +54,11 @@ class UrRtdeArm(PhysicalResource):
     Settings = UrRtdeSettings
 
     @classmethod
+    def claims(cls, config: RobotConfig) -> tuple[str, ...]:
+        s: UrRtdeSettings = config.backend_settings
+        return (f"UR controller at {s.host}",)  # one RTDE control script per controller
+
+    @classmethod
     def describe(cls, config: RobotConfig) -> ResourceDescription:
         s: UrRtdeSettings = config.backend_settings
         return ResourceDescription(

@@ -46,8 +46,8 @@ class _Node:
     module: Module | None  # None for the resource
 
 
-def _resource_node(resource: PhysicalResource, mode: CommandMode) -> _Node:
-    n, name = resource.dof, resource.name
+def _resource_node(resource: PhysicalResource, mode: CommandMode, name: str) -> _Node:
+    n = resource.dof
     outs = {}
     for port, unit, arr in (
         ("q", "rad", resource.state.q_rad),
@@ -73,12 +73,9 @@ def build_task(
     h = spec.task
     registry = registry if registry is not None else EventRegistry()
     queue = queue if queue is not None else EventQueue()
-    if h.resource != resource.name:
-        raise ConfigError(
-            src,
-            "task.resource",
-            f"(={h.resource!r}) must be {resource.name!r} (the robot's resource)",
-        )
+    # the file's `resource` is the resource's name in its wires; the mission binds the task to one
+    # of the robot's resources (`task T on R`), this one
+    wire_name = h.resource
     mode = MODE_BY_NAME[h.command]
     if mode not in resource.supported_modes:
         allowed = ", ".join(m.name.lower() for m in sorted(resource.supported_modes))
@@ -115,11 +112,11 @@ def build_task(
             f"(={h.period_s!r}) must be a whole multiple of the robot's control_period_s (={robot_period!r})",
         )
     ctx = ModuleContext(task=h.name, model=resource.model, period_s=period)
-    nodes: dict[str, _Node] = {resource.name: _resource_node(resource, mode)}
+    nodes: dict[str, _Node] = {wire_name: _resource_node(resource, mode, wire_name)}
     modules: dict[str, Module] = {}
     for ms in spec.modules:
         key = f"modules.{ms.name}"
-        if ms.name == resource.name:
+        if ms.name == wire_name:
             raise ConfigError(src, key, f"(={ms.name!r}) is the resource's name; choose another")
         cls = module_class(ms.type)
         if cls is None:
@@ -136,17 +133,17 @@ def build_task(
         modules[ms.name] = m
         nodes[ms.name] = _Node(ms.name, m.inputs, m.outputs, m)
     writers = _check_wires(spec, nodes)
-    order = _schedule(spec, modules, writers, resource.name)
+    order = _schedule(spec, modules, writers, wire_name)
     for dst, srcp in writers.items():
         dst.value = srcp.value  # the input *is* the output buffer
-    cmd_port = next(iter(nodes[resource.name].inputs.values()))
+    cmd_port = next(iter(nodes[wire_name].inputs.values()))
     events = _shell(spec, nodes, registry, modules)
     pres = []
     for i, p in enumerate(spec.preconditions):
         key = f"preconditions[{i}].signal"
         port = _find_port(spec, nodes, p.signal, key, output=True)
-        if port.module != resource.name:  # checked before the modules run: measured signals only
-            measured = ", ".join(f"{resource.name}.{n}" for n in nodes[resource.name].outputs)
+        if port.module != wire_name:  # checked before the modules run: measured signals only
+            measured = ", ".join(f"{wire_name}.{n}" for n in nodes[wire_name].outputs)
             raise ConfigError(
                 src,
                 key,

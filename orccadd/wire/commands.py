@@ -163,6 +163,7 @@ COMMANDS: dict[str, CommandSpec] = {
             C,
             "rt",
             "clear a safe stop (and a device fault) once the arm is at rest",
+            (Arg("resource", (str,), "the resource to reset (default: every safe-stopped one)", default=""),),
             reply_s=RESET_REPLY_S,
         ),
         CommandSpec(
@@ -217,6 +218,7 @@ COMMANDS: dict[str, CommandSpec] = {
                 Arg("fault", (str,), "resource or overrun", required=True, choices=("resource", "overrun")),
                 Arg("ticks", (int,), "overrun: how many ticks", default=20),
                 Arg("extra_ms", NUMBER, "overrun: extra compute per tick (0: 1.5 periods)", default=0.0),
+                Arg("resource", (str,), "the resource (default: the robot config's first)", default=""),
             ),
         ),
     )

@@ -122,10 +122,17 @@ def test_task_file_gives_its_events_to_the_mission() -> None:
     assert "Move.T3.Timeout" in a.program.inputs  # and no `timeout_s = inf`: it may time out
 
 
-def test_task_on_the_wrong_resource_for_its_file() -> None:
-    text = f'mission M\nresource Vehicle\ntask Move on Vehicle from "{MOVE_TASK}"\nend\n'
-    with pytest.raises(MissionError, match="runs on resource `arm`, not `Vehicle`"):
-        compile_text(text, "res.mission", task_files=read_task_interface)
+def test_a_task_file_runs_on_the_resource_its_mission_binds_it_to() -> None:
+    # the file's `resource = "arm"` names the resource in its wires; `on Left` binds it (one
+    # file for both arms of a cell); whether it fits Left's joints is checked against the robot
+    text = (
+        f'mission M\nresource Left, Right\ntask MoveL on Left from "{MOVE_TASK}"\nend\n'
+        f'task MoveR on Right from "{MOVE_TASK}"\nend\n'
+        "safe procedure S\n nothing\nend\n"
+        "main procedure P\n handle par(MoveL || MoveR) on fatal do safe end\nend\n"
+    )
+    a = compile_text(text, "res.mission", task_files=read_task_interface)
+    assert [(t.name, t.resource) for t in a.program.tasks] == [("MoveL", "Left"), ("MoveR", "Right")]
 
 
 def test_state_explosion_is_refused_clearly() -> None:

@@ -91,15 +91,16 @@ def test_online_commands_do_not_load_the_compiler() -> None:
 
 
 def test_check_refuses_what_load_refuses_and_language_only_does_not(tmp_path: Path) -> None:
-    """One function for both: a mission with two tasks active at once passes the language's checks
-    but not the daemon's, with the shortest trace to the state as the counterexample."""
+    """One function for both: a mission with two tasks active at once on one resource (on
+    disjoint joints) passes the language's checks but not the daemon's, with the shortest trace
+    to the state as the counterexample."""
     two = tmp_path / "two.mission"
     two.write_text(
         TWO_AT_ONCE.replace("TASK", str(ROOT / "configs/tasks/move_joints.toml")), encoding="utf-8"
     )
     r = ctl("check", str(two))
     assert r.returncode == 1, r.stdout + r.stderr
-    assert "FAIL one task: Reach and Look active at once" in r.stdout
+    assert "FAIL one task per resource: Reach and Look active at once on arm" in r.stdout
     assert "instant 1:" in r.stdout
     assert ctl("check", "--language-only", str(two)).returncode == 0
     bare = ctl("check", str(NO_GUARD))

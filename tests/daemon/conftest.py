@@ -11,6 +11,7 @@ from typing import cast
 
 import pytest
 
+from orccadd.config.cell import CellConfig
 from orccadd.daemon.machine import Machine
 from orccadd.daemon.replies import Pending
 from orccadd.launch import DaemonProcess
@@ -86,7 +87,7 @@ def machine(tmp_path: Path) -> Iterator[Machine]:
     res.activate(CommandMode.TORQUE)
     tel = TelemetryBlock.create(Layout(cfg.dof, 8000, 1000), cfg.control_period_s)
     r, w = os.pipe2(os.O_NONBLOCK)
-    m = Machine(cfg, res, WallClock(), tel, w)
+    m = Machine(CellConfig.of(cfg), [res], [WallClock()], [tel], w)
     try:
         yield m
     finally:

@@ -117,10 +117,10 @@ BAD_WIRING = [
         ConfigError,
         "preconditions[0].signal (='traj.q_des') must be a measured signal (arm.q, arm.dq, arm.tau)",
     ),
-    (
+    (  # the file's `resource` is the resource's name in its wires (the mission binds the task)
         ('resource = "arm"', 'resource = "vehicle"'),
-        ConfigError,
-        "task.resource (='vehicle') must be 'arm'",
+        WiringError,
+        "wires[0] (='arm.q'): no module 'arm' (modules: vehicle, traj",
     ),
 ]
 

@@ -1,0 +1,178 @@
+"""A cell: several Physical Resources in one daemon (an arm and its gripper, two arms).
+
+A robot config with one `[resource]` is a cell of one resource, read as before. A cell config
+lists its resources instead, each by the robot config that describes it on its own (its model,
+joints, limits, backend, period, safe stop), with what differs here:
+
+    name = "ur5e-gripper"
+
+    [[resources]]
+    name = "arm"                       # the name missions bind tasks to (`task T on arm ...`)
+    config = "ur5e-rtde-sim.toml"      # relative to this file
+
+    [[resources]]
+    name = "gripper"
+    config = "gripper-sim.toml"
+    control_period_s = 0.008           # optional: its own period (default: the config's)
+    settings = { port = "/tmp/ttyG" }  # optional: keys that replace its [resource.settings] ones
+
+    [daemon]                           # the cell's: one socket, one automaton, one mission
+
+Each resource keeps its own Hold task (its config's `daemon.hold_task`); every other `[daemon]`
+key is the cell's. A referenced config's own `[daemon]` table is otherwise not used.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from orccadd.config.robot import DaemonConfig, RobotConfig, read_robot_config, read_toml
+from orccadd.config.schema import field, load_dataclass
+from orccadd.errors import ConfigError
+
+NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")  # a mission's identifier
+
+
+@dataclass(frozen=True)
+class ResourceEntry:
+    """One `[[resources]]` table."""
+
+    name: str = field()
+    config: str = field()
+    control_period_s: float = field(default=0.0, bounds=(0.0, 0.1))  # 0: the config's own
+    settings: dict[str, Any] = field(default=None)  # type: ignore[assignment]
+
+
+@dataclass(frozen=True)
+class CellFile:
+    name: str = field()
+    resources: tuple[ResourceEntry, ...] = field(min_len=1)
+    daemon: DaemonConfig = field(default=DaemonConfig())
+
+
+@dataclass(frozen=True)
+class CellConfig:
+    """The resources one daemon drives, each a whole `RobotConfig` (its `resource.name` the
+    cell's name for it, its `daemon` the cell's but for its own Hold task)."""
+
+    name: str
+    source: str
+    daemon: DaemonConfig
+    resources: tuple[RobotConfig, ...]
+    listed: bool = False  # written as a cell ([[resources]]), not a one-resource robot config
+
+    @classmethod
+    def of(cls, cfg: RobotConfig) -> CellConfig:
+        """The cell of one resource that a robot config is."""
+        return cls(cfg.name, cfg.source, cfg.daemon, (cfg,))
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(r.resource.name for r in self.resources)
+
+    def resource(self, name: str) -> RobotConfig:
+        for r in self.resources:
+            if r.resource.name == name:
+                return r
+        raise KeyError(name)
+
+    def resolve(self, path: str) -> Path:
+        """A path from the cell's file, relative to its folder."""
+        return (Path(self.source).parent / path).resolve()
+
+    def with_resources(self, resources: tuple[RobotConfig, ...]) -> CellConfig:
+        return replace(self, resources=resources)
+
+
+def is_cell_file(raw: dict[str, Any]) -> bool:
+    return "resources" in raw
+
+
+def read_cell_config(path: str | Path) -> CellConfig:
+    """Read a cell config or a one-resource robot config (its form only: keys, types, bounds,
+    joints, names; no backend, no URDF: `orccadd.robot.load_cell_config` adds those)."""
+    file = str(path)
+    raw = read_toml(Path(path))
+    if not is_cell_file(raw):
+        return CellConfig.of(read_robot_config(path))
+    for key in ("resource", "model", "joints", "control_period_s", "safe_stop", "limits"):
+        if key in raw:
+            raise ConfigError(
+                file,
+                key,
+                "belongs to a resource's own config: a cell lists [[resources]], each with its `config`",
+            )
+    cell = load_dataclass(CellFile, raw, file)
+    here = Path(file).parent
+    daemon = _absolute(cell.daemon, here)
+    seen: dict[str, int] = {}
+    out: list[RobotConfig] = []
+    for i, entry in enumerate(cell.resources):
+        key = f"resources[{i}]"
+        if not NAME.match(entry.name):
+            raise ConfigError(
+                file, f"{key}.name", f"(={entry.name!r}) must be an identifier (letters, digits, _)"
+            )
+        if entry.name in seen:
+            raise ConfigError(
+                file, f"{key}.name", f"(={entry.name!r}) is resources[{seen[entry.name]}]'s name too"
+            )
+        seen[entry.name] = i
+        if 0.0 < entry.control_period_s < 0.0001:
+            raise ConfigError(
+                file,
+                f"{key}.control_period_s",
+                f"(={entry.control_period_s!r}) must be 0 (the config's) or in [0.0001, 0.1]",
+            )
+        sub_path = (here / entry.config).resolve()
+        if sub_path.is_file() and is_cell_file(read_toml(sub_path)):
+            raise ConfigError(
+                file, f"{key}.config", f"(={entry.config!r}) is a cell itself: name a resource's config"
+            )
+        if not sub_path.is_file():
+            raise ConfigError(
+                file, f"{key}.config", f"(={entry.config!r}): no such file (relative to {here})"
+            )
+        sub = read_robot_config(sub_path)
+        settings = {**(sub.resource.settings or {}), **(entry.settings or {})}
+        out.append(
+            replace(
+                sub,
+                resource=replace(sub.resource, name=entry.name, settings=settings),
+                control_period_s=entry.control_period_s or sub.control_period_s,
+                daemon=replace(daemon, hold_task=str(sub.resolve(sub.daemon.hold_task))),
+            )
+        )
+    return CellConfig(cell.name, file, daemon, tuple(out), listed=True)
+
+
+def _absolute(d: DaemonConfig, here: Path) -> DaemonConfig:
+    """The cell's daemon paths made absolute: each resource's config resolves them alike."""
+
+    def absolute(p: str) -> str:
+        return str((here / p).resolve())
+
+    return replace(
+        d,
+        hold_task=absolute(d.hold_task),
+        mission_dirs=tuple(absolute(p) for p in d.mission_dirs),
+        task_dirs=tuple(absolute(p) for p in d.task_dirs),
+        log_dir=absolute(d.log_dir) if d.log_dir else "",
+    )
+
+
+def override_key(cell: CellConfig, index: int, err: ConfigError) -> ConfigError:
+    """A backend's error about a setting the cell overrides, named at the cell's key."""
+    prefix = "resource.settings."
+    if not cell.listed or not err.key.startswith(prefix):
+        return err
+    rest = err.key.removeprefix(prefix)
+    raw = read_toml(Path(cell.source))
+    entry = raw["resources"][index]
+    top = re.split(r"[.\[]", rest, maxsplit=1)[0]
+    if top in (entry.get("settings") or {}):
+        return ConfigError(cell.source, f"resources[{index}].settings.{rest}", err.detail)
+    return err

@@ -1,0 +1,107 @@
+"""Cell configs: several resources, each by its own robot config, checked as a whole."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from orccadd.config.cell import read_cell_config
+from orccadd.errors import ConfigError
+from orccadd.robot import load_cell_config
+from tests.conftest import ROOT
+
+ROBOTS = ROOT / "configs" / "robots"
+
+
+def write(tmp: Path, text: str) -> Path:
+    p = tmp / "cell.toml"
+    p.write_text(text)
+    return p
+
+
+def entry(name: str, config: str, extra: str = "") -> str:
+    return f'[[resources]]\nname = "{name}"\nconfig = "{ROBOTS / config}"\n{extra}\n'
+
+
+def test_a_one_resource_robot_config_is_a_cell_of_one() -> None:
+    cell = load_cell_config(ROBOTS / "ur5e-rtde-sim.toml")
+    assert cell.names == ("arm",) and not cell.listed
+    assert cell.resources[0].backend_settings is not None
+
+
+def test_a_cell_names_its_resources_with_their_own_periods_and_hold_tasks(tmp_path: Path) -> None:
+    text = 'name = "c"\n' + entry("left", "sim-ur5e.toml", "control_period_s = 0.001")
+    text += entry("right", "sim-ur5e.toml") + entry("gripper", "gripper-sim.toml")
+    cell = load_cell_config(write(tmp_path, text))
+    assert cell.names == ("left", "right", "gripper")
+    assert [r.control_period_s for r in cell.resources] == [0.001, 0.002, 0.005]
+    assert Path(cell.resource("gripper").daemon.hold_task).name == "gripper_hold.toml"
+    assert Path(cell.resource("left").daemon.hold_task).name == "hold.toml"
+    # the cell's daemon paths are its own, relative to its file
+    assert cell.daemon.mission_dirs == (str((tmp_path / "../missions").resolve()),)
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "words"),
+    [
+        (
+            entry("arm", "sim-ur5e.toml") + entry("arm", "sim-panda.toml"),
+            "resources[1].name",
+            "resources[0]'s name too",
+        ),
+        (entry("left arm", "sim-ur5e.toml"), "resources[0].name", "identifier"),
+        (entry("a", "nowhere.toml"), "resources[0].config", "no such file"),
+        (
+            entry("a", "sim-ur5e.toml", "control_period_s = 0.00001"),
+            "resources[0].control_period_s",
+            "0.0001",
+        ),
+        (entry("a", "sim-ur5e.toml", "colour = 1"), "resources[0].colour", "not a known key"),
+        (
+            entry("g1", "gripper-sim.toml") + entry("g2", "gripper-sim.toml"),
+            "resources[1]",
+            "serial port /tmp/orccadd-gripper, which resources[0] (='g1') holds",
+        ),
+        (
+            entry("a", "ur5e-rtde-sim.toml") + entry("b", "ur5e-rtde-sim.toml"),
+            "resources[1]",
+            "UR controller at 127.0.0.1",
+        ),
+        (
+            entry("a", "gripper-sim.toml", "settings = { baud_rate = 12 }"),
+            "resources[0].settings.baud_rate",
+            "(=12)",
+        ),
+    ],
+)
+def test_a_wrong_cell_is_refused_naming_the_file_and_key(
+    tmp_path: Path, text: str, key: str, words: str
+) -> None:
+    path = write(tmp_path, 'name = "c"\n' + text)
+    with pytest.raises(ConfigError) as info:
+        load_cell_config(path)
+    assert info.value.file == str(path) and info.value.key == key, str(info.value)
+    assert words in str(info.value)
+
+
+def test_two_grippers_on_their_own_ports_are_a_cell(tmp_path: Path) -> None:
+    text = entry("g1", "gripper-sim.toml") + entry(
+        "g2", "gripper-sim.toml", 'settings = { port = "/tmp/g2" }'
+    )
+    cell = load_cell_config(write(tmp_path, 'name = "c"\n' + text))
+    assert cell.resource("g2").backend_settings.port == "/tmp/g2"
+
+
+def test_a_cell_takes_no_resource_keys_of_its_own(tmp_path: Path) -> None:
+    path = write(tmp_path, 'name = "c"\ncontrol_period_s = 0.001\n' + entry("a", "sim-ur5e.toml"))
+    with pytest.raises(ConfigError, match="control_period_s belongs to a resource's own config"):
+        read_cell_config(path)
+
+
+def test_a_cell_of_cells_is_refused(tmp_path: Path) -> None:
+    inner = write(tmp_path, 'name = "in"\n' + entry("a", "sim-ur5e.toml"))
+    outer = tmp_path / "outer.toml"
+    outer.write_text(f'name = "out"\n[[resources]]\nname = "x"\nconfig = "{inner}"\n')
+    with pytest.raises(ConfigError, match="is a cell itself"):
+        read_cell_config(outer)

@@ -1,0 +1,116 @@
+"""Several resources in one daemon (configs/robots/dual-arm-sim.toml: two simulated UR5e, `left`
+at 1 kHz and `right` at 500 Hz, each in a plant process of its own): a mission's tasks on both at
+once, each on its own control thread; a fault on one resource holds the other."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, cast
+
+import pytest
+
+from tests.daemon.conftest import ROOT, Daemon, start_daemon_with
+
+DUAL = ROOT / "configs/robots/dual-arm-sim.toml"
+MISSION = str(ROOT / "configs/missions/dual_reach.mission")
+pytestmark = pytest.mark.timeout(240, method="thread")
+
+
+@pytest.fixture
+def dual(tmp_path: Path) -> Iterator[Daemon]:
+    d = start_daemon_with(tmp_path, DUAL)
+    try:
+        yield d
+    finally:
+        d.stop()
+
+
+@pytest.fixture
+def slow(tmp_path: Path) -> Iterator[tuple[Daemon, str]]:
+    """The dual arm with missions from `tmp_path` too, and dual_reach there with a slow MeetL
+    (seconds: a fault injected while it runs lands in it)."""
+    robots = ROOT / "configs/robots"
+    cell = tmp_path / "dual.toml"
+    cell.write_text(
+        DUAL.read_text().replace('config = "', f'config = "{robots}/')
+        + f'mission_dirs = ["{tmp_path}"]\ntask_dirs = ["{ROOT / "configs/tasks"}"]\n'
+    )
+    text = Path(MISSION).read_text().replace('"../tasks/', f'"{ROOT}/configs/tasks/')
+    head, meet, tail = text.partition("task MeetL")
+    meet = meet.replace("  post\n", "  set traj.speed_scale = 0.05\n  post\n", 1)
+    (tmp_path / "slow.mission").write_text(head + meet + tail)
+    d = start_daemon_with(tmp_path, cell)
+    try:
+        yield d, str(tmp_path / "slow.mission")
+    finally:
+        d.stop()
+
+
+def instants(d: Daemon) -> list[dict[str, Any]]:
+    events = cast(list[dict[str, Any]], d.call("events", last=200)["events"])  # type: ignore[index]
+    return [e for e in events if e["kind"] == "instant"]
+
+
+def resources(d: Daemon) -> dict[str, dict[str, Any]]:
+    described = cast(dict[str, Any], d.call("describe"))
+    return {r["name"]: r for r in described["resources"]}
+
+
+def test_describe_lists_each_resource_with_its_clock_and_hold_task(dual: Daemon) -> None:
+    r = resources(dual)
+    assert list(r) == ["left", "right"]
+    assert (r["left"]["period_s"], r["right"]["period_s"]) == (0.001, 0.002)
+    assert r["left"]["clock"] == "loop" and r["left"]["backend"] == "sim_process"
+    assert (r["left"]["task"], r["right"]["task"]) == ("Hold_left", "Hold_right")
+    assert len(r["left"]["joints"]) == 6 and r["left"]["telemetry"] != r["right"]["telemetry"]
+
+
+def test_tasks_on_two_resources_run_at_once_and_in_turn(dual: Daemon) -> None:
+    dual.call("load", path=MISSION)
+    dual.call("start")
+    s = dual.wait(lambda s: s["state"] != "running", timeout_s=120)
+    assert s["result"] == "success" and not s["faulted"], s
+    steps = [(sorted(e["inputs"]), e["actions"]) for e in instants(dual)]
+    first = steps[0][1]
+    assert "start HomeL" in first and "start HomeR" in first, steps  # both at once
+    inputs = [i for ins, _ in steps for i in ins]
+    # MeetR starts only on MeetL's postcondition: the order of the postconditions says so
+    assert inputs.index("MeetL.done") < inputs.index("MeetR.done"), inputs
+    assert inputs.count("HomeL.done") == 2 and inputs.count("HomeR.done") == 2, inputs
+
+
+def test_a_fault_on_a_moving_resource_enters_the_safe_procedure_and_holds_the_other(
+    slow: tuple[Daemon, str],
+) -> None:
+    dual, mission = slow
+    dual.call("load", path=mission)
+    dual.call("start")
+    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
+    dual.call("inject", fault="resource", resource="left")  # left reaches, right holds
+    dual.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(dual)), timeout_s=30)
+    r = resources(dual)
+    assert r["left"]["fault"] and r["left"]["fault"]["resource"] == "left", r["left"]
+    assert r["right"]["fault"] is None and r["right"]["task"] == "Hold_right", r["right"]
+    dual.call("send", input="Stop")  # its acknowledgement
+    dual.wait(lambda s: s["state"] != "running", timeout_s=30)
+    assert cast(dict[str, Any], dual.call("reset"))["reset"]
+    assert all(x["fault"] is None for x in resources(dual).values())
+
+
+def test_a_fault_on_a_held_resource_ends_the_run_and_a_reset_names_it(slow: tuple[Daemon, str]) -> None:
+    dual, mission = slow
+    dual.call("load", path=mission)
+    dual.call("start")
+    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
+    dual.call("inject", fault="resource", resource="right")  # right holds while left reaches
+    s = dual.wait(lambda s: s["state"] != "running", timeout_s=30)
+    assert s["faulted"] and s["result"] == "aborted", s
+    r = resources(dual)
+    assert r["right"]["fault"] and r["right"]["fault"]["resource"] == "right", r["right"]
+    assert r["left"]["fault"] is None and r["left"]["task"] == "Hold_left", r["left"]  # held, not stopped
+    refused = dual.reply("start")
+    assert not refused["ok"] and "resource right was safe-stopped" in refused["error"], refused
+    assert cast(dict[str, Any], dual.call("reset", resource="right"))["reset"]
+    r = resources(dual)
+    assert r["right"]["fault"] is None and r["right"]["task"] == "Hold_right"
