@@ -18,8 +18,10 @@ joints, limits, backend, period, safe stop), with what differs here:
 
     [daemon]                           # the cell's: one socket, one automaton, one mission
 
-Each resource keeps its own Hold task (its config's `daemon.hold_task`); every other `[daemon]`
-key is the cell's. A referenced config's own `[daemon]` table is otherwise not used.
+The `[daemon]` keys of a resource's control loop come from its own config (`PER_RESOURCE`: its
+Hold task, overrun limit, switch blend, watchdog, task timeout, tick); every other `[daemon]` key
+(socket, roles, priorities, loads, logs, clients) is the cell's, and a cell's `[daemon]` that sets
+a per-resource key is refused, naming the config where it belongs.
 """
 
 from __future__ import annotations
@@ -33,6 +35,14 @@ from orccadd.config.robot import DaemonConfig, RobotConfig, read_robot_config, r
 from orccadd.config.schema import field, load_dataclass
 from orccadd.errors import ConfigError
 
+PER_RESOURCE = (
+    "hold_task",
+    "overrun_limit",
+    "switch_blend_s",
+    "watchdog_stale_periods",
+    "task_timeout_s",
+    "tick",
+)
 NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")  # a mission's identifier
 
 
@@ -105,6 +115,11 @@ def read_cell_config(path: str | Path) -> CellConfig:
                 key,
                 "belongs to a resource's own config: a cell lists [[resources]], each with its `config`",
             )
+    for key in PER_RESOURCE:
+        if key in (raw.get("daemon") or {}):
+            raise ConfigError(
+                file, f"daemon.{key}", "belongs to each resource's loop: set it in that resource's own config"
+            )
     cell = load_dataclass(CellFile, raw, file)
     here = Path(file).parent
     daemon = _absolute(cell.daemon, here)
@@ -143,7 +158,11 @@ def read_cell_config(path: str | Path) -> CellConfig:
                 sub,
                 resource=replace(sub.resource, name=entry.name, settings=settings),
                 control_period_s=entry.control_period_s or sub.control_period_s,
-                daemon=replace(daemon, hold_task=str(sub.resolve(sub.daemon.hold_task))),
+                daemon=replace(
+                    daemon,
+                    hold_task=str(sub.resolve(sub.daemon.hold_task)),
+                    **{k: getattr(sub.daemon, k) for k in PER_RESOURCE if k != "hold_task"},
+                ),
             )
         )
     return CellConfig(cell.name, file, daemon, tuple(out), listed=True)
@@ -176,3 +195,30 @@ def override_key(cell: CellConfig, index: int, err: ConfigError) -> ConfigError:
     if top in (entry.get("settings") or {}):
         return ConfigError(cell.source, f"resources[{index}].settings.{rest}", err.detail)
     return err
+
+
+def pick_resource(cell: CellConfig, backends: tuple[str, ...], name: str = "") -> RobotConfig:
+    """The resource a device simulator serves from `cell`: the one named `name`, or the cell's
+    only resource on one of `backends` (a one-resource robot config: its resource, whatever its
+    backend, as before). `ConfigError` naming the file if there is none, or several to choose from."""
+    if not cell.listed and not name:
+        return cell.resources[0]
+    if name:
+        try:
+            return cell.resource(name)
+        except KeyError:
+            raise ConfigError(
+                cell.source, "resources", f"has no resource {name!r} (it has: {', '.join(cell.names)})"
+            ) from None
+    mine = [r for r in cell.resources if r.resource.backend in backends]
+    if len(mine) == 1:
+        return mine[0]
+    kinds = " or ".join(backends)
+    if not mine:
+        raise ConfigError(
+            cell.source, "resources", f"has no {kinds} resource (it has: {', '.join(cell.names)})"
+        )
+    names = ", ".join(r.resource.name for r in mine)
+    raise ConfigError(
+        cell.source, "resources", f"has several {kinds} resources ({names}): name one with --resource"
+    )

@@ -233,6 +233,7 @@ class Machine:
             "hold_task": u.loop.hold.name,
             "fault": u.supervisor.fault.to_wire() if u.supervisor.fault else None,
             "telemetry": u.tel.name,
+            "helper_pid": u.resource.helper_pid(),  # a simulated arm's plant process (0: none)
         }
 
     # ---- events from the control threads --------------------------------------------------

@@ -305,7 +305,7 @@ class RealtimeProcess:
         now = time.monotonic_ns()
         for c, tel, thread in zip(self.cell.resources, self.tels, self.control_threads, strict=True):
             age_ns = now - int(tel.header[H.HEARTBEAT_NS])
-            stale = self.cfg.daemon.watchdog_stale_periods * c.control_period_s
+            stale = c.daemon.watchdog_stale_periods * c.control_period_s
             if not thread.is_alive() or age_ns >= stale * 1e9:
                 return False
         return bool(self.control_threads)

@@ -37,6 +37,7 @@ from typing import Any
 import can
 import numpy as np
 
+from orccadd.config.cell import pick_resource
 from orccadd.config.robot import RobotConfig, read_toml
 from orccadd.drivers.canopen.settings import CanopenSettings
 from orccadd.drivesim.axis import AxisUnits, Strictness
@@ -45,7 +46,7 @@ from orccadd.drivesim.socketcand import QueuedSocketcandBus
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.physres.sim import SimSettings, load_sim_settings
-from orccadd.robot import load_robot_config
+from orccadd.robot import load_cell_config
 from orccadd.runtime import Summary, sim_control
 from orccadd.runtime.rt import realtime_device_process
 from orccadd.runtime.threads import ThreadGroup
@@ -107,6 +108,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--config", required=True, help="a canopen402 robot config")
     ap.add_argument(
+        "--resource",
+        default="",
+        help="in a cell config (several resources): the resource to serve (default: its only canopen402 one)",
+    )
+    ap.add_argument(
         "--plant", default="", help="TOML table of `sim` settings for the arm (friction, initial_q_rad)"
     )
     ap.add_argument("--control-port", type=int, default=0)
@@ -142,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     except LogSetupError as e:
         ap.exit(2, f"{ap.prog}: error: {e}\n")
     try:
-        cfg = load_robot_config(args.config)
+        cfg = pick_resource(load_cell_config(args.config), ("canopen402",), args.resource)
         s = cfg.backend_settings
         if not isinstance(s, CanopenSettings):
             raise OrccaddError(f"{args.config}: resource.backend must be canopen402 for simulated drives")

@@ -16,7 +16,7 @@ import logging
 import signal
 import threading
 
-from orccadd.config.robot import read_robot_config
+from orccadd.config.cell import pick_resource, read_cell_config
 from orccadd.dxlsim.chain import Chain
 from orccadd.dxlsim.control import ControlServer
 from orccadd.dxlsim.link import PtyLink
@@ -43,6 +43,11 @@ def main(argv: list[str] | None = None) -> int:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     ap.add_argument("--config", required=True, help="a robot config whose resource is a DYNAMIXEL chain")
+    ap.add_argument(
+        "--resource",
+        default="",
+        help="in a cell config (several resources): the resource to serve (default: its only dynamixel one)",
+    )
     ap.add_argument("--port", default="", help="where to link the serial port (default: the config's port)")
     ap.add_argument("--control", default="", help="the fault-injection socket (default: PORT.control)")
     ap.add_argument(
@@ -61,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     except LogSetupError as e:
         ap.exit(2, f"{ap.prog}: error: {e}\n")
     try:
-        cfg = read_robot_config(args.config)
+        cfg = pick_resource(read_cell_config(args.config), ("dynamixel",), args.resource)
         settings = read_chain_settings(cfg)
         if args.initial_q_rad is not None and len(args.initial_q_rad) != cfg.dof:
             raise OrccaddError(

@@ -23,7 +23,8 @@ import threading
 from functools import partial
 from pathlib import Path
 
-from orccadd.config.robot import read_robot_config, read_toml
+from orccadd.config.cell import pick_resource, read_cell_config
+from orccadd.config.robot import read_toml
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.runtime import sim_control
@@ -54,6 +55,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     ap.add_argument("--config", required=True, help="the robot config (joints, limits, URDF)")
+    ap.add_argument(
+        "--resource",
+        default="",
+        help="in a cell config (several resources): the resource to serve (default: its only ur_rtde one)",
+    )
     ap.add_argument(
         "--host", type=_loopback, default="127.0.0.1", help="a loopback address (default 127.0.0.1)"
     )
@@ -100,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     except LogSetupError as e:
         raise SystemExit(f"python -m orccadd.ursim: error: {e}") from None
     try:
-        cfg = read_robot_config(args.config)
+        cfg = pick_resource(read_cell_config(args.config), ("ur_rtde",), args.resource)
         if cfg.dof != UR_DOF:
             raise OrccaddError(f"{args.config}: a UR arm has {UR_DOF} joints, this config {cfg.dof}")
         plant = read_toml(Path(args.plant)) if args.plant else {}

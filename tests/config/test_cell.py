@@ -105,3 +105,13 @@ def test_a_cell_of_cells_is_refused(tmp_path: Path) -> None:
     outer.write_text(f'name = "out"\n[[resources]]\nname = "x"\nconfig = "{inner}"\n')
     with pytest.raises(ConfigError, match="is a cell itself"):
         read_cell_config(outer)
+
+
+def test_a_resources_loop_keys_are_its_own_and_the_cell_may_not_set_them(tmp_path: Path) -> None:
+    text = 'name = "c"\n' + entry("g", "gripper-sim.toml") + entry("a", "ur5e-rtde.toml")
+    cell = read_cell_config(write(tmp_path, text))
+    assert cell.resource("g").daemon.overrun_limit == 25  # gripper-sim.toml's
+    assert cell.resource("a").daemon.overrun_limit == 5  # ur5e-rtde.toml's
+    path = write(tmp_path, 'name = "c"\n' + entry("a", "sim-ur5e.toml") + "[daemon]\noverrun_limit = 9\n")
+    with pytest.raises(ConfigError, match="daemon.overrun_limit belongs to each resource's loop"):
+        read_cell_config(path)

@@ -4,6 +4,8 @@ once, each on its own control thread; a fault on one resource holds the other.""
 
 from __future__ import annotations
 
+import os
+import signal
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, cast
@@ -114,3 +116,19 @@ def test_a_fault_on_a_held_resource_ends_the_run_and_a_reset_names_it(slow: tupl
     assert cast(dict[str, Any], dual.call("reset", resource="right"))["reset"]
     r = resources(dual)
     assert r["right"]["fault"] is None and r["right"]["task"] == "Hold_right"
+
+
+def test_one_arms_plant_killed_while_it_moves_stops_it_alone(slow: tuple[Daemon, str]) -> None:
+    dual, mission = slow
+    dual.call("load", path=mission)
+    dual.call("start")
+    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
+    os.kill(resources(dual)["left"]["helper_pid"], signal.SIGKILL)  # its "controller" gone
+    dual.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(dual)), timeout_s=30)
+    r = resources(dual)
+    assert r["left"]["fault"]["kind"] == "comm_lost" and r["left"]["fault"]["resource"] == "left", r["left"]
+    assert r["right"]["fault"] is None and r["right"]["task"] == "Hold_right", r["right"]
+    dual.call("send", input="Stop")
+    dual.wait(lambda s: s["state"] != "running", timeout_s=30)
+    assert cast(dict[str, Any], dual.call("reset", resource="left"))["reset"]  # a new plant
+    assert resources(dual)["left"]["fault"] is None
