@@ -58,6 +58,7 @@ bench: setup
 	$(PY) benchmarks/canopen_cycle.py
 	$(PY) benchmarks/canopen_cycle.py --buses 2 --rates 1000
 	$(PY) benchmarks/ur_rtde_cycle.py
+	$(PY) benchmarks/cell.py
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache

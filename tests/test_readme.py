@@ -37,6 +37,8 @@ def test_the_readme_has_a_tour_per_bus() -> None:
         "A UR arm over RTDE",
         "A Dynamixel chain",
         "CANopen CiA 402 drives",
+        "Two arms in one daemon",
+        "An arm with its gripper",
     ]
 
 

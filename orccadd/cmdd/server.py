@@ -160,6 +160,7 @@ class CommandDaemon:
         self.urdf = urdf  # attached to each log's MCAP
         self.rt = RtLink(rt_path)
         self.tel = TelemetryBlock.attach(telemetry)
+        self.unit_tels: dict[str, TelemetryBlock] = {telemetry: self.tel}  # a cell's, by block name
         self.roles = Roles(cfg)
         self.desc: dict[str, Any] = {}
         self.desc_mark = (0, 0)  # (mission generation, safe stop number) `desc` was read at
@@ -184,6 +185,24 @@ class CommandDaemon:
                 self.desc = reply["result"]
                 self.desc_mark = mark
                 self.missions = {int(m["generation"]): m for m in self.desc.get("missions", [])}
+                self._attach_units()
+
+    def _attach_units(self) -> None:
+        """A cell's other resources' telemetry blocks (the first's is `tel`), once."""
+        for r in self.desc.get("resources", []):
+            name = r.get("telemetry", "")
+            if name and name not in self.unit_tels:
+                try:
+                    self.unit_tels[name] = TelemetryBlock.attach(name)
+                except (OSError, ValueError) as e:
+                    log.warning("resource %s: its telemetry block %s: %s", r.get("name"), name, e)
+
+    def units(self) -> list[tuple[dict[str, Any], TelemetryBlock]]:
+        """A cell's resources with their telemetry blocks (none for a one-resource robot)."""
+        found = [(r, self.unit_tels.get(r.get("telemetry", ""))) for r in self.desc.get("resources", [])]
+        if len(found) < 2:
+            return []
+        return [(r, t) for r, t in found if t is not None]
 
     def decode_trace(self, rec: Any) -> dict[str, Any]:
         return views.decode_trace(rec, self.desc, self.missions)
@@ -420,8 +439,7 @@ class CommandDaemon:
     async def do_status(self, writer: asyncio.StreamWriter, rid: Any) -> dict[str, Any]:
         await self.refresh()
         log = self.recording.describe() if self.recording else self.last_log
-        out = views.status(self.tel, self.desc, log)
-        return out
+        return views.status(self.tel, self.desc, log, self.units())
 
     @handles("monitor")
     async def do_monitor(

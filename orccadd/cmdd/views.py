@@ -8,7 +8,7 @@ when a new mission was loaded, to learn the names behind the indices).
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -114,13 +114,16 @@ def timing(tel: TelemetryBlock, window_s: float = 5.0) -> dict[str, float]:
     return out
 
 
-def status(tel: TelemetryBlock, desc: dict[str, Any], log: dict[str, Any] | None) -> dict[str, Any]:
+def status(
+    tel: TelemetryBlock,
+    desc: dict[str, Any],
+    log: dict[str, Any] | None,
+    units: Sequence[tuple[dict[str, Any], TelemetryBlock]] = (),
+) -> dict[str, Any]:
+    """The daemon's state from its first resource's telemetry block (the status area, the
+    trace), and, for a cell (`units`: each resource's description and block), `resources`: each
+    one's task, status, timing and joints from its own block."""
     st = read_status(tel)
-    hdr = tel.header
-    rec = latest_tick(tel)
-    tasks: list[str] = desc.get("tasks", [])
-    joints: list[str] = desc.get("joints", [])
-    n = len(joints)
     out: dict[str, Any] = {
         "robot": desc.get("robot"),
         "state": MachineState(int(st[S.MACHINE])).name.lower(),
@@ -131,12 +134,30 @@ def status(tel: TelemetryBlock, desc: dict[str, Any], log: dict[str, Any] | None
         "faulted": bool(st[S.FAULTED]),
         "fault": desc.get("fault") or None if st[S.FAULTED] else None,  # why, in words
         "helper_pid": int(st[S.HELPER_PID]),
+        **loop_status(tel, desc.get("tasks", []), desc.get("joints", [])),
+        "log": log,
+    }
+    if units:
+        tasks = desc.get("tasks", [])
+        out["resources"] = [
+            {"name": u["name"], "fault": u.get("fault"), **loop_status(t, tasks, u["joints"])}
+            for u, t in units
+        ]
+    return out
+
+
+def loop_status(tel: TelemetryBlock, tasks: list[str], joints: list[str]) -> dict[str, Any]:
+    """One control loop's part of `status`, from its telemetry block: its counters and timing,
+    and from its newest tick its task, phase, resource status and joints."""
+    hdr = tel.header
+    rec = latest_tick(tel)
+    n = len(joints)
+    out: dict[str, Any] = {
         "ticks": int(hdr[H.TICKS]),
         "overruns": int(hdr[H.OVERRUNS]),
         "switches": int(hdr[H.SWITCHES]),
         "heartbeat_age_s": round((time.monotonic_ns() - hdr[H.HEARTBEAT_NS]) * 1e-9, 4),
         "timing": timing(tel),
-        "log": log,
     }
     if rec is not None:
         tid = int(rec[T.TASK])
@@ -217,9 +238,11 @@ def _tune(rec: np.ndarray, desc: dict[str, Any], mission: dict[str, Any]) -> dic
     base = len(R)
     values = rec[base + TRACE_IDX : base + TRACE_IDX + int(rec[R.N_ACT])].tolist()
     r = TuneRecord.decode(rec[base : base + 5].tolist(), values)
-    hold = (desc.get("tasks") or ["Hold"])[0]  # task id 0, the same whatever mission is loaded
-    tasks = [hold, *mission.get("tasks", [])]
-    tunables = [desc.get("hold_tunables", []), *mission.get("tunables", [])]
+    # the Hold tasks first (one per resource: ids 0, 1, ...), the same whatever mission is loaded
+    old_daemon = [{"hold_task": "Hold", "hold_tunables": desc.get("hold_tunables", [])}]
+    units = desc.get("resources") or old_daemon
+    tasks = [*(u.get("hold_task", "Hold") for u in units), *mission.get("tasks", [])]
+    tunables = [*(u.get("hold_tunables", []) for u in units), *mission.get("tunables", [])]
     task = tasks[r.task] if 0 <= r.task < len(tasks) else f"#{r.task}"
     names = tunables[r.task] if 0 <= r.task < len(tunables) else []
     param = names[r.param] if 0 <= r.param < len(names) else f"#{r.param}"

@@ -89,16 +89,31 @@ def timing_line(s: dict[str, Any]) -> str:
 
 def format_status(s: dict[str, Any]) -> str:
     automaton = f", automaton state {s['automaton_state']}" if s["automaton_state"] >= 0 else ""
-    lines = [
+    head = (
         f"{s.get('robot')}: {state_words(s)}"
         + (f", mission {s['mission']}" if s.get("mission") else "")
         + automaton
-        + (f"; fault: {cause_words(s.get('fault'))} (`reset` needed)" if s.get("faulted") else ""),
-        f"active task {s.get('active_task')} ({s.get('task_phase')}), last result {s['result']}, "
-        f"resource {', '.join(s.get('resource_status') or ['ok'])}",
-        "loop: " + timing_line(s),
-        *joint_lines(s),
-    ]
+        + (f"; fault: {cause_words(s.get('fault'))} (`reset` needed)" if s.get("faulted") else "")
+    )
+    if s.get("resources"):  # a cell: each resource, its loop and joints
+        lines = [head, f"last result {s['result']}"]
+        for r in s["resources"]:
+            fault = f"; fault: {cause_words(r['fault'])}" if r.get("fault") else ""
+            lines += [
+                "",
+                f"{r['name']}: task {r.get('active_task')} ({r.get('task_phase')}), "
+                f"resource {', '.join(r.get('resource_status') or ['ok'])}{fault}",
+                "  loop: " + timing_line(r),
+                *("  " + line for line in joint_lines(r)),
+            ]
+    else:
+        lines = [
+            head,
+            f"active task {s.get('active_task')} ({s.get('task_phase')}), last result {s['result']}, "
+            f"resource {', '.join(s.get('resource_status') or ['ok'])}",
+            "loop: " + timing_line(s),
+            *joint_lines(s),
+        ]
     if s.get("log"):
         lg = s["log"]
         lines.append(f"log: {lg['file']} ({lg['rows']} rows, {lg['lost']} lost)")

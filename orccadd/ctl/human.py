@@ -42,10 +42,26 @@ def _generic(r: dict[str, Any], _: dict[str, Any]) -> str:
 
 def _describe(r: dict[str, Any], ctx: dict[str, Any]) -> str:
     period = float(r["period_s"])
-    lines = [f"robot {r['robot']}: {r['dof']} joints, control period {period * 1e3:g} ms ({1 / period:g} Hz)"]
-    lines += table([("config", str(r["config"])), ("telemetry", str(r["telemetry"]))], "  ")
-    lines += _resource(r["resource"])
-    lines += _joint_limits(r)
+    units = r.get("resources") or []
+    if len(units) > 1:  # a cell: each resource on its own clock
+        lines = [f"robot {r['robot']}: {len(units)} resources, each on its own control thread"]
+        lines += table([("config", str(r["config"]))], "  ")
+        for u in units:
+            p = float(u["period_s"])
+            lines.append(
+                f"{u['name']}: {len(u['joints'])} joints, period {p * 1e3:g} ms ({1 / p:g} Hz), "
+                f"clock {u['clock']}, task {u['task']}"
+            )
+            lines += table([("config", str(u["config"])), ("telemetry", str(u["telemetry"]))], "  ")
+            lines += ["  " + line for line in _resource(u["description"])]
+            lines += ["  " + line for line in _joint_limits(u)]
+    else:
+        lines = [
+            f"robot {r['robot']}: {r['dof']} joints, control period {period * 1e3:g} ms ({1 / period:g} Hz)"
+        ]
+        lines += table([("config", str(r["config"])), ("telemetry", str(r["telemetry"]))], "  ")
+        lines += _resource(r["resource"])
+        lines += _joint_limits(r)
     m = r.get("mission")
     if m:
         lines.append(f"mission {m['name']} ({m['file']})")

@@ -234,6 +234,8 @@ class Machine:
             "fault": u.supervisor.fault.to_wire() if u.supervisor.fault else None,
             "telemetry": u.tel.name,
             "helper_pid": u.resource.helper_pid(),  # a simulated arm's plant process (0: none)
+            "hold_tunables": u.loop.hold.tunable_names,
+            "description": describe_resource(u.resource),
         }
 
     # ---- events from the control threads --------------------------------------------------

@@ -39,6 +39,7 @@ class LoadedMission:
             "file": self.file,
             "main_procedure": procs[0] if procs else "",
             "tasks": [t.name for t in p.tasks],
+            "task_resources": [t.resource.name for t in self.tasks],  # the resource each runs on
             "tunables": [t.tunable_names for t in self.tasks],  # per task: what a tune record names
             "inputs": list(p.inputs),
             "operator_inputs": [n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator"],

@@ -127,7 +127,7 @@ class T(IntEnum):
     T_S = 1  # release time of the tick (s, the loop's clock)
     WAKE_US = 2  # wake-up latency
     COMPUTE_US = 3
-    TASK = 4  # telemetry task id: 0 the Hold task, k the mission's task k-1
+    TASK = 4  # telemetry task id: the Hold tasks (one per resource), then the mission's (`describe`'s tasks)
     PHASE = 5  # Phase
     WROTE = 6  # 1 if a command was sent
     STATUS = 7  # Status flags of the resource

@@ -132,3 +132,10 @@ def test_one_arms_plant_killed_while_it_moves_stops_it_alone(slow: tuple[Daemon,
     dual.wait(lambda s: s["state"] != "running", timeout_s=30)
     assert cast(dict[str, Any], dual.call("reset", resource="left"))["reset"]  # a new plant
     assert resources(dual)["left"]["fault"] is None
+
+
+def test_a_mission_on_a_resource_the_cell_lacks_is_refused_at_its_line(dual: Daemon) -> None:
+    refused = dual.reply("load", path=str(ROOT / "configs/missions/grasp.mission"))
+    assert not refused["ok"], refused
+    assert "task Open runs on `gripper`, but this robot's resources are `left`, `right`" in refused["error"]
+    assert dual.status()["state"] == "idle"  # nothing loaded, nothing moved

@@ -1,0 +1,299 @@
+"""Several resources in one daemon: each clock domain's timing, law switches and cross-resource
+reactions, against cyclictest in the same run.
+
+Runs orccadd (as a separate process, with its command daemon) on:
+
+- **dual**: configs/robots/dual-arm-sim.toml (two simulated UR5e, `left` at 1 kHz and `right` at
+  500 Hz, each plant in its own process), first holding (no switches), then with
+  benchmarks/missions/cell_switching.mission: each arm alternates a tracking law and a dwell,
+  each par's end starting a law on both arms;
+- **gripper**: configs/robots/ur5e-gripper-sim.toml (the UR controller simulator at 500 Hz, the
+  arm device-paced, and the servo simulator's gripper at 200 Hz), holding, then pick_place.mission
+  run again and again;
+- **scale**: cells of 1, 2 and 4 simulated UR5e at 500 Hz, holding: how the figures grow.
+
+Every tick of every resource is read here from the daemon's own telemetry rings (shared memory,
+polled faster than they wrap), the automaton's instants from its trace ring. Printed per
+resource: wake-up latency and compute time (median, p99, max), overruns; per law switch on the
+resource whose event caused it, the ticks from the event's tick to the first tick of the new law
+(0: in the tick of the event); per cross-resource reaction (an event of resource A starting a law
+on B), the time from A's event tick to B's first tick of the new law, in B's periods; the ratio of
+each resource's wake-up p99 to cyclictest's (1 kHz, the control threads' priority, half of its
+run before ours and half after).
+
+Usage: `python benchmarks/cell.py [--duration-s 60] [--runs dual,gripper,scale]` (root, for
+SCHED_FIFO; `make bench`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from harness import ROOT, cyclictest, figures
+
+from orccadd.ctl.client import Client
+from orccadd.dxlsim.process import DxlSimProcess
+from orccadd.launch import DaemonProcess
+from orccadd.ursim.process import UrSimProcess
+from orccadd.wire.schema import TRACE_IDX, H, R, T, Trace
+from orccadd.wire.telemetry import RingReader, TelemetryBlock
+
+ROBOTS = ROOT / "configs/robots"
+DUAL = ROBOTS / "dual-arm-sim.toml"
+GRIPPER = ROBOTS / "ur5e-gripper-sim.toml"
+UR5E = ROBOTS / "sim-ur5e.toml"
+SWITCHING = ROOT / "benchmarks/missions/cell_switching.mission"
+PICK_PLACE = ROOT / "configs/missions/pick_place.mission"
+POLL_S = 0.5  # the rings hold 16 s of ticks
+
+
+@dataclass
+class Recording:
+    """Every tick of each resource and every instant, read from the daemon's telemetry."""
+
+    names: list[str]
+    periods_s: list[float]
+    ticks: list[list[np.ndarray]] = field(default_factory=list)  # per resource: chunks of records
+    trace: list[np.ndarray] = field(default_factory=list)
+    lost: int = 0
+
+    def resource_ticks(self, i: int) -> np.ndarray:
+        return np.concatenate(self.ticks[i]) if self.ticks[i] else np.empty((0, len(T)))
+
+    def instants(self) -> np.ndarray:
+        rec = np.concatenate(self.trace) if self.trace else np.empty((0, len(R)))
+        return rec[rec[:, R.KIND] == Trace.INSTANT] if len(rec) else rec
+
+
+@contextlib.contextmanager
+def recording(c: Client) -> Iterator[tuple[Recording, Callable[[], None]]]:
+    """Attach to every resource's block; `poll()` reads what is new (call it every `POLL_S`)."""
+    desc = c.call("describe")
+    units = desc["resources"]
+    blocks = [TelemetryBlock.attach(u["telemetry"]) for u in units]
+    rec = Recording([u["name"] for u in units], [float(u["period_s"]) for u in units])
+    rec.ticks = [[] for _ in units]
+    readers = [RingReader(b.ticks, b.header, H.TICK_HEAD) for b in blocks]
+    trace = RingReader(blocks[0].trace, blocks[0].header, H.TRACE_HEAD)
+
+    def poll() -> None:
+        for i, r in enumerate(readers):
+            rec.ticks[i].append(r.poll()[:, : len(T)])
+        rec.trace.append(trace.poll())
+        rec.lost = sum(r.lost for r in readers)
+
+    try:
+        yield rec, poll
+    finally:
+        poll()
+        for b in blocks:
+            b.close()
+
+
+def run_for(duration_s: float, poll: Callable[[], None], each: Callable[[], None] = lambda: None) -> None:
+    end = time.monotonic() + duration_s
+    while time.monotonic() < end:
+        time.sleep(POLL_S)
+        poll()
+        each()
+
+
+def timing_lines(rec: Recording, label: str, base_p99: float | None) -> list[str]:
+    out = []
+    for i, name in enumerate(rec.names):
+        t = rec.resource_ticks(i)
+        if not len(t):
+            out.append(f"  {label} {name}: no ticks")
+            continue
+        wake, comp = t[:, T.WAKE_US], t[:, T.COMPUTE_US]
+        period_us = rec.periods_s[i] * 1e6
+        overruns = int(((wake + comp) > period_us).sum())
+        ratio = f"  p99/cyclictest {np.percentile(wake, 99) / base_p99:.2f}" if base_p99 else ""
+        out.append(f"  {label} {name} ({period_us / 1e3:g} ms): wake-up {figures(wake, 'µs')}{ratio}")
+        out.append(f"  {label} {name}: compute {figures(comp, 'µs')}; ticks over their period {overruns}")
+    return out
+
+
+def switch_figures(rec: Recording, desc: dict[str, Any]) -> tuple[list[float], list[float]]:
+    """(law switches on the event's own resource, in ticks from the event's tick; cross-resource
+    reactions, in periods of the resource whose law changed)."""
+    mission = desc["mission"]
+    inputs, actions = mission["inputs"], mission["actions"]
+    on = dict(zip(mission["tasks"], mission["task_resources"], strict=True))
+    ids = {name: i for i, name in enumerate(desc["tasks"])}
+    ticks = [rec.resource_ticks(i) for i in range(len(rec.names))]
+    own, cross = [], []
+    for ins in rec.instants():
+        n_in, n_act = int(ins[R.N_IN]), int(ins[R.N_ACT])
+        names_in = [inputs[int(k)] for k in ins[len(R) : len(R) + n_in]]
+        sources = {on.get(n.split(".")[0]) for n in names_in} - {None}
+        if len(sources) != 1:
+            continue  # an operator's input, or events of two resources in one instant
+        (source,) = sources
+        t_event = float(ins[R.T_S])
+        acts = [actions[int(k)] for k in ins[len(R) + TRACE_IDX : len(R) + TRACE_IDX + n_act]]
+        for act in acts:
+            if not act.startswith("start "):
+                continue
+            task = act.removeprefix("start ")
+            k = rec.names.index(on[task])
+            t = ticks[k]
+            after = np.nonzero((t[:, T.T_S] >= t_event - 1e-9) & (t[:, T.TASK] == ids[task]))[0]
+            if not len(after):
+                continue
+            j = int(after[0])
+            if on[task] == source:
+                at = np.nonzero(np.abs(t[:, T.T_S] - t_event) < 1e-9)[0]
+                if len(at):
+                    own.append(float(j - int(at[0])))
+            else:
+                cross.append((float(t[j, T.T_S]) - t_event) / rec.periods_s[k])
+    return own, cross
+
+
+def daemon(config: Path, tmp: Path) -> DaemonProcess:
+    return DaemonProcess(config, tmp / "orccadd.sock", tmp / "orccadd.log", up_timeout_s=90.0)
+
+
+def run_dual(duration_s: float, base_p99: float | None) -> list[str]:
+    out = ["dual-arm-sim (left 1 kHz, right 500 Hz; simulated arms in their own processes)"]
+    with tempfile.TemporaryDirectory(prefix="orccadd-cell-") as tmp:
+        d = daemon(DUAL, Path(tmp))
+        try:
+            with Client(d.socket, timeout_s=120) as c:
+                with recording(c) as (rec, poll):
+                    run_for(duration_s, poll)
+                out += timing_lines(rec, "holding  ", base_p99)
+                c.call("load", path=str(SWITCHING))
+                desc = c.call("describe")
+                with recording(c) as (rec, poll):
+                    c.call("start")
+                    run_for(duration_s, poll)
+                    c.call("stop")
+                out += timing_lines(rec, "switching", base_p99)
+                out += _switch_lines(rec, desc)
+        finally:
+            d.stop()
+    return out
+
+
+def run_gripper(duration_s: float, base_p99: float | None) -> list[str]:
+    out = ["ur5e-gripper-sim (the arm paced by the UR simulator's 500 Hz, the gripper at 200 Hz)"]
+    with (
+        tempfile.TemporaryDirectory(prefix="orccadd-cell-") as tmp,
+        UrSimProcess(GRIPPER, "--boot", "running", "--priority", "70"),
+        DxlSimProcess(GRIPPER, "--priority", "70") as grip,
+    ):
+        grip.inject("object", device=1, at_rad=0.9, stiffness_nm_rad=20.0)
+        d = daemon(GRIPPER, Path(tmp))
+        try:
+            with Client(d.socket, timeout_s=120) as c:
+                with recording(c) as (rec, poll):
+                    run_for(duration_s, poll)
+                out += timing_lines(rec, "holding  ", base_p99)
+                c.call("load", path=str(PICK_PLACE))
+                desc = c.call("describe")
+                runs = [0]
+
+                def again() -> None:
+                    s = c.call("status")
+                    if s["state"] == "ready":
+                        if s["result"] != "success":
+                            raise SystemExit(f"pick_place ended {s['result']}: {s.get('fault')}")
+                        c.call("start")
+                        runs[0] += 1
+
+                with recording(c) as (rec, poll):
+                    c.call("start")
+                    run_for(duration_s, poll, again)
+                out += timing_lines(rec, "picking  ", base_p99)
+                out.append(f"  pick and place runs: {runs[0] + 1}")
+                out += _switch_lines(rec, desc)
+        finally:
+            d.stop()
+    return out
+
+
+def run_scale(duration_s: float, base_p99: float | None, sizes: tuple[int, ...] = (1, 2, 4)) -> list[str]:
+    out = ["cells of N simulated UR5e at 500 Hz, holding: the worst resource's figures"]
+    for n in sizes:
+        with tempfile.TemporaryDirectory(prefix="orccadd-cell-") as tmp:
+            cfg = Path(tmp) / f"arms{n}.toml"
+            cfg.write_text(
+                f'name = "arms{n}"\n'
+                + "".join(
+                    f'[[resources]]\nname = "arm{i}"\nconfig = "{ROBOTS}/sim-ur5e.toml"\n' for i in range(n)
+                )
+                + f'[daemon]\ntask_dirs = ["{ROOT}/configs/tasks"]\n'
+            )
+            d = daemon(cfg, Path(tmp))
+            try:
+                with Client(d.socket, timeout_s=120) as c, recording(c) as (rec, poll):
+                    run_for(duration_s, poll)
+            finally:
+                d.stop()
+        p99 = [np.percentile(rec.resource_ticks(i)[:, T.WAKE_US], 99) for i in range(n)]
+        worst = int(np.argmax(p99))
+        t = rec.resource_ticks(worst)
+        over = sum(
+            int(((x[:, T.WAKE_US] + x[:, T.COMPUTE_US]) > 2000.0).sum())
+            for x in (rec.resource_ticks(i) for i in range(n))
+        )
+        ratio = f", p99/cyclictest {p99[worst] / base_p99:.2f}" if base_p99 else ""
+        out.append(
+            f"  {n} arm(s): wake-up {figures(t[:, T.WAKE_US], 'µs')}{ratio}; ticks over their period {over}"
+        )
+        out.append(f"  {n} arm(s): compute {figures(t[:, T.COMPUTE_US], 'µs')}")
+    return out
+
+
+def _switch_lines(rec: Recording, desc: dict[str, Any]) -> list[str]:
+    own, cross = switch_figures(rec, desc)
+    in_tick = 100.0 * sum(1 for x in own if x == 0) / len(own) if own else float("nan")
+    lines = [
+        f"  law switches on the event's resource: {len(own)}, {in_tick:.1f} % in the tick of the event;"
+        f" ticks after it: {figures(own, 'ticks', 0)}",
+        "  cross-resource reactions (event on A → first tick of B's new law): "
+        + figures(cross, "periods of B", 2),
+    ]
+    if rec.lost:
+        lines.append(f"  (records lost: {rec.lost}: the figures miss them)")
+    return lines
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--duration-s", type=float, default=60.0, help="each phase of each run")
+    ap.add_argument("--runs", default="dual,gripper,scale", help="which: dual, gripper, scale")
+    ap.add_argument("--priority", type=int, default=80, help="cyclictest's: the control threads'")
+    args = ap.parse_args()
+    runs = [r.strip() for r in args.runs.split(",") if r.strip()]
+    table = {"dual": run_dual, "gripper": run_gripper, "scale": run_scale}
+    unknown = [r for r in runs if r not in table]
+    if unknown:
+        ap.error(f"--runs: unknown {', '.join(unknown)} (known: {', '.join(table)})")
+    before = cyclictest(0.001, args.duration_s / 2, args.priority)
+    base_p99 = None if before is None else float(np.percentile(before, 99))
+    lines: list[str] = []
+    for name in runs:
+        lines += table[name](args.duration_s, base_p99)
+    after = cyclictest(0.001, args.duration_s / 2, args.priority)
+    if before is not None and after is not None:
+        print(f"cyclictest 1 kHz, SCHED_FIFO {args.priority}, before: {figures(before, 'µs')}")
+        print(f"cyclictest 1 kHz, SCHED_FIFO {args.priority}, after:  {figures(after, 'µs')}")
+        print(f"(the ratios below: to the p99 before, {base_p99:.1f} µs)")
+    for line in lines:
+        print(line)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
