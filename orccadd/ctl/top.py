@@ -92,7 +92,10 @@ def render(
     `last_error`: the newest error seen so far (an exception of the trace, a refused key
     command); a fault of status (faulted) goes first."""
     width, height = size
+    units = status.get("resources") or []
     joints = len(status.get("joints", []))
+    if units:  # a cell: a goal, resource and loop line and the joints of each
+        joints = sum(len(u.get("joints", [])) + 4 for u in units) - 3
     need = (MIN_WIDTH, HEAD_LINES + joints + 2)
     if width < need[0] or height < need[1]:
         return [f"terminal too small: need {need[0]}x{need[1]}"[:width]]
@@ -109,17 +112,30 @@ def render(
     error = f"fault: {fault} (`reset` needed)" if fault else last_error
     flags = ", ".join(status.get("resource_status") or []) or "ok"
     c = state_colour(status) if colour else ""
-    lines = [
-        _fit(title, width),
-        _fit(state, width, c, 9, 9 + len(words)),
-        _fit(f"goal     {goal(status)}", width),
-        _fit(f"error    {error or '-'}", width, RED if colour and error else "", 9),
-        _fit(f"resource {flags}", width, RED if colour and flags != "ok" else "", 9),
-        _fit(f"loop     {timing_line(status)}", width),
-        _fit(f"> {note}" if note else "", width),
-        *(_fit(x, width) for x in joint_lines(status)),
-        _fit("last events:", width),
-    ]
+    error_line = _fit(f"error    {error or '-'}", width, RED if colour and error else "", 9)
+    head = [_fit(title, width), _fit(state, width, c, 9, 9 + len(words))]
+    note_line = _fit(f"> {note}" if note else "", width)
+    if units:  # a cell: each resource's goal, status, loop and joints
+        body = [error_line, note_line]
+        for u in units:
+            u_flags = ", ".join(u.get("resource_status") or []) or "ok"
+            bad = colour and (u_flags != "ok" or bool(u.get("fault")))
+            body += [
+                _fit(f"{u['name']}: {goal({**u, 'state': status.get('state')})}", width),
+                _fit(f"  resource {u_flags}", width, RED if bad else "", 11),
+                _fit(f"  loop     {timing_line(u)}", width),
+                *(_fit("  " + x, width) for x in joint_lines(u)),
+            ]
+    else:
+        body = [
+            _fit(f"goal     {goal(status)}", width),
+            error_line,
+            _fit(f"resource {flags}", width, RED if colour and flags != "ok" else "", 9),
+            _fit(f"loop     {timing_line(status)}", width),
+            note_line,
+            *(_fit(x, width) for x in joint_lines(status)),
+        ]
+    lines = [*head, *body, _fit("last events:", width)]
     room = height - len(lines)
     shown = list(events)[-room:] if room > 0 else []
     lines += [_fit(format_trace(e), width) for e in shown]

@@ -225,3 +225,24 @@ def test_count_ends_the_view(server: tuple[str, list[str]]) -> None:
     with Client(path) as c:
         Top(c, Keys(), screen, rate_hz=1000.0, count=1).run()
     assert len(screen.frames) == 1 and seen == ["status", "events"]
+
+
+def test_a_cell_shows_each_resource_its_goal_loop_and_joints() -> None:
+    joint = {"name": "j1", "q_rad": 0.1, "dq_rad_s": 0.0, "tau_nm": 0.0, "cmd": 0.0}
+    loop = {"ticks": 10, "overruns": 0, "switches": 1, "timing": {}, "joints": [joint]}
+    left = {"name": "left", "active_task": "MeetL", "task_phase": "run", "resource_status": [], **loop}
+    right = {
+        "name": "right",
+        "active_task": "Hold_right",
+        "task_phase": "run",
+        "resource_status": ["stopped"],
+    }
+    status = {
+        "robot": "dual", "state": "running", "result": "none", "automaton_state": 3, "faulted": False,
+        "resources": [left, {**right, **loop, "fault": {"kind": "device"}}], **loop,
+    }  # fmt: skip
+    frame = render(status, [], (100, 30))
+    assert "left: MeetL (run)" in frame and "right: Hold_right (run)" in frame, frame
+    assert "  resource stopped" in frame and sum("j1" in line for line in frame) == 2, frame
+    assert all(len(line) <= 100 for line in frame)
+    assert render(status, [], (100, 12)) == ["terminal too small: need 66x17"]
