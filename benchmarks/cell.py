@@ -159,6 +159,21 @@ def switch_figures(rec: Recording, desc: dict[str, Any]) -> tuple[list[float], l
     return own, cross
 
 
+def with_bench_missions(cell: Path, tmp: Path) -> Path:
+    """A copy of the cell config `cell` in `tmp` that also loads missions from benchmarks/missions."""
+    text = cell.read_text().replace('config = "', f'config = "{cell.parent}/')
+    dirs = f'mission_dirs = ["{ROOT}/configs/missions", "{ROOT}/benchmarks/missions"]\n'
+    dirs += f'task_dirs = ["{ROOT}/configs/tasks"]\n'
+    text = (
+        text.replace("\n[daemon]\n", f"\n[daemon]\n{dirs}", 1)
+        if "\n[daemon]\n" in text
+        else text + "\n[daemon]\n" + dirs
+    )
+    out = tmp / cell.name
+    out.write_text(text)
+    return out
+
+
 def daemon(config: Path, tmp: Path) -> DaemonProcess:
     return DaemonProcess(config, tmp / "orccadd.sock", tmp / "orccadd.log", up_timeout_s=90.0)
 
@@ -166,7 +181,7 @@ def daemon(config: Path, tmp: Path) -> DaemonProcess:
 def run_dual(duration_s: float, base_p99: float | None) -> list[str]:
     out = ["dual-arm-sim (left 1 kHz, right 500 Hz; simulated arms in their own processes)"]
     with tempfile.TemporaryDirectory(prefix="orccadd-cell-") as tmp:
-        d = daemon(DUAL, Path(tmp))
+        d = daemon(with_bench_missions(DUAL, Path(tmp)), Path(tmp))
         try:
             with Client(d.socket, timeout_s=120) as c:
                 with recording(c) as (rec, poll):
