@@ -127,7 +127,9 @@ def plant_main(
     if cycle_fd >= 0:
         os.set_blocking(cycle_fd, False)
     server = PlantServer(cfg, channel, watchdog_periods, cycle_fd)
-    enter_realtime(priority, lock_memory=False, cpus={cpu} if cpu >= 0 else None)
+    # its memory locked too: a page fault in a step delays the arm's state by milliseconds, and the
+    # controller counts a plant silent for `heartbeat_timeout_periods` as gone (CommLost)
+    enter_realtime(priority, cpus={cpu} if cpu >= 0 else None)
     ex = PeriodicExecutor(WallClock(), cfg.control_period_s, server.step)
     try:
         ex.run(until=lambda: server.done)
