@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The wheel as a user gets it (CI runs this after `make test`): built from this checkout's HEAD,
 # installed with every bus extra into an empty virtual environment, then, from outside the
-# checkout: --version, `orccadctl check` on every shipped mission (its tasks built on sim-ur5e, a gripper's on gripper-sim),
+# checkout: --version, `orccadctl check` on every shipped mission (its tasks built on the shipped robot whose resources it names),
 # the service files, completion, the module catalogue, orccadd on the shipped
 # sim-ur5e config for two seconds, status, and a SIGTERM that must end it cleanly (exit 0).
 set -euo pipefail
@@ -25,8 +25,15 @@ cd "$work"  # nothing of the checkout from here on
 share="$work/venv/share/orccadd/configs"
 for mission in "$share"/missions/*.mission; do
     if grep -q '^task .* from "' "$mission"; then
-        robot=sim-ur5e  # the arm's missions; a gripper's on the shipped gripper
-        if grep -q '^resource gripper' "$mission"; then robot=gripper-sim; fi
+        # the shipped robot whose resources the mission names (`resource ...`)
+        case "$(grep -m1 '^resource ' "$mission")" in
+            "resource arm") robot=sim-ur5e ;;
+            "resource gripper") robot=gripper-sim ;;
+            "resource arm, gripper") robot=ur5e-gripper-sim ;;
+            "resource left, right") robot=dual-arm-sim ;;
+            "resource left, right, left_hand, right_hand") robot=dual-arm-grippers-sim ;;
+            *) echo "smoke: no shipped robot for $(basename "$mission")" >&2; exit 1 ;;
+        esac
         "$bin/orccadctl" check "$mission" --config "$robot" >/dev/null  # every task built on it
         echo "checked $(basename "$mission") (and its tasks on $robot)"
     else  # the seed's KEEPSTABLE (an underwater vehicle): no task files for an arm
