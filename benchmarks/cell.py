@@ -122,15 +122,17 @@ def timing_lines(rec: Recording, label: str, base_p99: float | None) -> list[str
     return out
 
 
-def switch_figures(rec: Recording, desc: dict[str, Any]) -> tuple[list[float], list[float]]:
+def switch_figures(rec: Recording, desc: dict[str, Any]) -> tuple[list[float], list[float], list[float]]:
     """(law switches on the event's own resource, in ticks from the event's tick; cross-resource
-    reactions, in periods of the resource whose law changed)."""
+    reactions in periods of the resource B whose law changed: from the event tick's release to
+    B's first tick of the new law's release, and from the event tick's end (the event known) to
+    that tick's end (B's new command sent))."""
     mission = desc["mission"]
     inputs, actions = mission["inputs"], mission["actions"]
     on = dict(zip(mission["tasks"], mission["task_resources"], strict=True))
     ids = {name: i for i, name in enumerate(desc["tasks"])}
     ticks = [rec.resource_ticks(i) for i in range(len(rec.names))]
-    own, cross = [], []
+    own, cross, sent = [], [], []
     for ins in rec.instants():
         n_in, n_act = int(ins[R.N_IN]), int(ins[R.N_ACT])
         names_in = [inputs[int(k)] for k in ins[len(R) : len(R) + n_in]]
@@ -156,7 +158,14 @@ def switch_figures(rec: Recording, desc: dict[str, Any]) -> tuple[list[float], l
                     own.append(float(j - int(at[0])))
             else:
                 cross.append((float(t[j, T.T_S]) - t_event) / rec.periods_s[k])
-    return own, cross
+                a = ticks[rec.names.index(source)]
+                at = np.nonzero(np.abs(a[:, T.T_S] - t_event) < 1e-9)[0]
+                if len(at):
+                    i = int(at[0])
+                    known = t_event + (a[i, T.WAKE_US] + a[i, T.COMPUTE_US]) * 1e-6
+                    done = float(t[j, T.T_S]) + (t[j, T.WAKE_US] + t[j, T.COMPUTE_US]) * 1e-6
+                    sent.append((done - known) / rec.periods_s[k])
+    return own, cross, sent
 
 
 def with_bench_missions(cell: Path, tmp: Path) -> Path:
@@ -271,13 +280,15 @@ def run_scale(duration_s: float, base_p99: float | None, sizes: tuple[int, ...] 
 
 
 def _switch_lines(rec: Recording, desc: dict[str, Any]) -> list[str]:
-    own, cross = switch_figures(rec, desc)
+    own, cross, sent = switch_figures(rec, desc)
     in_tick = 100.0 * sum(1 for x in own if x == 0) / len(own) if own else float("nan")
     lines = [
         f"  law switches on the event's resource: {len(own)}, {in_tick:.1f} % in the tick of the event;"
         f" ticks after it: {figures(own, 'ticks', 0)}",
         "  cross-resource reactions (event on A → first tick of B's new law): "
         + figures(cross, "periods of B", 2),
+        "  the same from A's tick end (the event known) to that tick's end (B's command sent): "
+        + figures(sent, "periods of B", 2),
     ]
     if rec.lost:
         lines.append(f"  (records lost: {rec.lost}: the figures miss them)")

@@ -18,7 +18,7 @@ from typing import Any
 
 from orccadd.types import CommandMode, Phase, Status
 
-PROTOCOL_VERSION = 6  # bumped when a request, reply, record layout or enum changes meaning
+PROTOCOL_VERSION = 7  # bumped when a request, reply, record layout or enum changes meaning
 
 MAGIC = 0x0CCADD02
 HEADER_LEN = 16
