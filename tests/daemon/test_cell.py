@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, cast
@@ -139,3 +141,20 @@ def test_a_mission_on_a_resource_the_cell_lacks_is_refused_at_its_line(dual: Dae
     assert not refused["ok"], refused
     assert "task Open runs on `gripper`, but this robot's resources are `left`, `right`" in refused["error"]
     assert dual.status()["state"] == "idle"  # nothing loaded, nothing moved
+
+
+def test_a_resource_that_fails_at_startup_stops_the_daemon_naming_it(tmp_path: Path) -> None:
+    # the two arms start (their plants), then the left hand's chain is not there: exit 2 naming
+    # it, no socket served
+    cell = ROOT / "configs/robots/dual-arm-grippers-sim.toml"
+    text = cell.read_text().replace('config = "', f'config = "{cell.parent}/')
+    text = text.replace("/tmp/orccadd-left-hand", str(tmp_path / "no-such-chain"))
+    (tmp_path / "cell.toml").write_text(text)
+    cmd = [
+        sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(tmp_path / "cell.toml"),
+        "--socket", str(tmp_path / "run/orccadd.sock"),
+    ]  # fmt: skip
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2, out.stderr
+    assert "resource left_hand: " in out.stderr and "no-such-chain" in out.stderr, out.stderr
+    assert not (tmp_path / "run/orccadd.sock").exists()
