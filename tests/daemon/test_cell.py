@@ -158,3 +158,21 @@ def test_a_resource_that_fails_at_startup_stops_the_daemon_naming_it(tmp_path: P
     assert out.returncode == 2, out.stderr
     assert "resource left_hand: " in out.stderr and "no-such-chain" in out.stderr, out.stderr
     assert not (tmp_path / "run/orccadd.sock").exists()
+
+
+def test_orccadctl_describes_and_shows_each_resource_in_words(dual: Daemon) -> None:
+    def ctl(*args: str) -> str:
+        env = {**os.environ, "ORCCADD_SOCKET": str(dual.socket)}
+        out = subprocess.run(
+            [sys.executable, "-m", "orccadd.cli", *args], capture_output=True, text=True, timeout=60, env=env
+        )
+        assert out.returncode == 0, out.stderr
+        return out.stdout
+
+    text = ctl("describe")
+    assert "robot dual-arm-sim: 2 resources, each on its own control thread" in text, text
+    assert "left: 6 joints, period 1 ms (1000 Hz), clock loop, task Hold_left" in text, text
+    assert "right: 6 joints, period 2 ms (500 Hz), clock loop, task Hold_right" in text, text
+    status = ctl("status")
+    assert "left: task Hold_left (run), resource ok" in status and "right: task Hold_right" in status
+    assert status.count("  loop: ") == 2, status
