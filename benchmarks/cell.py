@@ -37,14 +37,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from harness import ROOT, cyclictest, figures
+from harness import ROOT, cyclictest, figures, running_daemon
 
 from orccadd.ctl.client import Client
 from orccadd.dxlsim.process import DxlSimProcess
-from orccadd.launch import DaemonProcess
 from orccadd.ursim.process import UrSimProcess
 from orccadd.wire.schema import TRACE_IDX, H, R, T, Trace
 from orccadd.wire.telemetry import RingReader, TelemetryBlock
+from tests.daemon.conftest import cell_copy
 
 ROBOTS = ROOT / "configs/robots"
 DUAL = ROBOTS / "dual-arm-sim.toml"
@@ -168,81 +168,59 @@ def switch_figures(rec: Recording, desc: dict[str, Any]) -> tuple[list[float], l
     return own, cross, sent
 
 
-def with_bench_missions(cell: Path, tmp: Path) -> Path:
-    """A copy of the cell config `cell` in `tmp` that also loads missions from benchmarks/missions."""
-    text = cell.read_text().replace('config = "', f'config = "{cell.parent}/')
-    dirs = f'mission_dirs = ["{ROOT}/configs/missions", "{ROOT}/benchmarks/missions"]\n'
-    dirs += f'task_dirs = ["{ROOT}/configs/tasks"]\n'
-    text = (
-        text.replace("\n[daemon]\n", f"\n[daemon]\n{dirs}", 1)
-        if "\n[daemon]\n" in text
-        else text + "\n[daemon]\n" + dirs
-    )
-    out = tmp / cell.name
-    out.write_text(text)
-    return out
-
-
-def daemon(config: Path, tmp: Path) -> DaemonProcess:
-    return DaemonProcess(config, tmp / "orccadd.sock", tmp / "orccadd.log", up_timeout_s=90.0)
+def hold_then_run(
+    c: Client,
+    duration_s: float,
+    base_p99: float | None,
+    mission: Path,
+    label: str,
+    each: Callable[[], None] = lambda: None,
+) -> list[str]:
+    """Every resource holding for `duration_s`, then `mission` started and run for as long (then
+    stopped if it still runs): the timing of both phases and the mission's switches."""
+    with recording(c) as (rec, poll):
+        run_for(duration_s, poll)
+    out = timing_lines(rec, "holding  ", base_p99)
+    c.call("load", path=str(mission))
+    desc = c.call("describe")
+    with recording(c) as (rec, poll):
+        c.call("start")
+        run_for(duration_s, poll, each)
+        if c.call("status")["state"] == "running":
+            c.call("stop")
+    return out + timing_lines(rec, label, base_p99) + _switch_lines(rec, desc)
 
 
 def run_dual(duration_s: float, base_p99: float | None) -> list[str]:
     out = ["dual-arm-sim (left 1 kHz, right 500 Hz; simulated arms in their own processes)"]
     with tempfile.TemporaryDirectory(prefix="orccadd-cell-") as tmp:
-        d = daemon(with_bench_missions(DUAL, Path(tmp)), Path(tmp))
-        try:
-            with Client(d.socket, timeout_s=120) as c:
-                with recording(c) as (rec, poll):
-                    run_for(duration_s, poll)
-                out += timing_lines(rec, "holding  ", base_p99)
-                c.call("load", path=str(SWITCHING))
-                desc = c.call("describe")
-                with recording(c) as (rec, poll):
-                    c.call("start")
-                    run_for(duration_s, poll)
-                    c.call("stop")
-                out += timing_lines(rec, "switching", base_p99)
-                out += _switch_lines(rec, desc)
-        finally:
-            d.stop()
+        missions = f'mission_dirs = ["{ROOT}/configs/missions", "{ROOT}/benchmarks/missions"]'
+        cfg = cell_copy(DUAL, Path(tmp), f'{missions}\ntask_dirs = ["{ROOT}/configs/tasks"]')
+        with running_daemon(cfg) as d, Client(d.socket, timeout_s=120) as c:
+            out += hold_then_run(c, duration_s, base_p99, SWITCHING, "switching")
     return out
 
 
 def run_gripper(duration_s: float, base_p99: float | None) -> list[str]:
     out = ["ur5e-gripper-sim (the arm paced by the UR simulator's 500 Hz, the gripper at 200 Hz)"]
     with (
-        tempfile.TemporaryDirectory(prefix="orccadd-cell-") as tmp,
         UrSimProcess(GRIPPER, "--boot", "running", "--priority", "70"),
         DxlSimProcess(GRIPPER, "--priority", "70") as grip,
     ):
         grip.inject("object", device=1, at_rad=0.9, stiffness_nm_rad=20.0)
-        d = daemon(GRIPPER, Path(tmp))
-        try:
-            with Client(d.socket, timeout_s=120) as c:
-                with recording(c) as (rec, poll):
-                    run_for(duration_s, poll)
-                out += timing_lines(rec, "holding  ", base_p99)
-                c.call("load", path=str(PICK_PLACE))
-                desc = c.call("describe")
-                runs = [0]
+        with running_daemon(GRIPPER) as d, Client(d.socket, timeout_s=120) as c:
+            runs = [1]
 
-                def again() -> None:
-                    s = c.call("status")
-                    if s["state"] == "ready":
-                        if s["result"] != "success":
-                            raise SystemExit(f"pick_place ended {s['result']}: {s.get('fault')}")
-                        c.call("start")
-                        runs[0] += 1
-
-                with recording(c) as (rec, poll):
+            def again() -> None:  # pick and place again, each time it ends
+                s = c.call("status")
+                if s["state"] == "ready":
+                    if s["result"] != "success":
+                        raise SystemExit(f"pick_place ended {s['result']}: {s.get('fault')}")
                     c.call("start")
-                    run_for(duration_s, poll, again)
-                out += timing_lines(rec, "picking  ", base_p99)
-                out.append(f"  pick and place runs: {runs[0] + 1}")
-                out += _switch_lines(rec, desc)
-        finally:
-            d.stop()
+                    runs[0] += 1
+
+            out += hold_then_run(c, duration_s, base_p99, PICK_PLACE, "picking  ", again)
+            out.append(f"  pick and place runs: {runs[0]}")
     return out
 
 
@@ -253,17 +231,11 @@ def run_scale(duration_s: float, base_p99: float | None, sizes: tuple[int, ...] 
             cfg = Path(tmp) / f"arms{n}.toml"
             cfg.write_text(
                 f'name = "arms{n}"\n'
-                + "".join(
-                    f'[[resources]]\nname = "arm{i}"\nconfig = "{ROBOTS}/sim-ur5e.toml"\n' for i in range(n)
-                )
+                + "".join(f'[[resources]]\nname = "arm{i}"\nconfig = "{UR5E}"\n' for i in range(n))
                 + f'[daemon]\ntask_dirs = ["{ROOT}/configs/tasks"]\n'
             )
-            d = daemon(cfg, Path(tmp))
-            try:
-                with Client(d.socket, timeout_s=120) as c, recording(c) as (rec, poll):
-                    run_for(duration_s, poll)
-            finally:
-                d.stop()
+            with running_daemon(cfg) as d, Client(d.socket, timeout_s=120) as c, recording(c) as (rec, poll):
+                run_for(duration_s, poll)
         p99 = [np.percentile(rec.resource_ticks(i)[:, T.WAKE_US], 99) for i in range(n)]
         worst = int(np.argmax(p99))
         t = rec.resource_ticks(worst)

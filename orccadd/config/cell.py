@@ -73,6 +73,7 @@ class CellConfig:
     daemon: DaemonConfig
     resources: tuple[RobotConfig, ...]
     listed: bool = False  # written as a cell ([[resources]]), not a one-resource robot config
+    overridden: tuple[frozenset[str], ...] = ()  # per resource: the settings keys the cell sets
 
     @classmethod
     def of(cls, cfg: RobotConfig) -> CellConfig:
@@ -165,7 +166,8 @@ def read_cell_config(path: str | Path) -> CellConfig:
                 ),
             )
         )
-    return CellConfig(cell.name, file, daemon, tuple(out), listed=True)
+    overridden = tuple(frozenset(e.settings or {}) for e in cell.resources)
+    return CellConfig(cell.name, file, daemon, tuple(out), listed=True, overridden=overridden)
 
 
 def _absolute(d: DaemonConfig, here: Path) -> DaemonConfig:
@@ -189,10 +191,7 @@ def override_key(cell: CellConfig, index: int, err: ConfigError) -> ConfigError:
     if not cell.listed or not err.key.startswith(prefix):
         return err
     rest = err.key.removeprefix(prefix)
-    raw = read_toml(Path(cell.source))
-    entry = raw["resources"][index]
-    top = re.split(r"[.\[]", rest, maxsplit=1)[0]
-    if top in (entry.get("settings") or {}):
+    if re.split(r"[.\[]", rest, maxsplit=1)[0] in cell.overridden[index]:
         return ConfigError(cell.source, f"resources[{index}].settings.{rest}", err.detail)
     return err
 

@@ -130,7 +130,8 @@ class Machine:
         )
         for u in self.units:
             u.loop.reactor = self.reactor
-        self.mission._publish_task_ids()
+        self.mission.publish_task_ids()
+        self.hold_names = frozenset(u.loop.hold.name for u in self.units)
         first = self.units[0]
         self.resource, self.clock, self.tel, self.loop, self.queue = (
             first.resource, first.clock, first.tel, first.loop, first.queue,
@@ -250,7 +251,6 @@ class Machine:
         inputs = 0
         t_last = 0.0
         held_fault = ""  # a type 3 of a resource the run had on its Hold task
-        holds = {lp.hold.name for lp in mc.loops}
         for k, u in enumerate(self.units):
             index, upto = u.queue.tail, self.reactor.upto[k]
             for t_s, eid in u.queue.drain():
@@ -258,7 +258,7 @@ class Machine:
                 if info.kind is EventKind.T3:
                     new = u.supervisor.fault is None  # not a stopped resource's Hold, again
                     u.supervisor.on_t3(info.name, self._task_fault(info.task))
-                    if new and info.task in holds and mc.running and len(self.units) > 1:
+                    if new and info.task in self.hold_names and mc.running and len(self.units) > 1:
                         held_fault = f"{u.name} safe-stopped while the run held it ({info.name})"
                 bit = mission.event_bits.get(eid, 0) if mission is not None and mc.running else 0
                 reacted = index < upto

@@ -89,7 +89,7 @@ class MissionControl:
         """The control loop of the resource `task` runs on."""
         return self.loops[self._by_resource[task.resource.name]]
 
-    def _publish_task_ids(self) -> None:
+    def publish_task_ids(self) -> None:
         ids = {id(t): i for i, t in enumerate(self.tasks())}
         for lp in self.loops:
             lp.set_task_ids(ids)
@@ -98,7 +98,7 @@ class MissionControl:
     def install(self, loaded: LoadedMission) -> None:
         self.need(MachineState.IDLE, MachineState.READY, what="load a mission")
         self.mission = loaded
-        self._publish_task_ids()
+        self.publish_task_ids()
         self.generation += 1
         self.pub.mission_gen = self.generation
         self.loaded = [

@@ -39,7 +39,7 @@ from orccadd.daemon.machine import Machine, Unit
 from orccadd.daemon.notify import Notifier
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.urgent import UrgentSocket
-from orccadd.errors import OrccaddError
+from orccadd.errors import OrccaddError, ResourceError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.robot import create_resource, load_cell_config, with_backend
 from orccadd.runtime import enter_realtime, leave_realtime
@@ -146,7 +146,7 @@ class RealtimeProcess:
             except OrccaddError as e:
                 if len(self.resources) == 1:
                     raise
-                raise type(e)(f"resource {res.name}: {e}") from None
+                raise ResourceError(f"resource {res.name}: {e}") from None
         self.wake_r, self.wake_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self.machine = Machine(
             self.cell,

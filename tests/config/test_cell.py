@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from orccadd.config.cell import read_cell_config
+from orccadd.config.cell import pick_resource, read_cell_config
 from orccadd.errors import ConfigError
 from orccadd.robot import load_cell_config
 from tests.conftest import ROOT
@@ -115,3 +115,20 @@ def test_a_resources_loop_keys_are_its_own_and_the_cell_may_not_set_them(tmp_pat
     path = write(tmp_path, 'name = "c"\n' + entry("a", "sim-ur5e.toml") + "[daemon]\noverrun_limit = 9\n")
     with pytest.raises(ConfigError, match="daemon.overrun_limit belongs to each resource's loop"):
         read_cell_config(path)
+
+
+def test_a_simulator_serves_the_one_resource_of_its_bus_or_the_one_named() -> None:
+    cell = read_cell_config(ROBOTS / "ur5e-gripper-sim.toml")
+    assert pick_resource(cell, ("dynamixel",)).resource.name == "gripper"
+    assert pick_resource(cell, ("ur_rtde",)).resource.name == "arm"
+    two = read_cell_config(ROBOTS / "dual-arm-grippers-sim.toml")
+    with pytest.raises(ConfigError, match=r"several dynamixel resources \(left_hand, right_hand\): name one"):
+        pick_resource(two, ("dynamixel",))
+    assert (
+        pick_resource(two, ("dynamixel",), "right_hand").resource.settings["port"]
+        == "/tmp/orccadd-right-hand"
+    )
+    with pytest.raises(ConfigError, match="has no resource 'thumb'"):
+        pick_resource(two, ("dynamixel",), "thumb")
+    with pytest.raises(ConfigError, match="has no canopen402 resource"):
+        pick_resource(two, ("canopen402",))

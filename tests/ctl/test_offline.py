@@ -201,3 +201,11 @@ def test_check_without_a_robot_says_which_checks_it_did_not_run_and_runs_them_on
     assert main(["check", str(typo)]) == 1
     assert "FAIL robot ur5e:" in capsys.readouterr().out
     assert main(["check", str(typo), "--config", "sim-ur5e"]) == 1
+
+
+def test_check_on_a_cell_refuses_a_task_on_a_resource_it_lacks_as_load_does() -> None:
+    grasp = str(ROOT / "configs/missions/grasp.mission")
+    r = ctl("check", grasp, "--config", "dual-arm-sim")
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "task Open runs on `gripper`, but this robot's resources are `left`, `right`" in r.stdout
+    assert ctl("check", grasp, "--config", "ur5e-gripper-sim").returncode == 0

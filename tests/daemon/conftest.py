@@ -65,6 +65,18 @@ def start_daemon_with(tmp: Path, config: Path, *extra: str, own_group: bool = Fa
     )  # fmt: skip
 
 
+def cell_copy(cell: Path, tmp: Path, daemon_lines: str = "") -> Path:
+    """A copy of the cell config `cell` in `tmp` (its resources' configs named by absolute paths,
+    so that they still name the shipped files), with `daemon_lines` added to its [daemon] table."""
+    text = cell.read_text().replace('config = "', f'config = "{cell.parent}/')
+    if daemon_lines:
+        head, found, rest = text.partition("\n[daemon]\n")
+        text = f"{head}\n[daemon]\n{daemon_lines}\n{rest}" if found else f"{text}\n[daemon]\n{daemon_lines}\n"
+    out = tmp / cell.name
+    out.write_text(text)
+    return out
+
+
 @pytest.fixture
 def daemon(tmp_path: Path) -> Iterator[Daemon]:
     d = start_daemon(tmp_path)

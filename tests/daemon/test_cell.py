@@ -14,7 +14,7 @@ from typing import Any, cast
 
 import pytest
 
-from tests.daemon.conftest import ROOT, Daemon, start_daemon_with
+from tests.daemon.conftest import ROOT, Daemon, cell_copy, start_daemon_with
 
 DUAL = ROOT / "configs/robots/dual-arm-sim.toml"
 MISSION = str(ROOT / "configs/missions/dual_reach.mission")
@@ -34,11 +34,8 @@ def dual(tmp_path: Path) -> Iterator[Daemon]:
 def slow(tmp_path: Path) -> Iterator[tuple[Daemon, str]]:
     """The dual arm with missions from `tmp_path` too, and dual_reach there with a slow MeetL
     (seconds: a fault injected while it runs lands in it)."""
-    robots = ROOT / "configs/robots"
-    cell = tmp_path / "dual.toml"
-    cell.write_text(
-        DUAL.read_text().replace('config = "', f'config = "{robots}/')
-        + f'mission_dirs = ["{tmp_path}"]\ntask_dirs = ["{ROOT / "configs/tasks"}"]\n'
+    cell = cell_copy(
+        DUAL, tmp_path, f'mission_dirs = ["{tmp_path}"]\ntask_dirs = ["{ROOT / "configs/tasks"}"]'
     )
     text = Path(MISSION).read_text().replace('"../tasks/', f'"{ROOT}/configs/tasks/')
     head, meet, tail = text.partition("task MeetL")
@@ -146,12 +143,10 @@ def test_a_mission_on_a_resource_the_cell_lacks_is_refused_at_its_line(dual: Dae
 def test_a_resource_that_fails_at_startup_stops_the_daemon_naming_it(tmp_path: Path) -> None:
     # the two arms start (their plants), then the left hand's chain is not there: exit 2 naming
     # it, no socket served
-    cell = ROOT / "configs/robots/dual-arm-grippers-sim.toml"
-    text = cell.read_text().replace('config = "', f'config = "{cell.parent}/')
-    text = text.replace("/tmp/orccadd-left-hand", str(tmp_path / "no-such-chain"))
-    (tmp_path / "cell.toml").write_text(text)
+    cell = cell_copy(ROOT / "configs/robots/dual-arm-grippers-sim.toml", tmp_path)
+    cell.write_text(cell.read_text().replace("/tmp/orccadd-left-hand", str(tmp_path / "no-such-chain")))
     cmd = [
-        sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(tmp_path / "cell.toml"),
+        sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(cell),
         "--socket", str(tmp_path / "run/orccadd.sock"),
     ]  # fmt: skip
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
@@ -176,3 +171,15 @@ def test_orccadctl_describes_and_shows_each_resource_in_words(dual: Daemon) -> N
     status = ctl("status")
     assert "left: task Hold_left (run), resource ok" in status and "right: task Hold_right" in status
     assert status.count("  loop: ") == 2, status
+
+
+def test_a_reset_or_an_injection_naming_no_resource_is_refused_and_nothing_changes(dual: Daemon) -> None:
+    for cmd, args in (
+        ("reset", {"resource": "middle"}),
+        ("inject", {"fault": "resource", "resource": "middle"}),
+    ):
+        r = dual.reply(cmd, **args)
+        assert not r["ok"] and "no resource 'middle' (resources: left, right)" in r["error"], r
+    s = dual.status()
+    assert not s["faulted"] and s["state"] == "idle", s
+    assert all(x["fault"] is None for x in resources(dual).values())
