@@ -80,22 +80,6 @@ class Machine(Protocol):
     def describe(self) -> dict[str, Any]: ...
 
 
-def _then(reply: Result | Pending, on_done: Callable[[], None]) -> Result | Pending:
-    """`reply`, calling `on_done` once it is complete."""
-    if not isinstance(reply, Pending):
-        on_done()
-        return reply
-    inner = reply
-
-    def poll() -> Result | None:
-        got = inner.poll()
-        if got is not None:
-            on_done()
-        return got
-
-    return Pending(poll, inner.deadline_ns, inner.expire)
-
-
 class RtCommands:
     """The `rt` side of the command table (see `Dispatcher`)."""
 
@@ -305,9 +289,8 @@ class RtCommands:
         for u in units:
             u.supervisor.check_reset()
         replies = [u.supervisor.begin_reset(lambda: None) for u in units]
-        if len(self.m.units) == 1:
-            return _then(replies[0], on_done)
         names = [u.name for u in units]
+        done: Result = {"reset": True} if len(self.m.units) == 1 else {"reset": True, "resources": names}
         results: dict[int, Result] = {}
 
         def poll() -> Result | None:
@@ -319,7 +302,7 @@ class RtCommands:
             if len(results) < len(replies):
                 return None
             on_done()
-            return {"reset": True, "resources": names}
+            return done
 
         def expire() -> Result:
             late = [names[i] for i in range(len(replies)) if i not in results]
