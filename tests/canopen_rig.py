@@ -91,11 +91,12 @@ def rig_config(
         for default, hub_port in zip(BUS_PORTS, [port] if isinstance(port, int) else port, strict=False):
             text = text.replace(f"port = {default}", f"port = {hub_port}")
     text = text.replace('hold_task = "../tasks/', f'hold_task = "{ROOT}/configs/tasks/')
-    # this VM stalls processes for up to ~0.3 s now and then: heartbeats every 250 ms (a lost
-    # drive is still reported within 3 × 250 ms), ours every 100 ms (the drives that watch it
-    # fault after 3 × 100 ms of silence)
+    # this VM stalls processes for up to ~0.3 s now and then (more with a busy process beside the
+    # suite: a CI run saw every drive lose a test's heartbeat, 3 × 100 ms): heartbeats every 250 ms
+    # (a lost drive is still reported within 3 × 250 ms), ours every 200 ms (the drives that watch
+    # it fault after 3 × 200 ms of silence)
     text = text.replace("heartbeat_ms = 100", "heartbeat_ms = 250")
-    text = text.replace("controller_heartbeat_ms = 50", "controller_heartbeat_ms = 100")
+    text = text.replace("controller_heartbeat_ms = 50", "controller_heartbeat_ms = 200")
     # and the drive simulator (a Python process beside the controller on 2 cores) now and then
     # answers nothing for ~0.1-0.15 s while the controller keeps sending SYNCs (measured with its
     # `longest_loop_gap_ms`): a node is silent after 150 SYNCs (0.3 s) here

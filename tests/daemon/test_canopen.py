@@ -98,7 +98,7 @@ def test_the_daemon_enables_the_drives_once_its_loop_runs(tmp_path: Path) -> Non
             deadline = time.monotonic() + 10
             while nodes_enabled(list(bus.frames)) != set(range(1, 7)) and time.monotonic() < deadline:
                 time.sleep(0.1)
-            time.sleep(0.5)  # past the drives' heartbeat timeout (3 × 100 ms)
+            time.sleep(0.8)  # past the drives' heartbeat timeout (3 × 200 ms)
             end_s = time.time()
         finally:
             d.stop()
@@ -106,4 +106,4 @@ def test_the_daemon_enables_the_drives_once_its_loop_runs(tmp_path: Path) -> Non
     assert nodes_enabled(frames) == set(range(1, 7)), d.log.read_text()
     assert not emcy_errors(frames)
     gaps_s = enable_to_sync_gaps_s(frames)
-    assert gaps_s and max(gaps_s) < 0.1, max(gaps_s)  # the rig's controller_heartbeat_ms
+    assert gaps_s and max(gaps_s) < 0.2, max(gaps_s)  # the rig's controller_heartbeat_ms

@@ -201,7 +201,7 @@ def test_the_bus_dying_is_comm_lost_with_a_clear_message(rig: Rig, arm: Canopen4
 
 # ---- issue 15: startup against strict drives ------------------------------------------------------
 LOOP_START_S = 1.0  # the daemon's setup between activate and its loop's first tick (0.15-0.22 s
-# measured), here longer than the drives' heartbeat timeout (3 × 100 ms on this rig)
+# measured), here longer than the drives' heartbeat timeout (3 × 200 ms on this rig)
 
 
 def when_watched(frames: list[can.Message]) -> list[float]:
