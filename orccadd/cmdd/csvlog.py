@@ -30,7 +30,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from orccadd.cmdd.logfeed import MODE_UNITS, FloatArray, LogEvent, LogOrigin, unit
+from orccadd.cmdd.logfeed import MODE_UNITS, FloatArray, LogEvent, LogOrigin, base_signal, unit
 from orccadd.cmdd.views import SignalSelection
 from orccadd.wire.schema import T
 from orccadd.wire.socketdir import SocketPathError, prepare_socket_dir
@@ -177,8 +177,9 @@ def header_lines(origin: LogOrigin, labels: list[str], meta: dict[str, Any]) -> 
     """The comment lines of a new log (without their line ends)."""
     info = {"start_utc": origin.start_utc, "origin_t_s": origin.t_s, "origin_tick": origin.tick, **meta}
     units: dict[str, Any] = {"time_s": "s"} | {label.partition(".")[0]: unit(label) for label in labels}
-    if "cmd" in units:  # the command's unit is its mode's: see the mode events
-        units["cmd"] = {mode.name.lower(): u for mode, u in MODE_UNITS.items()}
+    for group in units:
+        if base_signal(group) == "cmd":  # the command's unit is its mode's: see the mode events
+            units[group] = {mode.name.lower(): u for mode, u in MODE_UNITS.items()}
     return [
         f"# orccadd log {json.dumps(info)}",
         f"# units {json.dumps(units)}",

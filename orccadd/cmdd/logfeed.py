@@ -39,8 +39,13 @@ UNITS = {
 
 
 def unit(signal: str) -> str:
-    """The unit of a signal or signal group (`q`, `q.elbow_joint`, `wake_us`, ...)."""
-    return UNITS.get(signal.partition(".")[0], "1")
+    """The unit of a signal or signal group (`q`, `q.elbow_joint`, a cell's `left/q`, ...)."""
+    return UNITS.get(base_signal(signal), "1")
+
+
+def base_signal(label: str) -> str:
+    """The tick field of a label or group: `q` of `q.elbow_joint` and of a cell's `left/q.0`."""
+    return label.partition(".")[0].rpartition("/")[2]
 
 
 def mode_name(code: float) -> str:

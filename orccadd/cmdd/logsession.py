@@ -10,6 +10,7 @@ import contextlib
 import logging
 import os
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,7 @@ import numpy as np
 
 from orccadd.cmdd.csvlog import CsvLog, LogDir
 from orccadd.cmdd.logfeed import Decoder, LogFeed, LogOrigin
-from orccadd.cmdd.mcaplog import McapLog, Urdf, seal
+from orccadd.cmdd.mcaplog import McapLog, McapStream, Urdf, seal
 from orccadd.cmdd.views import SignalSelection
 from orccadd.wire.schema import H, T
 from orccadd.wire.telemetry import TelemetryBlock
@@ -48,26 +49,58 @@ def tick_at(tel: TelemetryBlock, t_s: float) -> int:
     return max(0, int(ring[oldest, T.SEQ]) - max(1, periods))
 
 
+def csv_name(name: str, resource: str) -> str:
+    """A log's CSV: `run.csv` itself, or in a cell each resource's `run.<resource>.csv`."""
+    return f"{name.removesuffix('.csv')}.{resource}.csv" if resource else name
+
+
+@dataclass(frozen=True)
+class LogSource:
+    """What a log records of one resource: its name ("" in a one-resource robot), telemetry
+    block and signals."""
+
+    resource: str
+    tel: TelemetryBlock
+    selection: SignalSelection
+
+
+@dataclass
+class Stream:
+    """One resource's part of a log: its CSV (rows at its own rate) and what feeds it."""
+
+    resource: str
+    feed: LogFeed
+    csv: CsvLog
+
+
 class TelemetryLog:
-    """Chosen signals at full rate into `<name>.csv` and `<name>.mcap`, events in both."""
+    """Chosen signals at full rate into `<name>.csv` and `<name>.mcap`, events in both. A cell's
+    log: a CSV per resource (`<name>.<resource>.csv`, its own rate, its columns named by it) and
+    one MCAP of every resource; the events (the trace of the first resource's block) in each."""
 
     def __init__(
         self,
         logs: LogDir,
-        feed: LogFeed,
-        csv: CsvLog,
+        streams: list[Stream],
         state: dict[str, Any],
         urdf: Urdf,
         resumed: bool,
     ) -> None:
         self.logs = logs
-        self.feed = feed
-        self.csv = csv
+        self.streams = streams
         self.state = state
         self.urdf = urdf
         self.resumed = resumed
         self.mcap: McapLog | None = None
         self.notes: list[str] = []
+
+    @property
+    def csv(self) -> CsvLog:
+        return self.streams[0].csv
+
+    @property
+    def feed(self) -> LogFeed:
+        return self.streams[0].feed
 
     @property
     def path(self) -> Path:
@@ -76,74 +109,103 @@ class TelemetryLog:
     @staticmethod
     def start(
         logs: LogDir,
-        tel: TelemetryBlock,
+        sources: list[LogSource],
         name: str,
-        sel: SignalSelection,
         desc: Callable[[], dict[str, Any]],
         decode: Decoder,
         urdf_path: Path | None,
         extra_state: dict[str, Any],
     ) -> TelemetryLog:
         """A new log from the next tick; `ValueError` if its files cannot be created."""
-        origin = LogOrigin.now(tel)
-        if origin.tick == 0:
-            raise ValueError("log: the control loop has not ticked yet: no time to start the log from")
-        trace_start = int(tel.header[H.TRACE_HEAD])
-        meta = {"robot": desc().get("robot"), "period_s": tel.period_s}
-        fh = logs.create(name)
+        origins = [LogOrigin.now(s.tel) for s in sources]
+        for s, origin in zip(sources, origins, strict=True):
+            if origin.tick == 0:
+                who = f"resource {s.resource}'s" if s.resource else "the"
+                raise ValueError(f"log: {who} control loop has not ticked yet: no time to start the log from")
+        trace_start = int(sources[0].tel.header[H.TRACE_HEAD])
+        created: list[str] = []
+        streams: list[Stream] = []
         try:
+            for s, origin in zip(sources, origins, strict=True):
+                file = csv_name(name, s.resource)
+                meta = {"robot": desc().get("robot"), "period_s": s.tel.period_s}
+                if s.resource:
+                    meta["resource"] = s.resource
+                fh = logs.create(file)
+                created.append(file)
+                csv = CsvLog(fh, logs.path / file, s.selection, origin, meta)
+                streams.append(Stream(s.resource, LogFeed(s.tel, origin, decode, origin.tick), csv))
             mcap_fd = logs.create_fd(part_name(name, 1))
+            created.append(part_name(name, 1))
         except ValueError:
-            fh.close()
-            logs.remove(name)
+            for st in streams:
+                st.csv.close()
+            for file in created:
+                logs.remove(file)
             raise
-        csv = CsvLog(fh, logs.path / name, sel, origin, meta)
-        feed = LogFeed(tel, origin, decode, origin.tick)
         state = {
             **extra_state,
             "file": name,
-            "signals": sel.labels,
-            "origin": origin.to_state(),
+            "streams": [
+                {
+                    "resource": st.resource,
+                    "csv": st.csv.path.name,
+                    "signals": st.csv.sel.labels,
+                    "origin": st.feed.origin.to_state(),
+                }
+                for st in streams
+            ],
             "trace_start": trace_start,
             "mcap": [part_name(name, 1)],
         }
-        rec = TelemetryLog(logs, feed, csv, state, Urdf.read(urdf_path), resumed=False)
+        rec = TelemetryLog(logs, streams, state, Urdf.read(urdf_path), resumed=False)
         try:
-            rec._open_mcap(os.fdopen(mcap_fd, "wb"), 1, sel, desc, tel.period_s, 0.0)
+            rec._open_mcap(os.fdopen(mcap_fd, "wb"), 1, desc, 0.0)
         except OSError as e:
-            csv.close()
-            logs.remove(name)
-            logs.remove(part_name(name, 1))
+            for st in streams:
+                st.csv.close()
+            for file in created:
+                logs.remove(file)
             raise ValueError(f"log: cannot write {part_name(name, 1)}: {e.strerror or e}") from None
         return rec
 
     @staticmethod
     def resume(
         logs: LogDir,
-        tel: TelemetryBlock,
+        blocks: dict[str, tuple[TelemetryBlock, list[str]]],
         state: dict[str, Any],
         desc: Callable[[], dict[str, Any]],
         decode: Decoder,
         urdf_path: Path | None,
     ) -> TelemetryLog:
-        """The log of `state` carried on after its last complete row (`KeyError`, `ValueError`,
-        `OSError`... if it cannot be)."""
-        name = str(state["file"])
-        sel = SignalSelection([str(s) for s in state["signals"]], desc()["joints"])
-        origin = LogOrigin.from_state(state["origin"])
-        fh, tail = logs.reopen(name)
-        last = tail.last_time_s
-        after_tick = origin.tick if last == float("-inf") else tick_at(tel, origin.t_s + last)
-        after_trace = max(tail.last_event_seq, int(state["trace_start"]))
-        feed = LogFeed(tel, origin, decode, after_tick, after_trace)
-        csv = CsvLog(fh, logs.path / name, sel, origin, rows=tail.rows)
-        rec = TelemetryLog(logs, feed, csv, dict(state), Urdf.read(urdf_path), resumed=True)
-        rec._next_part(sel, desc, tel.period_s, max(last, 0.0))
+        """The log of `state` carried on after each CSV's last complete row, `blocks` giving each
+        resource's telemetry block and joints ("": a one-resource robot's) (`KeyError`,
+        `ValueError`, `OSError`... if it cannot be)."""
+        streams: list[Stream] = []
+        last_s: list[float] = []
+        try:
+            for k, entry in enumerate(state["streams"]):
+                resource = str(entry["resource"])
+                tel, joints = blocks[resource]
+                sel = SignalSelection([str(s) for s in entry["signals"]], joints, resource)
+                origin = LogOrigin.from_state(entry["origin"])
+                fh, tail = logs.reopen(str(entry["csv"]))
+                last = tail.last_time_s
+                after_tick = origin.tick if last == float("-inf") else tick_at(tel, origin.t_s + last)
+                after_trace = max(tail.last_event_seq, int(state["trace_start"])) if k == 0 else None
+                feed = LogFeed(tel, origin, decode, after_tick, after_trace)
+                csv = CsvLog(fh, logs.path / str(entry["csv"]), sel, origin, rows=tail.rows)
+                streams.append(Stream(resource, feed, csv))
+                last_s.append(max(last, 0.0))
+        except BaseException:
+            for st in streams:
+                st.csv.close()
+            raise
+        rec = TelemetryLog(logs, streams, dict(state), Urdf.read(urdf_path), resumed=True)
+        rec._next_part(desc, last_s[0])
         return rec
 
-    def _next_part(
-        self, sel: SignalSelection, desc: Callable[[], dict[str, Any]], period_s: float, from_s: float
-    ) -> None:
+    def _next_part(self, desc: Callable[[], dict[str, Any]], from_s: float) -> None:
         """Seal the part a dead command daemon left, carry the MCAP on in a new one."""
         self._seal_last_part("was left unfinished by a command daemon that died: sealed")
         parts: list[str] = [str(p) for p in self.state.get("mcap", [])]
@@ -155,7 +217,7 @@ class TelemetryLog:
                 continue
             self.state["mcap"] = [*parts, name]
             try:
-                self._open_mcap(os.fdopen(fd, "wb"), n, sel, desc, period_s, from_s)
+                self._open_mcap(os.fdopen(fd, "wb"), n, desc, from_s)
             except OSError as e:
                 self.logs.remove(name)  # an empty or cut part is not an MCAP file
                 self.state["mcap"] = parts
@@ -167,85 +229,111 @@ class TelemetryLog:
             return
         self.notes.append("no new MCAP part could be created: the log goes on in CSV only")
 
-    def _open_mcap(
-        self,
-        fh: Any,
-        part: int,
-        sel: SignalSelection,
-        desc: Callable[[], dict[str, Any]],
-        period_s: float,
-        from_s: float,
-    ) -> None:
+    def _open_mcap(self, fh: Any, part: int, desc: Callable[[], dict[str, Any]], from_s: float) -> None:
         origin = self.feed.origin
         parts = self.state["mcap"]
         info = {
-            "csv": self.state["file"],
+            "csv": ",".join(st.csv.path.name for st in self.streams),
             "part": part,
             "continues": parts[-2] if part > 1 and len(parts) > 1 else "",
             "start_utc": origin.start_utc,
             "origin_t_s": repr(origin.t_s),
             "origin_tick": origin.tick,
             "robot": desc().get("robot"),
-            "period_s": period_s,
-            "signals": ",".join(sel.labels),
+            "period_s": self.feed.tel.period_s,
+            "signals": ",".join(label for st in self.streams for label in st.csv.sel.labels),
             "urdf": str(self.urdf.path) if self.urdf.text else f"none: {self.urdf.missing}",
         }
+        if len(self.streams) > 1:
+            info["resources"] = ",".join(st.resource for st in self.streams)
+            info["periods_s"] = ",".join(repr(st.feed.tel.period_s) for st in self.streams)
         path = self.logs.path / parts[-1]
         try:
-            self.mcap = McapLog(
-                fh, path, sel, desc()["joints"], origin, info, self.urdf, desc, period_s, from_s
-            )
+            self.mcap = McapLog(fh, path, self._mcap_streams(), info, self.urdf, desc, from_s)
         except Exception:
             with contextlib.suppress(OSError):
                 fh.close()
             raise
 
+    def _mcap_streams(self) -> list[McapStream]:
+        """Each stream's joints as `/joint_states` names them: a joint name two resources share
+        (two identical arms) is told apart by its resource's (`left/elbow_joint`)."""
+        names = [st.csv.sel.joints for st in self.streams]
+        seen = [j for js in names for j in js]
+        return [
+            McapStream(
+                st.csv.sel,
+                [f"{st.resource}/{j}" if seen.count(j) > 1 and st.resource else j for j in js],
+                st.feed.origin,
+                st.feed.tel.period_s,
+            )
+            for st, js in zip(self.streams, names, strict=True)
+        ]
+
     # ---- running ----------------------------------------------------------------------------
     def pump(self) -> None:
         """Write the new ticks and events: the MCAP first, so that a command daemon dying in
         between leaves the parts overlapping rather than a hole (`OSError` naming the file if
-        one cannot take them)."""
-        recs, events = self.feed.poll()
-        for path, write in ((self._mcap_path(), self._mcap_write), (self.csv.path, self.csv.write)):
-            try:
-                write(recs, events)
-            except OSError as e:
-                raise OSError(e.errno, f"{e.strerror or e} ({path})") from e
-            except Exception as e:  # a bug in a writer must not stop the command daemon's pump
-                raise OSError(f"{type(e).__name__}: {e} ({path})") from e
+        one cannot take them). The first stream's events (the mission's trace) go to every CSV;
+        a stream's changes of command mode to its own."""
+        polled = [st.feed.poll() for st in self.streams]
+        shared = [e for e in polled[0][1] if e.kind != "mode"]
+        for k, (st, (recs, events)) in enumerate(zip(self.streams, polled, strict=True)):
+            own = events if k == 0 else sorted(shared + events, key=lambda e: e.time_s)
+            self._write(self._mcap_path(), self._mcap_write, recs, events, k)
+            self._write(st.csv.path, st.csv.write, recs, own)
+
+    @staticmethod
+    def _write(path: Path | None, write: Callable[..., None], *args: Any) -> None:
+        try:
+            write(*args)
+        except OSError as e:
+            raise OSError(e.errno, f"{e.strerror or e} ({path})") from e
+        except Exception as e:  # a bug in a writer must not stop the command daemon's pump
+            raise OSError(f"{type(e).__name__}: {e} ({path})") from e
 
     def size_bytes(self) -> int:
-        """What the log's files hold so far (the CSV and the MCAP part being written)."""
+        """What the log's files hold so far (the CSVs and the MCAP part being written)."""
         mcap = self.mcap.fh.tell() if self.mcap is not None else 0
-        return self.csv.size + int(mcap)
+        return sum(st.csv.size for st in self.streams) + int(mcap)
 
     def _mcap_path(self) -> Path | None:
         return self.mcap.path if self.mcap else None
 
-    def _mcap_write(self, recs: Any, events: Any) -> None:
+    def _mcap_write(self, recs: Any, events: Any, stream: int) -> None:
         if self.mcap is not None:
-            self.mcap.write(recs, events)
+            self.mcap.write(recs, events, stream)
+
+    @property
+    def rows(self) -> int:
+        return sum(st.csv.rows for st in self.streams)
+
+    @property
+    def lost(self) -> int:
+        return sum(st.feed.lost for st in self.streams)
 
     def close(self, reason: str = "log stop") -> dict[str, Any]:
         self.pump()
         summary = self.describe()
         if self.mcap is not None:
-            self.mcap.close({"rows": self.csv.rows, "lost": self.feed.lost, "ended": reason})
-        self.csv.close()
+            self.mcap.close({"rows": self.rows, "lost": self.lost, "ended": reason})
+        for st in self.streams:
+            st.csv.close()
         return summary
 
     def abandon(self, error: OSError) -> dict[str, Any]:
         """A file failed (a full disk): close what can be closed, leave every file readable (the
         CSV ends with its last complete row: `CsvLog`; the MCAP part sealed, or removed if it holds
         nothing) and say why the log ended."""
-        with contextlib.suppress(OSError, ValueError):
-            self.csv.close()
+        for st in self.streams:
+            with contextlib.suppress(OSError, ValueError):
+                st.csv.close()
         if self.mcap is not None:
             self.mcap.abandon()
             self.mcap = None
             self._seal_last_part("sealed after the write error (readable to its last record)")
         reason = error.strerror or str(error)
-        return {**self.describe(), "error": f"log ended: {reason} after {self.csv.rows} rows"}
+        return {**self.describe(), "error": f"log ended: {reason} after {self.rows} rows"}
 
     def _seal_last_part(self, why: str) -> None:
         """Leave the last MCAP part readable: sealed to its last record (noted with `why`), or
@@ -271,22 +359,30 @@ class TelemetryLog:
         out: dict[str, Any] = {
             "file": str(self.csv.path),
             "mcap": [str(self.logs.path / p) for p in self.state.get("mcap", [])],
-            "rows": self.csv.rows,
-            "lost": self.feed.lost,
-            "signals": self.csv.sel.labels,
+            "rows": self.rows,
+            "lost": self.lost,
+            "signals": [label for st in self.streams for label in st.csv.sel.labels],
             "resumed": self.resumed,
             "start_utc": origin.start_utc,
             "origin_t_s": origin.t_s,
             "urdf": str(self.urdf.path) if self.urdf.text else None,
         }
+        if self.streams[0].resource:  # a cell: a CSV per resource
+            out["name"] = str(self.logs.path / str(self.state["file"]))
+            out["files"] = [str(st.csv.path) for st in self.streams]
+            out["resources"] = {
+                st.resource: {"file": str(st.csv.path), "rows": st.csv.rows, "lost": st.feed.lost}
+                for st in self.streams
+            }
         if not self.urdf.text:
             out["urdf_missing"] = self.urdf.missing
         if self.notes:
             out["notes"] = list(self.notes)
-        if self.feed.gap_lost:
-            n = self.feed.gap_ticks
+        gaps = [st for st in self.streams if st.feed.gap_lost]
+        if gaps:
+            n = gaps[0].feed.gap_ticks
             out["gap"] = (
-                f"{n} ticks ({n * self.feed.tel.period_s:.3f} s) lost while no command daemon ran "
+                f"{n} ticks ({n * gaps[0].feed.tel.period_s:.3f} s) lost while no command daemon ran "
                 "(longer than the telemetry ring keeps); a `gap` event marks where the rows resume"
             )
         return out

@@ -33,7 +33,7 @@ from mcap.records import DataEnd, Footer, Header
 from mcap.writer import Writer
 
 from orccadd import __version__
-from orccadd.cmdd.logfeed import MODE_UNITS, FloatArray, LogEvent, LogOrigin, mode_name, unit
+from orccadd.cmdd.logfeed import MODE_UNITS, FloatArray, LogEvent, LogOrigin, base_signal, mode_name, unit
 from orccadd.cmdd.views import SignalSelection
 from orccadd.wire import foxglove_schemas as sch
 from orccadd.wire.schema import CommandMode, Phase, T, TickLayout, status_names
@@ -76,7 +76,7 @@ class _Group:
 
     def __init__(self, channel: int, name: str, fields: list[str], cols: list[int]) -> None:
         self.channel = channel
-        self.name = name
+        self.name = name  # the tick field (`q`), whatever the channel's resource
         self.fields = fields
         self.cols = cols
         self.head = '{"time_s": %.6f' + "".join(f", {json.dumps(f)}: %r" for f in fields)
@@ -93,34 +93,53 @@ class _Group:
         return (json.dumps(msg)[:-1] + extra + "}").encode()
 
 
+@dataclass(frozen=True)
+class McapStream:
+    """One resource's ticks in a log's MCAP: what is sampled, the names its joints take on
+    `/joint_states`, its time origin (each resource's clock has its own) and period."""
+
+    selection: SignalSelection
+    joint_names: list[str]
+    origin: LogOrigin
+    period_s: float
+
+
+class _Source:
+    """A stream as written: its channels and when it last sent `/joint_states`."""
+
+    def __init__(self, stream: McapStream, groups: list[_Group]) -> None:
+        self.origin = stream.origin
+        self.joints = stream.joint_names
+        self.layout = TickLayout(len(stream.joint_names))
+        period_s = stream.period_s
+        self.every = max(1, round(1.0 / (JOINT_STATES_HZ * period_s))) if period_s > 0 else 1
+        self.groups = groups
+
+
 class McapLog:
-    """A log's MCAP part: `write` the feed's records and events, `close` at the end."""
+    """A log's MCAP part: `write` the feed's records and events, `close` at the end. A cell's
+    resources are streams of it: their channels named by resource (`/left/q`), every joint on
+    the one `/joint_states`, the events (`/events`, `/faults`) once, timed on the first's clock."""
 
     def __init__(
         self,
         fh: IO[bytes],
         path: Path,
-        selection: SignalSelection,
-        joints: list[str],
-        origin: LogOrigin,
+        streams: list[McapStream],
         info: dict[str, Any],
         urdf: Urdf,
         desc: Callable[[], dict[str, Any]],
-        period_s: float,
         from_time_s: float = 0.0,
     ) -> None:
         """A new part; `info` goes into its `orccadd.log` metadata; `from_time_s`: where it starts."""
         self.fh = fh
         self.path = path
-        self.origin = origin
+        self.origin = streams[0].origin
         self.desc = desc
-        self.joints = joints
-        self.layout = TickLayout(len(joints))
-        self.every = max(1, round(1.0 / (JOINT_STATES_HZ * period_s))) if period_s > 0 else 1
         w = self.writer = Writer(fh, use_chunking=False)
         w.start(profile="", library=LIBRARY)
         w.add_metadata("orccadd.log", {k: str(v) for k, v in info.items()})
-        self.groups = self._register_groups(selection)
+        self.sources = [_Source(s, self._register_groups(s.selection)) for s in streams]
         self.joint_states = w.register_channel(
             "/joint_states",
             "json",
@@ -132,7 +151,7 @@ class McapLog:
         self.faults = w.register_channel(
             "/faults", "json", w.register_schema("orccadd.StopCause", "jsonschema", sch.STOP_CAUSE_SCHEMA)
         )
-        start_ns = origin.wall_ns_at(from_time_s)
+        start_ns = self.origin.wall_ns_at(from_time_s)
         if urdf.text and urdf.path is not None:
             w.add_attachment(start_ns, start_ns, urdf.path.name, "application/xml", urdf.text.encode())
             desc_ch = w.register_channel(
@@ -155,35 +174,37 @@ class McapLog:
         groups = []
         for name, (fields, cols) in by_name.items():
             u = unit(name)
-            schema = w.register_schema(f"orccadd.{name}", "jsonschema", sch.group_schema(name, fields, u))
+            signal = base_signal(name)
+            schema = w.register_schema(f"orccadd.{signal}", "jsonschema", sch.group_schema(signal, fields, u))
             ch = w.register_channel(f"/{name}", "json", schema, {"signal": name, "unit": u})
-            groups.append(_Group(ch, name, fields, cols))
+            groups.append(_Group(ch, signal, fields, cols))
         return groups
 
-    def write(self, recs: FloatArray, events: list[LogEvent]) -> None:
-        """The new records and events, in one chunk (`OSError` if the file cannot take them)."""
+    def write(self, recs: FloatArray, events: list[LogEvent], stream: int = 0) -> None:
+        """A stream's new records, and events, in one chunk (`OSError` if the file cannot take them)."""
         finite = bool(np.isfinite(recs).all())
+        src = self.sources[stream]
         for rec in recs:
-            self._tick(rec.tolist(), finite)
+            self._tick(src, rec.tolist(), finite)
         for e in events:
             self._event(e)
         self._end_chunk()
 
-    def _tick(self, vals: list[float], finite: bool) -> None:
-        t = vals[T.T_S] - self.origin.t_s
-        ns = self.origin.wall_ns_at(t)
+    def _tick(self, src: _Source, vals: list[float], finite: bool) -> None:
+        t = vals[T.T_S] - src.origin.t_s
+        ns = src.origin.wall_ns_at(t)
         seq = int(vals[T.SEQ]) % 2**32
         add = self.writer.add_message
-        for g in self.groups:
+        for g in src.groups:
             extra = self._extra(g.name, vals)
             data = g.text(t, vals, extra) if finite else g.json_text(t, vals, extra)
             add(g.channel, ns, data, ns, seq)
-        if seq % self.every == 0:
-            at = self.layout
+        if seq % src.every == 0:
+            at = src.layout
             q, dq, tau = vals[at.q], vals[at.dq], vals[at.tau]
             joints = [
                 {"name": name, "position": _clean(q[j]), "velocity": _clean(dq[j]), "effort": _clean(tau[j])}
-                for j, name in enumerate(self.joints)
+                for j, name in enumerate(src.joints)
             ]
             data = json.dumps({"timestamp": sch.stamp(ns), "joints": joints}).encode()
             add(self.joint_states, ns, data, ns, seq)

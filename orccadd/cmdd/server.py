@@ -25,7 +25,7 @@ from typing import Any
 
 from orccadd.cmdd import views
 from orccadd.cmdd.csvlog import LogDir
-from orccadd.cmdd.logsession import TelemetryLog
+from orccadd.cmdd.logsession import LogSource, TelemetryLog
 from orccadd.cmdd.urdf import urdf_path
 from orccadd.config.cell import read_cell_config
 from orccadd.config.robot import DaemonConfig
@@ -454,8 +454,16 @@ class CommandDaemon:
         await self.refresh()
         if not all(isinstance(s, str) for s in signals or []):
             raise ValueError("monitor: signals must be a list of names")
-        sel = views.SignalSelection(list(signals or []), self.desc.get("joints", []))
-        max_rate = 1.0 / self.tel.period_s
+        units = self.units()
+        if units:  # a cell: each resource's latest tick, its labels named by it (`left/q.0`)
+            sels = views.cell_selections(
+                [str(s) for s in signals or []], [(str(r["name"]), list(r["joints"])) for r, _ in units]
+            )
+            picks = [(tel, sels[r["name"]]) for r, tel in units if r["name"] in sels]
+        else:
+            picks = [(self.tel, views.SignalSelection(list(signals or []), self.desc.get("joints", [])))]
+        labels = [label for _, sel in picks for label in sel.labels]
+        max_rate = 1.0 / min(tel.period_s for tel, _ in picks)
         if not MONITOR_MIN_HZ <= rate_hz <= max_rate:
             raise ValueError(
                 f"monitor: rate_hz (={rate_hz}) must be in [{MONITOR_MIN_HZ:g}, {max_rate:g}] (the loop rate)"
@@ -464,15 +472,16 @@ class CommandDaemon:
             raise ValueError("monitor: count and duration_s must be positive")
         sent = 0
         t_end = time.monotonic() + duration_s if duration_s else float("inf")
-        writer.write(encode({"id": rid, "ok": True, "stream": {"signals": ["t_s", *sel.labels]}}))
+        writer.write(encode({"id": rid, "ok": True, "stream": {"signals": ["t_s", *labels]}}))
         period = 1.0 / rate_hz
         nxt = time.monotonic()
         while time.monotonic() < t_end and not self.done.is_set():
-            rec = views.latest_tick(self.tel)
-            if rec is not None:
-                writer.write(
-                    encode({"id": rid, "ok": True, "stream": {"t_s": rec[1], "values": sel.values(rec)}})
-                )
+            recs = [views.latest_tick(tel) for tel, _ in picks]
+            ready = [rec for rec in recs if rec is not None]
+            if len(ready) == len(recs):
+                values = [v for rec, (_, sel) in zip(ready, picks, strict=True) for v in sel.values(rec)]
+                t_s = ready[0][1]
+                writer.write(encode({"id": rid, "ok": True, "stream": {"t_s": t_s, "values": values}}))
                 await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
                 sent += 1
             if count and sent >= count:
@@ -536,13 +545,19 @@ class CommandDaemon:
             if self.recording is not None:
                 raise ValueError(f"log: already logging to {self.recording.path} (log stop first)")
             await self.refresh()
-            sel = views.SignalSelection(
-                [str(s) for s in signals or ["q", "dq", "tau", "cmd"]], self.desc["joints"]
-            )
+            picked = [str(s) for s in signals or ["q", "dq", "tau", "cmd"]]
+            units = self.units()
+            if units:  # a cell: each resource's signals from its own block
+                sels = views.cell_selections(picked, [(str(r["name"]), list(r["joints"])) for r, _ in units])
+                sources = [
+                    LogSource(str(r["name"]), t, sels[r["name"]]) for r, t in units if r["name"] in sels
+                ]
+            else:
+                sources = [LogSource("", self.tel, views.SignalSelection(picked, self.desc["joints"]))]
             name = name or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv"
             extra = {"rt_pid": int(self.tel.header[H.PID])}
             rec = TelemetryLog.start(
-                self.logs, self.tel, name, sel, lambda: self.desc, self.decode_trace, self.urdf, extra
+                self.logs, sources, name, lambda: self.desc, self.decode_trace, self.urdf, extra
             )
             self.recording = rec
             self.logs.save_state(rec.state)
@@ -572,8 +587,10 @@ class CommandDaemon:
             self.logs.clear_state()
             return
         try:
+            blocks = {str(r["name"]): (t, list(r["joints"])) for r, t in self.units()}
+            blocks[""] = (self.tel, list(self.desc.get("joints", [])))
             rec = TelemetryLog.resume(
-                self.logs, self.tel, state, lambda: self.desc, self.decode_trace, self.urdf
+                self.logs, blocks, state, lambda: self.desc, self.decode_trace, self.urdf
             )
         except (OSError, SocketPathError, ValueError, KeyError, TypeError) as e:
             log.error("cannot carry on log %s: %s", state.get("file"), e)
@@ -584,7 +601,7 @@ class CommandDaemon:
             self.logs.save_state(rec.state)  # its new MCAP part
         except (OSError, SocketPathError) as e:
             log.error("log %s: cannot update the state file: %s", rec.path, e)
-        log.info("carrying on log %s after %d rows; %s", rec.path, rec.csv.rows, "; ".join(rec.notes))
+        log.info("carrying on log %s after %d rows; %s", rec.path, rec.rows, "; ".join(rec.notes))
 
 
 def _alive(pid: int) -> bool:

@@ -34,17 +34,22 @@ from orccadd.wire.telemetry import TelemetryBlock, read_status
 
 
 class SignalSelection:
-    """Signal names → columns of a tick record: `q`, `dq.3`, `tau.elbow_joint`, `wake_us`, ..."""
+    """Signal names → columns of a tick record: `q`, `dq.3`, `tau.elbow_joint`, `wake_us`, ...
+    In a cell, one resource's (`resource`): its labels are named by it (`left/q.elbow_joint`),
+    and a name may be so too."""
 
-    def __init__(self, names: list[str], joints: list[str]) -> None:
+    def __init__(self, names: list[str], joints: list[str], resource: str = "") -> None:
         n = len(joints)
+        self.joints = joints
+        prefix = f"{resource}/" if resource else ""
         cols: list[int] = []
         labels: list[str] = []
-        for raw in names or ["q"]:
+        for named in names or ["q"]:
+            raw = named.removeprefix(prefix) if prefix else named
             base, _, idx = raw.partition(".")
             if base in TICK_FIELDS and not idx and base != "seq":
                 cols.append(TICK_FIELDS.index(base))
-                labels.append(base)
+                labels.append(prefix + base)
                 continue
             if base not in TICK_VECTORS:
                 allowed = ", ".join([*TICK_FIELDS[1:], *TICK_VECTORS])
@@ -62,7 +67,7 @@ class SignalSelection:
                 raise ValueError(f"signal {raw!r}: no joint {idx!r} (0..{n - 1} or {', '.join(joints)})")
             for j in picked:
                 cols.append(start + j)
-                labels.append(f"{base}.{joints[j]}")
+                labels.append(f"{prefix}{base}.{joints[j]}")
         # a column named twice (`q q.0`, 12,000 × `q`) is sampled once: a selection is never wider
         # than the tick record, however long the list of names
         first = dict.fromkeys(range(len(cols)))
@@ -76,6 +81,33 @@ class SignalSelection:
 
     def values(self, rec: np.ndarray) -> list[float]:
         return [float(rec[c]) for c in self.cols]
+
+
+def cell_selections(names: list[str], resources: list[tuple[str, list[str]]]) -> dict[str, SignalSelection]:
+    """A cell's signals, by resource (name, joints), for those any name picks from: `left/q` is
+    resource left's only; an unnamed one is every resource's that has it (`q` all of them,
+    `q.finger` the one with that joint). `ValueError` naming what matches nothing."""
+    known = [r for r, _ in resources]
+    picks: dict[str, list[str]] = {r: [] for r in known}
+    for raw in names or ["q"]:
+        owner, slash, signal = raw.partition("/")
+        if slash:
+            if owner not in picks:
+                raise ValueError(f"signal {raw!r}: no resource {owner!r} (resources: {', '.join(known)})")
+            picks[owner].append(signal)
+            continue
+        idx = raw.partition(".")[2]
+        having = [
+            r
+            for r, joints in resources
+            if not idx or idx in joints or (idx.isascii() and idx.isdigit() and int(idx) < len(joints))
+        ]
+        if not having:
+            raise ValueError(f"signal {raw!r}: no resource has joint {idx!r} (a resource's: left/q.0)")
+        for r in having:
+            picks[r].append(raw)
+    joints_of = dict(resources)
+    return {r: SignalSelection(p, joints_of[r], r) for r, p in picks.items() if p}
 
 
 LATEST_BACK = 8  # records looked back for a consistent one

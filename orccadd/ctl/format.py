@@ -116,7 +116,9 @@ def format_status(s: dict[str, Any]) -> str:
         ]
     if s.get("log"):
         lg = s["log"]
-        lines.append(f"log: {lg['file']} ({lg['rows']} rows, {lg['lost']} lost)")
+        lines.append(
+            f"log: {', '.join(lg.get('files') or [lg['file']])} ({lg['rows']} rows, {lg['lost']} lost)"
+        )
     return "\n".join(lines)
 
 

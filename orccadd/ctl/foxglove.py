@@ -6,7 +6,8 @@ Follows the daemon's `monitor` stream (q, dq, tau, cmd at `--rate`) and its reac
 holding no role on the daemon, nor to a web page of another origin than Foxglove's. From another
 machine, tunnel the port over SSH. Channels as in a log's MCAP, with the same schemas: `/q`,
 `/dq`, `/tau`, `/cmd` (units in their schemas), `/joint_states` (foxglove.JointStates, for a URDF
-layer of the 3D panel) and `/events` (foxglove.Log).
+layer of the 3D panel) and `/events` (foxglove.Log). A cell: each resource's channels named by it
+(`/left/q`), every joint on `/joint_states`.
 """
 
 from __future__ import annotations
@@ -63,9 +64,10 @@ class LiveView:
             fields.setdefault(base, []).append(joint or "value")
         channels = []
         for base, (cid, _) in self.groups.items():
-            unit = UNITS.get(base, "1")
-            schema = sch.group_schema(base, fields[base], unit)
-            channels.append(Channel(cid, f"/{base}", f"orccadd.{base}", schema))
+            signal = base.rpartition("/")[2]  # a cell's `left/q` is a `q`
+            unit = UNITS.get(signal, "1")
+            schema = sch.group_schema(signal, fields[base], unit)
+            channels.append(Channel(cid, f"/{base}", f"orccadd.{signal}", schema))
         self.joint_states_id = len(channels) + 1
         self.events_id = len(channels) + 2
         channels.append(
@@ -73,7 +75,14 @@ class LiveView:
         )
         channels.append(Channel(self.events_id, "/events", "foxglove.Log", sch.LOG_SCHEMA))
         self.index = {label: i for i, label in enumerate(labels)}
-        self.joints = [label.partition(".")[2] for label in labels if label.startswith("q.")]
+        # (name on /joint_states, the resource's label prefix, joint): a cell's joints all there,
+        # a name two resources share told apart by its resource's (`left/elbow_joint`)
+        qs = [label.partition(".") for label in labels if label.partition(".")[0].rpartition("/")[2] == "q"]
+        names = [joint for _, _, joint in qs]
+        self.joints = [
+            (f"{base.removesuffix('q')}{j}" if names.count(j) > 1 else j, base.removesuffix("q"), j)
+            for base, _, j in qs
+        ]
         self.server = LiveServer("orccadd", channels, port, origins=(*FOXGLOVE_ORIGINS, *extra_origins))
 
     @property
@@ -95,8 +104,13 @@ class LiveView:
                 return values[i] if i is not None else None
 
             joints = [
-                {"name": j, "position": val(f"q.{j}"), "velocity": val(f"dq.{j}"), "effort": val(f"tau.{j}")}
-                for j in self.joints
+                {
+                    "name": name,
+                    "position": val(f"{res}q.{j}"),
+                    "velocity": val(f"{res}dq.{j}"),
+                    "effort": val(f"{res}tau.{j}"),
+                }
+                for name, res, j in self.joints
             ]
             states = {"timestamp": sch.stamp(ns), "joints": joints}
             self.server.log(self.joint_states_id, json.dumps(states).encode(), ns)

@@ -210,8 +210,9 @@ def _events(r: dict[str, Any], _: dict[str, Any]) -> str:
 
 def _log(r: dict[str, Any], ctx: dict[str, Any]) -> str:
     if ctx.get("args", {}).get("action") == "start":
-        return f"logging {len(r['signals'])} signals to {r['file']} (`log stop -o FILE` copies it to FILE)"
-    text = f"log: {r['rows']} rows ({r['lost']} lost) in {r['file']}"
+        files = ", ".join(r.get("files") or [r["file"]])
+        return f"logging {len(r['signals'])} signals to {files} (`log stop -o FILE` copies it to FILE)"
+    text = f"log: {r['rows']} rows ({r['lost']} lost) in {', '.join(r.get('files') or [r['file']])}"
     if r.get("mcap"):  # the same run for Foxglove, when the daemon writes it
         text += f", MCAP {', '.join(r['mcap'])}"
     if r.get("gap"):

@@ -20,7 +20,10 @@ from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, client_wait_s
 from orccadd.wire.socketdir import urgent_socket_path
 
 EXIT_OK, EXIT_REFUSED, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
-SIGNALS_HELP = "q, dq, tau, cmd (all joints), q.3 or q.elbow_joint (one), wake_us, compute_us, status, ..."
+SIGNALS_HELP = (
+    "q, dq, tau, cmd (all joints), q.3 or q.elbow_joint (one), wake_us, compute_us, status, ...; "
+    "in a cell, each resource's, or one's: left/q"
+)
 
 
 def table_help(cmd: str, arg: str) -> str:
@@ -236,9 +239,13 @@ def _fetch_log(info: dict[str, Any], dest: Path, quiet: bool) -> int:
     """Copy the daemon's log (the CSV, and its MCAP parts beside it: run.mcap, run-2.mcap, ...)
     to `dest`, a path from this command's own line (never one the daemon stored or echoed), with
     this user's rights, through no link at its end (`copy_to`)."""
-    copies = [(Path(info["file"]), dest)]
+    stem = Path(info.get("name") or info["file"]).stem  # the name the log was given
+    copies = []
+    for csv in info.get("files") or [info["file"]]:  # a cell's run.left.csv → DEST.left.csv
+        suffix = Path(csv).stem.removeprefix(stem)
+        copies.append((Path(csv), dest.with_name(f"{dest.stem}{suffix}.csv") if suffix else dest))
     for part in info.get("mcap", []):  # run.mcap → DEST's name with .mcap (run-2.mcap → DEST-2.mcap)
-        suffix = Path(part).stem.removeprefix(Path(info["file"]).stem)
+        suffix = Path(part).stem.removeprefix(stem)
         copies.append((Path(part), dest.with_name(f"{dest.stem}{suffix}.mcap")))
     for src, to in copies:
         try:
@@ -249,8 +256,9 @@ def _fetch_log(info: dict[str, Any], dest: Path, quiet: bool) -> int:
             print(error_line(why), file=sys.stderr)
             return EXIT_ERROR
     if not quiet:
-        also = "".join(f", {to}" for _, to in copies[1:])
-        print(f"log: {info['rows']} rows ({info['lost']} lost) in {dest}{also} (kept in {info['file']})")
+        kept = ", ".join(info.get("files") or [info["file"]])
+        copied = ", ".join(str(to) for _, to in copies)
+        print(f"log: {info['rows']} rows ({info['lost']} lost) in {copied} (kept in {kept})")
     return EXIT_OK
 
 

@@ -6,6 +6,8 @@ many rows as they need not to overlap (matplotlib); legends beside the panels, n
 A log is its CSV or its MCAP (the same content). Everything comes from the file itself (the
 CSV's header and `# event` lines; the MCAP's channels, their units and `/events`): a log copied
 elsewhere plots the same. A CSV written before logs had a header plots without units or events.
+A cell's log: each resource's CSV, or the one MCAP of all (a panel per resource and signal:
+`left/q`, `right/q`, each resource's samples at its own rate).
 """
 
 from __future__ import annotations
@@ -91,8 +93,9 @@ def read_mcap(log: Path) -> CsvLogData:
     times = sorted({t for c in columns.values() for t in c})
     names = list(columns)
     data = np.array([[t, *(columns[c].get(t, np.nan) for c in names)] for t in times])
-    if "cmd" in units:  # the command's unit is its mode's, as in the CSV
-        units["cmd"] = {"position": "rad", "velocity": "rad/s", "torque": "N.m"}
+    for group in units:  # the command's unit is its mode's, as in the CSV (a cell's `left/cmd` too)
+        if group.rpartition("/")[2] == "cmd":
+            units[group] = {"position": "rad", "velocity": "rad/s", "torque": "N.m"}
     timed = [((ns - offset_ns) * 1e-9, kind, name) for ns, kind, name in events]
     return CsvLogData(["time_s", *names], data, meta or {"format": "mcap"}, units, timed)
 
@@ -210,8 +213,10 @@ def plot_csv(log: Path, out: Path, prefixes: list[str], fmt: str | None = None) 
                 lane.text(ts, row, name, fontsize=LABEL_FONT_PT, color=MARKED[kind], ha="left", va="center")
         axes = axes[1:]
         for ax, (base, cols) in zip(axes[:, 0], groups.items(), strict=True):
-            for c in cols:
-                ax.plot(t, d.data[:, c], lw=1.0, label=d.columns[c].split(".", 1)[-1])
+            for c in cols:  # a column's own samples (a cell's MCAP: resources at their own rates)
+                y = d.data[:, c]
+                has = ~np.isnan(y) if d.meta.get("resources") else slice(None)
+                ax.plot(t[has], y[has], lw=1.0, label=d.columns[c].split(".", 1)[-1])
             for ts, kind, _ in marks:
                 ax.axvline(ts, color=MARKED[kind], lw=0.8, ls="--", alpha=0.7)
             if isinstance(d.units.get(base), dict):  # a unit by mode: where the mode changed

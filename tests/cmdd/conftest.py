@@ -52,8 +52,9 @@ DESC: dict[str, Any] = {
 class FakeLoop:
     """Writes tick and trace records as the real-time process does."""
 
-    def __init__(self, tel: TelemetryBlock) -> None:
+    def __init__(self, tel: TelemetryBlock, period_s: float = PERIOD_S) -> None:
         self.tel = tel
+        self.period_s = period_s
         self.mode = CommandMode.TORQUE
 
     @property
@@ -61,7 +62,7 @@ class FakeLoop:
         return int(self.tel.header[4])  # H.TICK_HEAD: ticks written so far
 
     def t_s(self, seq: int) -> float:
-        return T0_S + seq * PERIOD_S
+        return T0_S + seq * self.period_s
 
     def ticks(self, n: int) -> None:
         n_j = self.tel.dof
@@ -77,7 +78,7 @@ class FakeLoop:
             rec[T.MODE] = self.mode
             at = TickLayout(n_j)
             for j in range(n_j):
-                rec[at.column("q", j)] = math.sin(seq * PERIOD_S + j)
+                rec[at.column("q", j)] = math.sin(seq * self.period_s + j)
                 rec[at.column("dq", j)] = 0.1 * j
                 rec[at.column("tau", j)] = 5.0 + j
                 rec[at.column("cmd", j)] = 6.0 + j

@@ -17,7 +17,7 @@ import pytest
 from mcap.reader import make_reader
 
 from orccadd.cmdd.csvlog import HEADER_LINES, LogDir
-from orccadd.cmdd.logsession import TelemetryLog
+from orccadd.cmdd.logsession import LogSource, TelemetryLog
 from orccadd.cmdd.mcaplog import seal
 from orccadd.cmdd.urdf import urdf_path
 from orccadd.cmdd.views import SignalSelection
@@ -33,7 +33,9 @@ def start(tmp_path: Path, tel: TelemetryBlock, name: str = "run.csv") -> Telemet
     if not int(tel.header[4]):  # H.TICK_HEAD
         FakeLoop(tel).ticks(1)
     sel = SignalSelection(SIGNALS, DESC["joints"])
-    return TelemetryLog.start(LogDir(tmp_path / "logs", ""), tel, name, sel, lambda: DESC, decode, URDF, {})
+    return TelemetryLog.start(
+        LogDir(tmp_path / "logs", ""), [LogSource("", tel, sel)], name, lambda: DESC, decode, URDF, {}
+    )
 
 
 def read_csv(path: Path) -> tuple[list[str], list[str], np.ndarray, list[list[str]]]:
@@ -150,7 +152,9 @@ def test_a_log_outlives_its_command_daemon(tmp_path: Path, loop: FakeLoop) -> No
         fh.write(b"\x06\xff\xff\x00\x00\x00\x00\x00\x00half a chunk")
     loop.ticks(300)  # nobody logs
     loop.trace(Trace.EVENT, 0)
-    rec2 = TelemetryLog.resume(LogDir(logs, ""), loop.tel, state, lambda: DESC, decode, URDF)
+    rec2 = TelemetryLog.resume(
+        LogDir(logs, ""), {"": (loop.tel, DESC["joints"])}, state, lambda: DESC, decode, URDF
+    )
     assert rec2.state["mcap"] == ["run.mcap", "run-2.mcap"]
     loop.ticks(10)
     info = rec2.close()
@@ -229,7 +233,9 @@ def test_a_gap_longer_than_the_ring_is_counted_and_marked_where_the_rows_resume(
     state = dict(rec.state)
     ring = len(loop.tel.ticks)
     loop.ticks(ring + 250)  # nobody logs for longer than the ring keeps
-    rec2 = TelemetryLog.resume(LogDir(logs, ""), loop.tel, state, lambda: DESC, decode, URDF)
+    rec2 = TelemetryLog.resume(
+        LogDir(logs, ""), {"": (loop.tel, DESC["joints"])}, state, lambda: DESC, decode, URDF
+    )
     loop.ticks(10)
     info = rec2.close()
     _, _, rows, events = read_csv(logs / "run.csv")
@@ -245,7 +251,15 @@ def test_a_gap_longer_than_the_ring_is_counted_and_marked_where_the_rows_resume(
 def test_no_log_before_the_loops_first_tick(tmp_path: Path, tel: TelemetryBlock) -> None:
     sel = SignalSelection(["q"], DESC["joints"])
     with pytest.raises(ValueError, match="not ticked yet"):
-        TelemetryLog.start(LogDir(tmp_path / "logs", ""), tel, "run.csv", sel, lambda: DESC, decode, None, {})
+        TelemetryLog.start(
+            LogDir(tmp_path / "logs", ""),
+            [LogSource("", tel, sel)],
+            "run.csv",
+            lambda: DESC,
+            decode,
+            None,
+            {},
+        )
 
 
 def test_the_robot_description_is_found_from_the_config() -> None:

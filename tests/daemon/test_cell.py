@@ -4,6 +4,7 @@ once, each on its own control thread; a fault on one resource holds the other.""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -12,8 +13,11 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, cast
 
+import numpy as np
 import pytest
+from mcap.reader import make_reader
 
+from orccadd.offline.plot import read_log
 from tests.daemon.conftest import ROOT, Daemon, cell_copy, start_daemon_with
 
 DUAL = ROOT / "configs/robots/dual-arm-sim.toml"
@@ -183,3 +187,45 @@ def test_a_reset_or_an_injection_naming_no_resource_is_refused_and_nothing_chang
     s = dual.status()
     assert not s["faulted"] and s["state"] == "idle", s
     assert all(x["fault"] is None for x in resources(dual).values())
+
+
+def test_a_log_of_the_cell_has_each_resource_at_its_rate_and_one_mcap(dual: Daemon, tmp_path: Path) -> None:
+    """`orccadctl log` through a real daemon while both arms move: a CSV per resource, rows at its
+    own period, the mission's instants in each; one MCAP (every joint of both arms on
+    `/joint_states`, named by resource: the two arms share their joint names); `log stop -o`
+    copies them all; `monitor` samples both, each label named by its resource."""
+    with dual.client() as c:
+        head, *samples = c.stream("monitor", signals=["q.0", "right/tau.0"], rate_hz=50, count=2)
+    labels = head["signals"]
+    assert len(samples) == 2 and all(len(s["values"]) == 3 for s in samples), samples
+    assert labels == [
+        "t_s",
+        "left/q.shoulder_pan_joint",
+        "right/q.shoulder_pan_joint",
+        "right/tau.shoulder_pan_joint",
+    ]
+    out = dual.ctl("log", "start", "q", "wake_us", "--name", "reach.csv")
+    assert out.returncode == 0 and "reach.left.csv" in out.stdout and "reach.right.csv" in out.stdout, out
+    dual.call("load", path=MISSION)
+    dual.call("start")
+    dual.wait(lambda s: s["state"] != "running", timeout_s=120)
+    out = dual.ctl("log", "stop", "-o", str(tmp_path / "copy.csv"))
+    assert out.returncode == 0, out.stderr
+    for name in ("copy.left.csv", "copy.right.csv", "copy.mcap"):
+        assert (tmp_path / name).stat().st_size > 0, out.stdout
+    left, right = read_log(tmp_path / "copy.left.csv"), read_log(tmp_path / "copy.right.csv")
+    assert left.columns[1] == "left/q.shoulder_pan_joint" and right.columns[-1] == "right/wake_us"
+    # each resource at its own period (a skipped tick is a longer step, never a shorter one)
+    assert abs(float(np.median(np.diff(left.data[:, 0]))) - 0.001) < 1e-6
+    assert abs(float(np.median(np.diff(right.data[:, 0]))) - 0.002) < 1e-6
+    for d in (left, right):
+        assert any(kind == "instant" for _, kind, _ in d.events)  # the mission's instants in both
+    with (tmp_path / "copy.mcap").open("rb") as fh:
+        names = set()
+        topics = set()
+        for _, ch, m in make_reader(fh).iter_messages():
+            topics.add(ch.topic)
+            if ch.topic == "/joint_states":
+                names |= {j["name"] for j in json.loads(m.data)["joints"]}
+    assert {"/left/q", "/right/q", "/left/wake_us", "/right/wake_us", "/events"} <= topics
+    assert len(names) == 12 and "left/elbow_joint" in names and "right/elbow_joint" in names

@@ -12,7 +12,7 @@ import pytest
 
 from orccadd.cli import orccadctl_main
 from orccadd.cmdd.csvlog import LogDir
-from orccadd.cmdd.logsession import TelemetryLog
+from orccadd.cmdd.logsession import LogSource, TelemetryLog
 from orccadd.cmdd.views import SignalSelection
 from orccadd.offline.plot import LANE_ROWS, lane_rows, output_format, plot_csv, read_log
 from orccadd.wire.schema import CommandMode, Layout, OperatorAction, Trace
@@ -32,7 +32,13 @@ def log(tmp_path: Path) -> Iterator[Path]:
         loop.ticks(5)
         sel = SignalSelection(["q", "dq", "tau", "cmd", "wake_us"], DESC["joints"])
         rec = TelemetryLog.start(
-            LogDir(tmp_path / "logs", ""), tel, "run.csv", sel, lambda: DESC, decode, URDF, {}
+            LogDir(tmp_path / "logs", ""),
+            [LogSource("", tel, sel)],
+            "run.csv",
+            lambda: DESC,
+            decode,
+            URDF,
+            {},
         )
         loop.ticks(50)
         loop.trace(Trace.COMMAND, OperatorAction.START)
