@@ -198,3 +198,42 @@ def test_another_local_user_is_refused() -> None:
             assert json.loads(ws.recv(timeout=10))["op"] == "serverInfo"
     finally:
         view.stop()
+
+
+def test_a_cells_channels_are_named_by_resource_and_every_joint_is_on_joint_states() -> None:
+    """A cell's monitor labels (`left/q.j1`): a channel per resource and signal, with the
+    signal's unit; `/joint_states` carries both arms' joints, a shared name told apart."""
+    labels = ["left/q.j1", "left/q.j2", "left/tau.j1", "right/q.j1", "right/q.finger"]
+    view = LiveView(labels, port=0)
+    try:
+        with _connect(view.port) as ws:
+            json.loads(ws.recv(timeout=10))
+            adv = json.loads(ws.recv(timeout=10))
+            topics = {c["topic"]: c for c in adv["channels"]}
+            assert set(topics) == {"/left/q", "/left/tau", "/right/q", "/joint_states", "/events"}
+            assert json.loads(topics["/left/tau"]["schema"])["properties"]["j1"]["unit"] == "N.m"
+            ws.send(
+                json.dumps(
+                    {
+                        "op": "subscribe",
+                        "subscriptions": [{"id": 4, "channelId": topics["/joint_states"]["id"]}],
+                    }
+                )
+            )
+            states = None
+            for _ in range(200):
+                view.sample(2.0, [1.0, 2.0, 3.0, 4.0, 5.0])
+                with contextlib.suppress(TimeoutError):
+                    frame = ws.recv(timeout=0.05)
+                    assert isinstance(frame, bytes)
+                    states = json.loads(frame[13:])
+                    break
+        assert states is not None
+        assert [(j["name"], j["position"], j["effort"]) for j in states["joints"]] == [
+            ("left/j1", 1.0, 3.0),
+            ("j2", 2.0, None),
+            ("right/j1", 4.0, None),
+            ("finger", 5.0, None),
+        ]
+    finally:
+        view.stop()
