@@ -14,7 +14,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 
-from orccadd.automaton import Automaton, Report, compile_file, compile_text, verify
+from orccadd.automaton import Automaton, Network, Report, compile_file, compile_text, verify, verify_network
 from orccadd.automaton import ast as A
 from orccadd.automaton.compiler import DEFAULT_MAX_STATES, Progress
 from orccadd.automaton.verify import CheckResult
@@ -60,21 +60,27 @@ def check_mission(
     progress: Progress | None = None,
     text: str | None = None,
     task_files: TaskFiles | None = None,
-) -> tuple[Automaton, Report]:
+) -> tuple[Automaton | Network, Report]:
     """The compiled mission and its verification report; `MissionError` if it does not compile.
+    A mission whose main procedure runs a large `par` of independent branches compiles as a
+    network (`orccadd.automaton.network`), checked on its products (`verify_network`).
     `text`: the mission's content, already read from `path` (the daemon reads it by descriptor);
     `task_files`: how its task files are read (default: any file, by path)."""
     files = task_files or TaskFiles()
+    automaton: Automaton | Network
     if text is None:
-        automaton = compile_file(path, max_states, files.interface, progress)
+        automaton = compile_file(path, max_states, files.interface, progress, allow_network=True)
     else:
-        automaton = compile_text(text, str(path), max_states, files.interface, progress)
-    report = verify(automaton, one_task_per_resource=True)
+        automaton = compile_text(text, str(path), max_states, files.interface, progress, allow_network=True)
+    if isinstance(automaton, Network):
+        report = verify_network(automaton, one_task_per_resource=True, max_states=max_states)
+    else:
+        report = verify(automaton, one_task_per_resource=True)
     report.results.append(_check_task_files(automaton))
     return automaton, report
 
 
-def _check_task_files(automaton: Automaton) -> CheckResult:
+def _check_task_files(automaton: Automaton | Network) -> CheckResult:
     bare = [f"{d.name} (line {d.loc.line})" for d in automaton.program.ast.tasks if not d.source]
     if bare:
         return CheckResult(
@@ -88,7 +94,7 @@ Bindings = Mapping[str, tuple[PhysicalResource, EventQueue]]  # resource name â†
 
 
 def build_mission_tasks(
-    automaton: Automaton,
+    automaton: Automaton | Network,
     bindings: Bindings,
     registry: EventRegistry,
     task_spec: Callable[[Path], TaskSpec] = load_task_file,
@@ -165,7 +171,9 @@ def _build(
     return task
 
 
-def check_on_robot(automaton: Automaton, resources: Sequence[PhysicalResource], robot: str) -> CheckResult:
+def check_on_robot(
+    automaton: Automaton | Network, resources: Sequence[PhysicalResource], robot: str
+) -> CheckResult:
     """Whether every task of the mission builds on this robot (`orccadctl check --config`):
     a misspelt module parameter, a missing gain or a joint the robot lacks, before `load`."""
     try:

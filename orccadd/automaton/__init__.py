@@ -130,9 +130,9 @@ def _compile(
             if find_split(p) is None or ("exceeds" not in e.detail and "input combinations" not in e.detail):
                 raise
             hint = (
-                "; its main procedure runs a `par` of independent branches: `orccadctl check "
-                "--language-only` verifies it as a network of one automaton per branch (the daemon "
-                "runs one Robot-Task at a time)"
+                "; its main procedure runs a `par` of independent branches: compiled with "
+                "`allow_network=True` (as `orccadctl check` and the daemon's `load` do), it is "
+                "a network of one automaton per branch"
             )
             raise MissionError(e.file, e.line, e.col, e.detail + hint, p.text) from None
     except RecursionError:

@@ -141,6 +141,27 @@ class Runner:
             hit = self.table[state][self.automaton.normalize(state, inputs)]
         return hit
 
+    # the stepping interface the daemon drives a mission by, the same for a `NetworkRunner`
+    # (whose states are snapshots): where it is, what the tasks there are, whether it waits
+    def snapshot(self) -> int:
+        return self.state
+
+    def restore(self, state: int) -> None:
+        self.state = state
+
+    def active_in(self, state: int) -> tuple[int, ...]:
+        """The Robot-Tasks active in `state` (task indices, a task once)."""
+        return tuple(sorted(set(self.automaton.active[state])))
+
+    def waits(self, state: int) -> bool:
+        """`state` reacts to no input by staying as it is, doing nothing: it waits for one."""
+        nxt = self.table[state].get(0)
+        return nxt is None or (nxt[0] == state and nxt[1] == 0)
+
+    def number(self, state: int) -> int:
+        """The state as the trace records it."""
+        return state
+
 
 def _unpickle(fields: dict[str, Any]) -> Automaton:
     fields["table"] = tuple(MappingProxyType(row) for row in fields["table"])

@@ -14,11 +14,13 @@ loop around a preemption). A kill works on the branches' own actions, apart from
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 from orccadd.automaton.automaton import Automaton
 from orccadd.automaton.network import Network
 
+NetState = tuple[int, tuple[int, ...], int, int, int, frozenset[int]]
 DONE_I, PAUSED_I = 0, 1  # code indices (`Network.codes` is ordered: done, paused, the exits)
 # A branch instant left out of its table (not causal; network.py): computed ahead of the
 # context's lookup, it only matters if the context takes it.
@@ -55,6 +57,7 @@ class NetworkRunner:
         "present",
         "running",
         "running_events",
+        "scratch",
         "shift",
         "st",
         "start_actions",
@@ -71,6 +74,7 @@ class NetworkRunner:
 
     def __init__(self, net: Network) -> None:
         self.net = net
+        self.scratch: NetworkRunner | None = None  # for `peek`
         ctx = net.context
         code_base = len(net.program.inputs)
         real = (1 << code_base) - 1
@@ -159,6 +163,49 @@ class NetworkRunner:
             for b, s in enumerate(self.st):
                 out.extend(self.btasks[b][s])
         return tuple(sorted(out))
+
+    # the stepping interface the daemon drives a mission by (`Runner`'s): a state is a snapshot
+    def snapshot(self) -> NetState:
+        """Where the network is: the context's state, each branch's, what they run."""
+        return (
+            self.ostate,
+            tuple(self.st),
+            self.n_alive,
+            self.running,
+            self.running_events,
+            frozenset(self.busy),
+        )
+
+    def restore(self, state: NetState) -> None:
+        ostate, st, self.n_alive, self.running, self.running_events, busy = state
+        self.ostate, self.st, self.busy = ostate, list(st), set(busy)
+
+    def peek(self, state: NetState, inputs: int) -> tuple[NetState, int]:
+        """The reaction of `state` to `inputs`, (next state, action bits), without taking it
+        (on a scratch runner sharing the tables: this one stays where it is)."""
+        scratch = self.scratch
+        if scratch is None:
+            scratch = self.scratch = copy.copy(self)
+        scratch.restore(state)
+        actions = scratch.react(inputs)
+        return scratch.snapshot(), actions
+
+    def active_in(self, state: NetState) -> tuple[int, ...]:
+        """The Robot-Tasks active in `state` (task indices, a task once)."""
+        out = set(self.net.context.active[state[0]])
+        if self.alive[state[0]]:
+            for b, s in enumerate(state[1]):
+                out.update(self.btasks[b][s])
+        return tuple(sorted(out))
+
+    def waits(self, state: NetState) -> bool:
+        """`state` reacts to no input by staying as it is, doing nothing: it waits for one."""
+        nxt, actions = self.peek(state, 0)
+        return nxt == state and actions == 0
+
+    def number(self, state: NetState) -> int:
+        """The state as the trace records it: the context's."""
+        return state[0]
 
     def react(self, inputs: int) -> int:
         """Inputs present in this instant → action bits. Never raises for inputs outside the model."""

@@ -22,7 +22,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from orccadd.automaton import Automaton, Report
+from orccadd.automaton import Automaton, Network, Report
 from orccadd.config.robot import RobotConfig
 from orccadd.config.shipped import is_bare_name, is_file
 from orccadd.confine import Confinement, ConfinementError
@@ -203,7 +203,9 @@ class RtCommands:
         except ConfinementError as e:
             raise CommandError(str(e)) from None
 
-    def _install(self, path: str, automaton: Automaton, report: Report, specs: dict[str, TaskSpec]) -> Result:
+    def _install(
+        self, path: str, automaton: Automaton | Network, report: Report, specs: dict[str, TaskSpec]
+    ) -> Result:
         mc = self.m.mission
         mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
         try:

@@ -96,7 +96,7 @@ class InlineReactor:
             plan, wants = decision
             runner = self.mission.runner
             assert runner is not None
-            runner.state = plan[-1].s1
+            runner.restore(plan[-1].s1)
             self.taken.extend((t_s, instant) for instant in plan)
             self.upto[self.loops.index(loop)] = end
             self.inline += 1

@@ -184,7 +184,7 @@ class Machine:
         self.pub.status(
             {
                 S.MACHINE: float(mc.state),
-                S.AUTOMATON_STATE: float(mc.runner.state if mc.runner else -1),
+                S.AUTOMATON_STATE: float(mc.runner.number(mc.runner.snapshot()) if mc.runner else -1),
                 S.MISSION_GEN: float(mc.generation),
                 S.INSTANTS: float(mc.instants),
                 S.RESULT: float(mc.result),

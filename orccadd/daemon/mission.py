@@ -9,12 +9,26 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Protocol
 
-from orccadd.automaton import Automaton, Report
+from orccadd.automaton import Automaton, Network, NetworkRunner, Report, Runner
 from orccadd.errors import OrccaddError, VerificationError
 from orccadd.mission import Bindings, TaskFiles, build_mission_tasks, check_mission
 from orccadd.task import EventRegistry, RobotTask
 from orccadd.task.spec import TaskSpec
+
+
+class MissionRunner(Protocol):
+    """How the daemon steps a mission: `Runner` (one automaton) or `NetworkRunner` (a network,
+    whose states are snapshots). A state is opaque to the daemon; `number` is what the trace
+    records of it."""
+
+    def snapshot(self) -> Any: ...
+    def restore(self, state: Any) -> None: ...
+    def peek(self, state: Any, inputs: int) -> tuple[Any, int]: ...
+    def active_in(self, state: Any) -> tuple[int, ...]: ...
+    def waits(self, state: Any) -> bool: ...
+    def number(self, state: Any) -> int: ...
 
 
 @dataclass(frozen=True)
@@ -22,7 +36,7 @@ class LoadedMission:
     """A verified mission with its tasks built for this robot's resources."""
 
     file: str
-    automaton: Automaton
+    automaton: Automaton | Network  # a network: a `par` of independent branches compiled apart
     report: Report
     tasks: tuple[RobotTask, ...]  # index i ↔ automaton.program.tasks[i]
     event_bits: dict[int, int]  # event registry id → the automaton's input bit
@@ -30,6 +44,16 @@ class LoadedMission:
     @property
     def name(self) -> str:
         return self.automaton.program.name
+
+    @property
+    def top(self) -> Automaton:
+        """The automaton whose action bits every reaction uses (a network's context)."""
+        return self.automaton.context if isinstance(self.automaton, Network) else self.automaton
+
+    def new_runner(self) -> MissionRunner:
+        """A runner for a new run, at the mission's initial state."""
+        a = self.automaton
+        return NetworkRunner(a) if isinstance(a, Network) else Runner(a)
 
     def describe(self) -> dict[str, object]:
         p = self.automaton.program
@@ -43,9 +67,10 @@ class LoadedMission:
             "tunables": [t.tunable_names for t in self.tasks],  # per task: what a tune record names
             "inputs": list(p.inputs),
             "operator_inputs": [n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator"],
-            "actions": list(self.automaton.action_names),
+            "actions": list(self.top.action_names),
             "states": self.automaton.n_states,
             "transitions": self.automaton.n_transitions,
+            "network": self.automaton.describe() if isinstance(self.automaton, Network) else None,
         }
 
 
@@ -58,7 +83,7 @@ def load_mission(path: str | Path, bindings: Bindings, registry: EventRegistry) 
 
 def compile_and_verify(
     path: str | Path, text: str | None = None, task_files: TaskFiles | None = None
-) -> tuple[Automaton, Report]:
+) -> tuple[Automaton | Network, Report]:
     """The long, pure part of a load (parse, compile, verify): the real-time process runs it in
     a child process (`orccadd.daemon.compile_worker`), so that it never holds the control
     thread's interpreter lock. `VerificationError` with the counterexamples if a check fails.
@@ -72,7 +97,7 @@ def compile_and_verify(
 
 def prepare_mission(
     path: str | Path,
-    automaton: Automaton,
+    automaton: Automaton | Network,
     report: Report,
     bindings: Bindings,
     registry: EventRegistry,

@@ -10,11 +10,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from logging import INFO, WARNING
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
-from orccadd.automaton import Runner
 from orccadd.daemon.loop import SwitchingLoop
-from orccadd.daemon.mission import LoadedMission
+from orccadd.daemon.mission import LoadedMission, MissionRunner
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError
 from orccadd.task import RobotTask
@@ -22,10 +21,11 @@ from orccadd.wire.schema import MachineState, MissionResult, Trace
 
 
 class Instant(NamedTuple):
-    """One reaction of the automaton: from state s0 to s1 on `inputs`, with `actions`."""
+    """One reaction of the automaton: from state s0 to s1 on `inputs`, with `actions` (states as
+    the runner snapshots them: a network's are tuples)."""
 
-    s0: int
-    s1: int
+    s0: Any
+    s1: Any
     inputs: int
     actions: int
 
@@ -63,7 +63,7 @@ class MissionControl:
         self._abort = abort  # the supervisor's: safe stop, fault, end of the run
         self.state = MachineState.IDLE
         self.mission: LoadedMission | None = None
-        self.runner: Runner | None = None
+        self.runner: MissionRunner | None = None
         self.generation = 0
         self.runs = 0  # runs started since the daemon started (any mission)
         self.loaded: list[dict[str, object]] = []  # the last missions loaded, names for the trace
@@ -117,7 +117,7 @@ class MissionControl:
             raise CommandError(
                 f"mission {mission.name} has no main procedure {procedure!r} (it has {main!r})"
             )
-        self.runner = Runner(mission.automaton)
+        self.runner = mission.new_runner()
         self.runs += 1
         self.state = MachineState.RUNNING
         self.result = MissionResult.NONE
@@ -175,17 +175,14 @@ class MissionControl:
         thread calls it too (`InlineReactor`), under the automaton's lock."""
         runner, mission = self.runner, self.mission
         assert runner is not None and mission is not None
-        a = mission.automaton
+        a = mission.top
         ends = a.success_bit | a.failed_bit | a.safe_done_bit
-        s0 = runner.state
+        s0 = runner.snapshot()
         out = []
         for _ in range(REACTIONS_PER_INSTANT):
             s1, actions = runner.peek(s0, inputs)
             out.append(Instant(s0, s1, inputs, actions))
-            if actions & ends:
-                break
-            nxt = runner.table[s1].get(0)
-            if nxt is None or (nxt[0] == s1 and nxt[1] == 0):
+            if actions & ends or runner.waits(s1):
                 break
             s0, inputs = s1, 0
         return out
@@ -195,7 +192,7 @@ class MissionControl:
         runner = self.runner
         assert runner is not None
         for instant in self.plan(inputs):
-            runner.state = instant.s1
+            runner.restore(instant.s1)
             self.book(t_s, instant, request=True)
             if not self.running:
                 return
@@ -204,24 +201,25 @@ class MissionControl:
         """An instant taken: its trace record, notes, the task it makes active (`request`:
         asked of the control thread; else the control thread switched already, in the tick)."""
         self.instants += 1
-        self.pub.trace(
-            Trace.INSTANT, t_s, 0, instant.s0, instant.s1, _bits(instant.inputs), _bits(instant.actions)
-        )
+        runner = self.runner
+        assert runner is not None
+        s0, s1 = runner.number(instant.s0), runner.number(instant.s1)
+        self.pub.trace(Trace.INSTANT, t_s, 0, s0, s1, _bits(instant.inputs), _bits(instant.actions))
         self._apply(instant.actions, request)
 
-    def target_of(self, state: int, actions: int) -> list[tuple[RobotTask | None, bool]] | None:
+    def target_of(self, state: Any, actions: int) -> list[tuple[RobotTask | None, bool]] | None:
         """Per resource (loop index): the mission task the automaton makes active on it in
         `state`, reached with `actions` (None: none, or the run ends), and whether it (re)starts;
         None if two tasks would be active on one resource. Pure: the control threads call it too
         (`InlineReactor`)."""
-        mission = self.mission
-        assert mission is not None
-        a = mission.automaton
+        mission, runner = self.mission, self.runner
+        assert mission is not None and runner is not None
+        a = mission.top
         out: list[tuple[RobotTask | None, bool]] = [(None, False)] * len(self.loops)
         if actions & (a.success_bit | a.failed_bit | a.safe_done_bit):
             return out
         starts = a.starts(actions)
-        for i in set(a.active[state]):
+        for i in runner.active_in(state):
             task = mission.tasks[i]
             k = self._by_resource[task.resource.name]
             if out[k][0] is not None:
@@ -232,10 +230,11 @@ class MissionControl:
     def _apply(self, actions: int, request: bool = True) -> None:
         mission, runner = self.mission, self.runner
         assert mission is not None and runner is not None
-        a = mission.automaton
-        decided = self.target_of(runner.state, actions)
+        a = mission.top
+        state = runner.snapshot()
+        decided = self.target_of(state, actions)
         if decided is None:  # the verifier excludes it; activation asserts it again
-            names = ", ".join(mission.tasks[i].name for i in sorted(set(a.active[runner.state])))
+            names = ", ".join(mission.tasks[i].name for i in runner.active_in(state))
             self._abort(f"activation refused: {names} would be active at once on one resource")
             return
         ended = actions & (a.success_bit | a.failed_bit | a.safe_done_bit)

@@ -110,7 +110,7 @@ def test_the_scale_target_compiles_and_verifies_as_a_network() -> None:
     assert report.ok, report.format()
     assert "a network" in report.format()
     # not allowed a network, the one automaton is refused, naming the way out
-    with pytest.raises(MissionError, match="--language-only"):
+    with pytest.raises(MissionError, match="allow_network=True"):
         compile_file(TEN)
 
 

@@ -158,8 +158,14 @@ def test_check_verifies_a_large_par_as_a_network() -> None:
     assert r.returncode == 0, r.stdout + r.stderr
     out = json.loads(r.stdout)
     assert out["ok"] and "a network" in out["network"] and "10 branches" in out["network"]
-    refused = ctl("check", str(ten))  # the daemon's check: one automaton, refused with the way out
-    assert refused.returncode == 1 and "--language-only" in refused.stderr
+    # the daemon's check: the same network, with one task per resource on its products; refused
+    # here only because its tasks have no task files
+    daemon = ctl("check", "--json", str(ten))
+    checks = {c["name"]: c for c in json.loads(daemon.stdout)["checks"]}
+    assert daemon.returncode == 1 and "10 branches" in json.loads(daemon.stdout)["network"], daemon.stdout
+    assert checks["one task per resource"]["ok"] and checks["safety"]["ok"], checks
+    failed = [c["name"] for c in checks.values() if not c["ok"] and c["level"] == "error"]
+    assert failed == ["task files"], failed
 
 
 def test_graph_draws_a_network_component_by_component(tmp_path: Path) -> None:

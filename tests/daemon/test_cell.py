@@ -229,3 +229,39 @@ def test_a_log_of_the_cell_has_each_resource_at_its_rate_and_one_mcap(dual: Daem
                 names |= {j["name"] for j in json.loads(m.data)["joints"]}
     assert {"/left/q", "/right/q", "/left/wake_us", "/right/wake_us", "/events"} <= topics
     assert len(names) == 12 and "left/elbow_joint" in names and "right/elbow_joint" in names
+
+
+def test_a_mission_compiled_as_a_network_runs_each_branch_on_its_arm(tmp_path: Path) -> None:
+    """relay_network.mission: a `par` of two independent branches (thirty dwells on each arm)
+    compiles as a network; `load` checks it on its products, as `orccadctl check` does, and the
+    daemon steps it with the network runner: both branches at once, each arm through its
+    thirty tasks in order, the run a success."""
+    missions = ROOT / "tests/daemon/missions"
+    cell = cell_copy(
+        DUAL, tmp_path, f'mission_dirs = ["{missions}"]\ntask_dirs = ["{ROOT / "configs/tasks"}"]'
+    )
+    d = start_daemon_with(tmp_path, cell)
+    try:
+        d.call("load", path=str(missions / "relay_network.mission"))
+        mission = cast(dict[str, Any], d.call("describe"))["mission"]
+        assert mission["network"] and "branches of the par at line" in mission["network"], mission
+        d.call("start")
+        s = d.wait(lambda s: s["state"] != "running", timeout_s=120)
+        assert s["result"] == "success" and not s["faulted"], s
+        steps = [(e["inputs"], e["actions"]) for e in instants(d)]
+        # a fault on one arm mid-run: the context kills both branches, enters the safe procedure
+        d.call("start")
+        d.wait(lambda s: "DwellL" in str(resources(d)["left"]["task"]), timeout_s=60)
+        d.call("inject", fault="resource", resource="left")
+        d.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(d)), timeout_s=30)
+        r = resources(d)
+        assert r["right"]["task"] == "Hold_right" and r["left"]["fault"]["resource"] == "left", r
+        d.call("send", input="Stop")
+        s = d.wait(lambda s: s["state"] != "running", timeout_s=30)
+        assert s["result"] == "safe", s
+    finally:
+        d.stop()
+    assert "start DwellL0" in steps[0][1] and "start DwellR0" in steps[0][1], steps[0]
+    for side in "LR":  # each branch through its thirty dwells, alternating its two tasks
+        done = [i for ins, _ in steps for i in ins if i.startswith(f"Dwell{side}")]
+        assert done == [f"Dwell{side}{k % 2}.done" for k in range(30)], done
