@@ -42,8 +42,9 @@ def dependencies(m: A.MissionAst, internals: tuple[str, ...]) -> list[Dependency
             acc = list(guards)
             for item in s.items:
                 walk(item, acc, stack)
-                if isinstance(item, A.Await):  # what follows runs in the instant the await ends
-                    acc = acc + signals(item.cond)
+                # what follows runs once the item ends, which may hang on what it tests (an
+                # await's condition, a `present`'s: constructive semantics)
+                acc = acc + tests_in(item)
         elif isinstance(s, A.Present):
             g = guards + signals(s.cond)
             for sub in A.substatements(s):
@@ -64,11 +65,26 @@ def dependencies(m: A.MissionAst, internals: tuple[str, ...]) -> list[Dependency
             for sub in A.substatements(s):
                 walk(sub, guards, stack)
 
+    def tests_in(s: A.Stmt) -> list[tuple[str, A.Loc]]:
+        out = [x for c in _conds(s) for x in signals(c)]
+        for sub in A.substatements(s):
+            out += tests_in(sub)
+        return out
+
     for p in m.procedures:
         walk(p.body, [], (p.name,))
         for h in p.handlers:
             walk(h.body, signals(h.cond), (p.name,))
     return out
+
+
+def _conds(s: A.Stmt) -> list[A.SigExpr | None]:
+    """The conditions a statement itself tests."""
+    if isinstance(s, A.Present | A.Await | A.DoUntil | A.Suspend | A.Every):
+        return [s.cond]
+    if isinstance(s, A.When):
+        return [s.cond, s.until]
+    return []
 
 
 def find_cycle(deps: list[Dependency], among: set[str]) -> list[Dependency]:

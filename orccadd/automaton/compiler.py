@@ -23,6 +23,7 @@ from orccadd.automaton import kernel as K
 from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
 from orccadd.automaton.causality import dependencies, find_cycle
 from orccadd.automaton.classes import EventClass, event_classes, event_reps
+from orccadd.automaton.constructive import Env, analyse, establish
 from orccadd.automaton.program import Program
 from orccadd.errors import MissionError
 
@@ -105,10 +106,18 @@ def input_combinations(p: Program, active: tuple[int, ...], relevant: int, reps:
 R = TypeVar("R")
 
 
-def resolve(p: Program, inputs: int, internal: int, run: Callable[[K.Instant], R]) -> R:
+Outcomes = Callable[[int, int], tuple[int, int]]  # (present, absent) → (must emit, can emit)
+
+
+def resolve(
+    p: Program, inputs: int, internal: int, run: Callable[[K.Instant], R], outcomes: Outcomes | None = None
+) -> R:
     """The one consistent outcome of an instant (`run` evaluates it under guessed statuses of the
-    internal signals it may test). Raises K.InstantaneousLoopError or _CausalityError."""
-    solutions: dict[tuple[int, int], R] = {}
+    internal signals it may test), which constructive semantics must establish (`outcomes`: the
+    instant in three-valued logic, `constructive.analyse`): every signal the instant tests present
+    because it must be emitted or absent because it cannot be. Raises K.InstantaneousLoopError or
+    _CausalityError."""
+    solutions: dict[tuple[int, int], tuple[R, int]] = {}
     candidates = bits_of(internal)
     for n in range(len(candidates) + 1):
         for subset in itertools.combinations(candidates, n):
@@ -116,10 +125,16 @@ def resolve(p: Program, inputs: int, internal: int, run: Callable[[K.Instant], R
             r = K.Instant(inputs, assumed, p.end_masks)
             out = run(r)
             if (r.emitted & r.reads) == (assumed & r.reads):
-                solutions[(assumed & r.reads, r.emitted)] = out
+                solutions[(assumed & r.reads, r.emitted)] = (out, r.reads)
     if len(solutions) != 1:
         raise _CausalityError(internal, len(solutions))
-    return next(iter(solutions.values()))
+    ((assumed, _), (out, reads)), *_ = solutions.items()
+    if reads and outcomes is not None:
+        present, absent = establish(internal, outcomes)
+        unknown = reads & ~(present | absent)
+        if unknown or present & reads != assumed:
+            raise _CausalityError(unknown or reads, 1, constructive=False)
+    return out
 
 
 def instant_actions(lay: ActionLayout, r: K.Instant) -> int:
@@ -157,7 +172,27 @@ class Reactor:
 
     def react(self, top: Top, inputs: int, internal: int) -> tuple[Top, int]:
         """(next state, action bits). Raises K.InstantaneousLoopError or _CausalityError."""
-        return resolve(self.p, inputs, internal, lambda r: self._run(top, r))
+        return resolve(self.p, inputs, internal, lambda r: self._run(top, r), self._outcomes(top, inputs))
+
+    def _hole_code(self) -> int:
+        """The par's code in this instant (a network's context: `_ContextReactor`)."""
+        return K.PAUSED
+
+    def _outcomes(self, top: Top, inputs: int) -> Outcomes:
+        """The instant in three-valued logic: main, then the safe procedure if main can exit to it."""
+        p, hole = self.p, self._hole_code()
+
+        def outcomes(present: int, absent: int) -> tuple[int, int]:
+            env = Env(inputs, present, absent, top.prev_in, top.prev_int, p.end_masks, hole)
+            o = analyse(top.term, env)
+            must, can = o.must, o.can
+            if top.phase == MAIN and K.SAFE_CODE in o.can_codes:
+                s = analyse(p.safe, env)
+                can |= s.can
+                must |= s.must if o.must_code == K.SAFE_CODE else 0
+            return must, can
+
+        return outcomes
 
     def _run(self, top: Top, r: K.Instant) -> tuple[Top, int]:
         lay = self.layout
@@ -191,10 +226,11 @@ class Reactor:
 
 
 class _CausalityError(Exception):
-    def __init__(self, internal: int, solutions: int) -> None:
+    def __init__(self, internal: int, solutions: int, constructive: bool = True) -> None:
         super().__init__(internal, solutions)
-        self.internal = internal
-        self.solutions = solutions
+        self.internal = internal  # the signals concerned
+        self.solutions = solutions  # how many consistent statuses the instant has
+        self.constructive = constructive  # False: its one status cannot be established
 
 
 Progress = Callable[[int, int, float], None]  # (states, transitions, seconds so far)
@@ -339,6 +375,14 @@ def _causality_error(p: Program, e: _CausalityError, path: list[int]) -> Mission
     else:
         chain, why = ", ".join(sorted(names)), "no emission chain found"
         at = next((d.emitted_at for d in deps if d.emitted in names), A.Loc(p.file, 1, 1))
+    if not e.constructive:
+        what = " and ".join(sorted(names))
+        kind = (
+            f"the status of {what} cannot be established: it is tested before anything must emit "
+            "it, and something can (Esterel's constructive rule: a signal is present when it must "
+            "be emitted, absent when it cannot be; a status that only justifies itself is refused)"
+        )
+        return ReactionError(p, at.line, at.col, f"not constructive, {chain}: {kind}; {why}", path)
     if e.solutions == 0:
         kind = "no consistent status (an emission depends on its own absence)"
     else:

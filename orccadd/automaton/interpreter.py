@@ -4,7 +4,11 @@ It walks the *syntax tree* with one mutable object per statement (start / resume
 the compiler rewrites kernel terms; the two must agree instant by instant (a property test feeds
 both random programs and random inputs). It is the reference for the semantics, not for speed.
 Internal signals are resolved the same way (exactly one consistent status per instant), by
-re-running the instant on a copy of the program for every guess.
+re-running the instant on a copy of the program for every guess; and that status must be the one
+constructive semantics establishes (Esterel's rule): each node's `potential` is its instant in
+three-valued logic (what it must emit, what it can, its completion codes), signals present when
+they must be emitted, absent when they cannot be, iterated; computed on the syntax tree's nodes,
+apart from the compiler's (`constructive.py`, on kernel terms).
 """
 
 from __future__ import annotations
@@ -38,6 +42,45 @@ class Ctx:
         self.stops: list[int] = []
         self.prev_inputs = 0  # the previous instant's inputs and emitted signals (`pre(S)`)
         self.prev_emitted = 0
+        self.ternary = False  # a `potential`: internal signals `present`, `absent` or not known
+        self.present = 0
+        self.absent = 0
+
+
+Pot = tuple[int, int, "int | None", frozenset[int]]  # must emit, can emit, must code, can codes
+_NO: frozenset[int] = frozenset()
+
+
+def _pot(code: int) -> Pot:
+    return 0, 0, code, frozenset((code,))
+
+
+def _either(*pots: Pot, codes: frozenset[int] = _NO) -> Pot:
+    """Any of these can happen, none must (a test not decided yet)."""
+    can, out = 0, set(codes)
+    for _, c, _, k in pots:
+        can |= c
+        out |= k
+    return 0, can, None, frozenset(out)
+
+
+def _then(first: Pot, rest: Callable[[], Pot]) -> Pot:
+    """`first`, then `rest` if `first` can end (DONE) in this instant."""
+    must, can, code, codes = first
+    if DONE not in codes:
+        return first
+    m2, c2, k2, ks2 = rest()
+    return (
+        (must | m2 if code == DONE else must),
+        can | c2,
+        (k2 if code == DONE else None),
+        (codes - {DONE}) | ks2,
+    )
+
+
+def _map(pot: Pot, old: int, new: int) -> Pot:
+    must, can, code, codes = pot
+    return must, can, (new if code == old else code), frozenset(new if k == old else k for k in codes)
 
 
 class Node:
@@ -50,6 +93,11 @@ class Node:
     def kill(self, c: Ctx) -> None:
         """Preempted while paused."""
 
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        """This instant of the node (`fresh`: started in it, else resumed) in three-valued logic,
+        without changing it."""
+        raise NotImplementedError
+
 
 class Leaf(Node):
     def __init__(self, first: int, then: int) -> None:
@@ -61,6 +109,9 @@ class Leaf(Node):
     def resume(self, c: Ctx) -> int:
         return self.then
 
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        return _pot(self.first if fresh else self.then)
+
 
 class EmitN(Node):
     def __init__(self, bit: int) -> None:
@@ -69,6 +120,9 @@ class EmitN(Node):
     def start(self, c: Ctx) -> int:
         c.emitted |= self.bit
         return DONE
+
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        return self.bit, self.bit, DONE, frozenset((DONE,))
 
 
 class AwaitN(Node):
@@ -80,6 +134,12 @@ class AwaitN(Node):
 
     def resume(self, c: Ctx) -> int:
         return DONE if self.test(c) else PAUSED
+
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        if fresh and not self.immediate:
+            return _pot(PAUSED)
+        v = self.test(c)
+        return (0, 0, None, frozenset((DONE, PAUSED))) if v is None else _pot(DONE if v else PAUSED)
 
 
 class RunN(Node):
@@ -104,6 +164,9 @@ class RunN(Node):
         else:
             c.stops.append(self.task)
 
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        return _pot(PAUSED if fresh or not c.inputs & c.p.end_masks[self.task] else DONE)
+
 
 class SeqN(Node):
     def __init__(self, items: list[Node]) -> None:
@@ -125,6 +188,15 @@ class SeqN(Node):
 
     def kill(self, c: Ctx) -> None:
         self.items[self.at].kill(c)
+
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        at = 0 if fresh else self.at
+
+        def from_(i: int, first: bool) -> Pot:
+            pot = self.items[i].potential(c, first)
+            return pot if i + 1 == len(self.items) else _then(pot, lambda: from_(i + 1, True))
+
+        return from_(at, fresh)
 
 
 class ParN(Node):
@@ -154,6 +226,17 @@ class ParN(Node):
             if alive:
                 b.kill(c)
 
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        must = can = 0
+        code: int | None = DONE
+        codes = {DONE}
+        for b, alive in zip(self.branches, self.alive, strict=True):
+            m, cn, k, ks = b.potential(c, True) if fresh else (b.potential(c, False) if alive else _pot(DONE))
+            must, can = must | m, can | cn
+            code = None if code is None or k is None else max(code, k)
+            codes = {max(x, y) for x in codes for y in ks}
+        return must, can, code, frozenset(codes)
+
 
 class LoopN(Node):
     def __init__(self, body: Node) -> None:
@@ -171,6 +254,13 @@ class LoopN(Node):
 
     def kill(self, c: Ctx) -> None:
         self.body.kill(c)
+
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        def again() -> Pot:  # a body that ends at once is refused by `start` itself
+            must, can, code, codes = self.body.potential(c, True)
+            return must, can, (None if code == DONE else code), codes - {DONE}
+
+        return again() if fresh else _then(self.body.potential(c, False), again)
 
 
 class AbortN(Node):
@@ -201,6 +291,25 @@ class AbortN(Node):
     def kill(self, c: Ctx) -> None:
         self.body.kill(c)
 
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        if fresh and not self.immediate:
+            return self.body.potential(c, True)
+        if not self.weak:
+            v = self.test(c)
+            if v:
+                return _pot(DONE)
+            body = self.body.potential(c, fresh)
+            return body if v is False else _either(body, codes=frozenset((DONE,)))
+        body = self.body.potential(c, fresh)
+        if PAUSED not in body[3]:
+            return body
+        v = self.test(c)
+        if v is False:
+            return body
+        if v:
+            return _map(body, PAUSED, DONE)
+        return body[0], body[1], (None if body[2] == PAUSED else body[2]), body[3] | {DONE}
+
 
 class SuspendN(Node):
     """`suspend P when C`: in an instant where C holds (from the next instant, or this one too if
@@ -226,6 +335,15 @@ class SuspendN(Node):
         if self.started:
             self.body.kill(c)
 
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        if fresh and not self.immediate:
+            return self.body.potential(c, True)
+        v = self.test(c)
+        if v:
+            return _pot(PAUSED)
+        body = self.body.potential(c, fresh or not self.started)
+        return body if v is False else _either(body, codes=frozenset((PAUSED,)))
+
 
 class PresentN(Node):
     def __init__(self, test: Callable[[Ctx], bool], then: Node, orelse: Node) -> None:
@@ -241,6 +359,14 @@ class PresentN(Node):
 
     def kill(self, c: Ctx) -> None:
         self.chosen.kill(c)
+
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        if not fresh:
+            return self.chosen.potential(c, False)
+        v = self.test(c)
+        if v is None:
+            return _either(self.then.potential(c, True), self.orelse.potential(c, True))
+        return (self.then if v else self.orelse).potential(c, True)
 
 
 class TrapN(Node):
@@ -258,6 +384,9 @@ class TrapN(Node):
 
     def kill(self, c: Ctx) -> None:
         self.body.kill(c)
+
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        return _map(self.body.potential(c, fresh), self.code, DONE)
 
 
 class HandleN(Node):
@@ -293,6 +422,23 @@ class HandleN(Node):
 
     def kill(self, c: Ctx) -> None:
         self.current.kill(c)
+
+    def potential(self, c: Ctx, fresh: bool) -> Pot:
+        if not fresh and self.current is not self.body:
+            return self.current.potential(c, False)
+        seen: list[Pot] = []  # handlers that can start while an earlier condition is not known
+        if self.immediate or not fresh:
+            for test, h in self.handlers:
+                v = test(c)
+                if v is False:
+                    continue
+                if v and not seen:
+                    return h.potential(c, True)
+                seen.append(h.potential(c, True))
+                if v:
+                    return _either(*seen)
+        body = self.body.potential(c, fresh)
+        return _either(*seen, body) if seen else body
 
 
 class Interpreter:
@@ -345,17 +491,27 @@ class Interpreter:
                 return lambda c: bool(c.inputs & bit)
 
             def internal(c: Ctx) -> bool:
+                if c.ternary:  # known present, known absent, or not yet (None)
+                    return True if c.present & bit else (False if c.absent & bit else None)  # type: ignore[return-value]
                 c.reads |= bit
                 return bool(c.assumed & bit)
 
             return internal
         if isinstance(e, A.Not):
             inner = self.test(e.item)
-            return lambda c: not inner(c)
+            return lambda c: (lambda v: None if v is None else not v)(inner(c))  # type: ignore[return-value]
         parts = [self.test(x) for x in e.items]  # type: ignore[union-attr]
-        if isinstance(e, A.And):
-            return lambda c: all(f(c) for f in parts)
-        return lambda c: any(f(c) for f in parts)
+        conj = isinstance(e, A.And)
+
+        def combined(c: Ctx) -> bool:
+            if not c.ternary:
+                return all(f(c) for f in parts) if conj else any(f(c) for f in parts)
+            values = [f(c) for f in parts]  # one side can decide it: false for `and`, true for `or`
+            if (not conj) in values:
+                return not conj
+            return conj if all(v is conj for v in values) else None  # type: ignore[return-value]
+
+        return combined
 
     def tasks_of(self, s: A.Stmt) -> set[int]:
         if isinstance(s, A.Call | A.Run):
@@ -453,6 +609,7 @@ class Interpreter:
         """Inputs present in this instant → the same action bits as the compiled automaton."""
         n_int = len(self.p.internals)
         results: dict[tuple[int, int], tuple[Interpreter, int]] = {}
+        reads: dict[tuple[int, int], int] = {}
         for bits in itertools.product((0, 1), repeat=n_int):
             assumed = sum(b << i for i, b in enumerate(bits))
             trial = copy.deepcopy(self)
@@ -461,13 +618,56 @@ class Interpreter:
             actions = trial._instant(c)
             if (c.emitted & c.reads) == (assumed & c.reads):
                 results[(assumed & c.reads, c.emitted)] = (trial, actions)
+                reads[(assumed & c.reads, c.emitted)] = c.reads
         if len(results) != 1:
             raise InterpreterError(f"{len(results)} consistent reactions")
-        (_, emitted), (trial, actions) = next(iter(results.items()))
+        ((assumed, emitted), (trial, actions)), *_ = results.items()
+        if reads[(assumed, emitted)]:  # it tested internal signals
+            self._establish(inputs, reads[(assumed, emitted)], assumed)
         self.__dict__.update(trial.__dict__)
         self.instant += 1
         self.prev = (inputs, emitted)
         return actions
+
+    def _establish(self, inputs: int, reads: int, assumed: int) -> None:
+        """The statuses constructive semantics gives the signals this instant reads, iterated from
+        none known; `InterpreterError` unless every one is established, as the guess found it."""
+        present = absent = 0
+        every = (1 << len(self.p.internals)) - 1
+        while True:
+            c = Ctx(self.p, inputs, 0, self.instant)
+            c.prev_inputs, c.prev_emitted = self.prev
+            c.ternary, c.present, c.absent = True, present, absent
+            must, can = self._potential(c)
+            more_present = must & ~present
+            more_absent = every & ~can & ~absent & ~present
+            if not (more_present or more_absent):
+                break
+            present |= more_present
+            absent |= more_absent
+        if reads & ~(present | absent) or present & reads != assumed:
+            names = [
+                n
+                for i, n in enumerate(self.p.internals)
+                if reads >> i & 1 and not (present | absent) >> i & 1
+            ]
+            raise InterpreterError(
+                f"not constructive: the status of {', '.join(names)} cannot be established"
+            )
+
+    def _potential(self, c: Ctx) -> tuple[int, int]:
+        """(must emit, can emit) of this instant, main then the safe procedure it may enter."""
+        if self.phase == "end":
+            return 0, 0
+        if self.phase == "safe":
+            pot = self.safe.potential(c, False)
+            return pot[0], pot[1]
+        must, can, code, codes = self.main.potential(c, self.phase == "start")
+        if SAFE_CODE in codes:
+            smust, scan, _, _ = self.safe.potential(c, True)
+            can |= scan
+            must |= smust if code == SAFE_CODE else 0
+        return must, can
 
     def _instant(self, c: Ctx) -> int:
         lay = self.layout

@@ -59,6 +59,7 @@ from orccadd.automaton.compiler import (
     possible_inputs,
     resolve,
 )
+from orccadd.automaton.constructive import Env, analyse
 from orccadd.automaton.program import Program, Site
 from orccadd.errors import MissionError
 
@@ -315,8 +316,14 @@ def compile_branch(
                 code, res = K.step(term, r)
                 return code, (K.settle(res) if code == K.PAUSED else None), instant_actions(layout, r)
 
+            def outcomes(
+                present: int, absent: int, term: K.Term = term, inputs: int = inputs
+            ) -> tuple[int, int]:
+                o = analyse(term, Env(inputs, present, absent, end_masks=p.end_masks))
+                return o.must, o.can
+
             try:
-                code, nxt, actions = resolve(p, inputs, internal, run)
+                code, nxt, actions = resolve(p, inputs, internal, run, outcomes)
             except (K.InstantaneousLoopError, _CausalityError):
                 continue  # no reaction: the verifier's products refuse it if the mission can get here
             if nxt is None:
@@ -380,6 +387,9 @@ class _ContextReactor(Reactor):
         super().__init__(p, layout)
         self.code = K.PAUSED
         self.flags = flags  # step, kill, kill first, fresh
+
+    def _hole_code(self) -> int:
+        return self.code
 
     def _run(self, top: Top, r: K.Instant) -> tuple[Top, int]:
         r.hole_code = self.code

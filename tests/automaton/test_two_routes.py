@@ -5,11 +5,15 @@ from __future__ import annotations
 
 import random
 
+import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from orccadd.automaton import Automaton, Runner, compile_file, compile_text
-from orccadd.automaton.interpreter import Interpreter
+from orccadd.automaton.compiler import ReactionError
+from orccadd.automaton.elaborate import elaborate
+from orccadd.automaton.interpreter import Interpreter, InterpreterError
+from orccadd.automaton.parser import parse_mission
 from orccadd.errors import MissionError
 from tests.automaton.conftest import KEEPSTABLE
 
@@ -155,3 +159,48 @@ def test_a_pickled_automaton_reacts_as_the_original() -> None:
         inputs = rng.choice(sorted(a.table[sa]))  # an input combination the state reacts to
         (sa, acts_a), (sb, acts_b) = a.react(sa, inputs), b.react(sb, inputs)
         assert (sa, acts_a) == (sb, acts_b)
+
+
+# shapes where a signal is tested before (or apart from) what emits it, mixed into random programs
+PRONE = st.sampled_from([
+    "present S then emit U end; emit S", "present S then emit S else emit S end",
+    "par(present S then emit U end || present U then emit S end)", "present U then emit S end; emit U",
+    "par(present S then emit U else emit S end || nothing)", "do emit S; await I until immediate U; emit U",
+    "par(await immediate S; emit U || present U then emit S end)", "weak do emit S until immediate S",
+])  # fmt: skip
+
+
+@settings(
+    max_examples=int(__import__("os").environ.get("STRESS", "60")), deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much]
+)
+@given(
+    st.tuples(statements(2), PRONE, statements(1), st.booleans()).map(
+        lambda t: f"{t[0]}; par({t[1]} || {t[2]})" if t[3] else f"{t[0]}; {t[1]}; {t[2]}"
+    ),
+    statements(1).filter(lambda s: "safe" not in s),
+)
+def test_what_the_compiler_finds_not_constructive_the_interpreter_refuses_on_the_same_path(
+    main: str, safe: str
+) -> None:
+    """Constructive causality, two implementations (kernel terms; the syntax tree's nodes): a
+    program the compiler refuses as not constructive, replayed on the interpreter along the path
+    the refusal names, is refused by it at that path's last instant, and not before; one it
+    accepts, the interpreter runs instant by instant as the automaton does."""
+    try:
+        a = compile_text(program(main, safe), "random.mission", max_states=3000)
+    except ReactionError as e:
+        if "not constructive" not in str(e):
+            assume(False)
+            return
+        path = e.path
+    except MissionError:
+        assume(False)
+        return
+    else:  # accepted: the interpreter, its own judge of causality, agrees instant by instant
+        agree(a, len(main))
+        return
+    interp = Interpreter(elaborate(parse_mission(program(main, safe), "random.mission")))
+    for inputs in path[:-1]:
+        interp.react(inputs)
+    with pytest.raises(InterpreterError, match="not constructive"):
+        interp.react(path[-1])
