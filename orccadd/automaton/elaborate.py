@@ -299,9 +299,14 @@ class _Elaborator:
     def check_prop_expr(self, e: A.SigExpr) -> None:
         if isinstance(e, A.SigRef):
             self.resolve(e.name, e.loc)
+        elif isinstance(e, A.Fn) and e.fn == "pre":  # a signal in the previous instant
+            self.resolve(e.arg, e.loc)
         elif isinstance(e, A.Fn):
             if e.fn not in PROPERTY_FNS:
-                raise self.err(e.loc, f"unknown property atom `{e.fn}(...)`: use {', '.join(PROPERTY_FNS)}")
+                raise self.err(
+                    e.loc,
+                    f"unknown property atom `{e.fn}(...)`: use {', '.join(PROPERTY_FNS)} or pre(SIGNAL)",
+                )
             if e.arg not in self.tasks:
                 raise self.err(e.loc, f"`{e.fn}({e.arg})`: {e.arg} is not a declared task")
         elif isinstance(e, A.Not):

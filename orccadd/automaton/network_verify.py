@@ -224,6 +224,8 @@ def mentioned_branches(net: Network, e: A.SigExpr | None) -> set[int]:
     if e is None:
         return set()
     p, split = net.program, net.split
+    if isinstance(e, A.Fn) and e.fn == "pre":  # a signal, the instant before: that signal's
+        return mentioned_branches(net, A.SigRef(e.arg, e.loc))
     if isinstance(e, A.Fn):
         names = [t.name for t in p.tasks]
         t = names.index(e.arg) if e.arg in names else -1

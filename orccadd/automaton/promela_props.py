@@ -1,7 +1,8 @@
 """The mission's `property` lines as Promela assertions, shared by both spin exports.
 
 Each export says how an atom reads in its model (`Atom`): `active(T)`, `start(T)`, `stop(T)`, a
-signal. Evaluated once per instant, after it (like the verifier's observers, on transitions):
+signal; `pre(S)` is a variable of its own, S's value set after the instant's checks. Evaluated once
+per instant, after it (like the verifier's observers, on transitions):
 
 - `never C`: `C` does not hold in any instant;
 - `A and B alternate`: a two-state observer (A first; an instant with both counts as B then A);
@@ -51,11 +52,21 @@ class PropCode:
 
 def encode_properties(p: Program, atom: Atom) -> PropCode:
     out = PropCode()
+    pres: dict[str, str] = {}  # `pre(S)`: S's value in the instant before, one variable per signal
+
+    def with_pre(e: A.SigRef | A.Fn) -> str:
+        if isinstance(e, A.Fn) and e.fn == "pre":
+            if e.arg not in pres:
+                pres[e.arg] = f"pre{len(pres)}"
+                out.decls.append(f"bit {pres[e.arg]};  /* pre({e.arg}): 0 before the first instant */")
+            return pres[e.arg]
+        return atom(e)
+
     for i, prop in enumerate(p.properties):
         bit = prop_bit(i, prop.name)
         try:
-            a = expr(prop.a, atom)
-            b = expr(prop.b, atom) if prop.b is not None else ""
+            a = expr(prop.a, with_pre)
+            b = expr(prop.b, with_pre) if prop.b is not None else ""
         except OrccaddError as e:
             raise OrccaddError(f"property {prop.name} (line {prop.loc.line}): {e}") from None
         if prop.kind == "never":
@@ -73,6 +84,8 @@ def encode_properties(p: Program, atom: Atom) -> PropCode:
             ]
         else:
             out.skipped.append(f"{prop.name} (`-> eventually`: a branching-time property, left to check)")
+    for name, var in pres.items():  # after every check of the instant: what the next one reads
+        out.checks.append(f"{var} = {atom(A.SigRef(name, A.Loc(p.file, 0, 0)))};")
     return out
 
 

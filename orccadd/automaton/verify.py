@@ -582,13 +582,18 @@ def _dead_sites(sites: tuple[Site, ...], executed: set[int]) -> list[Site]:
 # observers ----------------------------------------------------------------------------------------
 
 
-def _atom_holds(a: Automaton, e: A.SigExpr, inputs: int, actions: int, nxt: int) -> bool:
+Prev = tuple[int, int]  # the previous instant's inputs and actions, as far as a `pre(S)` reads them
+
+
+def _atom_holds(a: Automaton, e: A.SigExpr, inputs: int, actions: int, nxt: int, prev: Prev = (0, 0)) -> bool:
     p = a.program
     if isinstance(e, A.SigRef):
         name = p.signal(e.name)
         if name in p.inputs:
             return bool(inputs >> p.inputs.index(name) & 1)
         return bool(actions >> (a.emit_base + p.internals.index(name)) & 1)
+    if isinstance(e, A.Fn) and e.fn == "pre":  # S in the previous instant (absent before the first)
+        return _atom_holds(a, A.SigRef(e.arg, e.loc), prev[0], prev[1], nxt)
     if isinstance(e, A.Fn):
         t = [x.name for x in p.tasks].index(e.arg)
         if e.fn == "active":
@@ -596,19 +601,43 @@ def _atom_holds(a: Automaton, e: A.SigExpr, inputs: int, actions: int, nxt: int)
         base = a.start_base if e.fn == "start" else a.stop_base
         return bool(actions >> (base + t) & 1)
     if isinstance(e, A.Not):
-        return not _atom_holds(a, e.item, inputs, actions, nxt)
+        return not _atom_holds(a, e.item, inputs, actions, nxt, prev)
     if isinstance(e, A.And):
-        return all(_atom_holds(a, x, inputs, actions, nxt) for x in e.items)
-    return any(_atom_holds(a, x, inputs, actions, nxt) for x in e.items)
+        return all(_atom_holds(a, x, inputs, actions, nxt, prev) for x in e.items)
+    return any(_atom_holds(a, x, inputs, actions, nxt, prev) for x in e.items)
+
+
+def _pre_masks(a: Automaton, e: A.SigExpr | None) -> Prev:
+    """(input bits, action bits) the `pre(S)` atoms of `e` read: what an observer remembers."""
+    if e is None:
+        return 0, 0
+    p = a.program
+    if isinstance(e, A.Fn) and e.fn == "pre":
+        name = p.signal(e.arg)
+        if name in p.inputs:
+            return 1 << p.inputs.index(name), 0
+        return 0, 1 << (a.emit_base + p.internals.index(name))
+    if isinstance(e, A.Not):
+        return _pre_masks(a, e.item)
+    if isinstance(e, A.And | A.Or):
+        pin = pact = 0
+        for x in e.items:
+            i, k = _pre_masks(a, x)
+            pin, pact = pin | i, pact | k
+        return pin, pact
+    return 0, 0
 
 
 def _check_property(a: Automaton, g: _Graph, prop: A.PropDecl) -> CheckResult:
     name = f"property {prop.name}"
+    pin_a, pact_a = _pre_masks(a, prop.a)
+    pin_b, pact_b = _pre_masks(a, prop.b)
+    pin, pact = pin_a | pin_b, pact_a | pact_b  # a `pre` observer: the instant before, remembered
 
-    def holds(e: A.SigExpr, inputs: int, actions: int, n: int) -> bool:
-        return _atom_holds(a, e, inputs, actions, n)
+    def holds(e: A.SigExpr, inputs: int, actions: int, n: int, prev: Prev = (0, 0)) -> bool:
+        return _atom_holds(a, e, inputs, actions, n, prev)
 
-    if prop.kind == "never":
+    if prop.kind == "never" and not (pin or pact):
         for s, inputs, n, actions in g.edges():
             if holds(prop.a, inputs, actions, n):
                 return CheckResult(
@@ -618,14 +647,19 @@ def _check_property(a: Automaton, g: _Graph, prop: A.PropDecl) -> CheckResult:
                     [*g.path(s), Step(inputs, actions)],
                 )
         return CheckResult(name, True, "never happens")
-    assert prop.b is not None
-    # product of the automaton with a two-state observer, breadth first for short counterexamples
-    start = (0, 0)
-    parent: dict[tuple[int, int], tuple[tuple[int, int], Step]] = {}
+    # product of the automaton with an observer (two states, and the instant before for a `pre`),
+    # breadth first for short counterexamples
+    Node = tuple[int, int, Prev]
+    start: Node = (0, 0, (0, 0))
+    parent: dict[Node, tuple[Node, Step]] = {}
     seen = {start}
     queue = deque([start])
-    bad: tuple[tuple[int, int], Step | None, str] | None = None
-    b = prop.b
+    bad: tuple[Node, Step | None, str] | None = None
+    b = prop.b if prop.b is not None else prop.a
+    if prop.kind == "eventually" and (pin_b or pact_b):
+        return CheckResult(
+            name, False, f"`pre(...)` in what must eventually happen ({A.show(b)}): not supported"
+        )
     can_b = (
         _backward(a, g, lambda i, act, n: holds(b, i, act, n), lambda i: True)
         if prop.kind == "eventually"
@@ -633,25 +667,30 @@ def _check_property(a: Automaton, g: _Graph, prop: A.PropDecl) -> CheckResult:
     )
     while queue and bad is None:
         node = queue.popleft()
-        s, obs = node
+        s, obs, prev = node
         if prop.kind == "eventually" and obs == 1 and (a.phase[s] == END or s not in can_b):
             why = "can no longer happen" if a.phase[s] != END else "did not happen before the mission ended"
-            bad = (node, None, f"after {A.show(prop.a)}, {A.show(prop.b)} {why}")
+            bad = (node, None, f"after {A.show(prop.a)}, {A.show(b)} {why}")
             break
         for inputs, (n, actions) in a.table[s].items():
-            ha, hb = holds(prop.a, inputs, actions, n), holds(prop.b, inputs, actions, n)
+            ha, hb = holds(prop.a, inputs, actions, n, prev), holds(b, inputs, actions, n, prev)
             step = Step(inputs, actions)
-            if prop.kind == "eventually":
+            if prop.kind == "never":
+                if ha:
+                    bad = (node, step, "the forbidden situation is reachable")
+                    break
+                nobs = 0
+            elif prop.kind == "eventually":
                 nobs = 0 if hb else (1 if (ha or obs == 1) else 0)
             else:  # alternate: A first; an instant with both counts as B then A
                 if obs == 0 and hb:
-                    bad = (node, step, f"{A.show(prop.b)} without {A.show(prop.a)} before it")
+                    bad = (node, step, f"{A.show(b)} without {A.show(prop.a)} before it")
                     break
                 if obs == 1 and ha and not hb:
-                    bad = (node, step, f"{A.show(prop.a)} twice without {A.show(prop.b)} between")
+                    bad = (node, step, f"{A.show(prop.a)} twice without {A.show(b)} between")
                     break
                 nobs = 1 if ha else (0 if hb else obs)
-            nxt = (n, nobs)
+            nxt = (n, nobs, (inputs & pin, actions & pact))
             if nxt not in seen:
                 seen.add(nxt)
                 parent[nxt] = (node, step)

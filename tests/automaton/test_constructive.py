@@ -157,3 +157,50 @@ def test_the_reference_interpreter_accepts_what_the_compiler_accepts(body: str, 
 
     a = compile_text(HEAD + body + "\nend\n", "c.mission")
     assert a.describe_actions(Interpreter(a.program).react(0)) == actions == first_instant(body)
+
+
+PRE = """mission P
+resource arm
+input Stop, Go
+signal O
+task Move on arm
+  post
+end
+main procedure M
+  handle
+    loop
+      await Go; emit O; {then}
+    end
+  on fatal do
+    safe
+  end
+end
+safe procedure S
+  await Stop
+end
+property NoTwice: never (O and pre(O))
+"""
+
+
+def test_pre_in_a_property_is_the_instant_before() -> None:
+    """`never (O and pre(O))`: O in two instants running. Holds when a task runs between two O's;
+    violated, with the run, when the loop can go round in one instant per Go."""
+    from orccadd.automaton import verify
+
+    ok = verify(compile_text(PRE.format(then="Move"), "p.mission"))
+    assert next(r for r in ok.results if r.name == "property NoTwice").ok
+    bad = verify(compile_text(PRE.format(then="present Stop then Move end"), "p.mission"))
+    r = next(r for r in bad.results if r.name == "property NoTwice")
+    a = bad.automaton
+    steps = [a.describe_actions(s.actions) for s in r.counterexample]
+    assert not r.ok and steps[-2:] == [["emit O"], ["emit O"]], steps
+
+
+def test_pre_of_a_task_or_an_unknown_signal_in_a_property_is_refused() -> None:
+    for arg, why in (
+        ("Nope", "unknown signal `Nope`"),
+        ("Move", "`Move` is a task, not a signal: did you mean Move.done"),
+    ):
+        with pytest.raises(MissionError, match=why):
+            compile_text(PRE.format(then="Move").replace("pre(O))", f"pre({arg}))"), "p.mission")
+    compile_text(PRE.format(then="Move").replace("pre(O))", "pre(Move.done))"), "p.mission")

@@ -171,7 +171,9 @@ PRONE = st.sampled_from([
 
 
 @settings(
-    max_examples=int(__import__("os").environ.get("STRESS", "60")), deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much]
+    max_examples=int(__import__("os").environ.get("STRESS", "60")),
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
 )
 @given(
     st.tuples(statements(2), PRONE, statements(1), st.booleans()).map(
