@@ -21,7 +21,10 @@ verdict holds for the mission when it holds in every product:
 A product's counterexample is a run of the mission (the stand-in's start, stop and inputs read as
 "the other branches"). Over-approximation can only refuse more: a counterexample that needs the
 other branches to behave as no real run does is possible in principle (they are abstracted),
-never a verdict of "ok" that does not hold.
+never a verdict of "ok" that does not hold. So a counterexample that goes through the stand-in
+says so in words (`_stand_in_words`): what its event means (the others ended, stopped for good,
+exited) and the shortest run of each of them that gets there, on their own inputs — the product's
+instants are not theirs.
 """
 
 from __future__ import annotations
@@ -295,6 +298,85 @@ def _merge(net: Network, checked: list[tuple[tuple[int, ...], Automaton, Report]
             continue
         members, a, r = min(failed, key=lambda x: _RANK[x[2].level])
         where = f"[in the product with {branch_names(net, members)}]"
-        out.append(dataclasses.replace(r, summary=f"{r.summary} {where}", automaton=a))
+        note = _stand_in_words(net, members, a, r)
+        explanation = "\n".join(x for x in (r.explanation, note) if x)
+        out.append(
+            dataclasses.replace(r, summary=f"{r.summary} {where}", automaton=a, explanation=explanation)
+        )
         del name
     return out
+
+
+def _stand_in_words(net: Network, members: tuple[int, ...], a: Automaton, r: CheckResult) -> str:
+    """What a counterexample's stand-in events mean, and the runs of the branches behind them: the
+    product shows the stand-in's instants, not theirs (each needs its own inputs to get there)."""
+    base = len(net.program.inputs)
+    used = 0
+    for step in r.counterexample or []:
+        used |= step.inputs >> base
+    if not used:
+        return ""
+    p = a.program
+    lines = []
+    for i in range(len(p.inputs) - base):
+        if not used >> i & 1:
+            continue
+        name = p.inputs[base + i]
+        what = name.rpartition(").")[2]
+        branches = [b for b in range(len(net.branches)) if b not in members]  # what it stands for
+        if what == "idle":
+            meaning = "each of them has stopped for good (nothing runs, no input leads out)"
+            runs = [(b, _shortest(net, b, _stuck_states(net.branches[b]))) for b in branches]
+        elif what == "done":
+            meaning = "each of them has ended"
+            runs = [(b, _shortest(net, b, {net.branches[b].n_states - 1})) for b in branches]
+        else:
+            meaning = f"one of them {'enters the safe procedure' if what == 'safe' else 'exits its trap'}"
+            if ".at_once." in name:
+                meaning += " in its first instant"
+            runs = []
+        words = "; ".join(
+            f"branch {b + 1} gets there after {_inputs_words(net, run)}" for b, run in runs if run is not None
+        )
+        lines.append(
+            f"`{name}`: {meaning} — the stand-in for the branches outside this product, whose "
+            f"instants are not theirs{': ' + words if words else ''}"
+        )
+    return "\n".join(lines)
+
+
+def _stuck_states(a: Automaton) -> set[int]:
+    return {s for loop in _fair_loops(a) if _stuck(a, loop) for s in loop}
+
+
+def _shortest(net: Network, b: int, targets: set[int]) -> list[int] | None:
+    """The shortest input sequence taking branch `b` from its start into `targets`."""
+    a = net.branches[b]
+    prev: dict[int, tuple[int, int]] = {0: (-1, 0)}
+    queue = [0]
+    for s in queue:
+        if s in targets:
+            out: list[int] = []
+            while s:
+                s, inputs = prev[s]
+                out.append(inputs)
+            return out[::-1]
+        for inputs, (n, _) in a.table[s].items():
+            if n not in prev:
+                prev[n] = (s, inputs)
+                queue.append(n)
+    return None
+
+
+def _inputs_words(net: Network, run: list[int]) -> str:
+    """`{T1.done} ×34, then {Go}`: a branch's run, repeated instants counted."""
+    if not run:
+        return "its first instant"
+    parts: list[tuple[int, int]] = []
+    for inputs in run:
+        if parts and parts[-1][0] == inputs:
+            parts[-1] = (inputs, parts[-1][1] + 1)
+        else:
+            parts.append((inputs, 1))
+    said = [net.program.describe_inputs(m) + (f" ×{k}" if k > 1 else "") for m, k in parts]
+    return f"{len(run)} instants of its own: " + ", then ".join(said)
