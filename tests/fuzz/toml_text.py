@@ -183,6 +183,8 @@ def mutated_dict(draw: st.DrawFn, d: dict[str, Any]) -> dict[str, Any]:
     """`d` with one value-level edit."""
     d = copy.deepcopy(d)
     paths = key_paths(d)
+    if not paths:  # edited down to nothing (a short cell config: `name` and `[[resources]]`)
+        return d
     op = draw(st.integers(0, 7))
     files = [p for p in paths if is_file_name(_parent(d, p)[p[-1]])]
     if op >= 6 and files:  # a file name made hostile: NUL, 300-byte names, system files, `..`
