@@ -10,6 +10,7 @@ import pytest
 from orccadd.automaton import Network, Runner, compile_text, verify_network
 from orccadd.automaton.constructive import Env, analyse, establish
 from orccadd.errors import MissionError
+from tests.automaton.conftest import two_branch_network
 
 HEAD = """mission M
 resource arm
@@ -102,13 +103,7 @@ def test_a_network_branch_follows_the_same_rule() -> None:
     """Two independent branches, one of them non-constructive where the mission gets: a network's
     component leaves the instant out of its table and the verifier's product refuses it, with the
     same words as one automaton."""
-    tasks = "".join(f"task T{i} on R{i}\n  post\nend\n" for i in range(2))
-    seq = lambda i: "; ".join(f"T{i}" for _ in range(34))  # noqa: E731
-    text = (
-        "mission N\nresource R0, R1\ninput Stop\nsignal X, O\n" + tasks
-        + f"main procedure P\n  handle\n    par({seq(0)} || {seq(1)}; present X then emit O end; emit X)\n"
-        + "  on fatal do\n    safe\n  end\nend\nsafe procedure S\n  await Stop\nend\n"
-    )  # fmt: skip
+    text = two_branch_network("present X then emit O end; emit X")
     net = compile_text(text, "n.mission", allow_network=True)
     assert isinstance(net, Network)
     with pytest.raises(MissionError, match="not constructive"):

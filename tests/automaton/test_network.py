@@ -24,6 +24,7 @@ from orccadd.automaton.interpreter import Interpreter
 from orccadd.automaton.network import compile_mission, find_split
 from orccadd.automaton.program import Program
 from orccadd.errors import MissionError
+from tests.automaton.conftest import two_branch_network
 from tests.automaton.random_par import random_mission
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -213,17 +214,11 @@ def test_a_counterexample_through_the_stand_in_says_what_it_abstracts() -> None:
     """Branch 2 halts after thirty-four tasks and an operator input: the product with branch 1
     shows its stand-in going idle in one of the product's instants; the counterexample says what
     that means and the run branch 2 needs to get there (its own instants, not the product's)."""
-    tasks = "".join(f"task T{i} on R{i}\n  post\nend\n" for i in range(2))
-    seq = lambda i: "; ".join(f"T{i}" for _ in range(34))  # noqa: E731
-    text = (
-        "mission N\nresource R0, R1\ninput Stop, Go\n" + tasks
-        + f"main procedure P\n  handle\n    par({seq(0)} || {seq(1)}; await Go; halt)\n"
-        + "  on fatal do\n    safe\n  end\nend\nsafe procedure S\n  await Stop\nend\n"
-    )  # fmt: skip
+    text = two_branch_network("await Go; halt")
     net = compile_text(text, "idle.mission", allow_network=True)
     assert isinstance(net, Network)
     deadlock = next(r for r in verify_network(net).results if r.name == "deadlock")
-    assert not deadlock.ok and "(branch 2 of the par at line 12).idle" in deadlock.explanation
+    assert not deadlock.ok and "(branch 2 of the par at line 13).idle" in deadlock.explanation
     assert "branch 2 gets there after 36 instants of its own: {}, then {T1.done} ×34, then {Go}" in (
         deadlock.explanation
     ), deadlock.explanation
