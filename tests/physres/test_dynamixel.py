@@ -295,7 +295,7 @@ def test_an_unplugged_servo_is_comm_lost_naming_it(rig: DxlRig, session: Session
     assert task.phase is Phase.FAULT
     assert [n for n in session.event_names() if ".T3." in n] == ["MoveJointsCSP.T3.CommLost"]
     assert (
-        "servo 5 (wrist_angle, XM430-W350) does not answer: 5 sync reads in a row stopped"
+        "servo 5 (wrist_angle, XM430-W350) does not answer: 10 sync reads in a row stopped"
         in res.fault_message
     )
     ticks = loop.ticks()
