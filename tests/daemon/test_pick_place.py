@@ -81,15 +81,21 @@ def test_closing_on_nothing_opens_retreats_and_ends_without_a_part(cell: Cell) -
 
 
 def test_a_gripper_fault_while_the_arm_moves_holds_the_arm(cell: Cell) -> None:
+    """The gripper holds the part with the mission's Grip while the arm carries it: its overload is
+    Grip's type 3, the mission's `on fatal` enters the safe procedure (which opens nothing), the
+    arm is held where it is, and the run ends `safe` on the operator's Stop."""
     cell.gripper.inject("object", device=1, at_rad=PART_AT_RAD, stiffness_nm_rad=20.0)
     cell.run_until("Over")
+    assert cell.resources()["gripper"]["task"] == "Grip"  # the mission's, not the daemon's Hold
     cell.gripper.inject("overload", device=1)  # the servo's hardware error: torque off
-    s = cell.d.wait(lambda s: s["state"] != "running", timeout_s=30)
-    assert s["result"] == "aborted" and s["faulted"], s
+    cell.d.wait(lambda s: s["faulted"] and "Grip.T3.ResourceFault" in cell.inputs(), timeout_s=30)
     r = cell.resources()
     assert r["gripper"]["fault"]["resource"] == "gripper", r["gripper"]
     assert r["arm"]["fault"] is None and r["arm"]["task"] == "Hold_arm", r["arm"]  # held, not stopped
     assert not cell.ur.status()["devices"][0]["fault"]  # the controller: no protective stop
+    cell.d.call("send", input="Stop")  # the operator's acknowledgement ends the safe procedure
+    s = cell.d.wait(lambda s: s["state"] != "running", timeout_s=30)
+    assert s["result"] == "safe", s
 
 
 def test_the_arms_link_lost_while_the_gripper_closes_holds_the_gripper(cell: Cell) -> None:
