@@ -123,7 +123,8 @@ COMMANDS: dict[str, CommandSpec] = {
             "cmdd",
             "stream of `{t_s, values}`: `q`, `dq`, `tau`, `cmd` (sent to the device, in `mode`: "
             "1 position, 2 velocity, 3 torque) (or `q.3`, `q.<joint>`), `wake_us`, `compute_us`, `task`, "
-            "`phase`, `status`, `mode`",
+            "`phase`, `status`, `mode`; in a cell every resource's (labels `left/q.<joint>`), or one's "
+            "(`left/q`)",
             (
                 Arg("signals", (list,), "signal names (default: q)", default=None),
                 Arg("rate_hz", NUMBER, "samples per second, 0.01 to the control rate", default=10.0),
@@ -202,7 +203,8 @@ COMMANDS: dict[str, CommandSpec] = {
             "cmdd",
             "start/stop a full-rate log, CSV and MCAP beside it, written by the command daemon into its "
             "own log directory (daemon.log_dir); the reply names the files (`file`, `mcap` parts), the "
-            "wall-clock start (`start_utc`) and the loop time rows count from (`origin_t_s`)",
+            "wall-clock start (`start_utc`) and the loop time rows count from (`origin_t_s`); in a cell "
+            "a CSV per resource (`files`, `resources`: `<name>.<resource>.csv`) and one MCAP",
             (
                 Arg("action", (str,), "start or stop", required=True, choices=("start", "stop")),
                 Arg("signals", (list,), "signal names (default: q dq tau cmd)", default=None),
