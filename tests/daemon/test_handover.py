@@ -67,3 +67,29 @@ def test_a_right_hand_closing_on_nothing_leaves_the_part_in_the_left(
     steps = [i for step in run(d) for i in step]
     assert "TakeR.T2.Missed" in steps and "ReleaseL.done" not in steps, steps
     assert PART_AT_RAD <= left.status()["q_rad"][0] < PART_AT_RAD + 0.1  # still held on the left
+
+
+def test_the_holding_hand_overloaded_while_the_arms_meet_enters_the_safe_procedure(
+    cell: tuple[DxlSimProcess, DxlSimProcess, Daemon],
+) -> None:
+    """The left hand holds the part with the mission's KeepL while the arms meet: its overload is
+    KeepL's type 3, the safe procedure runs, the arms and the other hand are held (not stopped),
+    and the run ends `safe` on the operator's Stop."""
+    left, _, d = cell
+    left.inject("object", device=1, at_rad=PART_AT_RAD, stiffness_nm_rad=20.0)
+    d.call("load", path=MISSION)
+    d.call("start")
+
+    def resources() -> dict[str, dict[str, Any]]:
+        return {r["name"]: r for r in cast(dict[str, Any], d.call("describe"))["resources"]}
+
+    d.wait(lambda s: resources()["left_hand"]["task"] == "KeepL", timeout_s=60)
+    left.inject("overload", device=1)
+    d.wait(lambda s: s["faulted"], timeout_s=30)
+    r = resources()
+    assert r["left_hand"]["fault"]["resource"] == "left_hand", r["left_hand"]
+    assert all(r[x]["fault"] is None for x in ("left", "right", "right_hand")), r
+    assert (r["left"]["task"], r["right"]["task"]) == ("Hold_left", "Hold_right"), r
+    d.call("send", input="Stop")
+    s = d.wait(lambda s: s["state"] != "running", timeout_s=30)
+    assert s["result"] == "safe", s
