@@ -20,6 +20,7 @@ from orccadd.cmdd.csvlog import CsvLog, LogDir
 from orccadd.cmdd.logfeed import Decoder, LogFeed, LogOrigin
 from orccadd.cmdd.mcaplog import McapLog, McapStream, Urdf, seal
 from orccadd.cmdd.views import SignalSelection
+from orccadd.wire import foxglove_schemas as sch
 from orccadd.wire.schema import H, T
 from orccadd.wire.telemetry import TelemetryBlock
 
@@ -263,7 +264,7 @@ class TelemetryLog:
         return [
             McapStream(
                 st.csv.sel,
-                [f"{st.resource}/{j}" if seen.count(j) > 1 and st.resource else j for j in js],
+                [sch.joint_state_name(st.resource, j, seen) for j in js],
                 st.feed.origin,
                 st.feed.tel.period_s,
             )

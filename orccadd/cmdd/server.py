@@ -204,6 +204,16 @@ class CommandDaemon:
             return []
         return [(r, t) for r, t in found if t is not None]
 
+    def _sources(self, names: list[str]) -> list[LogSource]:
+        """What `monitor` and `log` sample: in a cell each resource's signals from its own block,
+        labelled by it (`left/q.0`); else the one resource's. `ValueError` naming a signal no
+        resource has."""
+        units = self.units()
+        if not units:
+            return [LogSource("", self.tel, views.SignalSelection(names, self.desc.get("joints", [])))]
+        sels = views.cell_selections(names, [(str(r["name"]), list(r["joints"])) for r, _ in units])
+        return [LogSource(str(r["name"]), tel, sels[r["name"]]) for r, tel in units if r["name"] in sels]
+
     def decode_trace(self, rec: Any) -> dict[str, Any]:
         return views.decode_trace(rec, self.desc, self.missions)
 
@@ -454,14 +464,7 @@ class CommandDaemon:
         await self.refresh()
         if not all(isinstance(s, str) for s in signals or []):
             raise ValueError("monitor: signals must be a list of names")
-        units = self.units()
-        if units:  # a cell: each resource's latest tick, its labels named by it (`left/q.0`)
-            sels = views.cell_selections(
-                [str(s) for s in signals or []], [(str(r["name"]), list(r["joints"])) for r, _ in units]
-            )
-            picks = [(tel, sels[r["name"]]) for r, tel in units if r["name"] in sels]
-        else:
-            picks = [(self.tel, views.SignalSelection(list(signals or []), self.desc.get("joints", [])))]
+        picks = [(s.tel, s.selection) for s in self._sources([str(s) for s in signals or []])]
         labels = [label for _, sel in picks for label in sel.labels]
         max_rate = 1.0 / min(tel.period_s for tel, _ in picks)
         if not MONITOR_MIN_HZ <= rate_hz <= max_rate:
@@ -545,15 +548,7 @@ class CommandDaemon:
             if self.recording is not None:
                 raise ValueError(f"log: already logging to {self.recording.path} (log stop first)")
             await self.refresh()
-            picked = [str(s) for s in signals or ["q", "dq", "tau", "cmd"]]
-            units = self.units()
-            if units:  # a cell: each resource's signals from its own block
-                sels = views.cell_selections(picked, [(str(r["name"]), list(r["joints"])) for r, _ in units])
-                sources = [
-                    LogSource(str(r["name"]), t, sels[r["name"]]) for r, t in units if r["name"] in sels
-                ]
-            else:
-                sources = [LogSource("", self.tel, views.SignalSelection(picked, self.desc["joints"]))]
+            sources = self._sources([str(s) for s in signals or ["q", "dq", "tau", "cmd"]])
             name = name or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv"
             extra = {"rt_pid": int(self.tel.header[H.PID])}
             rec = TelemetryLog.start(

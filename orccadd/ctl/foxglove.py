@@ -80,7 +80,7 @@ class LiveView:
         qs = [label.partition(".") for label in labels if label.partition(".")[0].rpartition("/")[2] == "q"]
         names = [joint for _, _, joint in qs]
         self.joints = [
-            (f"{base.removesuffix('q')}{j}" if names.count(j) > 1 else j, base.removesuffix("q"), j)
+            (sch.joint_state_name(base.rpartition("/")[0], j, names), base.removesuffix("q"), j)
             for base, _, j in qs
         ]
         self.server = LiveServer("orccadd", channels, port, origins=(*FOXGLOVE_ORIGINS, *extra_origins))

@@ -136,3 +136,9 @@ def level(kind: str, name: str, exception: int) -> int:
 
 def stamp(wall_ns: int) -> dict[str, int]:
     return {"sec": wall_ns // 1_000_000_000, "nsec": wall_ns % 1_000_000_000}
+
+
+def joint_state_name(resource: str, joint: str, every_joint: list[str]) -> str:
+    """A joint's name on `/joint_states`: its own, or `resource/joint` when two resources of a
+    cell share it (two identical arms), as ROS prefixes do."""
+    return f"{resource}/{joint}" if resource and every_joint.count(joint) > 1 else joint
