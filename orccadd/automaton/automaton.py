@@ -94,12 +94,15 @@ class Automaton:
 
     def normalize(self, state: int, inputs: int) -> int:
         """Reduce raw inputs to the environment model the table was built for: operator inputs kept,
+        one resource's fault (the first) where no active task runs on it (not in the first instant),
         events only from active tasks, at most one per task (T3 > T2 > post > pre > sync), each
         event standing as its class's representative (`event_rep`)."""
         from orccadd.automaton.program import PRIORITY
 
         p = self.program
         out = inputs & p.operator_mask
+        faults = inputs & (p.faults_possible(self.active[state]) if state else 0)
+        out |= faults & -faults  # one resource's fault per instant: the first
         for t in set(self.active[state]):
             present = inputs & p.event_masks[t] & self.relevant[state]
             if not present:

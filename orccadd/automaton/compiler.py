@@ -81,9 +81,11 @@ class ActionLayout:
         )
 
 
-def possible_inputs(p: Program, active: tuple[int, ...]) -> int:
-    """The inputs the environment can give in a state: operator inputs, events of its active tasks."""
-    possible = p.operator_mask
+def possible_inputs(p: Program, active: tuple[int, ...], first: bool = False) -> int:
+    """The inputs the environment can give in a state: operator inputs, events of its active tasks,
+    the faults of the resources none of them runs on, except in the mission's `first` instant (the
+    daemon takes it at `start`, every resource ready, with no event)."""
+    possible = p.operator_mask | (0 if first else p.faults_possible(active))
     for t in active:
         possible |= p.event_masks[t]
     return possible
@@ -95,6 +97,9 @@ def input_combinations(p: Program, active: tuple[int, ...], relevant: int, reps:
     choices: list[list[int]] = [[0, *bits_of(reps[t] & relevant)] for t in sorted(set(active))]
     ops = bits_of(relevant & p.operator_mask)
     choices.extend([0, b] for b in ops)
+    faults = bits_of(relevant & p.fault_mask)
+    if faults:  # one resource's fault at most per instant (the daemon gives each its own instant)
+        choices.append([0, *faults])
     count = 1
     for c in choices:
         count *= len(c)
@@ -278,7 +283,7 @@ def compile_program(
         top = states[s]
         act = tuple(sorted(K.active_tasks(top.term, [])))
         ins, internal = reactor.mentions(top)
-        rel = ins & possible_inputs(p, act)
+        rel = ins & possible_inputs(p, act, first=s == 0)
         try:
             combos = input_combinations(p, act, rel, reps)
         except OverflowError as e:

@@ -110,6 +110,11 @@ class _Elaborator:
             self.internals.append(s.name)
             self.short.setdefault(s.name, []).append(s.name)
         operator_mask = (1 << len(self.inputs)) - 1
+        faults: list[tuple[str, int]] = []
+        for name in resources:
+            self.add_input(f"{name}.fault", -1, "fault", f"{name}.fault")
+            faults.append((name, 1 << (len(self.inputs) - 1)))
+        fault_mask = sum(bit for _, bit in faults)
         for t in m.tasks:
             self.declare(t.name, t.loc, "task")
             if t.resource not in resources:
@@ -139,13 +144,13 @@ class _Elaborator:
                 f"(found {len(safes)})",
             )
         tasks = tuple(self.tasks.values())
-        main = self.proc_term(mains[0], [], in_safe=False)
+        main = _guard_main(self.proc_term(mains[0], [], in_safe=False), fault_mask)
         safe_proc = safes[0]
         safe_body = self.branch(
             f"the safe procedure {safe_proc.name}", safe_proc.loc,
             lambda: self.proc_term(safe_proc, [], in_safe=True), kind="safe",
         )  # fmt: skip
-        safe = _guard_safe(safe_body, self.t3_of(safe_body))
+        safe = _guard_safe(safe_body, self.t3_of(safe_body) | fault_mask)
         for prop in m.properties:
             self.check_prop(prop)
         return Program(
@@ -167,6 +172,7 @@ class _Elaborator:
             ast=m,
             names=self.spellings(),
             sites=tuple(site for site in self.sites if site is not None),
+            fault_inputs=tuple(faults),
         )
 
     def task(self, t: A.TaskDecl, index: int) -> TaskInfo:
@@ -539,10 +545,20 @@ class _Scope:
         self.via = via  # the procedure calls that led here: (procedure, where it is called)
 
 
+def _guard_main(body: K.Term, faults: int) -> K.Term:
+    """The main procedure, left for the safe procedure in the instant a resource faults while no
+    task of the mission runs on it (`R.fault`): an immediate strong preemption around all of it,
+    so a resource's fault enters the safe procedure wherever the main procedure is."""
+    if not faults:
+        return body
+    return K.Handle(body, ((K.IN, faults),), (K.Exit(K.SAFE_CODE),))
+
+
 def _guard_safe(body: K.Term, t3: int) -> K.Term:
-    """The safe procedure, ended as *failed* by a type 3 exception of one of its own tasks: from the
-    instant after it is entered on (a non-immediate strong abort, like every other guard), not in
-    that instant, whose type 3 exception caused the entry (the safe procedure may run that task again)."""
+    """The safe procedure, ended as *failed* by a type 3 exception of one of its own tasks or a
+    resource's fault: from the instant after it is entered on (a non-immediate strong abort, like
+    every other guard), not in that instant, whose type 3 exception or fault caused the entry (the
+    safe procedure may run that task again)."""
     ended = K.Exit(_SAFE_ENDED)
     guarded = K.Abort(K.seq((body, ended)), (K.IN, t3), False, False)
     return K.Trap(_SAFE_ENDED, K.seq((guarded, K.Exit(K.FAILED_CODE))))

@@ -451,9 +451,13 @@ class Interpreter:
         self.task_index = {t.name: t.index for t in p.tasks}
         main = next(d for d in p.ast.procedures if d.role == "main")
         safe = next(d for d in p.ast.procedures if d.role == "safe")
+        # a resource's fault (no task on it) enters the safe procedure from anywhere in the main one
+        faults = p.fault_mask
         self.main = self.proc(main, 0)
+        if faults:
+            self.main = HandleN(self.main, [(lambda c: bool(c.inputs & faults), Leaf(SAFE_CODE, SAFE_CODE))])
         safe_body = self.proc(safe, 0)
-        t3 = self.t3_mask(self.tasks_of_proc(safe))
+        t3 = self.t3_mask(self.tasks_of_proc(safe)) | faults
         failed: list[tuple[Callable[[Ctx], bool], Node]] = [
             (lambda c: bool(c.inputs & t3), Leaf(FAILED_CODE, FAILED_CODE))
         ]

@@ -493,7 +493,7 @@ def _compile_context(
         s = states.queue.popleft()
         top = states.items[s]
         act = tuple(sorted(K.active_tasks(top.term, [])))
-        possible = possible_inputs(q, act)
+        possible = possible_inputs(q, act, first=s == 0)
         ins, internal = reactor.mentions(top)
         hole = top.phase == MAIN and _has_hole(top.term)
         # where the par is, its tasks' events count by class (`hole_classes`); elsewhere (the safe

@@ -40,6 +40,7 @@ class NetworkRunner:
         "busy",
         "busy_states",
         "ended",
+        "fault_mask",
         "fresh_bit",
         "hole_classes",
         "hole_mask",
@@ -69,6 +70,7 @@ class NetworkRunner:
         "state_events",
         "step_bit",
         "stop_base",
+        "task_fault",
         "task_mask",
     )
 
@@ -113,6 +115,10 @@ class NetworkRunner:
                 bits ^= low
         self.branch_mask = sum(net.split.inputs)
         self.operator_mask = net.program.operator_mask
+        p = net.program
+        self.fault_mask = p.fault_mask  # a resource's fault, raised only while no task runs on it
+        faults = dict(p.fault_inputs)
+        self.task_fault = tuple(faults.get(t.resource, 0) for t in p.tasks)  # task t → its resource's
         self.binputs = net.split.inputs
         self.task_mask = tuple(tuple(sum(1 << t for t in act) for act in b.active) for b in net.branches)
         self.ostate = 0
@@ -211,6 +217,9 @@ class NetworkRunner:
         """Inputs present in this instant → action bits. Never raises for inputs outside the model."""
         out: int
         os = self.ostate
+        if inputs & self.fault_mask:  # one at most, of a resource no branch's task runs on
+            faults = inputs & self.fault_mask & ~(self._busy_faults() if self.running else 0)
+            inputs = inputs & ~self.fault_mask | faults & -faults
         key = inputs & self.orel[os]
         h = inputs & self.hole_mask if self.present[os] else 0
         if h:  # only events of the tasks the branches run (the environment model; as `normalize`)
@@ -351,6 +360,15 @@ class NetworkRunner:
             return self._kill_all(branches)
         self._reset()
         return branches
+
+    def _busy_faults(self) -> int:
+        """The faults of the resources the branches' running tasks run on."""
+        out, running = 0, self.running
+        while running:
+            low = running & -running
+            out |= self.task_fault[low.bit_length() - 1]
+            running ^= low
+        return out
 
     def _kill_all(self, branches: int) -> int:
         """Every branch is killed: its running tasks stop; one started in this instant (in

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 from orccadd.automaton.ast import Loc, MissionAst, PropDecl, SigExpr
@@ -75,9 +75,10 @@ class Program:
     name: str
     file: str
     text: str
-    inputs: tuple[str, ...]  # input bit i ↔ inputs[i]: operator inputs first, then task events
-    input_task: tuple[int, ...]  # per input bit: the task raising it, -1 for an operator input
-    input_kind: tuple[str, ...]  # per input bit: "operator" or an EVENT_KINDS entry
+    # input bit i ↔ inputs[i]: operator inputs first, then the resources' faults, then task events
+    inputs: tuple[str, ...]
+    input_task: tuple[int, ...]  # per input bit: the task raising it, -1 for an operator input or a fault
+    input_kind: tuple[str, ...]  # per input bit: "operator", "fault" or an EVENT_KINDS entry
     internals: tuple[str, ...]  # internal signal bit i ↔ internals[i]
     tasks: tuple[TaskInfo, ...]
     operator_mask: int
@@ -90,6 +91,19 @@ class Program:
     ast: MissionAst
     names: Mapping[str, tuple[str, ...]]  # every accepted spelling (full or short) -> full names
     sites: tuple[Site, ...] = ()  # what the dead-code check follows
+    # per declared resource: (its name, the input bit of `R.fault`: the resource safe-stopped while
+    # no task of the mission runs on it; a fault while one runs is that task's type 3)
+    fault_inputs: tuple[tuple[str, int], ...] = ()
+
+    @property
+    def fault_mask(self) -> int:
+        return sum(bit for _, bit in self.fault_inputs)
+
+    def faults_possible(self, active: Iterable[int]) -> int:
+        """The resource faults the environment can raise while tasks `active` run: those of the
+        resources none of them runs on."""
+        busy = {self.tasks[t].resource for t in active}
+        return sum(bit for r, bit in self.fault_inputs if r not in busy)
 
     def signal(self, name: str) -> str:
         """The full name of a signal as the mission may write it; OrccaddError if unknown or ambiguous."""

@@ -11,9 +11,9 @@ Two models (`export_model`, `orccadctl export-promela --model ...`):
   is not taken.
 
 Both assert, after each instant, with the verifier's check names (`ok_<check>`, see
-`promela_spin.py`): safety (an instant holding a type 3 exception of an active task enters the safe
-procedure, or ends it failed), conflicts (no two active tasks claim the same resource or joints),
-and the mission's `never` and `alternate` properties (`promela_props.py`).
+`promela_spin.py`): safety (an instant holding a type 3 exception of an active task, or a
+resource's fault, enters the safe procedure, or ends it failed), conflicts (no two active tasks
+claim the same resource or joints), and the mission's `never` and `alternate` properties (`promela_props.py`).
 """
 
 from __future__ import annotations
@@ -63,8 +63,8 @@ def export_promela(a: Automaton, properties: tuple[str, ...] = PROPERTIES) -> st
         "",
         "int state = 0;",
         "int act = 0;  /* bit t: task t is active, as spin sees it */",
-        "int evsrc; int t3src; int starts; int stops; bool handled; int emits;",
-        *(f"bit in_{n};" for n in atoms.inputs),
+        "int evsrc; int t3src; bit fltsrc; int starts; int stops; bool handled; int emits;",
+        *(f"bit {atoms.var(n)};" for n in atoms.inputs),
         "bit ok_safety = 1, ok_conflicts = 1;",
         *(props.decls if props else []),
         "",
@@ -78,9 +78,9 @@ def export_promela(a: Automaton, properties: tuple[str, ...] = PROPERTIES) -> st
     out += ["     fi;", "     act = (act & ~stops) | starts;"]
     out += ["     " + c for c in _checks(a, properties)]
     out += ["     " + c for c in (props.checks if props else [])]
-    clear = "".join(f"; in_{n} = 0" for n in atoms.inputs)
+    clear = "".join(f"; {atoms.var(n)} = 0" for n in atoms.inputs)
     out += [
-        f"     evsrc = 0; t3src = 0; starts = 0; stops = 0; handled = 0; emits = 0{clear}",
+        f"     evsrc = 0; t3src = 0; fltsrc = 0; starts = 0; stops = 0; handled = 0; emits = 0{clear}",
         "  }",
         "  od",
         "}",
@@ -140,9 +140,14 @@ def _state(a: Automaton, s: int, atoms: _Atoms) -> list[str]:
                 if p.input_kind[i] == "T3":
                     t3 |= 1 << p.input_task[i]
         handled = int(bool(actions & (a.safe_bit | a.failed_bit)))
+        idle = 0  # a resource's fault: only while spin sees no task active on it
+        for r, bit in p.fault_inputs:
+            if inputs & bit:
+                idle |= sum(1 << t for t, info in enumerate(p.tasks) if info.resource == r)
         ins = "".join(f"{atoms.var(name)} = {inputs >> p.inputs.index(name) & 1}; " for name in atoms.inputs)
         alt = (
-            f"        :: ({ev} & ~act) == 0 -> evsrc = {ev}; t3src = {t3}; "
+            f"        :: ({ev} & ~act) == 0 && ({idle} & act) == 0 -> evsrc = {ev}; t3src = {t3}; "
+            f"fltsrc = {int(bool(inputs & p.fault_mask))}; "
             f"stops = {a.stops(actions)}; starts = {a.starts(actions)}; handled = {handled}; "
             f"emits = {(actions >> a.emit_base) & emit_mask}; {ins}state = {n}"
         )
@@ -155,7 +160,7 @@ def _checks(a: Automaton, properties: tuple[str, ...]) -> list[str]:
     p = a.program
     out = []
     if "safety" in properties:
-        out.append("ok_safety = (t3src == 0 || handled); assert(ok_safety); ok_safety = 1;")
+        out.append("ok_safety = ((t3src == 0 && !fltsrc) || handled); assert(ok_safety); ok_safety = 1;")
     if "conflicts" in properties:
         pairs = [
             f"!((act >> {i}) & 1 && (act >> {j}) & 1)"

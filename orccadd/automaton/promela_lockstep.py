@@ -37,6 +37,7 @@ def _guard(a: Automaton, names: Names, s: int, key: int) -> str | None:
     the first of its class (the model offers each class once)."""
     p, rel = a.program, a.relevant[s]
     parts = [f"in_{p.inputs[i]} == {key >> i & 1}" for i in names.operators if rel >> i & 1]
+    parts += [f"flt_{r} == {key >> i & 1}" for r, i in names.faults if rel >> i & 1]
     for t in sorted(set(a.active[s])):
         ev, classes = f"ev_{p.tasks[t].name}", names.classes[t]
         bit = key & p.event_masks[t]

@@ -12,9 +12,11 @@ down; each reacts until it pauses, terminates or exits, and reports. Then the cl
 instant and clears it. Every process's reaction is `atomic`: spin stores states at hand-overs only.
 
 Environment (docs/mission-language.md): operator inputs in any combination; a Robot-Task raises
-events only while active, at most one per instant. Events a task's statements cannot tell apart
-(same kind, in the same conditions: the five built-in T3s where only `fatal` tests them) are one
-choice; an input or event no statement tests is not offered (it changes no reaction).
+events only while active, at most one per instant; one resource's fault at most (`flt_R`) after
+the first instant, while the mission runs and no task runs on the resource. Events a task's
+statements cannot tell apart (same kind, in the same conditions: the five built-in T3s where
+only `fatal` tests them) are one choice; an input or event no statement tests is not offered (it
+changes no reaction).
 
 Internal signals: the mission's semantics is logical correctness (one consistent status per
 instant, checked by the compiler). The model guesses a signal's status when it is first tested in
@@ -56,7 +58,11 @@ class Names:
         tested = 0
         for m in masks:
             tested |= m
-        self.operators = [i for i in range(len(p.inputs)) if p.input_task[i] < 0 and tested >> i & 1]
+        self.operators = [
+            i for i in range(len(p.inputs)) if p.input_kind[i] == "operator" and tested >> i & 1
+        ]
+        # a resource's fault: offered after the first instant, while no task runs on the resource
+        self.faults = [(r, bit.bit_length() - 1) for r, bit in p.fault_inputs if tested & bit]
         self.classes: list[list[EventClass]] = [task_classes(p, t, masks) for t in range(len(p.tasks))]
         pin, pint = K.pre_masks(p.main, p.safe)
         self.pre_inputs = [i for i in range(len(p.inputs)) if pin >> i & 1]
@@ -91,6 +97,7 @@ class Names:
 
     def _inputs(self, mask: int) -> str:
         parts = [f"in_{self.p.inputs[i]}" for i in self.operators if mask >> i & 1]
+        parts += [f"flt_{r}" for r, i in self.faults if mask >> i & 1]
         for t, classes in enumerate(self.classes):
             values = [c.value for c in classes if c.bits & mask]
             parts += [f"ev_{self.task(t)} == {v}" for v in values]
@@ -168,6 +175,9 @@ def _globals(p: Program, names: Names, kids: list[str], props: PropCode) -> list
     out = ["byte cmd_mission;"]
     out += [f"byte cmd_{k}, res_{k};" for k in kids]
     out += [f"bit in_{p.inputs[i]};" for i in names.operators]
+    out += [f"bit flt_{r};  /* {p.inputs[i]} */" for r, i in names.faults]
+    if names.faults:
+        out.append("bit started, over;  /* the first instant is over (no fault in it); the mission is */")
     for t, info in enumerate(p.tasks):
         events = ", ".join(
             f"{c.value} {c.name}{'…' if c.bits & (c.bits - 1) else ''}" for c in names.classes[t]
@@ -210,6 +220,12 @@ def _environment(p: Program, names: Names) -> list[str]:
         name = p.tasks[t].name
         picks = " ".join(f":: ev_{name} = {c.value}{'; t3in = 1' if c.kind == 'T3' else ''}" for c in classes)
         out.append(f"if :: act_{name} > 0 -> if {picks} :: skip fi :: else -> skip fi;")
+    faults = []  # one resource's fault at most per instant
+    for r, _ in names.faults:
+        idle = " && ".join(["1", *(f"act_{t.name} == 0" for t in p.tasks if t.resource == r)])
+        faults.append(f":: {idle} -> flt_{r} = 1; t3in = 1")
+    if faults:
+        out.append(f"if :: started && !over -> if {' '.join(faults)} :: skip fi :: else -> skip fi;")
     return out
 
 
@@ -237,6 +253,8 @@ def _clear(p: Program, names: Names) -> list[str]:
     out = [f"pre_in{i} = {names.cond((K.IN, 1 << i))};" for i in names.pre_inputs]
     out += [f"pre_{s} = em_{s};" for s in names.pre_internals]
     out += [f"in_{p.inputs[i]} = 0;" for i in names.operators]
+    out += [f"flt_{r} = 0;" for r, _ in names.faults]
+    out += ["started = 1; over = over || f_success || f_failed || f_safe_done;"] if names.faults else []
     out += [f"ev_{t.name} = 0; nst_{t.name} = 0; stp_{t.name} = 0;" for t in p.tasks]
     out += [f"em_{s} = 0; gs_{s} = 0;" for s in p.internals]
     return [*out, "t3in = 0; f_success = 0; f_safe = 0; f_failed = 0; f_safe_done = 0"]

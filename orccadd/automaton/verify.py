@@ -6,8 +6,9 @@
   that changes its reaction), no cycle the program runs through on its own without a task or an
   operator input; judged per state, so the inputs of the safe procedure (tested in every instant
   of the main one, in case it is entered) do not keep a stuck main procedure alive;
-- safety: in every reachable state, a type 3 exception of any active Robot-Task enters the safe
-  procedure in the same instant (or, inside the safe procedure, ends the mission as failed);
+- safety: in every reachable state, a type 3 exception of any active Robot-Task, and a resource's
+  fault (`R.fault`), enters the safe procedure in the same instant (or, inside the safe procedure,
+  ends the mission as failed);
 - liveness: with no exceptions (no T2, no T3), success stays reachable from every reachable state
   of the main procedure (the end of the safe procedure from every state of it);
 - strong liveness: every run of each procedure ends (the main one in success or the safe
@@ -175,15 +176,16 @@ def _t3_of_active(a: Automaton, s: int) -> int:
 
 def _check_safety(a: Automaton, g: _Graph) -> CheckResult:
     handled = a.safe_bit | a.failed_bit
+    faults = a.program.fault_mask
     checked = 0
     for s, inputs, _, actions in g.edges():
-        if inputs & _t3_of_active(a, s):
+        if inputs & (_t3_of_active(a, s) | faults):
             checked += 1
             if not actions & handled:
                 names = [
                     n
                     for i, n in enumerate(a.program.inputs)
-                    if inputs >> i & 1 and a.program.input_kind[i] == "T3"
+                    if inputs >> i & 1 and a.program.input_kind[i] in ("T3", "fault")
                 ]
                 return CheckResult(
                     "safety", False, f"type 3 exception {', '.join(names)} is not handled",
@@ -194,13 +196,14 @@ def _check_safety(a: Automaton, g: _Graph) -> CheckResult:
     return CheckResult(
         "safety",
         True,
-        f"every type 3 exception of every active task enters the safe procedure ({checked} cases)",
+        "every type 3 exception of every active task and every resource's fault enters the safe "
+        f"procedure ({checked} cases)",
     )
 
 
 def _nominal(a: Automaton, inputs: int) -> bool:
     p = a.program
-    return not any(inputs >> i & 1 and p.input_kind[i] in ("T2", "T3") for i in range(len(p.inputs)))
+    return not any(inputs >> i & 1 and p.input_kind[i] in ("T2", "T3", "fault") for i in range(len(p.inputs)))
 
 
 def _backward(
@@ -248,9 +251,11 @@ def _check_liveness(a: Automaton, g: _Graph) -> CheckResult:
 
 def _operator_moves(a: Automaton, s: int) -> bool:
     """Some operator input changes the reaction of this state (with no task active, its row holds
-    operator inputs only). An input the state tests without effect does not count: in the main
-    procedure, the safe procedure's inputs are tested in every instant in case it is entered."""
-    return len(set(a.table[s].values())) > 1
+    operator inputs and resources' faults only; a fault is not awaited). An input the state tests
+    without effect does not count: in the main procedure, the safe procedure's inputs are tested
+    in every instant in case it is entered."""
+    faults = a.program.fault_mask
+    return len({hit for inputs, hit in a.table[s].items() if not inputs & faults}) > 1
 
 
 def _idle(a: Automaton, s: int) -> bool:
@@ -334,7 +339,7 @@ def _warnings(a: Automaton, g: _Graph) -> list[str]:
 
 _ASSUMED = (
     "every active task ends (its postcondition, a type 2 or a type 3 exception: tasks time out); "
-    "operator inputs may never come"
+    "operator inputs and resources' faults may never come"
 )
 
 Edge = tuple[int, int, int, int]  # (state, inputs, next state, actions)
@@ -420,7 +425,12 @@ def _describe_loop(a: Automaton, states: set[int], entry: int, phase: int) -> _L
     p = a.program
     proc = next(d.name for d in p.ast.procedures if d.role == ("main" if phase == MAIN else "safe"))
     who = f"the {'main' if phase == MAIN else 'safe'} procedure {proc}"
-    exits = [(inputs, act) for s in states for inputs, (n, act) in a.table[s].items() if n not in states]
+    exits = [  # a resource's fault is no way out: it may never come
+        (inputs, act)
+        for s in states
+        for inputs, (n, act) in a.table[s].items()
+        if n not in states and not inputs & p.fault_mask
+    ]
     busy = any(p.tasks[t].runs for s in states for t in a.active[s])
     if not exits and not busy:
         return _Loop(states, entry, True, f"{who} can run forever with nothing running and no way out")
@@ -448,7 +458,7 @@ def _exit_inputs(a: Automaton, exits: list[tuple[int, int]]) -> list[str]:
     bits = 0
     for m in masks:
         bits |= m
-    return [n for i, n in enumerate(p.inputs) if bits >> i & 1 and p.input_kind[i] != "T3"]
+    return [n for i, n in enumerate(p.inputs) if bits >> i & 1 and p.input_kind[i] not in ("T3", "fault")]
 
 
 def _fair_cycle(a: Automaton, loop: _Loop) -> list[Step]:

@@ -248,7 +248,10 @@ def decode_trace(
         out["to"] = int(rec[R.STATE_TO])
         out["inputs"] = [inputs[i] if i < len(inputs) else f"#{i}" for i in ins]
         kind_of = dict(zip(events, kinds, strict=False))
-        out["input_kinds"] = [kind_of.get(name, "input") for name in out["inputs"]]
+        faults = set(mission.get("fault_inputs", []))  # a resource's fault: the type 3 of its Hold
+        out["input_kinds"] = [
+            kind_of.get(name, "t3" if name in faults else "input") for name in out["inputs"]
+        ]
         out["actions"] = [actions[i] if i < len(actions) else f"#{i}" for i in acts]
     elif kind is Trace.EVENT:
         known = 0 <= code < len(events)

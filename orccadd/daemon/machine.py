@@ -131,7 +131,6 @@ class Machine:
         for u in self.units:
             u.loop.reactor = self.reactor
         self.mission.publish_task_ids()
-        self.hold_names = frozenset(u.loop.hold.name for u in self.units)
         first = self.units[0]
         self.resource, self.clock, self.tel, self.loop, self.queue = (
             first.resource, first.clock, first.tel, first.loop, first.queue,
@@ -250,7 +249,8 @@ class Machine:
         mission = mc.mission
         inputs = 0
         t_last = 0.0
-        held_fault = ""  # a type 3 of a resource the run had on its Hold task
+        held_fault = ""  # a type 3 of a resource the mission has no input for (it does not declare it)
+        faults: list[int] = []  # the mission's `R.fault` inputs: one per instant, in resource order
         for k, u in enumerate(self.units):
             index, upto = u.queue.tail, self.reactor.upto[k]
             for t_s, eid in u.queue.drain():
@@ -258,8 +258,13 @@ class Machine:
                 if info.kind is EventKind.T3:
                     new = u.supervisor.fault is None  # not a stopped resource's Hold, again
                     u.supervisor.on_t3(info.name, self._task_fault(info.task))
-                    if new and info.task in self.hold_names and mc.running and len(self.units) > 1:
-                        held_fault = f"{u.name} safe-stopped while the run held it ({info.name})"
+                    if new and mc.running and not self._runs_task(info.task):
+                        bit = self._fault_bit(u.name)
+                        if bit:
+                            faults.append(bit)
+                            t_last = max(t_last, t_s)
+                        elif len(self.units) > 1:
+                            held_fault = f"{u.name} safe-stopped while the run held it ({info.name})"
                 bit = mission.event_bits.get(eid, 0) if mission is not None and mc.running else 0
                 reacted = index < upto
                 index += 1
@@ -269,16 +274,39 @@ class Machine:
                         t_last = max(t_last, t_s)
                 else:
                     self.pub.trace(Trace.EVENT, t_s, code=eid)
+        if faults:
+            inputs |= faults[0]
         if inputs:
             mc.react(t_last, inputs)
+        for bit in faults[1:]:  # another resource's fault: the next instant's
+            if mc.running:
+                mc.react(t_last, bit)
         if held_fault and mc.running:
             self._end_on_held_fault(held_fault)
         self.publish()
 
+    def _runs_task(self, task: str) -> bool:
+        """`task` is a Robot-Task of the mission, active where the run is now: its type 3 is its own
+        event. Otherwise (the daemon's Hold task, or a task the mission has already stopped) the
+        resource faulted with no task of the mission on it: the mission's `R.fault`."""
+        mc = self.mission
+        runner, mission = mc.runner, mc.mission
+        if runner is None or mission is None:
+            return False
+        tasks = mission.automaton.program.tasks
+        return any(tasks[t].name == task for t in runner.active_in(runner.snapshot()))
+
+    def _fault_bit(self, resource: str) -> int:
+        """The input bit of the mission's `resource.fault`; 0 if the mission does not declare it."""
+        mission = self.mission.mission
+        if mission is None:
+            return 0
+        return dict(mission.automaton.program.fault_inputs).get(resource, 0)
+
     def _end_on_held_fault(self, why: str) -> None:
-        """A resource with no task of the run safe-stopped (its Hold task's type 3): the mission
-        has no input for it (its events are its tasks'), so the run ends here, aborted, and every
-        other resource is back on its Hold task at its next tick: held where it is, not stopped."""
+        """A resource the mission does not declare safe-stopped: the mission has no input for it,
+        so the run ends here, aborted, and every other resource is back on its Hold task at its
+        next tick: held where it is, not stopped."""
         self.note(f"run ended: {why}; the other resources are held", logging.WARNING)
         self.mission.end(MissionResult.ABORTED)
 

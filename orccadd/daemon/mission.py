@@ -67,6 +67,7 @@ class LoadedMission:
             "tunables": [t.tunable_names for t in self.tasks],  # per task: what a tune record names
             "inputs": list(p.inputs),
             "operator_inputs": [n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator"],
+            "fault_inputs": [n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "fault"],
             "actions": list(self.top.action_names),
             "states": self.automaton.n_states,
             "transitions": self.automaton.n_transitions,

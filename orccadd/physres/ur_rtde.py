@@ -12,7 +12,9 @@ tick over it: state, faults, commands and the stop.
   model), and every tick robot mode, safety mode, runtime state and status bits: a protective or
   safeguard stop, an emergency stop, a violation or fault, power off or the control script not
   running is a device fault naming the condition (type 3);
-- write: POSITION = servoJ(q, time = period, lookahead, gain), VELOCITY = speedJ(qd, a, period);
+- write: POSITION = servoJ(q, time = period, lookahead, gain), VELOCITY = speedJ(qd, a, period),
+  TORQUE = directTorque(tau − g(q)) where the config's `min_version` is 5.26 or later (ur_rtde
+  1.6's script has `direct_torque` from 5.26 on; the controller adds gravity itself);
 - safe stop (category 1 or 2): our own deceleration ramp at the configured rate, sent through the
   same servoJ/speedJ stream (never a jump), then servoStop/speedStop at rest; category 1 then
   powers the arm off (brakes);
@@ -28,6 +30,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
 from orccadd.drivers.ur.controller import RobotMode, SafetyMode, condition, parse_polyscope_version
@@ -44,6 +47,19 @@ from orccadd.types import CommandMode, Status
 
 E_SERIES = ("UR3e", "UR5e", "UR10e", "UR16e", "UR20", "UR30")
 AT_REST_RAD_S = 0.01
+DIRECT_TORQUE_SINCE = (5, 26)  # ur_rtde 1.6's script calls `direct_torque` on 5.26 and later only
+NO_FRICTION_SCALE = [0.0] * 6  # what that script passes to `direct_torque`, whatever it is sent
+# a tick without a torque command (a task waiting for its preconditions): held in torque where
+# the arm was at the first such tick, critically damped at 20 rad/s (M(q)·(kp·e − kd·q̇))
+KEEP_KP_S2, KEEP_KD_S = 400.0, 40.0
+
+
+def direct_torque(config: RobotConfig) -> bool:
+    """The config's controllers have direct torque control: its `min_version` (checked at
+    connect: an older controller is refused, naming its version) is 5.26 or later."""
+    s: UrRtdeSettings = config.backend_settings
+    least = parse_polyscope_version(s.min_version)
+    return (least.major, least.minor) >= DIRECT_TORQUE_SINCE
 
 
 def _period_of(model: str) -> float:
@@ -64,7 +80,10 @@ class UrRtdeArm(PhysicalResource):
         return ResourceDescription(
             backend="ur_rtde",
             joints=config.joint_names,
-            modes=frozenset({CommandMode.POSITION, CommandMode.VELOCITY}),
+            modes=frozenset(
+                {CommandMode.POSITION, CommandMode.VELOCITY}
+                | ({CommandMode.TORQUE} if direct_torque(config) else set())
+            ),
             mode_switch_needs_disable=False,
             position=MEASURED,
             velocity=MEASURED,
@@ -106,7 +125,10 @@ class UrRtdeArm(PhysicalResource):
         self._hold = np.zeros(self.dof)  # the command kept while waiting (position mode)
         self._cmd_v = np.zeros(self.dof)  # the servoJ targets' velocity (position mode)
         self._ramp = StopRamp(self.dof)
-        self._zero = np.zeros(self.dof)  # the velocity held while waiting
+        self._zero = np.zeros(self.dof)  # the velocity held while waiting (and the extra torque)
+        self._pin, self._data = model.model, model.new_data()  # the gravity the controller adds
+        self._tau = np.zeros(self.dof)  # the torque sent: commanded minus gravity
+        self._keep_q: FloatArray | None = None  # where ticks without a torque command hold the arm
         self._stop_t0 = 0.0  # tick time the safe stop began
         self.packets_missed = 0
         self._flags = 0  # the last read's status flags, repeated while a reset holds the links
@@ -128,6 +150,7 @@ class UrRtdeArm(PhysicalResource):
     def _hold_here(self) -> None:
         self._hold[:] = self.state.q_rad
         self._cmd_v[:] = 0.0
+        self._keep_q = None
 
     def _on_perform_mode_switch(self, mode: CommandMode) -> None:
         self._hold_here()
@@ -282,6 +305,8 @@ class UrRtdeArm(PhysicalResource):
                 self._hold[:] = command
                 q = command.tolist()
                 ok = self.link.control.servoJ(q, 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
+            elif mode is CommandMode.TORQUE:
+                ok = self._direct_torque(command)
             else:
                 ok = self.link.control.speedJ(command.tolist(), s.speedj_acceleration_rad_s2, self.period_s)
         except RuntimeError as e:  # after its own reconnection attempt failed (ur_rtde's)
@@ -294,6 +319,30 @@ class UrRtdeArm(PhysicalResource):
             why = cond.what if cond else "no stop reported yet"
             self._set_fault(FaultKind.DEVICE, f"the controller refused the command ({why})")
         return int(Status.FAULT)
+
+    def _direct_torque(self, tau_nm: FloatArray) -> bool:
+        """Our torque command is the whole joint torque (a computed-torque law includes gravity);
+        the controller adds its own gravity compensation to what `directTorque` sends, so gravity
+        at the measured q is taken off first."""
+        self._keep_q = None
+        gravity = pin.computeGeneralizedGravity(self._pin, self._data, self.state.q_rad)
+        np.subtract(tau_nm, gravity, out=self._tau)
+        return bool(self.link.control.directTorque(self._tau.tolist(), NO_FRICTION_SCALE, NO_FRICTION_SCALE))
+
+    def _keep_torque(self) -> None:
+        """A torque tick without a command: the controller returns to position control unless
+        `direct_torque` comes every cycle, and gravity alone would let a moving arm coast on. So
+        the arm is held, in torque, where it was at the first such tick: a critically damped PD
+        through the mass matrix (gravity is the controller's), within the joints' max torque."""
+        st = self.state
+        if self._keep_q is None:
+            self._keep_q = st.q_rad.copy()
+        m = pin.crba(self._pin, self._data, st.q_rad)
+        m = np.triu(m) + np.triu(m, 1).T  # crba fills the upper triangle
+        acc = KEEP_KP_S2 * (self._keep_q - st.q_rad) - KEEP_KD_S * st.dq_rad_s
+        tau_max = self.model.tau_max_nm
+        np.clip(m @ acc, -tau_max, tau_max, out=self._tau)
+        self.link.control.directTorque(self._tau.tolist(), NO_FRICTION_SCALE, NO_FRICTION_SCALE)
 
     def _on_keep_alive(self, t_s: float) -> None:
         if self._comm_lost:  # nothing reaches the controller: its watchdog stops the script
@@ -316,6 +365,8 @@ class UrRtdeArm(PhysicalResource):
             self._ramp_step(t_s)
         elif self._stop_flags:  # at rest after the stop: no command, the watchdog still fed
             self.link.control.kickWatchdog()
+        elif self.mode is CommandMode.TORQUE:
+            self._keep_torque()
         else:
             self._send(self.mode, self._hold if self.mode is CommandMode.POSITION else self._zero)
 
@@ -342,7 +393,8 @@ class UrRtdeArm(PhysicalResource):
         ramp.step(t_s, decel)
         if self.mode is CommandMode.POSITION:
             control.servoJ(ramp.q_rad, 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
-        else:
+        else:  # velocity, and torque: the ramp's speeds from the measured state (a servoJ
+            # started at speed would brake the arm at once: its target is not ahead of the arm)
             control.speedJ(ramp.dq_rad_s, decel, self.period_s)
         if ramp.done and at_rest:
             self._at_rest()

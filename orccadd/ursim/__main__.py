@@ -1,7 +1,7 @@
 """`python -m orccadd.ursim --config ROBOT.toml`: a simulated UR controller on 127.0.0.1.
 
 It serves RTDE on 30004, the dashboard server on 29999 and the script ports 30001-30003 (the
-ports stock ur_rtde uses; all can be moved), as an e-Series controller (PolyScope 5.11,
+ports stock ur_rtde uses; all can be moved), as an e-Series controller (PolyScope 5.26,
 500 Hz) or, with --cb3, a CB3 (3.15, 125 Hz). The arm is the robot config's (joints, limits,
 URDF); --plant gives the `sim` settings of its dynamics (friction, initial_q_rad). The robot
 boots powered off, as a real one does, unless --boot running.
@@ -78,6 +78,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     ap.add_argument("--cb3", action="store_true", help="a CB3 controller: version 3.15, 125 Hz")
     ap.add_argument(
+        "--software",
+        default="",
+        help="the controller's software version (default: e-Series 5.26.0, CB3 3.15.7); "
+        "5.26 or later has direct torque control",
+    )
+    ap.add_argument(
         "--plant", default="", help="TOML table of `sim` settings for the arm (friction, initial_q_rad)"
     )
     ap.add_argument(
@@ -117,9 +123,15 @@ def main(argv: list[str] | None = None) -> int:
             "secondary": args.secondary_port,
             "realtime": args.script_port,
         }
+        series = CB3 if args.cb3 else E_SERIES
+        if args.software:
+            try:
+                series = series.with_software(args.software)
+            except ValueError as e:
+                raise OrccaddError(f"--software: {e}") from None
         sim = UrSimulator(
             cfg,
-            CB3 if args.cb3 else E_SERIES,
+            series,
             host=args.host,
             ports=ports,
             sim_settings=plant,

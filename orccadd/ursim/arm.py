@@ -129,7 +129,20 @@ class UrArm:
     def command(self, t_s: float, q_target_rad: FloatArray) -> None:
         """The joint servo's next target (only while the brakes are released)."""
         if self.brakes_released:
+            if self.sim.mode is not CommandMode.POSITION:  # back from direct torque: held here
+                self.sim.switch_mode(CommandMode.POSITION)
             self.sim.write(t_s, q_target_rad)
+
+    def apply_torque(self, t_s: float, tau_nm: FloatArray) -> None:
+        """Direct torque until the next cycle: `tau_nm` on top of the arm's gravity at the cycle's
+        q (the controller compensates gravity; friction is the arm's own, uncompensated: ur_rtde
+        1.6's script passes zero friction scales to `direct_torque`)."""
+        if not self.brakes_released:
+            return
+        if self.sim.mode is not CommandMode.TORQUE:
+            self.sim.switch_mode(CommandMode.TORQUE)
+        gravity = pin.computeGeneralizedGravity(self._pin, self._data, self.q_rad)
+        self.sim.write(t_s, tau_nm + gravity)
 
     @property
     def q_rad(self) -> FloatArray:

@@ -24,6 +24,7 @@ import numpy as np
 from orccadd.state import FloatArray
 from orccadd.ursim.motion import Motion, MoveJ, ServoJ, SpeedJ, StopJ
 from orccadd.ursim.robot_state import RobotState
+from orccadd.ursim.series import Series
 
 log = logging.getLogger("orccadd.ursim")
 
@@ -62,6 +63,7 @@ class ScriptHost(Protocol):
     """What the control script needs from the controller (`controller.UrController`)."""
 
     state: RobotState
+    series: Series
     period_s: float
     v_max_rad_s: FloatArray
     a_max_rad_s2: FloatArray
@@ -74,6 +76,7 @@ class ScriptHost(Protocol):
     def set_payload(self, mass_kg: float, cog_m: FloatArray) -> None: ...
     def joint_history(self, steps: int) -> FloatArray: ...
     def joint_torques(self) -> FloatArray: ...
+    def direct_torque(self, tau_nm: FloatArray) -> None: ...
     def forward_kin(self, q: FloatArray | None, tcp: FloatArray | None) -> FloatArray: ...
     def within_limits(self, q: FloatArray) -> bool: ...
     def is_steady(self) -> bool: ...
@@ -220,6 +223,10 @@ class ControlScript:
                 self._stop_threads()
                 self.is_servoing = True
                 h.start_motion(self.servo)
+        elif cmd == 66:  # direct_torque: the script's lines for it exist on 5.26 and later only
+            if h.series.direct_torque:
+                self._stop_threads()
+                h.direct_torque(self._q(0))
         elif cmd in (15, 16):  # speed_stop, servo_stop
             self._stop(self._float(0), motion_async=False)
         elif cmd in (33, 34):  # stopl (in joint space here), stopj

@@ -30,7 +30,7 @@ from orccadd.state import FloatArray
 from orccadd.ursim.arm import UrArm
 from orccadd.ursim.control_script import Program
 from orccadd.ursim.export import export_state
-from orccadd.ursim.motion import Hold, Motion, StopJ, Target
+from orccadd.ursim.motion import DirectTorque, Hold, Motion, StopJ, Target
 from orccadd.ursim.robot_state import FieldTable, RobotState
 from orccadd.ursim.series import Series
 from orccadd.ursim.states import (
@@ -66,6 +66,7 @@ class UrController:
         self.v_max_rad_s = arm.v_max_rad_s
         self.a_max_rad_s2 = arm.a_max_rad_s2
         self.target = Target(arm.dof)
+        self.torque = DirectTorque(arm.dof)  # the one direct torque motion, set every cycle
         self._safe_target = Target(arm.dof)
         self.subscribers: list[Callable[[int], None]] = []  # RTDE sessions, called every cycle
         self.input_owner: dict[str, object] = {}  # input field -> the RTDE session writing it
@@ -209,6 +210,14 @@ class UrController:
     def start_motion(self, motion: Motion) -> None:
         self.motion, self.motion_done = motion, False
 
+    def direct_torque(self, tau_nm: FloatArray) -> None:
+        """`direct_torque(tau)`: joint torques on top of gravity compensation for this cycle
+        (from the program's step, before the motion's)."""
+        if self.motion is not self.torque or self.motion_done:
+            self.target.hold(self.arm.q_rad)
+            self.start_motion(self.torque)
+        self.torque.set(tau_nm)
+
     def motion_finished(self, motion: Motion) -> bool:
         return motion is not self.motion or self.motion_done
 
@@ -330,15 +339,22 @@ class UrController:
                 self._safe_target.q[:], self._safe_target.qd[:] = tgt.q, tgt.qd
                 if not self.motion_done:
                     self.motion_done = self.motion.step(tgt, h)
+                torque = self.motion is self.torque and not self.motion_done
+                if torque:  # the target is the arm: its limits are checked on the arm itself
+                    tgt.q[:], tgt.qd[:] = arm.q_rad, arm.dq_rad_s
                 if self.safety_mode is SafetyMode.NORMAL:
                     why = self._check_target()
                     if why:
                         tgt.q[:], tgt.qd[:] = self._safe_target.q, self._safe_target.qd
                         self.protective_stop(why)
                         self.motion_done = self.motion.step(tgt, h)
+                        torque = False
                 if self.power_off_when_stopped and self.motion_done:
                     self._power_off()
-                arm.command(t_s, tgt.q)
+                if torque:
+                    arm.apply_torque(t_s, self.torque.tau_nm)
+                else:
+                    arm.command(t_s, tgt.q)
             else:
                 tgt.hold(arm.q_rad)
             self.cycles += 1

@@ -64,6 +64,32 @@ class Hold(Motion):
         return True
 
 
+class DirectTorque(Motion):
+    """Direct joint torque control (`direct_torque`, PolyScope 5.23+): the joints take the torques
+    commanded on top of the controller's gravity compensation, the target follows the arm (the
+    controller steps them; `UrController.step`). Called every cycle, or the robot "returns to
+    position control mode" (UR's script manual): a cycle without a `direct_torque` ends it, held
+    where the arm is."""
+
+    name = "direct_torque"
+
+    def __init__(self, n: int) -> None:
+        self.tau_nm = np.zeros(n)
+        self.fresh = False  # `direct_torque` called since the last cycle
+
+    def set(self, tau_nm: FloatArray) -> None:
+        self.tau_nm[:] = tau_nm
+        self.fresh = True
+
+    def step(self, tgt: Target, h_s: float) -> bool:
+        if self.fresh:
+            self.fresh = False
+            return False
+        tgt.qd[:] = 0.0
+        tgt.qdd[:] = 0.0
+        return True
+
+
 class StopJ(Motion):
     """Decelerate every joint to rest together, the fastest at `a` rad/s² (stopj)."""
 

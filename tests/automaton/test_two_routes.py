@@ -84,12 +84,17 @@ def program(main: str, safe: str) -> str:
 
 
 def random_inputs(a: Automaton, state: int, rng: random.Random) -> int:
-    """Inputs the environment may give: operator inputs at random, one event or none per active task."""
+    """Inputs the environment may give: operator inputs at random, one resource's fault at most
+    where none of the active tasks runs on it (not in the first instant), one event or none per
+    active task."""
     p = a.program
     inputs = 0
     for i in range(len(p.inputs)):
-        if p.input_task[i] < 0 and rng.random() < 0.3:
+        if p.input_kind[i] == "operator" and rng.random() < 0.3:
             inputs |= 1 << i
+    faults = [b for _, b in p.fault_inputs if b & (p.faults_possible(a.active[state]) if state else 0)]
+    if faults and rng.random() < 0.1:  # one resource's fault at most per instant
+        inputs |= rng.choice(faults)
     for t in set(a.active[state]):
         events = [bit for _, _, bit in p.tasks[t].events]
         if rng.random() < 0.5:

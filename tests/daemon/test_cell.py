@@ -103,17 +103,25 @@ def test_a_fault_on_a_moving_resource_enters_the_safe_procedure_and_holds_the_ot
     assert all(x["fault"] is None for x in resources(dual).values())
 
 
-def test_a_fault_on_a_held_resource_ends_the_run_and_a_reset_names_it(slow: tuple[Daemon, str]) -> None:
+def test_a_fault_on_a_held_resource_enters_the_safe_procedure_and_a_reset_names_it(
+    slow: tuple[Daemon, str],
+) -> None:
     dual, mission = slow
     dual.call("load", path=mission)
     dual.call("start")
     dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
     dual.call("inject", fault="resource", resource="right")  # right holds while left reaches
-    s = dual.wait(lambda s: s["state"] != "running", timeout_s=30)
-    assert s["faulted"] and s["result"] == "aborted", s
+    dual.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(dual)), timeout_s=30)
+    entry = next(e for e in instants(dual) if "safe" in e["actions"])
+    assert entry["inputs"] == ["right.fault"] and "stop MeetL" in entry["actions"], entry
+    assert entry["input_kinds"] == ["t3"], entry  # the resource's type 3, as `top` and the logs tell it
     r = resources(dual)
     assert r["right"]["fault"] and r["right"]["fault"]["resource"] == "right", r["right"]
     assert r["left"]["fault"] is None and r["left"]["task"] == "Hold_left", r["left"]  # held, not stopped
+    assert dual.call("status")["state"] == "running"  # the safe procedure awaits Stop
+    dual.call("send", input="Stop")  # its acknowledgement
+    s = dual.wait(lambda s: s["state"] != "running", timeout_s=30)
+    assert s["result"] == "safe", s
     refused = dual.reply("start")
     assert not refused["ok"] and "resource right was safe-stopped" in refused["error"], refused
     assert cast(dict[str, Any], dual.call("reset", resource="right"))["reset"]

@@ -156,3 +156,30 @@ def test_a_killed_controller_is_comm_lost_at_once_and_reset_reconnects_to_the_re
         daemon.wait(lambda s: not s["faulted"] and not s.get("resource_status"))
         run_to_success(daemon)
         daemon.stop()  # ur_rtde's clients go before this simulator does
+
+
+def test_computed_torque_motions_run_on_the_controllers_direct_torque(
+    sim: UrSimProcess, tmp_path: Path
+) -> None:
+    """demo_position.mission's three motions with the computed-torque task (Ruckig + computed
+    torque: a torque task, move_joints.toml) instead of the position one, through orccadd/orccadctl
+    on the UR controller simulator (PolyScope 5.26: direct torque), to success, with the same
+    reactive trace as the position mission's on this controller."""
+    text = Path(MISSION).read_text().replace("move_joints_csp.toml", "move_joints.toml")
+    (tmp_path / "ct_motions.mission").write_text(text.replace('"../tasks/', f'"{ROOT}/configs/tasks/'))
+    config = local_config(tmp_path, UR)
+    config.write_text(config.read_text().replace("mission_dirs = [", f'mission_dirs = ["{tmp_path}", ', 1))
+    d = start_daemon_with(tmp_path, config)
+    try:
+        r = d.ctl("load", str(tmp_path / "ct_motions.mission"))
+        assert r.returncode == 0, r.stderr
+        d.call("start")
+        s = d.wait(lambda s: s["state"] != "running" or s["faulted"], timeout_s=90)
+        assert s["result"] == "success" and not s["faulted"], (s.get("fault"), sim.log_text()[-3000:])
+        ev = d.call("events", last=200)
+        instants = [e for e in ev["events"] if e["kind"] == "instant"]  # type: ignore[index]
+        started = [a for e in instants for a in e["actions"] if a.startswith("start ")]
+        assert started == ["start Home", "start Reach", "start Back"], started
+        assert sim.status()["safety_mode"] == "NORMAL" and sim.status()["protective_stops"] == 0
+    finally:
+        d.stop()

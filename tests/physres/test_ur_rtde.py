@@ -64,7 +64,7 @@ def test_a_motion_is_paced_by_the_controllers_stream_and_reaches_its_target(arm:
     assert max(abs(q - t) for q, t in zip(arm.resource.state.q_rad, REACH, strict=True)) < 0.01
     assert_commands_within_limits(loop.ticks(), arm.config)
     d = arm.resource.diagnostics()
-    assert d.details["controller"] == "UR5e 5.11.1.108318"
+    assert d.details["controller"] == "UR5e 5.26.0.0"
     assert len(str(d.details["actual_current_a"]).split()) == 6
     assert len(str(d.details["tcp_pose_m_rad"]).split()) == 6
     assert float(d.details["controller_time_s"]) > 0
@@ -202,3 +202,44 @@ def test_power_on_and_brake_release_only_when_the_config_says_so(tmp_path: Path,
             assert sim.status()["robot_mode"] == "RUNNING"
         finally:
             s.close()
+
+
+CT_MOVE = ROOT / "configs/tasks/move_joints.toml"  # Ruckig + computed torque: a torque task
+
+
+def test_a_computed_torque_motion_runs_on_the_controllers_direct_torque(sim: UrSimProcess) -> None:
+    """The computed-torque task, unchanged, on a controller with direct torque (5.26): the
+    backend sends its torque less gravity (the controller adds gravity itself); the arm reaches
+    the target within the task's tolerance, every command within the limits."""
+    s = Session.open(CONFIG, CommandMode.TORQUE)
+    try:
+        assert CommandMode.TORQUE in s.resource.description.modes
+        task = s.task(CT_MOVE)
+        next(m for m in task.modules if m.name == "traj").configure({"target_rad": REACH, "speed_scale": 0.3})
+        loop = TickRecorder(s.resource, resource_clock(s.resource), overrun_limit=10**6)
+        phase = loop.run_task(task, timeout_s=30.0)
+        assert phase is Phase.DONE, (task.fault_reason, s.resource.fault_message)
+        assert np.abs(s.resource.state.q_rad - REACH).max() < 0.01
+        assert_commands_within_limits(loop.ticks(), s.config)
+        assert sim.status()["safety_mode"] == "NORMAL"
+    finally:
+        s.close()
+
+
+def test_torque_needs_a_controller_with_direct_torque(tmp_path: Path) -> None:
+    """ur_rtde 1.6's script calls direct_torque from PolyScope 5.26 on: a config that wants torque
+    (min_version 5.26) refuses an older controller at connect, naming its version; a config
+    without it has no torque mode, and a torque task is refused before anything moves."""
+    with UrSimProcess(CONFIG, "--boot", "running", "--software", "5.11.1", "--priority", "70") as old:
+        with pytest.raises(
+            ResourceError, match=r"controller software 5\.11\.1.* older than min_version 5\.26"
+        ):
+            Session.open(CONFIG, CommandMode.POSITION)
+        text = CONFIG.read_text().replace('"../urdf/', f'"{ROOT}/configs/urdf/')
+        path = tmp_path / "ur.toml"
+        path.write_text(text.replace('min_version = "5.26"', 'min_version = "5.4"'))
+        with pytest.raises(ResourceError, match="cannot command torque"):
+            Session.open(path, CommandMode.TORQUE)
+        assert old.status()["robot_mode"] == "RUNNING" and old.status()["q_rad"] == pytest.approx(
+            [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0], abs=1e-3
+        )

@@ -9,7 +9,7 @@ import pytest
 from orccadd.config.robot import RobotConfig
 from orccadd.ursim.control_script import DONE_WITH_CMD, RDY_FOR_CMD, ControlScript
 from orccadd.ursim.controller import UrController
-from orccadd.ursim.series import CB3
+from orccadd.ursim.series import CB3, E_SERIES
 from orccadd.ursim.states import (
     BOOT_S,
     RELEASE_S,
@@ -245,3 +245,43 @@ def test_a_program_paused_by_a_protective_stop_resumes_its_servo_on_play(clocked
     clocked.run(2.0)
     assert ctl.safety_mode is SafetyMode.NORMAL
     assert ctl.target.q[4] == pytest.approx(q[4], abs=1e-4)
+
+
+DIRECT_TORQUE = 66
+
+
+def test_direct_torque_adds_to_gravity_and_a_cycle_without_it_returns_to_position_control(
+    clocked: Clocked,
+) -> None:
+    """`direct_torque(tau)`: the joints take tau on top of the controller's gravity compensation
+    (zero torque: the arm floats where it is); a cycle without a new command (the script's
+    command register cleared) is back to position control, held where the arm is."""
+    ctl = clocked.ctl
+    start_script(ctl)
+    q0 = ctl.arm.q_rad.copy()
+    command(ctl, DIRECT_TORQUE, [0.0] * 6)
+    clocked.run(0.2)
+    assert ctl.motion.name == "direct_torque" and not ctl.motion_done
+    assert np.abs(ctl.arm.q_rad - q0).max() < 1e-3  # gravity compensated: it stays
+    command(ctl, DIRECT_TORQUE, [0.0, 0.0, 0.0, 0.0, 0.0, 0.05])  # a push on the wrist
+    clocked.run(0.1)
+    assert ctl.arm.dq_rad_s[5] > 0.02 and np.allclose(ctl.target.q, ctl.arm.q_rad)  # target = arm
+    command(ctl, 0)  # no more direct_torque
+    clocked.run(0.5)
+    assert ctl.motion_done and ctl.safety_mode is SafetyMode.NORMAL
+    q1 = ctl.arm.q_rad.copy()
+    clocked.run(0.2)
+    assert np.abs(ctl.arm.q_rad - q1).max() < 1e-3  # held by the position servo
+
+
+def test_direct_torque_is_nothing_before_5_26(ur5e: RobotConfig) -> None:
+    """ur_rtde 1.6's script has `direct_torque` from PolyScope 5.26 on: on an older controller
+    its command 66 does nothing (the arm stays under position control)."""
+    clocked = Clocked(make_controller(ur5e, E_SERIES.with_software("5.11.1")))
+    ctl = clocked.ctl
+    start_script(ctl)
+    q0 = ctl.arm.q_rad.copy()
+    command(ctl, DIRECT_TORQUE, [0.0, 0.0, 0.0, 0.0, 0.0, 0.5])
+    clocked.run(0.3)
+    assert ctl.motion.name != "direct_torque" and ctl.runtime_state is RuntimeState.PLAYING
+    assert np.abs(ctl.arm.q_rad - q0).max() < 1e-3

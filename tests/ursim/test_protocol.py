@@ -87,7 +87,7 @@ def test_version_negotiation_accepts_only_protocol_2(sim: UrSimulator) -> None:
     c = RtdeClient(sim.servers["rtde"].port)
     assert c.request("V", struct.pack(">H", 1)) == b"\x00"
     assert c.request("V", struct.pack(">H", 2)) == b"\x01"
-    assert struct.unpack(">4I", c.request("v")) == (5, 11, 1, 108318)
+    assert struct.unpack(">4I", c.request("v")) == (5, 26, 0, 0)
     c.close()
 
 
@@ -166,7 +166,7 @@ def test_the_dashboard_greets_then_answers_line_by_line(sim: UrSimulator) -> Non
     assert f.readline() == b"Connected: Universal Robots Dashboard Server\n"
     for line, reply in [
         ("robotmode", "Robotmode: RUNNING"),
-        ("PolyscopeVersion", "URSoftware 5.11.1.108318 (Nov 22 2021)"),
+        ("PolyscopeVersion", "URSoftware 5.26.0.0 (Jan 01 2026)"),
         ("power off", "Powering off"),
         ("robotmode", "Robotmode: POWER_OFF"),
         ("unlock protective stop", "Protective stop releasing"),
@@ -191,7 +191,7 @@ def test_dashboard_commands_are_matched_whole_and_case_insensitively(sim: UrSimu
     assert answer(ctl, session, "getUserRole") == "OPERATOR"
     assert answer(ctl, session, "load /programs/x.urp") == "File not found: /programs/x.urp"
     assert answer(ctl, session, "play") == "Failed to execute: play"  # nothing to resume
-    assert answer(ctl, session, "version") == "5.11.1.108318"
+    assert answer(ctl, session, "version") == "5.26.0.0"
 
 
 def test_protective_stop_line_on_a_script_port(sim: UrSimulator) -> None:

@@ -119,7 +119,7 @@ def test_stopj_stops_an_asynchronous_movej_short_of_its_goal(ready: Any, receive
 
 
 def test_dashboard_power_cycle(ready: Any, receive: Any, dashboard: Any) -> None:
-    assert dashboard.polyscopeVersion() == "5.11.1.108318"
+    assert dashboard.polyscopeVersion() == "5.26.0.0"
     assert dashboard.robotmode() == "Robotmode: RUNNING"
     assert dashboard.safetystatus() == "Safetystatus: NORMAL"
     assert dashboard.programState() == "PLAYING rtde_control"

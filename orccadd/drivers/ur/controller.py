@@ -135,7 +135,7 @@ class Version:
 
 
 def parse_polyscope_version(reply: str) -> Version:
-    """`URSoftware 5.11.1.108318 (Jan 14 2022)` (dashboard `PolyscopeVersion`) -> Version."""
+    """`URSoftware 5.26.0.0 (Jan 01 2026)` (dashboard `PolyscopeVersion`) -> Version."""
     m = re.search(r"(\d+)\.(\d+)(?:\.(\d+))?(?:\.(\d+))?", reply)
     if m is None:
         raise ValueError(f"not a PolyscopeVersion reply: {reply!r}")
