@@ -25,6 +25,7 @@ tick over it: state, faults, commands and the stop.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -277,10 +278,20 @@ class UrRtdeArm(PhysicalResource):
             self.link.lock.release()
 
     def _lose(self, why: str) -> None:
-        """CommLost, said as first seen (the type 3 reports the message of its tick)."""
+        """CommLost, said as first seen (the type 3 reports the message of its tick). The links
+        are dropped at once, outside the tick: left to a dead or vanished controller, ur_rtde's
+        control interface reconnects from its own thread again and again, and it crashed the
+        process (a segmentation fault in rtde_control, seconds after a dropped connection while
+        the daemon went on running its safe procedure); `reset` opens them again."""
         if not self._comm_lost:
             self._comm_lost = why
             self._set_fault(FaultKind.COMM_LOST, why)
+            threading.Thread(target=self._drop_links, name=f"{self.name}-drop", daemon=True).start()
+
+    def _drop_links(self) -> None:
+        with self.link.lock:  # after the tick that saw it; its destructors take ~0.5 s each
+            if self._comm_lost:
+                self.link.close()
 
     def _control_ready(self) -> bool:
         """The control link is up (a command sent on a dead one blocks while ur_rtde reconnects)
