@@ -43,6 +43,7 @@ from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, ClockSource, Quantity, ResourceDescription, Source
 from orccadd.physres.stop_ramp import StopRamp
+from orccadd.physres.torque_hold import TorqueHold
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Status
 
@@ -50,9 +51,6 @@ E_SERIES = ("UR3e", "UR5e", "UR10e", "UR16e", "UR20", "UR30")
 AT_REST_RAD_S = 0.01
 DIRECT_TORQUE_SINCE = (5, 26)  # ur_rtde 1.6's script calls `direct_torque` on 5.26 and later only
 NO_FRICTION_SCALE = [0.0] * 6  # what that script passes to `direct_torque`, whatever it is sent
-# a tick without a torque command (a task waiting for its preconditions): held in torque where
-# the arm was at the first such tick, critically damped at 20 rad/s (M(q)·(kp·e − kd·q̇))
-KEEP_KP_S2, KEEP_KD_S = 400.0, 40.0
 
 
 def direct_torque(config: RobotConfig) -> bool:
@@ -129,7 +127,7 @@ class UrRtdeArm(PhysicalResource):
         self._zero = np.zeros(self.dof)  # the velocity held while waiting (and the extra torque)
         self._pin, self._data = model.model, model.new_data()  # the gravity the controller adds
         self._tau = np.zeros(self.dof)  # the torque sent: commanded minus gravity
-        self._keep_q: FloatArray | None = None  # where ticks without a torque command hold the arm
+        self._keep = TorqueHold(model, gravity=False)  # ticks without a torque command
         self._stop_t0 = 0.0  # tick time the safe stop began
         self.packets_missed = 0
         self._flags = 0  # the last read's status flags, repeated while a reset holds the links
@@ -151,7 +149,7 @@ class UrRtdeArm(PhysicalResource):
     def _hold_here(self) -> None:
         self._hold[:] = self.state.q_rad
         self._cmd_v[:] = 0.0
-        self._keep_q = None
+        self._keep.release()
 
     def _on_perform_mode_switch(self, mode: CommandMode) -> None:
         self._hold_here()
@@ -335,7 +333,7 @@ class UrRtdeArm(PhysicalResource):
         """Our torque command is the whole joint torque (a computed-torque law includes gravity);
         the controller adds its own gravity compensation to what `directTorque` sends, so gravity
         at the measured q is taken off first."""
-        self._keep_q = None
+        self._keep.release()
         gravity = pin.computeGeneralizedGravity(self._pin, self._data, self.state.q_rad)
         np.subtract(tau_nm, gravity, out=self._tau)
         return bool(self.link.control.directTorque(self._tau.tolist(), NO_FRICTION_SCALE, NO_FRICTION_SCALE))
@@ -343,16 +341,11 @@ class UrRtdeArm(PhysicalResource):
     def _keep_torque(self) -> None:
         """A torque tick without a command: the controller returns to position control unless
         `direct_torque` comes every cycle, and gravity alone would let a moving arm coast on. So
-        the arm is held, in torque, where it was at the first such tick: a critically damped PD
-        through the mass matrix (gravity is the controller's), within the joints' max torque."""
-        st = self.state
-        if self._keep_q is None:
-            self._keep_q = st.q_rad.copy()
-        m = pin.crba(self._pin, self._data, st.q_rad)
-        m = np.triu(m) + np.triu(m, 1).T  # crba fills the upper triangle
-        acc = KEEP_KP_S2 * (self._keep_q - st.q_rad) - KEEP_KD_S * st.dq_rad_s
+        the arm is held, in torque, where it was at the first such tick (`TorqueHold`, gravity
+        left to the controller), within the joints' max torque."""
+        self._keep.update(self.state, self._tau)
         tau_max = self.model.tau_max_nm
-        np.clip(m @ acc, -tau_max, tau_max, out=self._tau)
+        np.clip(self._tau, -tau_max, tau_max, out=self._tau)
         self.link.control.directTorque(self._tau.tolist(), NO_FRICTION_SCALE, NO_FRICTION_SCALE)
 
     def _on_keep_alive(self, t_s: float) -> None:

@@ -22,6 +22,7 @@ from orccadd.errors import ParameterError, did_you_mean
 from orccadd.fault import Fault, FaultKind
 from orccadd.modules.base import Module, Parameter
 from orccadd.physres.base import PhysicalResource
+from orccadd.physres.torque_hold import TorqueHold
 from orccadd.task.compiled import CompiledTick, compile_schedule
 from orccadd.task.events import EventKind, EventQueue
 from orccadd.types import T3_MASK, TASK_TIMEOUT, CommandMode, Phase, Status
@@ -181,6 +182,10 @@ class RobotTask:
         self._blend_ticks = 0
         self._blend_left = 0
         self._holding_previous = False
+        # a torque task waiting for its preconditions after a switch holds the arm (TorqueHold)
+        full = len(command) == resource.model.dof
+        torque = signature.command is CommandMode.TORQUE and full
+        self._torque_hold = TorqueHold(resource.model) if torque else None
         # position commands: a blend never steps faster than the joints may move (the resource
         # would clamp that step as a limit violation); 0.9 of it, per robot period
         position = signature.command is CommandMode.POSITION
@@ -213,10 +218,14 @@ class RobotTask:
 
     def continue_from(self, previous: npt.NDArray[np.float64], blend_ticks: int) -> None:
         """Switching (seed §5.1): until the law starts, keep sending `previous` (the outgoing
-        task's last command); then blend the difference between it and this law's first command
-        out linearly over `blend_ticks`, so the command never jumps. Call after `activate`."""
+        task's last command) — for a torque task, a hold (`TorqueHold`: the outgoing law's last
+        torque is a stale feed-forward on a moving arm, and no watcher of this task runs before
+        its law does); then blend the difference between it and this law's first command out
+        linearly over `blend_ticks`, so the command never jumps. Call after `activate`."""
         self.sent[:] = previous
         self._holding_previous = True
+        if self._torque_hold is not None:
+            self._torque_hold.release()  # held where the arm is when the wait begins
         self._blend_ticks = self._blend_left = max(0, blend_ticks)
 
     def deactivate(self) -> None:
@@ -368,7 +377,9 @@ class RobotTask:
                 self.t_started_s = t_s
             if not self._preconditions_hold(t_s):
                 if self._holding_previous and self.phase is Phase.PRE:
-                    self._out = self.sent  # the outgoing command, until the law starts
+                    if self._torque_hold is not None:
+                        self._torque_hold.update(st, self.sent)
+                    self._out = self.sent  # the outgoing command (a torque: a hold), until the law starts
                 return
             for m in self.modules:
                 m.begin(st)

@@ -183,3 +183,23 @@ def test_computed_torque_motions_run_on_the_controllers_direct_torque(
         assert sim.status()["safety_mode"] == "NORMAL" and sim.status()["protective_stops"] == 0
     finally:
         d.stop()
+
+
+def test_the_computed_torque_demo_runs_on_the_controllers_direct_torque(
+    sim: UrSimProcess, daemon: Daemon
+) -> None:
+    """demo.mission (Ruckig + computed torque) through orccadd/orccadctl on the UR controller
+    simulator, to success. Its Inspect loses tracking mid-motion and Approach waits for ArmSlow:
+    meanwhile the arm is held in torque (it ran out of its range, protective stop, in 2 runs of 3
+    while the waiting task kept Inspect's last torque)."""
+    r = daemon.ctl("load", str(ROOT / "configs/missions/demo.mission"))
+    assert r.returncode == 0, r.stderr
+    daemon.call("start")
+    s = daemon.wait(lambda s: s["state"] != "running" or s["faulted"], timeout_s=90)
+    assert s["result"] == "success" and not s["faulted"], (s.get("fault"), sim.log_text()[-3000:])
+    ev = daemon.call("events", last=200)
+    started = [
+        a for e in ev["events"] if e["kind"] == "instant" for a in e["actions"] if a.startswith("start ")
+    ]  # type: ignore[index]
+    assert started[:3] == ["start Home", "start Reach", "start Inspect"], started
+    assert sim.status()["protective_stops"] == 0
