@@ -25,6 +25,7 @@ tick over it: state, faults, commands and the stop.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from collections.abc import Mapping
@@ -119,6 +120,7 @@ class UrRtdeArm(PhysicalResource):
         self._last_stamp = -1.0
         self._last_new_s = 0.0  # tick time at which the last new package was seen
         self._comm_lost = ""
+        self._parked: list[Any] = []  # ur_rtde clients disconnected at a loss (`_drop_links`)
         self._controller_stopped = False  # the controller stopped the arm itself (its script too)
         self._off_by_us = False  # our category 1 stop powered the arm off: not a fault
         self._hold = np.zeros(self.dof)  # the command kept while waiting (position mode)
@@ -160,6 +162,7 @@ class UrRtdeArm(PhysicalResource):
 
     def _on_shutdown(self) -> None:
         self.link.close()
+        self._parked.clear()
 
     def _on_clear_stop(self) -> None:
         with self.link.lock:
@@ -202,6 +205,7 @@ class UrRtdeArm(PhysicalResource):
         startup (the controller may have been restarted: model, version and period checked
         again), the state read afresh, and the stop's hold taken from where the arm now is."""
         self.link.close()
+        self._parked.clear()  # the clients dropped at the loss: their destructors run here
         self._connect()
         self._flags = self._read_locked(time.monotonic(), self.state)
         if self._comm_lost:
@@ -287,9 +291,21 @@ class UrRtdeArm(PhysicalResource):
             threading.Thread(target=self._drop_links, name=f"{self.name}-drop", daemon=True).start()
 
     def _drop_links(self) -> None:
-        with self.link.lock:  # after the tick that saw it; its destructors take ~0.5 s each
-            if self._comm_lost:
-                self.link.close()
+        """Off the tick: the clients taken out of the link under its lock (the ticks then see no
+        link), then disconnected outside it (ur_rtde's `disconnect` lets the interpreter run
+        while it joins its threads, ~0.5 s each) and kept: their destructors hold the interpreter
+        for as long again, so they run at the next `reset` or shutdown, when the links are
+        replaced anyway, not while every control thread of the cell runs."""
+        link = self.link
+        with link.lock:  # after the tick that saw it
+            if not self._comm_lost:
+                return
+            clients = [c for c in (link.control, link.receive, link.dashboard) if c is not None]
+            link.close()
+        for c in clients:
+            with contextlib.suppress(RuntimeError):
+                c.disconnect()
+        self._parked.extend(clients)
 
     def _control_ready(self) -> bool:
         """The control link is up (a command sent on a dead one blocks while ur_rtde reconnects)
