@@ -158,6 +158,18 @@ def test_a_killed_controller_is_comm_lost_at_once_and_reset_reconnects_to_the_re
         daemon.stop()  # ur_rtde's clients go before this simulator does
 
 
+def run_started(d: Daemon, sim: UrSimProcess, mission: Path) -> list[str]:
+    """`mission` loaded and run to success (the simulator's log in a failure); the tasks it
+    started, in order."""
+    r = d.ctl("load", str(mission))
+    assert r.returncode == 0, r.stderr
+    d.call("start")
+    s = d.wait(lambda s: s["state"] != "running" or s["faulted"], timeout_s=90)
+    assert s["result"] == "success" and not s["faulted"], (s.get("fault"), sim.log_text()[-3000:])
+    events = d.call("events", last=200)["events"]  # type: ignore[index]
+    return [a for e in events if e["kind"] == "instant" for a in e["actions"] if a.startswith("start ")]
+
+
 def test_computed_torque_motions_run_on_the_controllers_direct_torque(
     sim: UrSimProcess, tmp_path: Path
 ) -> None:
@@ -171,14 +183,7 @@ def test_computed_torque_motions_run_on_the_controllers_direct_torque(
     config.write_text(config.read_text().replace("mission_dirs = [", f'mission_dirs = ["{tmp_path}", ', 1))
     d = start_daemon_with(tmp_path, config)
     try:
-        r = d.ctl("load", str(tmp_path / "ct_motions.mission"))
-        assert r.returncode == 0, r.stderr
-        d.call("start")
-        s = d.wait(lambda s: s["state"] != "running" or s["faulted"], timeout_s=90)
-        assert s["result"] == "success" and not s["faulted"], (s.get("fault"), sim.log_text()[-3000:])
-        ev = d.call("events", last=200)
-        instants = [e for e in ev["events"] if e["kind"] == "instant"]  # type: ignore[index]
-        started = [a for e in instants for a in e["actions"] if a.startswith("start ")]
+        started = run_started(d, sim, tmp_path / "ct_motions.mission")
         assert started == ["start Home", "start Reach", "start Back"], started
         assert sim.status()["safety_mode"] == "NORMAL" and sim.status()["protective_stops"] == 0
     finally:
@@ -192,14 +197,6 @@ def test_the_computed_torque_demo_runs_on_the_controllers_direct_torque(
     simulator, to success. Its Inspect loses tracking mid-motion and Approach waits for ArmSlow:
     meanwhile the arm is held in torque (it ran out of its range, protective stop, in 2 runs of 3
     while the waiting task kept Inspect's last torque)."""
-    r = daemon.ctl("load", str(ROOT / "configs/missions/demo.mission"))
-    assert r.returncode == 0, r.stderr
-    daemon.call("start")
-    s = daemon.wait(lambda s: s["state"] != "running" or s["faulted"], timeout_s=90)
-    assert s["result"] == "success" and not s["faulted"], (s.get("fault"), sim.log_text()[-3000:])
-    ev = daemon.call("events", last=200)
-    started = [
-        a for e in ev["events"] if e["kind"] == "instant" for a in e["actions"] if a.startswith("start ")
-    ]  # type: ignore[index]
+    started = run_started(daemon, sim, ROOT / "configs/missions/demo.mission")
     assert started[:3] == ["start Home", "start Reach", "start Inspect"], started
     assert sim.status()["protective_stops"] == 0
