@@ -34,7 +34,7 @@ class Series:
         is not one of this generation's (its major version)."""
         parts = [int(p) for p in text.split(".")]
         if not 2 <= len(parts) <= 4 or parts[0] != self.version[0]:
-            raise ValueError(f"{text!r} is not a {self.name} software version ({self.version[0]}.x.y)")
+            raise ValueError(f"{text!r} is not a software version of the {self.name} ({self.version[0]}.x.y)")
         major, minor, bugfix, build = (*parts, 0, 0)[:4]
         return replace(self, version=(major, minor, bugfix, build))
 
