@@ -15,13 +15,16 @@ joints, limits, backend, period, safe stop), with what differs here:
     config = "gripper-sim.toml"
     control_period_s = 0.008           # optional: its own period (default: the config's)
     settings = { port = "/tmp/ttyG" }  # optional: keys that replace its [resource.settings] ones
+    loop = { overrun_limit = 10 }      # optional: its loop's [daemon] keys here (`PER_RESOURCE`)
 
     [daemon]                           # the cell's: one socket, one automaton, one mission
 
 The `[daemon]` keys of a resource's control loop come from its own config (`PER_RESOURCE`: its
 Hold task, overrun limit, switch blend, watchdog, task timeout, tick); every other `[daemon]` key
 (socket, roles, priorities, loads, logs, clients) is the cell's, and a cell's `[daemon]` that sets
-a per-resource key is refused, naming the config where it belongs.
+a per-resource key is refused, naming the config where it belongs. A resource's `loop` table
+replaces some of those keys for this cell only: limits counted in periods (overruns in a row, a
+stale heartbeat) are shorter in time when the cell runs the resource at a shorter period.
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ class ResourceEntry:
     config: str = field()
     control_period_s: float = field(default=0.0, bounds=(0.0, 0.1))  # 0: the config's own
     settings: dict[str, Any] = field(default=None)  # type: ignore[assignment]
+    loop: dict[str, Any] = field(default=None)  # type: ignore[assignment]
 
 
 @dataclass(frozen=True)
@@ -119,7 +123,10 @@ def read_cell_config(path: str | Path) -> CellConfig:
     for key in PER_RESOURCE:
         if key in (raw.get("daemon") or {}):
             raise ConfigError(
-                file, f"daemon.{key}", "belongs to each resource's loop: set it in that resource's own config"
+                file,
+                f"daemon.{key}",
+                "belongs to each resource's loop: set it in that resource's own config "
+                "(or in its `loop` table here)",
             )
     cell = load_dataclass(CellFile, raw, file)
     here = Path(file).parent
@@ -153,6 +160,7 @@ def read_cell_config(path: str | Path) -> CellConfig:
                 file, f"{key}.config", f"(={entry.config!r}): no such file (relative to {here})"
             )
         sub = read_robot_config(sub_path)
+        loop = _loop_keys(entry.loop or {}, file, f"{key}.loop")
         settings = {**(sub.resource.settings or {}), **(entry.settings or {})}
         out.append(
             replace(
@@ -162,12 +170,25 @@ def read_cell_config(path: str | Path) -> CellConfig:
                 daemon=replace(
                     daemon,
                     hold_task=str(sub.resolve(sub.daemon.hold_task)),
-                    **{k: getattr(sub.daemon, k) for k in PER_RESOURCE if k != "hold_task"},
+                    **{k: getattr(sub.daemon, k) for k in PER_RESOURCE if k != "hold_task"} | loop,
                 ),
             )
         )
     overridden = tuple(frozenset(e.settings or {}) for e in cell.resources)
     return CellConfig(cell.name, file, daemon, tuple(out), listed=True, overridden=overridden)
+
+
+def _loop_keys(table: dict[str, Any], file: str, key: str) -> dict[str, Any]:
+    """A resource entry's `loop` table: `PER_RESOURCE` keys but its Hold task (a path of its own
+    config), typed and bounded as in a `[daemon]` table."""
+    allowed = [k for k in PER_RESOURCE if k != "hold_task"]
+    for k in table:
+        if k not in allowed:
+            raise ConfigError(
+                file, f"{key}.{k}", f"is not a key of a resource's loop (allowed: {', '.join(allowed)})"
+            )
+    checked = load_dataclass(DaemonConfig, table, file, prefix=key)
+    return {k: getattr(checked, k) for k in table}
 
 
 def _absolute(d: DaemonConfig, here: Path) -> DaemonConfig:

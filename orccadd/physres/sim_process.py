@@ -8,6 +8,7 @@ coming; the controller reports COMM_LOST (type 3) when the plant's heartbeat sto
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import pickle
 import select
@@ -32,6 +33,8 @@ from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Lifecycle, Status
 
 SELF_STOPPED = int(Status.STOPPING | Status.STOPPED)
+WATCHDOG_S = 0.04  # the watchdogs' default tolerance: 20 periods of UR's 500 Hz
+WATCHDOG_MIN_PERIODS = 20
 KEEPALIVE = 0  # a command "mode" the plant counts as fresh but does not apply
 
 
@@ -39,13 +42,21 @@ KEEPALIVE = 0  # a command "mode" the plant counts as fresh but does not apply
 class SimProcessSettings(SimSettings):
     """`sim` settings plus the process link's watchdogs."""
 
-    watchdog_periods: int = field(default=20, bounds=(2, 100000))
-    heartbeat_timeout_periods: int = field(default=20, bounds=(2, 100000))
+    # 0: as many periods as `WATCHDOG_S`, at least `WATCHDOG_MIN_PERIODS` (the same tolerance in
+    # time whatever the period: a cell may run the arm faster than its config does)
+    watchdog_periods: int = field(default=0, bounds=(0, 100000))
+    heartbeat_timeout_periods: int = field(default=0, bounds=(0, 100000))
     startup_timeout_s: float = field(default=30.0, bounds=(0.1, 600.0))
     plant_priority: int = field(default=70, bounds=(0, 99))
     plant_cpu: int = field(default=-1, bounds=(-1, 1023))  # -1: let the scheduler choose
     # the plant's own cycle paces the control loop, as a UR controller's RTDE stream does
     paced_by_plant: bool = field(default=False)
+
+    def periods(self, periods: int, period_s: float) -> int:
+        """A watchdog's count of periods: `periods`, or its default at `period_s` if 0."""
+        if periods:
+            return max(2, periods)
+        return max(WATCHDOG_MIN_PERIODS, math.ceil(WATCHDOG_S / period_s - 1e-9))
 
 
 class SimProcessArm(PhysicalResource):
@@ -72,6 +83,7 @@ class SimProcessArm(PhysicalResource):
         if s is None:
             s = SimProcessArm.load_settings({}, config, config.source)
         self.settings: SimProcessSettings = s
+        self._heartbeat_periods = s.periods(s.heartbeat_timeout_periods, config.control_period_s)
         self.channel: PlantChannel | None = None
         self.process: Any = None
         self._buf = np.zeros(1 + 3 * self.dof)
@@ -111,7 +123,7 @@ class SimProcessArm(PhysicalResource):
             "--shm",
             channel.name,
             "--watchdog-periods",
-            str(s.watchdog_periods),
+            str(s.periods(s.watchdog_periods, self.config.control_period_s)),
             "--priority",
             str(s.plant_priority),
         ]
@@ -277,7 +289,7 @@ class SimProcessArm(PhysicalResource):
         else:
             self._last_heartbeat, self._silent_reads = hb, 0
         flags = status & ~SELF_STOPPED & ~int(Status.LIMIT_VIOLATION)
-        if self._silent_reads >= self.settings.heartbeat_timeout_periods:
+        if self._silent_reads >= self._heartbeat_periods:
             flags |= Status.COMM_LOST
             if self.plant_alive():
                 self._set_fault(FaultKind.COMM_LOST, "the plant process stopped answering")

@@ -8,7 +8,7 @@ import pytest
 
 from orccadd.config.cell import pick_resource, read_cell_config
 from orccadd.errors import ConfigError
-from orccadd.robot import load_cell_config
+from orccadd.robot import load_cell_config, with_backend
 from tests.conftest import ROOT
 
 ROBOTS = ROOT / "configs" / "robots"
@@ -115,6 +115,41 @@ def test_a_resources_loop_keys_are_its_own_and_the_cell_may_not_set_them(tmp_pat
     path = write(tmp_path, 'name = "c"\n' + entry("a", "sim-ur5e.toml") + "[daemon]\noverrun_limit = 9\n")
     with pytest.raises(ConfigError, match="daemon.overrun_limit belongs to each resource's loop"):
         read_cell_config(path)
+
+
+def test_a_cell_may_set_a_resources_loop_keys_in_its_entry(tmp_path: Path) -> None:
+    """A resource run at a shorter period than its config's keeps its tolerances in time only
+    with more periods: the entry's `loop` table sets them for this cell (checked as in [daemon])."""
+    loop = "control_period_s = 0.001\nloop = { overrun_limit = 50, watchdog_stale_periods = 80 }"
+    cell = read_cell_config(
+        write(tmp_path, 'name = "c"\n' + entry("l", "sim-ur5e.toml", loop) + entry("r", "sim-ur5e.toml"))
+    )
+    left, right = cell.resource("l").daemon, cell.resource("r").daemon
+    assert (left.overrun_limit, left.watchdog_stale_periods) == (50, 80)
+    assert right.overrun_limit == 25 and left.socket == right.socket  # the other one's own; the cell's socket
+    for bad, why in (
+        (
+            "loop = { socket = 'x' }",
+            r"resources\[0\]\.loop\.socket is not a key of a resource's loop \(allowed: overrun_limit",
+        ),
+        ("loop = { hold_task = 'x.toml' }", r"resources\[0\]\.loop\.hold_task is not a key"),
+        ("loop = { overrun_limit = 0 }", r"resources\[0\]\.loop\.overrun_limit"),
+        ("loop = { overrun_limit = 'many' }", r"resources\[0\]\.loop\.overrun_limit"),
+    ):
+        with pytest.raises(ConfigError, match=why):
+            read_cell_config(write(tmp_path, 'name = "c"\n' + entry("l", "sim-ur5e.toml", bad)))
+
+
+def test_the_dual_arm_cell_keeps_its_fast_arms_tolerances_in_time() -> None:
+    """dual-arm-sim runs `left` at 1 kHz from sim-ur5e.toml's 500 Hz: the same 50 ms of late
+    ticks and 40 ms without a command (the daemon's plant process, by default) as `right`."""
+    cell = load_cell_config(ROBOTS / "dual-arm-sim.toml")
+    for name in ("left", "right"):
+        r = with_backend(cell.resource(name), "sim_process")
+        s = r.backend_settings
+        assert r.daemon.overrun_limit * r.control_period_s == pytest.approx(0.05)
+        for periods in (s.watchdog_periods, s.heartbeat_timeout_periods):
+            assert s.periods(periods, r.control_period_s) * r.control_period_s == pytest.approx(0.04)
 
 
 def test_a_simulator_serves_the_one_resource_of_its_bus_or_the_one_named() -> None:

@@ -149,3 +149,12 @@ def test_a_stalled_device_still_releases_the_loop_which_reports_comm_lost(paced:
         assert [n for n in paced.event_names() if ".T3." in n] == ["MoveJoints.T3.CommLost"]
     finally:
         os.kill(res.process.pid, signal.SIGCONT)
+
+
+def test_the_watchdogs_default_to_40_ms_at_any_period_and_keep_a_count_set() -> None:
+    """A watchdog counted in periods tolerates less at a shorter period (a cell runs an arm at
+    1 kHz from its 500 Hz config): by default both watchdogs count 40 ms, at least 20 periods."""
+    s = with_backend(load_robot_config(UR5E), "sim_process").backend_settings
+    assert (s.watchdog_periods, s.heartbeat_timeout_periods) == (0, 0)
+    assert [s.periods(0, p) for p in (0.001, 0.002, 0.008)] == [40, 20, 20]
+    assert s.periods(7, 0.001) == 7
