@@ -16,14 +16,12 @@ at the same period and priority, half of --duration-s just before our loop and h
 - the controller's timestamp steps between the packages our ticks read: a cycle we did not see
   is a packet missed (the backend's `packets_missed`), told apart into cycles the simulator
   skipped itself, packages its sender replaced unsent, and the rest (ur_rtde's thread or ours);
-- wake-up latency: our tick's release minus the package's arrival in ur_rtde. The arrival is
-  not observable (ur_rtde's C++ thread receives it); it lies after the last poll of the
-  backend's wait that still saw the old timestamp (polls every POLL_S), and after the start of
-  the cycle that made the package (the simulator's `clock_origin_s` + the package's timestamp):
-  release minus the later of the two is an upper bound, judged against cyclictest's p99. Also
-  the poll sleep's overshoot past POLL_S (a timer wake-up of our thread, as cyclictest measures
-  one) and the package's age at release (since its cycle's start: the simulator's wake-up, its
-  cycle, its sender, loopback TCP, ur_rtde's thread, our poll);
+- wake-up latency: ur_rtde runs in the link process (`drivers.ur.link_server`), whose stream
+  thread polls ur_rtde every POLL_S and sends each new package to us; the tick's release is
+  the instant that poll saw it, and the wake-up is from there to our control thread running
+  (the hop between the two processes included), judged against cyclictest's p99. Also the
+  package's age at release (since its cycle's start: the simulator's wake-up, its cycle, its
+  sender, loopback TCP, ur_rtde's thread, the link process's poll);
 - our tick's compute (release -> servoJ sent), and when the servoJ left, since the cycle of
   the package it answers: after the next cycle's start it can only reach the one after;
 - command-to-motion latency, on the controller's time (each command at its package's cycle,
@@ -85,35 +83,6 @@ MAX_LAG_S = 0.5  # command-to-motion: shifts tried
 MOVING_RAD = 0.1  # a joint is in the lag fit if it moves at least this far
 
 
-class TimedReceive:
-    """ur_rtde's RTDEReceiveInterface with `getTimestamp` timed: for the newest timestamp, when
-    it was first seen, when a poll last saw the one before (`before_ns`), and how many polls had
-    seen the old one (`vain`: the backend's read of the previous tick is one, a wait that had to
-    poll adds more)."""
-
-    def __init__(self, inner: Any) -> None:
-        self._inner = inner
-        self.value = -1.0
-        self.before_ns = 0
-        self.vain = 0
-        self._last_call_ns = 0
-        self._vain_now = 0
-
-    def getTimestamp(self) -> float:  # noqa: N802 - ur_rtde's name
-        v: float = self._inner.getTimestamp()
-        now = time.monotonic_ns()
-        if v != self.value:
-            self.value, self.before_ns, self.vain = v, self._last_call_ns, self._vain_now
-            self._vain_now = 0
-        else:
-            self._vain_now += 1
-        self._last_call_ns = now
-        return v
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._inner, name)
-
-
 @dataclass
 class Record:
     """Per tick of the measured window, preallocated (nothing allocated in a tick)."""
@@ -123,10 +92,8 @@ class Record:
     k: int = 0
     release_ns: np.ndarray = field(init=False)
     stamp_s: np.ndarray = field(init=False)  # the controller's timestamp of the package read
-    before_ns: np.ndarray = field(init=False)  # the last poll that still saw the old timestamp
-    waited: np.ndarray = field(init=False)  # the wait polled in vain at least once
+    wake_ns: np.ndarray = field(init=False)  # the package seen by the link process -> our thread runs
     sent_ns: np.ndarray = field(init=False)  # the tick's end: its servoJ sent
-    exec_ms: np.ndarray = field(init=False)  # the controller's cycle time (actual_execution_time)
     q_cmd: np.ndarray = field(init=False)
     q_act: np.ndarray = field(init=False)
     moves: list[tuple[int, int]] = field(default_factory=list)  # (first tick, pose index)
@@ -135,17 +102,15 @@ class Record:
         n, dof = self.n, self.dof
         self.release_ns = np.zeros(n, dtype=np.int64)
         self.stamp_s = np.zeros(n)
-        self.before_ns = np.zeros(n, dtype=np.int64)
-        self.waited = np.zeros(n, dtype=np.bool_)
+        self.wake_ns = np.zeros(n, dtype=np.int64)
         self.sent_ns = np.zeros(n, dtype=np.int64)
-        self.exec_ms = np.zeros(n)
         self.q_cmd = np.zeros((n, dof))
         self.q_act = np.zeros((n, dof))
 
     def trim(self) -> None:
         """Keep the ticks recorded (a run cut short)."""
         k = self.k
-        for name in ("release_ns", "stamp_s", "before_ns", "waited", "sent_ns", "exec_ms", "q_cmd", "q_act"):
+        for name in ("release_ns", "stamp_s", "wake_ns", "sent_ns", "q_cmd", "q_act"):
             setattr(self, name, getattr(self, name)[:k])
         self.n = k
 
@@ -157,7 +122,6 @@ class BackAndForth(ControlLoop):
     def __init__(self, resource: PhysicalResource, clock: Clock, task: RobotTask, rec: Record) -> None:
         super().__init__(resource, clock, overrun_limit=10**9)
         self.task, self.rec = task, rec
-        self.recv: TimedReceive | None = None  # once the resource is configured
         self.pose = 1
         self.recording = False
         self.rearm = True  # False: the last move, ending at rest
@@ -181,14 +145,14 @@ class BackAndForth(ControlLoop):
         rec = self.rec
         if not self.recording or rec.k >= rec.n:
             return
-        k, recv, res = rec.k, self.recv, self.resource
-        assert recv is not None
+        k, res = rec.k, self.resource
+        assert isinstance(res, UrRtdeArm)
+        pkg = res.link.state
+        assert pkg is not None
         rec.release_ns[k] = round(t_s * 1e9)
-        rec.stamp_s[k] = recv.value
-        rec.before_ns[k] = recv.before_ns
-        rec.waited[k] = recv.vain >= 2
+        rec.stamp_s[k] = pkg.stamp
+        rec.wake_ns[k] = self.stats.last_latency_ns  # the release is the package's arrival
         rec.sent_ns[k] = sent
-        rec.exec_ms[k] = recv.getActualExecutionTime()
         rec.q_cmd[k] = res.last_command
         rec.q_act[k] = res.state.q_rad
         rec.k = k + 1
@@ -254,7 +218,6 @@ def run_ours(sim: UrSimProcess, duration_s: float, priority: int) -> Run:
     try:  # ur_rtde's clients go (s.close) before the simulator does
         arm.configure()
         arm.activate(CommandMode.POSITION)
-        loop.recv = arm.link.receive = TimedReceive(arm.link.receive)
         loop.active = task
         task.activate()
         loop.executor.run(max_ticks=int(round(WARMUP_S / period)))
@@ -379,24 +342,19 @@ def report(run: Run, base_us: np.ndarray | None, halves: tuple[np.ndarray, np.nd
     row(f"  its jitter |period - {period_us:.0f} µs|", np.abs(d_rel_us - period_us), "µs")
     row("controller timestamp step", d_stamp_ms, "ms", 3)
     row(f"  its jitter |step - {period * 1e3:g} ms|", np.abs(d_stamp_ms - period * 1e3), "ms", 3)
-    wake_us = over_us = None
+    wake_us = None
     late = -1  # servoJ sent after the next cycle's scheduled start (-1: not known)
     origin = s1["clock_origin_s"]
     if origin is not None:
         cycle_ns = (rec.stamp_s + float(origin)) * 1e9  # each package's cycle: its scheduled start
-        wake_us = np.maximum(rel - np.maximum(rec.before_ns.astype(np.float64), cycle_ns), 0.0) * 1e-3
-        w = rec.waited
-        over_us = (rel[w] - rec.before_ns[w]) * 1e-3 - POLL_S * 1e6
-        row("wake-up, package arrival -> release (<=)", wake_us, "µs")
-        row(f"  poll sleep overshoot (past {POLL_S * 1e6:g} µs)", over_us, "µs")
+        wake_us = rec.wake_ns * 1e-3
+        row(f"wake-up, package seen (polled every {POLL_S * 1e6:g} µs) -> release", wake_us, "µs")
         row("package age at release (since its cycle)", (rel - cycle_ns) * 1e-3, "µs")
-        row("  the simulator's cycle compute", rec.exec_ms * 1e3, "µs")
         row("tick compute (release -> servoJ sent)", (rec.sent_ns - rel) * 1e-3, "µs")
         row("servoJ sent, since the package's cycle", (rec.sent_ns - cycle_ns) * 1e-3, "µs")
         late = int((rec.sent_ns - cycle_ns > period * 1e9).sum())
     else:
         print("    (the simulator gave no clock origin: wake-up latency and package age not measured)")
-        row("  the simulator's cycle compute", rec.exec_ms * 1e3, "µs")
         row("tick compute (release -> servoJ sent)", (rec.sent_ns - rel) * 1e-3, "µs")
     sim_missed, skipped = delta("missed_periods"), delta("rtde_packages_skipped")
     rest = max(0, run.packets_missed - sim_missed - skipped)
@@ -437,14 +395,13 @@ def report(run: Run, base_us: np.ndarray | None, halves: tuple[np.ndarray, np.nd
         f"  {verdict(run.packets_missed == 0 and stale == 0)}: no missed controller cycles "
         f"({run.packets_missed} unseen, {stale} without a new servoJ command)"
     )
-    if wake_us is None or over_us is None or base is None:
+    if wake_us is None or base is None:
         print("  (no wake-up figure or no cyclictest: the wake-up target is not judged)")
         return 0
     ours = float(np.percentile(wake_us, 99))
-    over = float(np.percentile(over_us, 99)) if over_us.size else 0.0
     print(
         f"  {verdict(ours <= base)}: wake-up p99 {ours:.0f} µs <= cyclictest p99 {base:.0f} µs: "
-        f"ratio {ours / base:.2f} (poll overshoot alone: p99 {over:.0f} µs, ratio {over / base:.2f})"
+        f"ratio {ours / base:.2f}"
     )
     return 0
 

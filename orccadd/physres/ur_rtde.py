@@ -1,13 +1,17 @@
 """`ur_rtde` backend: a Universal Robots arm (e-Series at 500 Hz, CB3 at 125 Hz) over RTDE, through
 the `ur-rtde` package, whose three clients (the RTDE stream, the control script, the dashboard)
-the driver object `drivers.ur.link.UrLink` owns with their threads and lock; this resource is the
-tick over it: state, faults, commands and the stop.
+the driver object `drivers.ur.link.UrLink` owns with their threads, in a process of its own
+(`drivers.ur.link_server`: ur_rtde has crashed the process it runs in after a dropped
+connection); this resource is the tick over it (`drivers.ur.remote_link.RemoteLink`): state,
+faults, commands and the stop.
 
 - configure: the dashboard first: controller version and robot model checked against the config,
   the controller's period against the control period; power on and brake release only if the
   config says so (`power_on`); then the RTDE stream and the control script;
 - the loop is **device-paced**: `wait_for_cycle` returns when a new RTDE package (a new controller
-  timestamp) has arrived; no package for `stall_periods` periods is CommLost;
+  timestamp) has arrived from the link process; no package for `stall_periods` periods, the links
+  down, or the link process ended, is CommLost: the process is ended at once (the controller's
+  watchdog then stops its script), and `reset` starts a new one;
 - read: actual q and dq (measured), torque = the controller's target moments (estimated from its
   model), and every tick robot mode, safety mode, runtime state and status bits: a protective or
   safeguard stop, an emergency stop, a violation or fault, power off or the control script not
@@ -21,12 +25,14 @@ tick over it: state, faults, commands and the stop.
 - reset: a protective stop is unlocked once the controller allows it (5 s after it began), the
   safety popup closed and the control script restarted; a lost connection is re-opened (only here,
   when idle); an emergency stop or a violation is refused with what must be done at the pendant.
+
+Stream commands go one way to the link process in the tick; a refusal (the script not running,
+ur_rtde raising) comes back and is taken by the next tick.
 """
 
 from __future__ import annotations
 
 import contextlib
-import threading
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -35,8 +41,8 @@ import numpy as np
 import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
-from orccadd.drivers.ur.controller import RobotMode, SafetyMode, condition, parse_polyscope_version
-from orccadd.drivers.ur.link import UrLink
+from orccadd.drivers.ur.controller import RobotMode, SafetyMode, parse_polyscope_version
+from orccadd.drivers.ur.remote_link import RemoteLink
 from orccadd.drivers.ur.settings import UrRtdeSettings
 from orccadd.errors import ConfigError, ResourceError
 from orccadd.fault import FaultKind
@@ -116,11 +122,10 @@ class UrRtdeArm(PhysicalResource):
         super().__init__(config, model)
         self.settings: UrRtdeSettings = config.backend_settings
         self.period_s = config.control_period_s
-        self.link = UrLink(self.settings, self.period_s, self.name)
+        self.link = RemoteLink(self.settings, self.period_s, self.name)
         self._last_stamp = -1.0
         self._last_new_s = 0.0  # tick time at which the last new package was seen
         self._comm_lost = ""
-        self._parked: list[Any] = []  # ur_rtde clients disconnected at a loss (`_drop_links`)
         self._controller_stopped = False  # the controller stopped the arm itself (its script too)
         self._off_by_us = False  # our category 1 stop powered the arm off: not a fault
         self._hold = np.zeros(self.dof)  # the command kept while waiting (position mode)
@@ -157,12 +162,12 @@ class UrRtdeArm(PhysicalResource):
         self._hold_here()
 
     def _on_deactivate(self) -> None:
-        if self.link.control is not None and not self._comm_lost:
-            self.link.control.servoStop(self.config.safe_stop.deceleration_rad_s2)
+        if not self._comm_lost and not self.link.dead:
+            with contextlib.suppress(ResourceError):  # the link gone: the controller's watchdog stops it
+                self.link.call("control", "servoStop", self.config.safe_stop.deceleration_rad_s2)
 
     def _on_shutdown(self) -> None:
-        self.link.close()
-        self._parked.clear()
+        self.link.shutdown()
 
     def _on_clear_stop(self) -> None:
         with self.link.lock:
@@ -187,7 +192,8 @@ class UrRtdeArm(PhysicalResource):
             self._reconnect()
             return
         st = self.state
-        if self._off_by_us and int(self.link.receive.getSafetyMode()) == SafetyMode.NORMAL:
+        latest = self.link.read()
+        if self._off_by_us and latest is not None and latest.safety_mode == SafetyMode.NORMAL:
             return  # nothing but our own power-off: `clear_stop` powers it on
         cond = self.link.condition()
         if cond is None:
@@ -204,9 +210,7 @@ class UrRtdeArm(PhysicalResource):
         """After CommLost, with the arm safe-stopped: every link closed and opened again as at
         startup (the controller may have been restarted: model, version and period checked
         again), the state read afresh, and the stop's hold taken from where the arm now is."""
-        self.link.close()
-        self._parked.clear()  # the clients dropped at the loss: their destructors run here
-        self._connect()
+        self._connect()  # a new link process (the old one ended at the loss)
         self._flags = self._read_locked(time.monotonic(), self.state)
         if self._comm_lost:
             raise ResourceError(f"{self.fault_message}: reconnected, but no package has come")
@@ -217,7 +221,10 @@ class UrRtdeArm(PhysicalResource):
 
     # ---- the device's clock ---------------------------------------------------------------
     def wait_for_cycle(self, timeout_s: float) -> int:
-        """Until ur_rtde's receive thread has a package with a new controller timestamp."""
+        """Until the link process has sent a package with a new controller timestamp."""
+        if self.link.lock.locked() or self._comm_lost:  # a reset replaces the link; or none
+            time.sleep(timeout_s)
+            return -1
         return self.link.wait_for_package(self._last_stamp, timeout_s)
 
     # ---- tick -----------------------------------------------------------------------------
@@ -232,14 +239,13 @@ class UrRtdeArm(PhysicalResource):
 
     def _read_locked(self, t_s: float, state: JointState) -> int:
         link = self.link
-        r = link.receive
-        if r is None:  # a reconnection failed: nothing to read until the next `reset`
+        if self._comm_lost:  # latched until `reset` starts a new link process
             return int(Status.COMM_LOST)
-        try:  # ur_rtde's control link first: a command sent on a dead link blocks while it reconnects
-            connected = link.control.isConnected() and r.isConnected()
-            stamp = r.getTimestamp()
-        except RuntimeError:
-            connected, stamp = False, self._last_stamp
+        pkg = link.read()
+        if pkg is None or link.dead:
+            self._lose(link.dead or "no RTDE package yet")
+            return int(Status.COMM_LOST)
+        connected, stamp = pkg.connected, pkg.stamp
         if stamp != self._last_stamp or not self._last_new_s:
             if self._last_stamp >= 0:
                 self.packets_missed += max(0, round((stamp - self._last_stamp) / self.period_s) - 1)
@@ -251,14 +257,21 @@ class UrRtdeArm(PhysicalResource):
             self._lose(f"no RTDE package for {silent} periods (the stream stalled)")
         if self._comm_lost:  # latched until `reset` reconnects
             return int(Status.COMM_LOST)
-        state.q_rad[:] = r.getActualQ()
-        state.dq_rad_s[:] = r.getActualQd()
-        state.tau_nm[:] = r.getTargetMoment()
-        robot_mode, safety_mode = int(r.getRobotMode()), int(r.getSafetyMode())
-        cond = condition(robot_mode, safety_mode, int(r.getRuntimeState()), link.script_running())
+        refused = link.take_refusal()
+        if refused is not None and refused[1]:  # ur_rtde raised: its link is down
+            self._lose(f"the RTDE connection is closed ({refused[1]})")
+            return int(Status.COMM_LOST)
+        state.q_rad[:] = pkg.q_rad
+        state.dq_rad_s[:] = pkg.dq_rad_s
+        state.tau_nm[:] = pkg.target_moment_nm
+        robot_mode, safety_mode = pkg.robot_mode, pkg.safety_mode
+        cond = pkg.condition()
         self._controller_stopped = cond is not None
+        if refused is not None and self.fault is None:  # the type 3 says why
+            why = cond.what if cond else "no stop reported yet"
+            self._set_fault(FaultKind.DEVICE, f"the controller refused the command ({why})")
         if cond is None:
-            return 0
+            return int(Status.FAULT) if refused is not None else 0
         if self._off_by_us and safety_mode == SafetyMode.NORMAL:
             return int(Status.TORQUE_OFF)  # as the stop left it, until `clear_stop` powers it on
         state.fault_code = safety_mode if safety_mode != SafetyMode.NORMAL else 100 + robot_mode
@@ -280,70 +293,49 @@ class UrRtdeArm(PhysicalResource):
             self.link.lock.release()
 
     def _lose(self, why: str) -> None:
-        """CommLost, said as first seen (the type 3 reports the message of its tick). The links
-        are dropped at once, outside the tick: left to a dead or vanished controller, ur_rtde's
-        control interface reconnects from its own thread again and again, and it crashed the
-        process (a segmentation fault in rtde_control, seconds after a dropped connection while
-        the daemon went on running its safe procedure); `reset` opens them again."""
+        """CommLost, said as first seen (the type 3 reports the message of its tick). The link
+        process is ended at once (a signal: tick-safe): left to a dead or vanished controller,
+        ur_rtde's control interface reconnects from its own thread and then runs two receive
+        threads on one connection, which has crashed the process it runs in; the controller's
+        watchdog stops the script when our link closes. `reset` starts a new one."""
         if not self._comm_lost:
             self._comm_lost = why
             self._set_fault(FaultKind.COMM_LOST, why)
-            threading.Thread(target=self._drop_links, name=f"{self.name}-drop", daemon=True).start()
-
-    def _drop_links(self) -> None:
-        """Off the tick: the clients taken out of the link under its lock (the ticks then see no
-        link), then disconnected outside it (ur_rtde's `disconnect` lets the interpreter run
-        while it joins its threads, ~0.5 s each) and kept: their destructors hold the interpreter
-        for as long again, so they run at the next `reset` or shutdown, when the links are
-        replaced anyway, not while every control thread of the cell runs."""
-        link = self.link
-        with link.lock:  # after the tick that saw it
-            if not self._comm_lost:
-                return
-            clients = [c for c in (link.control, link.receive, link.dashboard) if c is not None]
-            link.close()
-        for c in clients:
-            with contextlib.suppress(RuntimeError):
-                c.disconnect()
-        self._parked.extend(clients)
+            self.link.close()
 
     def _control_ready(self) -> bool:
-        """The control link is up (a command sent on a dead one blocks while ur_rtde reconnects)
-        and the controller's watchdog armed (`UrLink.arm_watchdog`)."""
-        c = self.link.control
-        if c is None or self._comm_lost:
+        """The link up and the controller's watchdog armed (`UrLink.arm_watchdog`)."""
+        if self._comm_lost:
             return False
-        if not c.isConnected():
-            self._lose("the RTDE connection is closed")
+        pkg = self.link.state
+        if self.link.dead or pkg is None or not pkg.connected:
+            self._lose(self.link.dead or "the RTDE connection is closed")
             return False
-        self.link.arm_watchdog(self.settings.watchdog_s)
+        try:
+            self.link.arm_watchdog(self.settings.watchdog_s)
+        except ResourceError as e:
+            self._lose(str(e))
+            return False
         return True
 
     def _send(self, mode: CommandMode, command: FloatArray) -> int:
         if not self._control_ready():
             return int(Status.COMM_LOST)
         s = self.settings
-        try:  # the link may die between the check above and the send: ur_rtde then raises
-            if mode is CommandMode.POSITION:
-                np.subtract(command, self._hold, out=self._cmd_v)
-                self._cmd_v /= self.period_s
-                self._hold[:] = command
-                q = command.tolist()
-                ok = self.link.control.servoJ(q, 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
-            elif mode is CommandMode.TORQUE:
-                ok = self._direct_torque(command)
-            else:
-                ok = self.link.control.speedJ(command.tolist(), s.speedj_acceleration_rad_s2, self.period_s)
-        except RuntimeError as e:  # after its own reconnection attempt failed (ur_rtde's)
-            self._lose(f"the RTDE connection is closed ({e})")
-            return int(Status.COMM_LOST)
-        if ok:
-            return 0
-        if self.fault is None:  # the type 3 says why, even when this comes before the read
-            cond = self.link.condition()
-            why = cond.what if cond else "no stop reported yet"
-            self._set_fault(FaultKind.DEVICE, f"the controller refused the command ({why})")
-        return int(Status.FAULT)
+        if mode is CommandMode.POSITION:
+            np.subtract(command, self._hold, out=self._cmd_v)
+            self._cmd_v /= self.period_s
+            self._hold[:] = command
+            q = command.tolist()
+            sent = self.link.send("servoJ", q, 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
+        elif mode is CommandMode.TORQUE:
+            sent = self._direct_torque(command)
+        else:
+            sent = self.link.send("speedJ", command.tolist(), s.speedj_acceleration_rad_s2, self.period_s)
+        if sent:
+            return 0  # a refusal comes back and is taken by the next read
+        self._lose(self.link.dead or "the UR link process is gone")
+        return int(Status.COMM_LOST)
 
     def _direct_torque(self, tau_nm: FloatArray) -> bool:
         """Our torque command is the whole joint torque (a computed-torque law includes gravity);
@@ -352,7 +344,7 @@ class UrRtdeArm(PhysicalResource):
         self._keep.release()
         gravity = pin.computeGeneralizedGravity(self._pin, self._data, self.state.q_rad)
         np.subtract(tau_nm, gravity, out=self._tau)
-        return bool(self.link.control.directTorque(self._tau.tolist(), NO_FRICTION_SCALE, NO_FRICTION_SCALE))
+        return self.link.send("directTorque", self._tau.tolist(), NO_FRICTION_SCALE, NO_FRICTION_SCALE)
 
     def _keep_torque(self) -> None:
         """A torque tick without a command: the controller returns to position control unless
@@ -362,7 +354,7 @@ class UrRtdeArm(PhysicalResource):
         self._keep.update(self.state, self._tau)
         tau_max = self.model.tau_max_nm
         np.clip(self._tau, -tau_max, tau_max, out=self._tau)
-        self.link.control.directTorque(self._tau.tolist(), NO_FRICTION_SCALE, NO_FRICTION_SCALE)
+        self.link.send("directTorque", self._tau.tolist(), NO_FRICTION_SCALE, NO_FRICTION_SCALE)
 
     def _on_keep_alive(self, t_s: float) -> None:
         if self._comm_lost:  # nothing reaches the controller: its watchdog stops the script
@@ -373,8 +365,8 @@ class UrRtdeArm(PhysicalResource):
             return
         try:
             self._keep_alive_locked(t_s)
-        except RuntimeError as e:  # the link died under the stop's ramp (ur_rtde raises)
-            self._lose(f"the RTDE connection is closed ({e})")
+        except ResourceError as e:  # the link process gone under the stop's servoStop
+            self._lose(str(e))
         finally:
             self.link.lock.release()
 
@@ -384,7 +376,7 @@ class UrRtdeArm(PhysicalResource):
         if self._stop_flags & Status.STOPPING:
             self._ramp_step(t_s)
         elif self._stop_flags:  # at rest after the stop: no command, the watchdog still fed
-            self.link.control.kickWatchdog()
+            self.link.send("kickWatchdog")
         elif self.mode is CommandMode.TORQUE:
             self._keep_torque()
         else:
@@ -408,23 +400,20 @@ class UrRtdeArm(PhysicalResource):
             if at_rest:
                 self._mark_stopped(self.config.safe_stop.category == 1)
             return
-        ramp, s, control = self._ramp, self.settings, self.link.control
+        ramp, s, link = self._ramp, self.settings, self.link
         decel = self.config.safe_stop.deceleration_rad_s2
         ramp.step(t_s, decel)
         if self.mode is CommandMode.POSITION:
-            control.servoJ(ramp.q_rad, 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
+            link.send("servoJ", ramp.q_rad, 0.0, 0.0, self.period_s, s.lookahead_time_s, s.gain)
         else:  # velocity, and torque: the ramp's speeds from the measured state (a servoJ
             # started at speed would brake the arm at once: its target is not ahead of the arm)
-            control.speedJ(ramp.dq_rad_s, decel, self.period_s)
+            link.send("speedJ", ramp.dq_rad_s, decel, self.period_s)
         if ramp.done and at_rest:
             self._at_rest()
 
     def _at_rest(self) -> None:
-        control, decel = self.link.control, self.config.safe_stop.deceleration_rad_s2
-        if self.mode is CommandMode.POSITION:
-            control.servoStop(decel)
-        else:
-            control.speedStop(decel)
+        decel = self.config.safe_stop.deceleration_rad_s2
+        self.link.call("control", "servoStop" if self.mode is CommandMode.POSITION else "speedStop", decel)
         torque_off = self.config.safe_stop.category == 1
         if torque_off:
             self.link.power_off()

@@ -124,6 +124,27 @@ def test_an_emergency_stop_is_a_type_3_and_reset_says_what_the_pendant_needs(
     sim.inject("emergency_stop_release")
 
 
+def test_a_dropped_connection_is_comm_lost_and_the_daemon_runs_on_to_a_new_run(
+    sim: UrSimProcess, daemon: Daemon
+) -> None:
+    """The controller drops every connection and takes new ones: ur_rtde, reconnecting from its
+    own threads, crashed the daemon within a second (issue 31); in its link process it takes
+    only that process down. CommLost, the safe procedure, `reset` starts a new link process."""
+    start_mission_until_reach(daemon)
+    sim.inject("drop_connection", ports="all")
+    s = daemon.wait(lambda s: s["faulted"] and "comm_lost" in s.get("resource_status", []), timeout_s=10)
+    assert s["fault"]["kind"] == "comm_lost", s["fault"]
+    assert t3_inputs(daemon) == ["T3.CommLost"], daemon.log.read_text()[-3000:]
+    daemon.wait(lambda s: "stopped" in s.get("resource_status", []), timeout_s=10)
+    time.sleep(1.0)  # where ur_rtde's threads crashed the daemon
+    assert daemon.proc.poll() is None, daemon.log.read_text()[-3000:]
+    acknowledge(daemon)
+    r = daemon.ctl("reset")
+    assert r.returncode == 0, (r.stderr, daemon.log.read_text()[-3000:])
+    daemon.wait(lambda s: not s["faulted"] and not s.get("resource_status"))
+    run_to_success(daemon)
+
+
 def test_a_killed_controller_is_comm_lost_at_once_and_reset_reconnects_to_the_restarted_one(
     sim: UrSimProcess, daemon: Daemon
 ) -> None:

@@ -132,6 +132,42 @@ def test_a_stalled_stream_is_comm_lost_after_stall_periods(sim: UrSimProcess, ar
     assert_safe_stop_in_time(ticks, status_shows(ticks, Status.COMM_LOST))
 
 
+def test_a_dropped_connection_is_comm_lost_this_process_lives_on_and_reset_reconnects(
+    sim: UrSimProcess, arm: Session
+) -> None:
+    """The controller closes every connection and takes new ones (a network glitch, a restarted
+    PolyScope): ur_rtde reconnects from its own threads and then runs two receive threads on one
+    connection, which crashed the process it ran in (issue 31). It runs in the link process now:
+    here, CommLost within a few periods, that process ended, ours running on; `reset` starts a
+    new link process and the arm moves again."""
+    task, loop = move(arm, REACH)
+    task.activate()
+    loop.active = task
+    loop.run_for(0.3)
+    res = arm.resource
+    first = res.link.process  # type: ignore[attr-defined]
+    sim.inject("drop_connection", ports="all")
+    loop.executor.run(max_ticks=40)  # each released by the stream or the clock's stall timeout
+    assert task.phase is Phase.FAULT
+    assert [n for n in arm.event_names() if ".T3." in n] == ["MoveJointsCSP.T3.CommLost"]
+    assert first.wait(timeout=5.0) != 0  # ended (by us, or by ur_rtde's crash), not by itself
+    loop.executor.run(max_ticks=100)  # ur_rtde would have crashed us by now
+    ticks = loop.ticks()
+    assert_safe_stop_in_time(ticks, status_shows(ticks, Status.COMM_LOST))
+    deadline = time.monotonic() + 20
+    while not res.state.status & Status.STOPPED:  # no controller confirms: the stop's timeout
+        assert time.monotonic() < deadline
+        loop.run_for(0.2)
+    res.reset_fault()
+    assert res.link.process is not first and res.link.process.poll() is None  # type: ignore[attr-defined]
+    loop.run_for(1.0)
+    assert not res.state.status & (Status.FAULT | Status.COMM_LOST), res.fault_message
+    res.clear_stop()
+    task2, loop2 = move(arm, HOME)
+    phase = loop2.run_task(task2, timeout_s=20.0)
+    assert phase is Phase.DONE, (task2.fault_reason, arm.resource.fault_message)
+
+
 @pytest.mark.parametrize(
     ("change", "message"),
     [
