@@ -106,7 +106,7 @@ def _modules(params: dict[str, list[dict[str, Any]]]) -> list[tuple[str, ...]]:
 RESOURCE_SHOWN = {
     "backend", "modes", "mode_switch_needs_disable", "position", "velocity", "torque", "brakes",
     "stop_categories", "read_time_s", "write_time_s", "clock", "device_period_s", "fault_reset",
-    "fault_injection", "diagnostics", "protocol_version",
+    "fault_injection", "diagnostics", "protocol_version", "signals",
 }  # fmt: skip
 
 
@@ -128,6 +128,7 @@ def _resource(res: dict[str, Any]) -> list[str]:
         ("fault reset", "yes" if res["fault_reset"] else "no"),
         ("fault injection", ", ".join(res["fault_injection"]) or "none"),
     ]
+    rows += [("signal", str(g)) for g in res.get("signals") or []]
     rows += [(k, str(v)) for k, v in res.items() if k not in RESOURCE_SHOWN]
     if d.get("fault_message") or d.get("fault_code"):
         rows.append(("device fault", f"{d.get('fault_message')} (code {d.get('fault_code')})"))

@@ -199,3 +199,27 @@ class GraspMissedWatch(_GraspWatch):
             return debounce(closed and max_abs(dq) < float(vtol))
 
         return missed
+
+
+@register("force_watch")
+class ForceWatch(Watcher):
+    """Fires when the force at the tool exceeds `force_n` (its magnitude) or, if `torque_nm` > 0,
+    its torque exceeds `torque_nm`: a contact, or a push harder than the task allows. Wired to a
+    resource that measures the wrench (`arm.wrench` on a UR: actual_TCP_force, N and N·m)."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        self.wrench = self.add_input("wrench", (6,), "N|N.m")
+        self.force = self.add_parameter("force_n", 20.0, bounds=(0.01, 1e5), unit="N", tunable=True)
+        self.torque = self.add_parameter("torque_nm", 0.0, bounds=(0.0, 1e4), unit="N.m", tunable=True)
+
+    def kernel(self) -> Kernel:
+        force, torque, debounce = self.force.value, self.torque.value, self._debounce
+
+        def over_force(t_s: float, wrench: list[float]) -> tuple[bool]:
+            fx, fy, fz, tx, ty, tz = wrench
+            pushed = fx * fx + fy * fy + fz * fz > float(force) ** 2
+            twisted = float(torque) > 0.0 and tx * tx + ty * ty + tz * tz > float(torque) ** 2
+            return debounce(pushed or twisted)
+
+        return over_force

@@ -72,6 +72,8 @@ class PhysicalResource(ABC):
         self.lifecycle = Lifecycle.UNCONFIGURED
         self.mode = CommandMode.TORQUE
         self.state = JointState(self.dof)
+        # the description's other signals, preallocated: `read` fills them in place
+        self.signals: dict[str, FloatArray] = {g.name: np.zeros(g.size) for g in self.description.signals}
         self.fault: Fault | None = None  # what the device or the limits reported last (None: nothing)
         self._cmd: FloatArray = np.zeros(self.dof)
         self._last_pos_cmd: FloatArray = np.zeros(self.dof)

@@ -39,6 +39,20 @@ MEASURED = Quantity(Source.MEASURED)
 ABSENT = Quantity(Source.ABSENT)
 
 
+@dataclass(frozen=True)
+class Signal:
+    """A measured signal beyond the joint state (the flange's wrench, the speed slider): an
+    output of the resource's node in every task's wiring (`arm.wrench`), filled by `read`."""
+
+    name: str
+    size: int
+    unit: str
+    what: str
+
+    def describe(self) -> str:
+        return f"{self.name} [{self.size}, {self.unit}]: {self.what}"
+
+
 class ClockSource(Enum):
     LOOP = "loop"  # our executor's absolute deadlines release each tick
     DEVICE = "device"  # the device's own cycle (a packet stream) releases each tick
@@ -64,6 +78,7 @@ class ResourceDescription:
     fault_reset: bool = False  # `reset_fault()` asks the device to leave a fault
     fault_injection: tuple[str, ...] = ()  # kinds `inject_fault()` accepts
     extra: dict[str, str] = field(default_factory=dict)  # backend facts shown by `describe`
+    signals: tuple[Signal, ...] = ()  # measured beyond q, dq, tau (task wiring outputs)
 
     def as_dict(self) -> dict[str, object]:
         """Plain data for `describe` and `status`."""
@@ -82,6 +97,7 @@ class ResourceDescription:
             "device_period_s": self.device_period_s,
             "fault_reset": self.fault_reset,
             "fault_injection": list(self.fault_injection),
+            "signals": [s.describe() for s in self.signals],
             **self.extra,
         }
 

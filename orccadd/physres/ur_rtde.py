@@ -48,7 +48,7 @@ from orccadd.errors import ConfigError, ResourceError
 from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
-from orccadd.physres.description import MEASURED, ClockSource, Quantity, ResourceDescription, Source
+from orccadd.physres.description import MEASURED, ClockSource, Quantity, ResourceDescription, Signal, Source
 from orccadd.physres.stop_ramp import StopRamp
 from orccadd.physres.torque_hold import TorqueHold
 from orccadd.state import FloatArray, JointState
@@ -57,6 +57,10 @@ from orccadd.types import CommandMode, Status
 E_SERIES = ("UR3e", "UR5e", "UR10e", "UR16e", "UR20", "UR30")
 AT_REST_RAD_S = 0.01
 DIRECT_TORQUE_SINCE = (5, 26)  # ur_rtde 1.6's script calls `direct_torque` on 5.26 and later only
+SIGNALS = (
+    Signal("wrench", 6, "N|N.m", "the TCP's force and torque, base frame (RTDE actual_TCP_force)"),
+    Signal("speed_scaling", 1, "1", "the controller's speed scaling: its speed slider times its own"),
+)
 NO_FRICTION_SCALE = [0.0] * 6  # what that script passes to `direct_torque`, whatever it is sent
 
 
@@ -101,6 +105,7 @@ class UrRtdeArm(PhysicalResource):
             clock=ClockSource.DEVICE,
             device_period_s=_period_of(s.model),
             fault_reset=True,
+            signals=SIGNALS,
         )
 
     @classmethod
@@ -137,6 +142,7 @@ class UrRtdeArm(PhysicalResource):
         self._keep = TorqueHold(model, gravity=False)  # ticks without a torque command
         self._stop_t0 = 0.0  # tick time the safe stop began
         self.packets_missed = 0
+        self._wrench, self._speed_scaling = self.signals["wrench"], self.signals["speed_scaling"]
         self._flags = 0  # the last read's status flags, repeated while a reset holds the links
 
     # ---- lifecycle ------------------------------------------------------------------------
@@ -264,6 +270,9 @@ class UrRtdeArm(PhysicalResource):
         state.q_rad[:] = pkg.q_rad
         state.dq_rad_s[:] = pkg.dq_rad_s
         state.tau_nm[:] = pkg.target_moment_nm
+        if pkg.tcp_force:
+            self._wrench[:] = pkg.tcp_force
+        self._speed_scaling[0] = pkg.speed_scaling
         robot_mode, safety_mode = pkg.robot_mode, pkg.safety_mode
         cond = pkg.condition()
         self._controller_stopped = cond is not None
@@ -427,7 +436,8 @@ class UrRtdeArm(PhysicalResource):
             "controller": f"{self.link.robot_model} {self.link.version}" if self.link.version else "",
             "packets_missed": self.packets_missed,
             "comm": self._comm_lost or "ok",
-            **self._measured(),
+            "speed_scaling": round(float(self._speed_scaling[0]), 3),
+            "tcp_wrench_n_nm": " ".join(f"{x:.2f}" for x in self._wrench),
             **self._measured(),
         }
 

@@ -57,6 +57,10 @@ def _resource_node(resource: PhysicalResource, mode: CommandMode, name: str) -> 
         p = Port(name, port, (n,), unit, np.float64, is_input=False)
         p.value = arr  # the measured state itself: no copy in a tick
         outs[port] = p
+    for sig in resource.description.signals:  # the backend's own (e.g. the flange's wrench)
+        p = Port(name, sig.name, (sig.size,), sig.unit, np.float64, is_input=False)
+        p.value = resource.signals[sig.name]
+        outs[sig.name] = p
     cmd_name, cmd_unit = COMMAND_PORTS[mode]
     ins = {cmd_name: Port(name, cmd_name, (n,), cmd_unit, np.float64, is_input=True)}
     return _Node(name, ins, outs, None)

@@ -7,6 +7,7 @@ import numpy as np
 from orccadd.model import RobotModel
 from orccadd.modules import ModuleContext
 from orccadd.modules.watchers import (
+    ForceWatch,
     GraspMissedWatch,
     GraspWatch,
     JointLimitWatch,
@@ -118,3 +119,17 @@ def test_grasp_missed_watch_fires_closed_on_nothing() -> None:
     w = GraspMissedWatch("m", CTX)
     w.configure({"grip_torque_nm": 0.25, "ticks": 3})
     assert first_fired(w, _closing(w, object_at=0.3)) is None  # holding something
+
+
+def test_force_watch_fires_on_the_force_magnitude_and_optionally_the_torque() -> None:
+    """A tool pressing into a surface: the force grows 1 N a tick along a slanted direction."""
+    w = ForceWatch("f", CTX)
+    w.configure({"force_n": 20.0, "ticks": 2})
+
+    def feed(k: int) -> None:
+        w.wrench.value[:] = [0.6 * k, 0.0, -0.8 * k, 3.0, 0.0, 0.0]  # |F| = k N; 3 N.m ignored
+
+    assert first_fired(w, feed) == 22  # |F| > 20 from k = 21, two ticks in a row
+    w = ForceWatch("f", CTX)
+    w.configure({"force_n": 100.0, "torque_nm": 2.5})
+    assert first_fired(w, feed) == 0  # the torque alone

@@ -213,3 +213,20 @@ def test_misplaced_wires_key_gets_a_hint(session, tmp_path) -> None:  # type: ig
     )
     with pytest.raises(ConfigError, match="modules.h.wires belongs at the top level"):
         build(session, p)
+
+
+def test_a_resources_own_signals_are_outputs_of_its_node_and_others_refuse_them(session: Session) -> None:
+    """A UR measures the tool's wrench (`arm.wrench`, shared with the resource: no copy); a task
+    that wires it is refused on a resource without it, naming the outputs it has."""
+    from orccadd.robot import create_resource, load_robot_config
+    from tests.conftest import ROOT
+
+    guarded = ROOT / "configs/tasks/approach_until_contact.toml"
+    ur = create_resource(load_robot_config(ROOT / "configs/robots/ur5e-rtde-sim.toml"))  # not connected
+    task = build_task(load_task_file(guarded), ur)
+    contact = next(m for m in task.modules if m.name == "contact")
+    assert contact.inputs["wrench"].value is ur.signals["wrench"]
+    signals = ur.description.as_dict()["signals"]
+    assert isinstance(signals, list) and [s.split(" ")[0] for s in signals] == ["wrench", "speed_scaling"]
+    with pytest.raises(WiringError, match=r"arm has no output 'wrench' \(outputs: q, dq, tau\)"):
+        build(session, guarded)

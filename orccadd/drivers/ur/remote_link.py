@@ -61,6 +61,8 @@ class StreamState:
     safety_mode: int
     runtime_state: int
     script_running: bool
+    tcp_force: tuple[float, ...] = ()  # actual_TCP_force: N and N·m, base frame
+    speed_scaling: float = 1.0  # the speed slider's fraction times the controller's own scaling
 
     def condition(self) -> Condition | None:
         """What stops the arm in this package (None: it may move)."""
@@ -83,6 +85,8 @@ def snapshot(link: Any, arrival_ns: int) -> StreamState:
             int(r.getSafetyMode()),
             int(r.getRuntimeState()),
             bool(int(r.getRobotStatus()) & ROBOT_PROGRAM_RUNNING),
+            tuple(r.getActualTCPForce()),
+            float(r.getSpeedScaling()),
         )
     except (RuntimeError, AttributeError):
         return StreamState(-1.0, arrival_ns, False, (), (), (), 0, 0, 0, False)
