@@ -43,7 +43,7 @@ import pinocchio as pin
 from orccadd.config.robot import RobotConfig
 from orccadd.drivers.ur.controller import RobotMode, SafetyMode, parse_polyscope_version
 from orccadd.drivers.ur.remote_link import RemoteLink
-from orccadd.drivers.ur.settings import UrRtdeSettings
+from orccadd.drivers.ur.settings import RATED_PAYLOAD_KG, UrRtdeSettings
 from orccadd.errors import ConfigError, ResourceError
 from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
@@ -70,6 +70,21 @@ def direct_torque(config: RobotConfig) -> bool:
     s: UrRtdeSettings = config.backend_settings
     least = parse_polyscope_version(s.min_version)
     return (least.major, least.minor) >= DIRECT_TORQUE_SINCE
+
+
+def _check_tool(s: UrRtdeSettings, file: str) -> None:
+    """The tool's settings: sizes, and a payload within the model's rating."""
+    key = "resource.settings"
+    if s.payload_kg is not None and s.payload_kg > RATED_PAYLOAD_KG[s.model]:
+        raise ConfigError(
+            file, f"{key}.payload_kg",
+            f"(={s.payload_kg:g}) exceeds the {s.model}'s rated payload ({RATED_PAYLOAD_KG[s.model]:g} kg)",
+        )  # fmt: skip
+    if s.payload_cog_m is not None and s.payload_kg is None:
+        raise ConfigError(file, f"{key}.payload_cog_m", "needs payload_kg (the mass it belongs to)")
+    for name, value, n in (("payload_cog_m", s.payload_cog_m, 3), ("tcp_m_rad", s.tcp_m_rad, 6)):
+        if value is not None and len(value) != n:
+            raise ConfigError(file, f"{key}.{name}", f"(={value!r}) must have {n} numbers")
 
 
 def _period_of(model: str) -> float:
@@ -115,6 +130,7 @@ class UrRtdeArm(PhysicalResource):
         s = load_dataclass(UrRtdeSettings, raw, file, "resource.settings")
         if len(cfg.joints) != 6:
             raise ConfigError(file, "joints", f"a UR arm has 6 joints, the config lists {len(cfg.joints)}")
+        _check_tool(s, file)
         try:
             parse_polyscope_version(s.min_version)
         except ValueError:

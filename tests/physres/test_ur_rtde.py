@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orccadd.errors import ResourceError
+from orccadd.errors import ConfigError, ResourceError
 from orccadd.model import RobotModel
 from orccadd.physres.ur_rtde import UrRtdeArm
 from orccadd.robot import load_robot_config
@@ -279,3 +279,29 @@ def test_torque_needs_a_controller_with_direct_torque(tmp_path: Path) -> None:
         assert old.status()["robot_mode"] == "RUNNING" and old.status()["q_rad"] == pytest.approx(
             [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0], abs=1e-3
         )
+
+
+def test_the_configs_payload_and_tcp_are_set_on_the_controller_and_a_bad_one_refused(
+    sim: UrSimProcess, tmp_path: Path
+) -> None:
+    """The tool from the config, set each time the control script starts: the controller reports
+    the payload, and the TCP moves actual_TCP_pose 0.1 m along the flange's z."""
+    base = load_robot_config(CONFIG)
+    poses = []
+    for tcp in ([0.0] * 6, [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]):
+        s = dataclasses.replace(
+            base.backend_settings, payload_kg=2.0, payload_cog_m=[0.0, 0.0, 0.05], tcp_m_rad=tcp
+        )
+        arm = UrRtdeArm(dataclasses.replace(base, backend_settings=s), RobotModel.from_config(base))
+        arm.configure()
+        try:
+            d = arm.diagnostics().details
+            assert float(d["payload_kg"]) == pytest.approx(2.0), d
+            poses.append(np.array([float(x) for x in str(d["tcp_pose_m_rad"]).split()]))
+        finally:
+            arm.shutdown()
+    assert np.linalg.norm(poses[1][:3] - poses[0][:3]) == pytest.approx(0.1, abs=1e-3)
+    with pytest.raises(ConfigError, match=r"payload_kg \(=6\) exceeds the UR5e's rated payload \(5 kg\)"):
+        text = CONFIG.read_text().replace("[resource.settings]\n", "[resource.settings]\npayload_kg = 6.0\n")
+        (tmp_path / "six.toml").write_text(text.replace('"../', f'"{CONFIG.parent.parent}/'))
+        load_robot_config(tmp_path / "six.toml")

@@ -130,6 +130,21 @@ class UrLink:
         for w in started.warnings:
             log.warning("%s: %s", self.name, w)
         self.watchdog_armed = False
+        self._set_tool()
+
+    def _set_tool(self) -> None:
+        """The config's payload and TCP, on the controller (each time the script starts: they hold
+        for the program that sets them); a refusal is an error naming the value."""
+        s, c = self.settings, self.control
+        if s.payload_kg is not None:
+            cog = list(s.payload_cog_m) if s.payload_cog_m is not None else []
+            if not c.setPayload(s.payload_kg, cog):
+                raise ResourceError(
+                    f"{self.name}: the controller refused payload_kg = {s.payload_kg:g} (centre of "
+                    f"gravity {cog or 'its own estimate'}): check it against the arm's rating"
+                )
+        if s.tcp_m_rad is not None and not c.setTcp(list(s.tcp_m_rad)):
+            raise ResourceError(f"{self.name}: the controller refused tcp_m_rad = {list(s.tcp_m_rad)}")
 
     def _try(self, fn: Any, what: str) -> Any:
         try:
@@ -160,6 +175,7 @@ class UrLink:
         self.control.stopScript()  # ur_rtde clears the command registers (no stale servoJ target)
         self.control.reuploadScript()
         self.watchdog_armed = False
+        self._set_tool()
 
     # ---- the stream (tick-safe) ------------------------------------------------------------
     def wait_for_package(self, last_stamp: float, timeout_s: float) -> int:
@@ -214,6 +230,7 @@ class UrLink:
                 "controller_time_s": float(r.getTimestamp()),
                 "actual_current_a": " ".join(f"{i:.3f}" for i in r.getActualCurrent()),
                 "tcp_pose_m_rad": " ".join(f"{x:.4f}" for x in r.getActualTCPPose()),
+                "payload_kg": float(r.getPayload()),
             }
         except RuntimeError:
             return {}

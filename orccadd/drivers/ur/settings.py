@@ -10,6 +10,11 @@ from orccadd.config.schema import field
 # The controller's bounds for servoJ (UR script manual): lookahead_time 0.03-0.2 s, gain 100-2000.
 LOOKAHEAD_S = (0.03, 0.2)
 GAIN = (100.0, 2000.0)
+# each model's rated payload, kg (UR's data sheets)
+RATED_PAYLOAD_KG = {
+    "UR3e": 3.0, "UR5e": 5.0, "UR10e": 12.5, "UR16e": 16.0, "UR20": 20.0, "UR30": 30.0,
+    "UR3": 3.0, "UR5": 5.0, "UR10": 10.0,
+}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -33,3 +38,9 @@ class UrRtdeSettings:
     watchdog_s: float = field(default=0.1, bounds=(0.01, 1.0))
     stall_periods: int = field(default=3, bounds=(2, 1000), doc="no packet for this many periods: CommLost")
     connect_timeout_s: float = field(default=10.0, bounds=(0.5, 120.0))
+    # the tool, set on the controller each time the control script starts (none: the
+    # installation's, as set at the pendant): its mass, its centre of gravity from the flange
+    # (x, y, z in m), and the TCP from the flange (x, y, z in m, rotation vector in rad)
+    payload_kg: float | None = field(default=None, bounds=(0.0, 35.0))
+    payload_cog_m: list[float] | None = field(default=None)
+    tcp_m_rad: list[float] | None = field(default=None)
