@@ -116,3 +116,35 @@ class RuckigTrajectory(KernelModule):
         goal = self.target.value.tolist()
         self._outs = (goal, self._zeros, self._zeros, goal, True)
         self._settled = True
+
+
+@register("ruckig_trajectory_scaled")
+class ScaledRuckigTrajectory(RuckigTrajectory):
+    """`ruckig_trajectory` on a time base that the resource's speed scaling slows, as a UR
+    controller slows its own trajectories by its speed slider (wire `arm.speed_scaling`: the
+    slider times the controller's own scaling). At a fraction s the trajectory advances s of a
+    period each period, its velocity times s and its acceleration times s²; at 0 it holds where
+    it is, and goes on from there when the scaling comes back."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        self.scaling = self.add_input("speed_scaling", (1,), "1")
+
+    def kernel(self) -> Kernel:
+        advance, otg, period_s = super().kernel(), self._otg, self.ctx.period_s
+
+        def scaled_trajectory(
+            t_s: float, q: list[float], dq: list[float], speed_scaling: list[float]
+        ) -> Outputs:
+            s = min(max(float(speed_scaling[0]), 0.0), 1.0)
+            if s <= 0.0:  # held: the last desired position, at rest
+                q_des, _, _, goal, done = self._outs
+                return (q_des, self._zeros, self._zeros, goal, done)
+            otg.delta_time = period_s * s
+            q_des, dq_des, ddq_des, goal, done = advance(t_s, q, dq)
+            if s == 1.0:
+                return (q_des, dq_des, ddq_des, goal, done)
+            s2 = s * s
+            return (q_des, [v * s for v in dq_des], [a * s2 for a in ddq_des], goal, done)
+
+        return scaled_trajectory

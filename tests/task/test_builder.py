@@ -230,3 +230,6 @@ def test_a_resources_own_signals_are_outputs_of_its_node_and_others_refuse_them(
     assert isinstance(signals, list) and [s.split(" ")[0] for s in signals] == ["wrench", "speed_scaling"]
     with pytest.raises(WiringError, match=r"arm has no output 'wrench' \(outputs: q, dq, tau\)"):
         build(session, guarded)
+    scaled = build_task(load_task_file(ROOT / "configs/tasks/ur_move_joints.toml"), ur)
+    traj = next(m for m in scaled.modules if m.name == "traj")
+    assert traj.inputs["speed_scaling"].value is ur.signals["speed_scaling"]
