@@ -15,11 +15,16 @@ In place on numpy arrays: no allocation per step.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pinocchio as pin
 
 from orccadd.model import RobotModel
 from orccadd.state import FloatArray
+
+# (q, dq) -> the external joint torques (N.m), or None when nothing touches the arm
+ExternalTorque = Callable[[FloatArray, FloatArray], "FloatArray | None"]
 
 
 class ArmDynamics:
@@ -53,6 +58,9 @@ class ArmDynamics:
         self._tmp = np.zeros(n)
         self._dv = np.zeros(n)
         self._stuck = np.zeros(n, dtype=np.bool_)
+        # the world's joint torques at (q, dq) (a contact's J^T W), at every step; None: nothing
+        # touches the arm (the function may return None too)
+        self.external: ExternalTorque | None = None
         self.refresh_inertia()
 
     @property
@@ -74,6 +82,9 @@ class ArmDynamics:
         q, dq, tau, tmp = self.q, self.dq, self._tau, self._tmp
         np.multiply(self.viscous, dq, out=tau)
         np.subtract(tau_motor_nm, tau, out=tau)
+        ext = self.external(q, dq) if self.external is not None else None
+        if ext is not None:
+            tau += ext
         ddq = pin.aba(self.pin_model, self.data, q, dq, tau)
         np.multiply(ddq, h_s, out=tmp)
         dq += tmp

@@ -8,6 +8,10 @@ RTDE (protocol version 2) on 30004, the dashboard server on 29999 and the script
 - `fields`: RTDE field names and types, inputs and outputs;
 - `arm`, `motion`: the arm behind the controller and the controller's own trajectory
   generation (servoj, speedj, movej, stopj) with its limits;
+- `world`: a wall and a push on the tool, felt by the arm's dynamics (`ArmDynamics.external`);
+- `ft_sensor`, `tool_contact`, `force_mode`, `task_frame`, `force_control`: the flange's
+  force/torque sensor, tool_contact, force mode and freedrive (an admittance on the TCP);
+- `speed_scaling`: the speed slider and the scaling of the planned motions;
 - `controller`: the controller's cycle (500 Hz e-Series, 125 Hz CB3), safety, programs;
 - `control_script`: our implementation of ur_rtde's control script (its register protocol);
 - `rtde_server`, `dashboard`, `script_server`: the network side;

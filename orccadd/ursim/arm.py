@@ -8,6 +8,10 @@ holding itself up. Brakes engaged = the resource inactive (motors off), released
 
 Poses are UR's: [x, y, z, rx, ry, rz] in metres and a rotation vector (radians), of the tool
 flange (`tool0`) composed with the TCP offset, in the base frame.
+
+The world (`world.World`: a wall, a push) acts on the dynamics through the TCP's Jacobian,
+τ_ext = J_tcpᵀ·W at every sub-step (`ArmDynamics.external`); the payload (`set_payload`) is a point
+mass on the flange's link, in the model the dynamics and the gravity compensation share.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from orccadd.model import RobotModel
 from orccadd.physres.sim import SimSettings, SimulatedArm, load_sim_settings
 from orccadd.state import FloatArray
 from orccadd.types import CommandMode, Lifecycle
+from orccadd.ursim.world import World
 
 TOOL_FRAME = "tool0"
 CURRENT_AT_MAX_TORQUE_A = 12.0  # the simulator's motor model: a joint's max torque at 12 A
@@ -100,11 +105,27 @@ class UrArm:
         self._amps_per_nm = CURRENT_AT_MAX_TORQUE_A / self.model.tau_max_nm
         self.tcp_offset = pin.SE3.Identity()
         self._no_offset = True
+        self._payload_joint = self._pin.frames[self._tool].parentJoint
+        self._payload_at = self._pin.frames[self._tool].placement  # tool0 in its joint's frame
+        self._bare_inertia = self._pin.inertias[self._payload_joint].copy()
+        self.payload_kg = 0.0
+        self.world = World()
+        self._ext_data = self.model.new_data()  # the sub-steps' kinematics (not the cycle's)
+        self._ext_jac = np.zeros((6, self.dof))
+        self._ext_wrench = np.zeros(6)
+        self.sim.arm.external = self._external_torque
 
     def set_tcp_offset(self, pose: Any) -> None:
         """The TCP relative to the flange (a UR pose), as `set_tcp` sets it."""
         self.tcp_offset = pose_to_se3(pose)
         self._no_offset = not np.any(np.asarray(pose, dtype=np.float64))
+
+    def set_payload(self, mass_kg: float, cog_m: Any) -> None:
+        """The payload on the flange: a point mass at `cog_m` (flange frame), part of the model
+        the dynamics integrate and the controller's gravity compensation uses."""
+        extra = pin.Inertia(float(mass_kg), np.asarray(cog_m, dtype=np.float64), np.zeros((3, 3)))
+        self._pin.inertias[self._payload_joint] = self._bare_inertia + self._payload_at.act(extra)
+        self.payload_kg = float(mass_kg)
 
     # ---- brakes ---------------------------------------------------------------------------
     @property
@@ -202,6 +223,41 @@ class UrArm:
             j = self._elbow_joint
             elbow[0][:] = d.oMi[j].translation
             elbow[1][:] = pin.getJointJacobian(m, d, j, LWA)[0:3] @ dq
+
+    def tcp_jacobian(self, q: FloatArray, out: FloatArray) -> FloatArray:
+        """The TCP's Jacobian at `q` (6×n, base frame: rows vx vy vz wx wy wz), into `out`."""
+        return self._tcp_jacobian(q, self._data, out)
+
+    def _tcp_jacobian(self, q: FloatArray, d: Any, out: FloatArray) -> FloatArray:
+        m = self._pin
+        pin.computeJointJacobians(m, d, q)
+        pin.updateFramePlacement(m, d, self._tool)
+        out[:] = pin.getFrameJacobian(m, d, self._tool, LWA)
+        if not self._no_offset:  # v_tcp = v_flange + w × r = v_flange − [r]× w
+            r = d.oMf[self._tool].rotation @ self.tcp_offset.translation
+            out[0:3] -= pin.skew(r) @ out[3:6]
+        return out
+
+    def tcp_position(self) -> FloatArray:
+        """The TCP's position after the last `tcp_jacobian` (base frame, m)."""
+        m: pin.SE3 = self._data.oMf[self._tool] * self.tcp_offset
+        return np.asarray(m.translation)
+
+    def external_wrench(self, q: FloatArray, dq: FloatArray, out: FloatArray) -> bool:
+        """The world's wrench on the TCP at (q, dq) into `out` (base frame, N and N·m about the
+        TCP); False when nothing touches the tool."""
+        if self.world.wall is None and self.world.push is None:
+            out[:] = 0.0
+            return False
+        jac = self._tcp_jacobian(q, self._ext_data, self._ext_jac)
+        p = (self._ext_data.oMf[self._tool] * self.tcp_offset).translation
+        return self.world.wrench_at(p, jac[0:3] @ dq, out)
+
+    def _external_torque(self, q: FloatArray, dq: FloatArray) -> FloatArray | None:
+        if not self.external_wrench(q, dq, self._ext_wrench):
+            return None
+        tau: FloatArray = self._ext_jac.T @ self._ext_wrench
+        return tau
 
     def inverse_dynamics(self, q: FloatArray, dq: FloatArray, ddq: FloatArray, out: FloatArray) -> FloatArray:
         out[:] = pin.rnea(self._pin, self._data, q, dq, ddq)

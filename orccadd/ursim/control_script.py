@@ -11,6 +11,19 @@ after "done". With the upper range flag every register index is offset by 24.
 
 Commands are the script's ids (ur_rtde `RobotCommand::Type`); ids this simulator does not
 model stop the program with a runtime error, so the client's call returns false.
+
+Force side (`force_control.ForceControl`), with the script's register layout:
+- 6 force_mode (real-time, re-read every cycle as the script's force thread does): float
+  registers 0-5 task frame, 6-11 wrench, 12-17 limits; int register 1 type, 2-7 selection;
+- 7 force_mode_stop: end_force_mode() then stopl(10) (here a joint stop at 10 rad/s²);
+- 8 zero_ftsensor; 20 force_mode_set_damping, 21 force_mode_set_gain_scaling: float 0 (the
+  script sets gain scaling 0.5 and damping 0.025 when it starts);
+- 25 tool_contact (real-time): direction in float registers 0-5, the answer in int register 1;
+- 52 freedrive_mode: free axes in int registers 1-6, feature in float registers 0-5;
+  53 end_freedrive_mode; 54 get_freedrive_status (int register 1); 18/19 teach mode;
+- 17 set_payload: mass float 0, centre of gravity floats 1-3 (zero: keep the present one).
+A refused argument (out of range, above a safety limit) is a runtime error: the program stops,
+and the client's next call returns false.
 """
 
 from __future__ import annotations
@@ -22,6 +35,8 @@ from typing import Protocol
 import numpy as np
 
 from orccadd.state import FloatArray
+from orccadd.ursim.force_control import ForceControl
+from orccadd.ursim.force_mode import Admittance, ForceModeArgs
 from orccadd.ursim.motion import Motion, MoveJ, ServoJ, SpeedJ, StopJ
 from orccadd.ursim.robot_state import RobotState
 from orccadd.ursim.series import Series
@@ -47,6 +62,8 @@ COMMAND_NAMES = {
     57: "enable_external_ft_sensor", 58: "get_actual_tool_flange_pose", 59: "set_gravity",
 }  # fmt: skip
 MARKER = "RTDE Control Script"  # the textmsg of ur_rtde's script: how it is recognised
+SCRIPT_GAIN_SCALING, SCRIPT_DAMPING = 0.5, 0.025  # set by the script when it starts
+FORCE_MODE_STOP_RAD_S2 = 10.0  # the script's stopl(10) after end_force_mode()
 
 
 class Program(Protocol):
@@ -67,13 +84,14 @@ class ScriptHost(Protocol):
     period_s: float
     v_max_rad_s: FloatArray
     a_max_rad_s2: FloatArray
+    forces: ForceControl
 
     def start_motion(self, motion: Motion) -> None: ...
     def motion_finished(self, motion: Motion) -> bool: ...
     def protective_stop(self, reason: str) -> None: ...
     def set_watchdog(self, register: str, min_frequency_hz: float) -> None: ...
     def set_tcp(self, pose: FloatArray) -> None: ...
-    def set_payload(self, mass_kg: float, cog_m: FloatArray) -> None: ...
+    def set_payload(self, mass_kg: float, cog_m: FloatArray) -> str: ...
     def joint_history(self, steps: int) -> FloatArray: ...
     def joint_torques(self) -> FloatArray: ...
     def direct_torque(self, tau_nm: FloatArray) -> None: ...
@@ -119,6 +137,7 @@ class ControlScript:
         self.async_wr_count = 0
         self.async_op_id = 0
         self.started = False
+        self.compliant: Admittance | None = None  # force mode or freedrive running
 
     # ---- registers ------------------------------------------------------------------------
     def _int(self, i: int) -> int:
@@ -154,6 +173,8 @@ class ControlScript:
         if not self.started:
             self.started = True
             log.info("%s: RTDE Control Script Loaded", self.name)
+            self.host.forces.set_gain_scaling(SCRIPT_GAIN_SCALING)
+            self.host.forces.set_damping(SCRIPT_DAMPING)
             self._async_progress(-1)
             self._out_int(0, RDY_FOR_CMD)
         if self.async_motion is not None and self.host.motion_finished(self.async_motion):
@@ -200,6 +221,12 @@ class ControlScript:
 
     def _process(self, cmd: int) -> bool:
         """Execute one command (its effect on registers and motion); False: the script ends."""
+        if cmd in FORCE_COMMANDS:
+            why = self._force_command(cmd)
+            if why:
+                self.host.runtime_error(why)
+                return False
+            return True
         h = self.host
         if cmd == 1:  # movej
             move = MoveJ(self._q(0), self._float(6), self._float(7), h.v_max_rad_s, h.a_max_rad_s2)
@@ -236,7 +263,10 @@ class ControlScript:
         elif cmd == 35:
             h.set_watchdog(f"input_int_register_{self.oi}", self._float(0))
         elif cmd == 17:
-            h.set_payload(self._float(0), np.array([self._float(1), self._float(2), self._float(3)]))
+            why = h.set_payload(self._float(0), np.array([self._float(1), self._float(2), self._float(3)]))
+            if why:
+                h.runtime_error(why)
+                return False
         elif cmd == 26:
             self._out_floats(0, np.array([h.period_s]))
         elif cmd == 27:
@@ -255,8 +285,6 @@ class ControlScript:
             self._out_floats(0, h.forward_kin(self._q(0), self._q(6)))
         elif cmd == 47:
             self._out_int(1, int(h.is_steady()))
-        elif cmd in (20, 21):  # force mode damping / gain scaling: only tune force mode
-            pass
         elif cmd == STOP_SCRIPT:
             log.info("%s: received stop script", self.name)
             return False
@@ -265,3 +293,60 @@ class ControlScript:
             h.runtime_error(f"command {cmd} ({name}) is not simulated")
             return False
         return True
+
+    # ---- force mode, freedrive, the sensor ---------------------------------------------------
+    def _running(self, name: tuple[str, ...]) -> Admittance | None:
+        c = self.compliant
+        return c if c is not None and c.name in name and not self.host.motion_finished(c) else None
+
+    def _start_compliant(self, made: Admittance | str) -> str:
+        if isinstance(made, str):
+            return made
+        self._stop_threads()
+        self.compliant = made
+        self.host.start_motion(made)
+        return ""
+
+    def _force_command(self, cmd: int) -> str:
+        """A force-side command: '' or the runtime error that stops the program."""
+        f = self.host.forces
+        if cmd == 6:
+            args = ForceModeArgs(
+                tuple(self._q(0)),
+                tuple(self._int(2 + k) for k in range(6)),
+                tuple(self._q(6)),
+                self._int(1),
+                tuple(self._q(12)),
+            )
+            made = f.force_mode(args)
+            running = self._running(("force_mode",))
+            if running is not None and not isinstance(made, str):
+                running.update(args)
+                return ""
+            return self._start_compliant(made)
+        if cmd == 7:
+            self.compliant = None
+            self._stop(FORCE_MODE_STOP_RAD_S2, motion_async=False)
+        elif cmd == 8:
+            f.zero_ftsensor()
+        elif cmd == 20:
+            return f.set_damping(self._float(0))
+        elif cmd == 21:
+            return f.set_gain_scaling(self._float(0))
+        elif cmd == 25:
+            self._out_int(1, f.tool_contact(self._q(0)))
+        elif cmd == 52:
+            axes = tuple(self._int(1 + k) for k in range(6))
+            return self._start_compliant(f.freedrive(axes, tuple(self._q(0)), "freedrive"))
+        elif cmd == 18:
+            return self._start_compliant(f.freedrive((1,) * 6, (0.0,) * 6, "teach_mode"))
+        elif cmd in (19, 53):
+            if self._running(("freedrive", "teach_mode")) is not None:
+                self.compliant = None
+                self._stop(float("inf"), motion_async=False)
+        elif cmd == 54:
+            self._out_int(1, f.freedrive_status())
+        return ""
+
+
+FORCE_COMMANDS = frozenset({6, 7, 8, 18, 19, 20, 21, 25, 52, 53, 54})

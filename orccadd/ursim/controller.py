@@ -13,7 +13,13 @@ Safety, as a UR controller does it (stop categories of IEC 60204-1):
   stays powered (category 2), the program pauses; "unlock protective stop" is accepted
   `unlock_delay_s` after it (5 s on UR controllers);
 - emergency stop: stop at the limits, then power off (category 1); the program stops;
-- power off: the brakes at once (category 0); the program stops.
+- power off: the brakes at once (category 0); the program stops;
+- tool force limit: an external force on the tool above the safety configuration's limit
+  (150 N, e-Series default) is a protective stop, as a collision is.
+
+Each cycle also reads the flange's force/torque sensor (`force_control.ForceControl`: the
+world's wrench on the tool, `world.World`) and moves the speed scaling towards the speed
+slider (`speed_scaling.SpeedScaling`), which the planned motions run at.
 """
 
 from __future__ import annotations
@@ -30,9 +36,12 @@ from orccadd.state import FloatArray
 from orccadd.ursim.arm import UrArm
 from orccadd.ursim.control_script import Program
 from orccadd.ursim.export import export_state
+from orccadd.ursim.force_control import ForceControl
+from orccadd.ursim.force_mode import TOOL_FORCE_LIMIT_N
 from orccadd.ursim.motion import DirectTorque, Hold, Motion, StopJ, Target
 from orccadd.ursim.robot_state import FieldTable, RobotState
 from orccadd.ursim.series import Series
+from orccadd.ursim.speed_scaling import SpeedScaling
 from orccadd.ursim.states import (
     BOOT_S,
     POWER_TRANSITIONS,
@@ -48,6 +57,7 @@ log = logging.getLogger("orccadd.ursim")
 ESTOPPED = (SafetyMode.ROBOT_EMERGENCY_STOP, SafetyMode.SYSTEM_EMERGENCY_STOP)
 HISTORY_CYCLES = 1000  # get_actual_joint_positions_history reaches this far back
 STEADY_RAD_S = 1e-3
+RATED_PAYLOAD_KG = 5.0  # UR5e
 
 
 class UrController:
@@ -68,6 +78,9 @@ class UrController:
         self.target = Target(arm.dof)
         self.torque = DirectTorque(arm.dof)  # the one direct torque motion, set every cycle
         self._safe_target = Target(arm.dof)
+        self.world = arm.world  # what the tool touches (the control channel sets it)
+        self.forces = ForceControl(arm, self.state)
+        self.speed = SpeedScaling()
         self.subscribers: list[Callable[[int], None]] = []  # RTDE sessions, called every cycle
         self.input_owner: dict[str, object] = {}  # input field -> the RTDE session writing it
         self._t0_s: float | None = None  # the first cycle's time: the controller's time 0
@@ -101,6 +114,11 @@ class UrController:
             self.state.out_int[:] = [0] * len(self.state.out_int)
             self.state.in_double[:] = [0.0] * len(self.state.in_double)
             self.state.out_double[:] = [0.0] * len(self.state.out_double)
+            self.state.digital_output_bits = 0
+            self.set_payload(0.0, np.zeros(3))
+            self.state.payload_cog[:] = 0.0
+            self.forces.reset()
+            self.speed.reset()
             self.arm.engage_brakes()
             self.target.hold(self.arm.q_rad)
             if self.boot_running:
@@ -291,6 +309,11 @@ class UrController:
                 )
         return ""
 
+    def _check_tool_force(self) -> None:
+        force = float(np.linalg.norm(self.forces.external[0:3]))
+        if force > TOOL_FORCE_LIMIT_N and self.safety_mode is SafetyMode.NORMAL:
+            self.protective_stop(f"tool force limit ({force:.0f} N, limit {TOOL_FORCE_LIMIT_N:g} N)")
+
     # ---- watchdog, inputs ---------------------------------------------------------------------
     def set_watchdog(self, register: str, min_frequency_hz: float) -> None:
         self.watchdog = (register, min_frequency_hz) if min_frequency_hz > 0 else None
@@ -326,17 +349,23 @@ class UrController:
             if self._t0_s is None:
                 self._t0_s = t_s - self.period_s
             now = self._now_s = t_s - self._t0_s
+            self.world.now_s = now
             self._advance_power(now)
             arm, tgt = self.arm, self.target
             arm.sample(t_s)
+            self.forces.measure()
+            self._check_tool_force()
             self.history.append(arm.q_rad.copy())
             playing = self.program is not None and self.runtime_state is RuntimeState.PLAYING
             if playing and self.program is not None and not self.program.step():
                 self.stop_program("the program ended")
             self._count_servoj_updates(playing)
             self._check_watchdog(now)
+            scaling = self.speed.step(self.state, h)
             if arm.brakes_released:
                 self._safe_target.q[:], self._safe_target.qd[:] = tgt.q, tgt.qd
+                if self.motion.scaled:
+                    self.motion.speed_fraction = scaling
                 if not self.motion_done:
                     self.motion_done = self.motion.step(tgt, h)
                 torque = self.motion is self.torque and not self.motion_done
@@ -390,10 +419,18 @@ class UrController:
         self.state.tcp_offset[:] = pose
         self.arm.set_tcp_offset(pose)
 
-    def set_payload(self, mass_kg: float, cog_m: FloatArray) -> None:
+    def set_payload(self, mass_kg: float, cog_m: FloatArray) -> str:
+        """set_payload(mass, cog): the payload the arm carries (its dynamics and the sensor's
+        compensation); a zero `cog_m` keeps the present one (ur_rtde's script passes
+        get_target_payload_cog() then). '' or why refused (a runtime error)."""
+        if not (0.0 <= mass_kg <= RATED_PAYLOAD_KG) or not np.isfinite(cog_m).all():
+            rated = RATED_PAYLOAD_KG
+            return f"set_payload: mass (={mass_kg:g} kg) must be in [0, {rated:g}] kg (rated payload)"
         self.state.payload_kg = mass_kg
         if cog_m.any():
             self.state.payload_cog[:] = cog_m
+        self.arm.set_payload(mass_kg, self.state.payload_cog)
+        return ""
 
     def joint_history(self, steps: int) -> FloatArray:
         if not self.history:

@@ -11,6 +11,7 @@ import numpy as np
 from orccadd.ursim.arm import UrArm
 from orccadd.ursim.motion import Target
 from orccadd.ursim.robot_state import RobotState
+from orccadd.ursim.speed_scaling import SpeedScaling
 from orccadd.ursim.states import SAFETY_BITS, JointMode, RobotMode, RobotStatus, RuntimeState, SafetyMode
 
 MAIN_VOLTAGE_V = 48.0
@@ -30,6 +31,7 @@ class Exported(Protocol):
     robot_mode: RobotMode
     safety_mode: SafetyMode
     runtime_state: RuntimeState
+    speed: SpeedScaling
 
 
 def export_state(ctl: Exported, now_s: float, exec_ms: float) -> None:
@@ -65,5 +67,5 @@ def export_state(ctl: Exported, now_s: float, exec_ms: float) -> None:
     s.actual_joint_voltage[:] = MAIN_VOLTAGE_V if powered else 0.0
     s.robot_current_a = float(np.abs(s.actual_current).sum()) * 0.1  # the motors' share at 48 V
     s.actual_momentum = float(np.abs(s.actual_qd).sum())
-    s.target_speed_fraction = s.speed_slider_fraction if s.speed_slider_mask & 1 else 1.0
-    s.speed_scaling = s.target_speed_fraction if ctl.runtime_state is RuntimeState.PLAYING else 0.0
+    s.target_speed_fraction = ctl.speed.slider
+    s.speed_scaling = ctl.speed.scaling if ctl.runtime_state is RuntimeState.PLAYING else 0.0

@@ -9,7 +9,22 @@ and answers one per line, `{"ok": true, ...}` or `{"ok": false, "error": "..."}`
     {"inject": "stream_stall", "duration_s": 1.0}
     {"inject": "drop_connection", "ports": "rtde"}    (rtde | dashboard | script | all)
     {"inject": "controller_restart", "down_s": 1.0}
-    {"status": true}   -> modes, program, joint positions, cycles, connections, ports
+
+The world and the I/O (`simulator.UrSimulator.inject`; `world.World`):
+
+    {"inject": "wall", "point_m": [x, y, z], "normal": [nx, ny, nz], "stiffness_n_m": 5000}
+        (optional "damping_n_s_m", 100 by default): a plane in the base frame, `normal` out of
+        it into free space; the TCP inside it is pushed out (the arm's dynamics and the F/T
+        sensor feel it). One wall at a time: a new one replaces the old.
+    {"inject": "wall_remove"}
+    {"inject": "push", "force_n": [fx, fy, fz], "torque_nm": [tx, ty, tz], "duration_s": 0.5}
+        a wrench on the TCP (base frame) for that long: a hand on the tool
+    {"inject": "digital_input", "index": 3, "value": true}               standard DI 0-7 (bits 0-7)
+    {"inject": "configurable_digital_input", "index": 0, "value": true}  CI 0-7 (bits 8-15)
+    {"inject": "tool_digital_input", "index": 1, "value": true}          TDI 0-1 (bits 16-17)
+    {"inject": "ft_noise", "force_n": 0.5, "torque_nm": 0.02, "seed": 1}  sensor noise (std)
+    {"status": true}   -> modes, program, joint positions, cycles, connections, ports, the
+                          wall, tcp_force, external_wrench, motion, payload_kg, I/O bits
 
 The protocol is every simulator's (`orccadd.runtime.sim_control`); `process.UrSimProcess.inject()`
 and `.status()` send these for Python callers.

@@ -45,9 +45,13 @@ def leading_limit(asked: float, share: FloatArray, limit: FloatArray) -> float:
 
 
 class Motion(ABC):
-    """One motion command; `step` advances `tgt` by `h_s` and returns True once finished."""
+    """One motion command; `step` advances `tgt` by `h_s` and returns True once finished.
+    A `scaled` motion runs at the speed slider's `speed_fraction` (set by the controller before
+    each step: `speed_scaling.SpeedScaling`)."""
 
     name = "motion"
+    scaled = False
+    speed_fraction = 1.0
 
     @abstractmethod
     def step(self, tgt: Target, h_s: float) -> bool: ...
@@ -127,9 +131,10 @@ class StopJ(Motion):
 class MoveJ(Motion):
     """Move to `q_goal` in joint space from rest: a trapezoidal speed profile on the leading
     axis (speed `v`, acceleration `a`), every joint arriving together (movej). Planned at its
-    first step, from the target it then finds."""
+    first step, from the target it then finds; played in scaled time (the speed slider)."""
 
     name = "movej"
+    scaled = True
 
     def __init__(
         self,
@@ -189,11 +194,12 @@ class MoveJ(Motion):
         if self._length < EPS:
             tgt.hold(self.goal)
             return True
-        self._t_s += h_s
+        f = self.speed_fraction
+        self._t_s += h_s * f
         s, sd, sdd = self._profile(self._t_s)
         tgt.q[:] = self._start + self._dir * s
-        tgt.qd[:] = self._dir * sd
-        tgt.qdd[:] = self._dir * sdd
+        tgt.qd[:] = self._dir * (sd * f)
+        tgt.qdd[:] = self._dir * (sdd * f * f)
         if self._t_s >= self._t_total:
             tgt.hold(self.goal)
             return True
@@ -202,9 +208,11 @@ class MoveJ(Motion):
 
 class SpeedJ(Motion):
     """Accelerate to joint speeds `qd` (the fastest change at `a` rad/s²) and keep them (speedj,
-    repeated by the control script until a stop)."""
+    repeated by the control script until a stop); the speed slider scales the speeds (and the
+    acceleration by its square)."""
 
     name = "speedj"
+    scaled = True
 
     def __init__(self, a_max_rad_s2: FloatArray) -> None:
         self.a_max = a_max_rad_s2
@@ -216,11 +224,12 @@ class SpeedJ(Motion):
         self.a = a_rad_s2
 
     def step(self, tgt: Target, h_s: float) -> bool:
-        delta = self.qd_ref - tgt.qd
+        f = self.speed_fraction
+        delta = self.qd_ref * f - tgt.qd
         lead = float(np.abs(delta).max())
         qd0 = tgt.qd.copy()
         if lead > EPS:
-            a = leading_limit(max(self.a, EPS), np.abs(delta) / lead, self.a_max)
+            a = leading_limit(max(self.a * f * f, EPS), np.abs(delta) / lead, self.a_max)
             tgt.qd += delta * (min(lead, a * h_s) / lead)
         tgt.qdd[:] = (tgt.qd - qd0) / h_s
         tgt.q += 0.5 * (qd0 + tgt.qd) * h_s

@@ -4,7 +4,10 @@
 `output_field(name)` and `input_field(name)` give a field's RTDE type and its getter or setter,
 or None for a name the controller does not have (answered NOT_FOUND). Names and types are the
 RTDE guide's ("Field names and associated types", PolyScope 5.11 / 3.15); fields of devices the
-simulator does not model (tool I/O, Euromap, analog inputs, energy) read as constants.
+simulator does not model (tool analog I/O, Euromap, analog inputs, energy) read as constants.
+Digital outputs (standard 0-7, configurable 8-15, tool 16-17 of `actual_digital_output_bits`)
+are written by RTDE clients through the masked inputs; digital inputs (the same layout in
+`actual_digital_input_bits`) by the control channel.
 """
 
 from __future__ import annotations
@@ -56,6 +59,8 @@ class RobotState:
         self.robot_voltage_v = 0.0
         self.robot_current_a = 0.0
         self.digital_output_bits = 0  # standard 0-7, configurable 8-15, tool 16-17
+        self.digital_input_bits = 0  # the same layout (set through the control channel)
+        self.ft_raw_wrench = _z6()
         self.analog_output = [0.0, 0.0]
         self.analog_output_types = 0
         self.speed_slider_mask = 0
@@ -102,8 +107,8 @@ def _outputs(s: RobotState) -> dict[str, tuple[RtdeType, Getter]]:
         "target_TCP_pose": (V6, _vec(s.target_tcp_pose)),
         "target_TCP_speed": (V6, _vec(s.target_tcp_speed)),
         "tcp_offset": (V6, _vec(s.tcp_offset)),
-        "actual_digital_input_bits": (T.UINT64, _const(0)),
-        "actual_configurable_digital_input_bits": (T.UINT64, _const(0)),
+        "actual_digital_input_bits": (T.UINT64, lambda: s.digital_input_bits),
+        "actual_configurable_digital_input_bits": (T.UINT64, lambda: (s.digital_input_bits >> 8) & 0xFF),
         "joint_temperatures": (V6, _vec(s.joint_temperatures_c)),
         "actual_execution_time": (D, lambda: s.actual_execution_time_ms),
         "robot_mode": (T.INT32, lambda: s.robot_mode),
@@ -143,7 +148,7 @@ def _outputs(s: RobotState) -> dict[str, tuple[RtdeType, Getter]]:
         "tcp_force_scalar": (D, _const(0.0)),
         "joint_position_deviation_ratio": (D, _const(0.0)),
         "collision_detection_ratio": (D, _const(0.0)),
-        "ft_raw_wrench": (V6, _const([0.0] * 6)),
+        "ft_raw_wrench": (V6, _vec(s.ft_raw_wrench)),
         "payload": (D, lambda: s.payload_kg),
         "payload_cog": (V3, _vec(s.payload_cog)),
         "payload_inertia": (V6, _vec(s.payload_inertia)),

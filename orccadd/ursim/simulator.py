@@ -10,6 +10,14 @@ cycle on absolute deadlines until told to stop. Faults (`inject`) act as the rea
   the ports stay open;
 - `controller_restart` (`down_s`): every port closes, the controller reboots (power off,
   program and registers cleared), and the ports open again `down_s` later.
+
+And the world and the I/O the test plays (not faults, the same channel):
+
+- `wall` (`point_m`, `normal`, `stiffness_n_m`, optional `damping_n_s_m`), `wall_remove`;
+- `push` (`force_n`, optional `torque_nm`, `duration_s`): a wrench on the TCP (base frame);
+- `digital_input`, `configurable_digital_input`, `tool_digital_input` (`index`, `value`):
+  inputs 0-7, 0-7 and 0-1 (bits 0-7, 8-15 and 16-17 of actual_digital_input_bits);
+- `ft_noise` (`force_n`, `torque_nm`, `seed`): the force/torque sensor's noise.
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ from orccadd.ursim.net import Server
 from orccadd.ursim.rtde_server import Stall, rtde_handler
 from orccadd.ursim.script_server import script_handler
 from orccadd.ursim.series import Series
+from orccadd.ursim.world import push_from_params, wall_from_params
 
 log = logging.getLogger("orccadd.ursim")
 
@@ -44,6 +53,13 @@ FAULTS = (
     "drop_connection",
     "controller_restart",
 )
+WORLD = ("wall", "wall_remove", "push", "ft_noise")
+# input name -> (first bit of actual_digital_input_bits, count)
+DIGITAL_INPUTS = {
+    "digital_input": (0, 8),
+    "configurable_digital_input": (8, 8),
+    "tool_digital_input": (16, 2),
+}
 
 
 class UrSimulator:
@@ -127,9 +143,41 @@ class UrSimulator:
         elif fault == "controller_restart":
             down = float(params.get("down_s", 1.0))
             self.threads.start(self._restart, down, name="restart")
+        elif fault in WORLD or fault in DIGITAL_INPUTS:
+            with ctl.lock:
+                self._set_world(fault, params)
         else:
-            raise ValueError(f"unknown fault {fault!r} (faults: {', '.join(FAULTS)})")
+            known = ", ".join((*FAULTS, *WORLD, *DIGITAL_INPUTS))
+            raise ValueError(f"unknown fault {fault!r} (faults: {known})")
         log.info("fault injected: %s %s", fault, params or "")
+
+    def _set_world(self, what: str, params: dict[str, Any]) -> None:
+        """One of `WORLD` or `DIGITAL_INPUTS` (under the controller's lock)."""
+        ctl = self.ctl
+        if what == "wall":
+            ctl.world.wall = wall_from_params(params)
+        elif what == "wall_remove":
+            ctl.world.wall = None
+        elif what == "push":
+            ctl.world.push = push_from_params(params, ctl.now_s())
+        elif what == "ft_noise":
+            unknown = set(params) - {"force_n", "torque_nm", "seed"}
+            if unknown:
+                raise ValueError(f"ft_noise: unknown parameter(s) {', '.join(sorted(unknown))}")
+            noise = (float(params.get("force_n", 0.0)), float(params.get("torque_nm", 0.0)))
+            ctl.forces.sensor.set_noise(*noise, int(params.get("seed", 0)))
+        else:
+            first, count = DIGITAL_INPUTS[what]
+            if set(params) != {"index", "value"}:
+                raise ValueError(f'{what} takes "index" and "value" (got {sorted(params)})')
+            index, value = params["index"], params["value"]
+            if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < count:
+                raise ValueError(f"{what}: index (={index!r}) must be an integer in [0, {count - 1}]")
+            if not isinstance(value, bool):
+                raise ValueError(f"{what}: value (={value!r}) must be true or false")
+            bit = 1 << (first + index)
+            s = ctl.state
+            s.digital_input_bits = (s.digital_input_bits | bit) if value else (s.digital_input_bits & ~bit)
 
     def _restart(self, down_s: float) -> None:
         self._down = True
@@ -179,4 +227,13 @@ class UrSimulator:
                 "servoj_stale_cycles": ctl.servoj_stale_cycles,
                 "servoj_overwritten": ctl.servoj_overwritten,
                 "rtde_packages_skipped": ctl.rtde_packages_skipped,
+                # the force side and the I/O
+                **ctl.world.describe(),
+                "tcp_force": ctl.state.actual_tcp_force.tolist(),
+                "external_wrench": ctl.forces.external.tolist(),
+                "motion": ctl.motion.name if not ctl.motion_done else "",
+                "payload_kg": ctl.arm.payload_kg,
+                "digital_input_bits": ctl.state.digital_input_bits,
+                "digital_output_bits": ctl.state.digital_output_bits,
+                "speed_scaling": ctl.speed.scaling,
             }

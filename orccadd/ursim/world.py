@@ -1,0 +1,147 @@
+"""What the arm can touch: a wall (a plane in the base frame) and an external push on the TCP.
+
+The world gives the external wrench on the tool at the TCP, in the base frame ([Fx, Fy, Fz] N,
+[Tx, Ty, Tz] N·m about the TCP): the arm's dynamics take it as joint torques (J_tcpᵀ·W, every
+sub-step: `arm.UrArm`) and the flange's force/torque sensor measures it (`ft_sensor.FtSensor`).
+
+The wall is a one-sided spring-damper at the TCP (a point contact, no friction): with `n` the
+wall's unit normal (pointing out of the wall, into free space), `p0` a point of its surface and
+the TCP at `p` moving at `v`,
+
+    depth d = (p0 − p)·n        (> 0: the TCP is inside the wall)
+    F = n · max(0, k·d − c·(v·n))   while d > 0, else 0
+
+so the wall pushes the tool out along its normal and never pulls it in. The push is a wrench
+the test applies to the TCP for a while (a hand on the tool, in freedrive tests).
+
+Set from the control channel (`faults.py`): `wall`, `wall_remove`, `push`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from orccadd.state import FloatArray
+
+DEFAULT_WALL_DAMPING_N_S_M = 100.0
+
+
+@dataclass(frozen=True)
+class Wall:
+    """A plane the TCP cannot pass without a reaction: `point_m` on its surface, `normal` the
+    unit vector out of it (base frame), stiffness N/m and damping N·s/m."""
+
+    point_m: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    stiffness_n_m: float
+    damping_n_s_m: float = DEFAULT_WALL_DAMPING_N_S_M
+
+
+@dataclass(frozen=True)
+class Push:
+    """A wrench on the TCP (base frame: N, N·m) until the controller's time `until_s`."""
+
+    wrench: tuple[float, float, float, float, float, float]
+    until_s: float
+
+
+def _vector3(params: dict[str, Any], key: str, default: Any = None) -> tuple[float, float, float]:
+    raw = params.get(key, default)
+    if raw is None:
+        raise ValueError(f'"{key}" is required (3 numbers)')
+    if not isinstance(raw, list | tuple) or len(raw) != 3:
+        raise ValueError(f'"{key}" (={raw!r}) must be 3 numbers')
+    x, y, z = (float(v) for v in raw)
+    if not all(math.isfinite(v) for v in (x, y, z)):
+        raise ValueError(f'"{key}" (={raw!r}) must be finite')
+    return x, y, z
+
+
+def _positive(params: dict[str, Any], key: str, default: float | None, allow_zero: bool = False) -> float:
+    raw = params.get(key, default)
+    if raw is None:
+        raise ValueError(f'"{key}" is required')
+    v = float(raw)
+    if not math.isfinite(v) or v < 0.0 or (v == 0.0 and not allow_zero):
+        raise ValueError(f'"{key}" (={raw!r}) must be {">= 0" if allow_zero else "> 0"}')
+    return v
+
+
+def _only(params: dict[str, Any], allowed: tuple[str, ...], what: str) -> None:
+    unknown = sorted(set(params) - set(allowed))
+    if unknown:
+        raise ValueError(f"{what}: unknown parameter(s) {', '.join(unknown)} (allowed: {', '.join(allowed)})")
+
+
+def wall_from_params(params: dict[str, Any]) -> Wall:
+    """A wall from the control channel's `{"inject": "wall", ...}` (`ValueError` if bad)."""
+    _only(params, ("point_m", "normal", "stiffness_n_m", "damping_n_s_m"), "wall")
+    point = _vector3(params, "point_m")
+    nx, ny, nz = _vector3(params, "normal")
+    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if norm < 1e-9:
+        raise ValueError('"normal" must not be zero')
+    stiffness = _positive(params, "stiffness_n_m", None)
+    damping = _positive(params, "damping_n_s_m", DEFAULT_WALL_DAMPING_N_S_M, allow_zero=True)
+    return Wall(point, (nx / norm, ny / norm, nz / norm), stiffness, damping)
+
+
+def push_from_params(params: dict[str, Any], now_s: float) -> Push:
+    """A push from `{"inject": "push", "force_n": [...], "torque_nm": [...], "duration_s": T}`."""
+    _only(params, ("force_n", "torque_nm", "duration_s"), "push")
+    f = _vector3(params, "force_n", [0.0, 0.0, 0.0])
+    t = _vector3(params, "torque_nm", [0.0, 0.0, 0.0])
+    duration = _positive(params, "duration_s", None)
+    return Push((*f, *t), now_s + duration)
+
+
+class World:
+    """The wall and the push, read by the arm's dynamics (any thread holding the controller's
+    lock, or the cycle itself); replaced whole, never changed in place."""
+
+    def __init__(self) -> None:
+        self.wall: Wall | None = None
+        self.push: Push | None = None
+        self.now_s = 0.0  # the controller's time, set by its cycle (the push's clock)
+
+    def wrench_at(self, p_m: FloatArray, v_m_s: FloatArray, out: FloatArray) -> bool:
+        """The external wrench on the TCP at `p_m` moving at `v_m_s` (base frame) into `out`;
+        False (and `out` zero) when there is none. Cheap when the world is empty."""
+        wall, push = self.wall, self.push
+        out[:] = 0.0
+        touched = False
+        if wall is not None:
+            n0, n1, n2 = wall.normal
+            w0, w1, w2 = wall.point_m
+            depth = (w0 - p_m[0]) * n0 + (w1 - p_m[1]) * n1 + (w2 - p_m[2]) * n2
+            if depth > 0.0:
+                speed_out = v_m_s[0] * n0 + v_m_s[1] * n1 + v_m_s[2] * n2
+                f = max(0.0, wall.stiffness_n_m * depth - wall.damping_n_s_m * speed_out)
+                out[0], out[1], out[2] = f * n0, f * n1, f * n2
+                touched = f > 0.0
+        if push is not None:
+            if self.now_s < push.until_s:
+                out += np.asarray(push.wrench)
+                touched = True
+            else:
+                self.push = None
+        return touched
+
+    def describe(self) -> dict[str, Any]:
+        """For the control channel's status."""
+        wall = self.wall
+        return {
+            "wall": None
+            if wall is None
+            else {
+                "point_m": list(wall.point_m),
+                "normal": list(wall.normal),
+                "stiffness_n_m": wall.stiffness_n_m,
+                "damping_n_s_m": wall.damping_n_s_m,
+            },
+            "push_active": self.push is not None and self.now_s < self.push.until_s,
+        }
