@@ -17,12 +17,14 @@ from pathlib import Path
 from orccadd.automaton import Automaton, Network, Report, compile_file, compile_text, verify, verify_network
 from orccadd.automaton import ast as A
 from orccadd.automaton.compiler import DEFAULT_MAX_STATES, Progress
+from orccadd.automaton.program import Program
 from orccadd.automaton.verify import CheckResult
 from orccadd.config.robot import MAX_TOML_BYTES
 from orccadd.confine import Confinement
 from orccadd.errors import ConfigError, MissionError, OrccaddError, ParameterError
 from orccadd.physres.base import PhysicalResource
 from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
+from orccadd.task.events import EventKind
 from orccadd.task.spec import TaskSpec, interface_of, parse_task_text
 from orccadd.types import TaskInterface
 
@@ -119,6 +121,8 @@ def build_mission_tasks(
     )
     bits: dict[int, int] = {}
     for i, name in enumerate(p.inputs):
+        if p.input_kind[i] == "operator" and "." in name:  # a resource's input, `R.X`
+            bits[_resource_io(p, name, bindings, "input", registry)] = 1 << i
         if p.input_task[i] < 0:
             continue
         try:
@@ -127,7 +131,32 @@ def build_mission_tasks(
             raise OrccaddError(
                 f"{p.file}: the mission expects event {name}, which its task does not raise"
             ) from None
+    for name in p.internals:
+        if "." in name:
+            _resource_io(p, name, bindings, "output", registry)
     return tasks, bits
+
+
+def _resource_io(p: Program, name: str, bindings: Bindings, what: str, registry: EventRegistry) -> int:
+    """`R.X`, a resource's named input (registered: its event id) or output action (checked)
+    against the robot's resource R; a `MissionError` at its declaration otherwise."""
+    r, x = name.split(".", 1)
+    decl = next(d for d in (*p.ast.inputs, *p.ast.signals) if d.name == name)
+    if r not in bindings:
+        raise _err(
+            decl.loc, p.text, f"`{name}`: this robot has no resource `{r}` (it has {', '.join(bindings)})"
+        )
+    resource = bindings[r][0]
+    have = resource.description.inputs if what == "input" else resource.description.outputs
+    if x not in have:
+        table = "digital_inputs" if what == "input" else "digital_outputs"
+        listed = ", ".join(have) or "none"
+        raise _err(
+            decl.loc, p.text,
+            f"`{name}`: resource `{r}` has no {what} `{x}` (its {what}s: {listed}; a `ur_rtde` arm names "
+            f"them in [resource.settings] {table})",
+        )  # fmt: skip
+    return registry.register(r, EventKind.INPUT, x) if what == "input" else -1
 
 
 def _err(decl_loc: A.Loc, text: str, msg: str) -> MissionError:

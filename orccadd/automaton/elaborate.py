@@ -85,6 +85,17 @@ class _Elaborator:
             raise self.err(loc, f"`{name}` is already declared at line {first.line}")
         self.declared[name] = loc
 
+    def resource_part(self, name: str, loc: A.Loc, resources: dict[str, A.Loc], what: str) -> None:
+        """`R.X`: R must be a declared resource, X not `fault` (the mission's own input)."""
+        if "." not in name:
+            return
+        r, x = name.split(".", 1)
+        if r not in resources:
+            have = f"declared resources: {', '.join(resources)}" if resources else f"add `resource {r}`"
+            raise self.err(loc, f"`{name}` names resource `{r}`'s {what}, but `{r}` is not declared ({have})")
+        if x == "fault":
+            raise self.err(loc, f"`{name}` is the mission's own input for {r}'s faults: declare nothing")
+
     def add_input(self, full: str, task: int, kind: str, short: str) -> None:
         self.full[full] = ("in", 1 << len(self.inputs))
         self.inputs.append(full)
@@ -103,9 +114,11 @@ class _Elaborator:
             resources[r.name] = r.loc
         for i in m.inputs:
             self.declare(i.name, i.loc, "signal")
+            self.resource_part(i.name, i.loc, resources, "input")
             self.add_input(i.name, -1, "operator", i.name)
         for s in m.signals:
             self.declare(s.name, s.loc, "signal")
+            self.resource_part(s.name, s.loc, resources, "output")
             self.full[s.name] = ("int", 1 << len(self.internals))
             self.internals.append(s.name)
             self.short.setdefault(s.name, []).append(s.name)

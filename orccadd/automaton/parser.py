@@ -199,9 +199,11 @@ class _Builder:
                 if name:
                     raise self.err(d, "a file holds one mission: a second `mission` line")
                 name = str(d.children[1])
-            elif kind in ("resource_decl", "input_decl", "signal_decl"):
-                target = {"resource_decl": resources, "input_decl": inputs, "signal_decl": signals}[kind]
-                target.extend(self.names(d.children[1]))
+            elif kind == "resource_decl":
+                resources.extend(self.names(d.children[1]))
+            elif kind in ("input_decl", "signal_decl"):
+                target = inputs if kind == "input_decl" else signals
+                target.extend(self.signal_names(d.children[1]))
             elif kind == "task_decl":
                 tasks.append(self.task(d))
             elif kind == "proc_decl":
@@ -215,6 +217,14 @@ class _Builder:
 
     def names(self, node: lark.Tree[Any]) -> list[A.NameDecl]:
         return [A.NameDecl(str(t), self.loc(t)) for t in node.children if isinstance(t, lark.Token)]
+
+    def signal_names(self, node: lark.Tree[Any]) -> list[A.NameDecl]:
+        """`S` or `R.X` (a resource's input or output action) for each name of the list."""
+        out = []
+        for sig in node.children:
+            parts = [t for t in sig.children if isinstance(t, lark.Token)]
+            out.append(A.NameDecl(".".join(str(t) for t in parts), self.loc(parts[0])))
+        return out
 
     def task(self, d: lark.Tree[Any]) -> A.TaskDecl:
         _, name, _, resource, _, joints, _, source, *items, _ = d.children

@@ -35,6 +35,7 @@ active tasks claim the same resource or joints), the mission's `never` and `alte
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 
 from orccadd.automaton import ast as A
@@ -146,7 +147,18 @@ def export_structure(
     for q in procs:
         out += q.render()
     out += _clock(p, names, properties, props)
-    return "\n".join(out) + "\n"
+    return _dotted_names(p, "\n".join(out) + "\n")
+
+
+def _dotted_names(p: Program, text: str) -> str:
+    """A resource's input or output action (`arm.part_present`) is a plain signal here, named
+    with `__` for the dot (a dot in Promela reads a struct field: task events use that)."""
+    dotted = [n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator" and "." in n]
+    dotted += [n for n in p.internals if "." in n]
+    for name in sorted(dotted, key=len, reverse=True):
+        flat = name.replace(".", "__")
+        text = re.sub(rf"\b(in|em|gs|resolve|pre)_{re.escape(name)}\b", rf"\1_{flat}", text)
+    return text
 
 
 def _ranks(p: Program) -> dict[int, int]:

@@ -106,7 +106,7 @@ def _modules(params: dict[str, list[dict[str, Any]]]) -> list[tuple[str, ...]]:
 RESOURCE_SHOWN = {
     "backend", "modes", "mode_switch_needs_disable", "position", "velocity", "torque", "brakes",
     "stop_categories", "read_time_s", "write_time_s", "clock", "device_period_s", "fault_reset",
-    "fault_injection", "diagnostics", "protocol_version", "signals",
+    "fault_injection", "diagnostics", "protocol_version", "signals", "inputs", "outputs",
 }  # fmt: skip
 
 
@@ -129,6 +129,14 @@ def _resource(res: dict[str, Any]) -> list[str]:
         ("fault injection", ", ".join(res["fault_injection"]) or "none"),
     ]
     rows += [("signal", str(g)) for g in res.get("signals") or []]
+    if res.get("inputs") or res.get("outputs"):
+        rows.append(
+            (
+                "digital I/O",
+                f"inputs {', '.join(res.get('inputs') or []) or 'none'}; "
+                f"outputs {', '.join(res.get('outputs') or []) or 'none'}",
+            )
+        )
     rows += [(k, str(v)) for k, v in res.items() if k not in RESOURCE_SHOWN]
     if d.get("fault_message") or d.get("fault_code"):
         rows.append(("device fault", f"{d.get('fault_message')} (code {d.get('fault_code')})"))

@@ -67,6 +67,8 @@ class SwitchingLoop(ControlLoop):
         self.blend_ticks = blend_ticks
         self.tunes: Mailbox[ParameterChange] = Mailbox(64)
         self._task_ids: dict[int, int] = {id(hold): 0}  # id(task) -> telemetry task id
+        # the event id of each of the resource's named inputs the mission declares (-1: not)
+        self._input_events: tuple[int, ...] = ()
         self._request: tuple[int, RobotTask, bool] = (0, hold, False)
         self._applied = -1
         self._notified = 0
@@ -96,6 +98,11 @@ class SwitchingLoop(ControlLoop):
     def switched(self, request: int) -> bool:
         """The control thread has applied switch request `request` (or a later one)."""
         return self._applied >= request
+
+    def set_input_events(self, ids: tuple[int, ...]) -> None:
+        """Per named input of the resource (`description.inputs`), the event its rising edge
+        pushes (-1: the mission does not declare it). One store: the old or the new tuple."""
+        self._input_events = ids
 
     def set_task_ids(self, ids: dict[int, int]) -> None:
         """Telemetry task ids by id(task) (`MissionControl.tasks`: the Hold tasks, then the
@@ -142,6 +149,11 @@ class SwitchingLoop(ControlLoop):
         assert task is not None
         first = self.queue.pushed
         task.compute(t_s)
+        rose = self.resource.take_rising()
+        if rose and self._input_events:  # read in this tick: the automaton reacts in it too
+            for i, eid in enumerate(self._input_events):
+                if rose >> i & 1 and eid >= 0:
+                    self.queue.push(t_s, eid)
         end = self.queue.pushed
         reactor = self.reactor  # the automaton's reaction to this tick's events, in this tick
         if end != first and reactor and reactor.react(self, t_s, first, end, task, self._switch_in_tick):

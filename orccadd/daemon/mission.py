@@ -66,7 +66,13 @@ class LoadedMission:
             "task_resources": [t.resource.name for t in self.tasks],  # the resource each runs on
             "tunables": [t.tunable_names for t in self.tasks],  # per task: what a tune record names
             "inputs": list(p.inputs),
-            "operator_inputs": [n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator"],
+            "operator_inputs": [
+                n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator" and "." not in n
+            ],
+            "resource_inputs": [
+                n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator" and "." in n
+            ],
+            "resource_outputs": [n for n in p.internals if "." in n],
             "fault_inputs": [n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "fault"],
             "actions": list(self.top.action_names),
             "states": self.automaton.n_states,

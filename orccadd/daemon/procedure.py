@@ -12,10 +12,13 @@ from collections.abc import Callable, Sequence
 from logging import INFO, WARNING
 from typing import Any, NamedTuple
 
+from orccadd.automaton import Automaton
 from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.mission import LoadedMission, MissionRunner
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError
+from orccadd.errors import OrccaddError
+from orccadd.physres.base import PhysicalResource
 from orccadd.task import RobotTask
 from orccadd.wire.schema import MachineState, MissionResult, Trace
 
@@ -93,6 +96,20 @@ class MissionControl:
         ids = {id(t): i for i, t in enumerate(self.tasks())}
         for lp in self.loops:
             lp.set_task_ids(ids)
+            lp.set_input_events(self._input_events(lp.resource))
+
+    def _input_events(self, resource: PhysicalResource) -> tuple[int, ...]:
+        """The event of each of `resource`'s named inputs the mission declares (`R.X`), -1 else."""
+        mission = self.mission
+        if mission is None:
+            return ()
+        p = mission.automaton.program
+        by_bit = {bit: eid for eid, bit in mission.event_bits.items()}
+        out = []
+        for x in resource.description.inputs:
+            name = f"{resource.name}.{x}"
+            out.append(by_bit.get(1 << p.inputs.index(name), -1) if name in p.inputs else -1)
+        return tuple(out)
 
     # ---- lifecycle ----------------------------------------------------------------------------
     def install(self, loaded: LoadedMission) -> None:
@@ -129,7 +146,12 @@ class MissionControl:
         mission = self.mission
         assert mission is not None
         p = mission.automaton.program
-        ops = [n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator"]
+        ops = [n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator" and "." not in n]
+        if "." in name and name in p.inputs:
+            r = name.split(".", 1)[0]
+            raise CommandError(
+                f"{name} is resource {r}'s digital input: it comes from the device, not from `send`"
+            )
         for op in ops:
             if op == name or op.lower() == name.lower():
                 return 1 << p.inputs.index(op)
@@ -227,6 +249,17 @@ class MissionControl:
             out[k] = (task, bool(starts >> i & 1))
         return out
 
+    def _outputs(self, a: Automaton, actions: int) -> None:
+        """The resources' output actions the instant emits (`emit R.Y`), in declaration order.
+        One the device refuses is said, and the run goes on (the mission cannot see it)."""
+        for k, name in enumerate(a.program.internals):
+            if "." in name and actions >> (a.emit_base + k) & 1:
+                r, y = name.split(".", 1)
+                try:
+                    self.loops[self._by_resource[r]].resource.set_output(y)
+                except (OrccaddError, KeyError) as e:
+                    self.note(f"output {name} not performed: {e}", WARNING)
+
     def _apply(self, actions: int, request: bool = True) -> None:
         mission, runner = self.mission, self.runner
         assert mission is not None and runner is not None
@@ -242,6 +275,7 @@ class MissionControl:
             self.note(", ".join(a.describe_actions(actions)))
         if actions & a.safe_bit:
             self.note("entering the safe procedure", WARNING)
+        self._outputs(a, actions)
         self.current = [target for target, _ in decided]
         if request and self.state is not MachineState.HOLDING:
             for lp, (target, restart) in zip(self.loops, decided, strict=True):

@@ -210,6 +210,16 @@ class PhysicalResource(ABC):
             raise ResourceError(f"resource {self.name!r} ({self.description.backend}) cannot reset a fault")
         self._on_reset_fault()
 
+    def take_rising(self) -> int:
+        """The named digital inputs (`description.inputs`, bit i for the i-th) that rose since
+        the last call (tick-safe; the backend notes them as it reads). Default: none."""
+        return 0
+
+    def set_output(self, name: str) -> None:
+        """Perform the output action `name` (`description.outputs`: a digital output set or
+        cleared). Not for a tick; `ResourceError` if it cannot."""
+        raise ResourceError(f"resource {self.name!r} ({self.description.backend}) has no output {name!r}")
+
     def inject_fault(self, kind: str, message: str) -> None:
         """Make the device report a fault of `kind` (tests, commissioning). `ResourceError` if the
         backend does not declare that kind."""

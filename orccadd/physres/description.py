@@ -79,6 +79,10 @@ class ResourceDescription:
     fault_injection: tuple[str, ...] = ()  # kinds `inject_fault()` accepts
     extra: dict[str, str] = field(default_factory=dict)  # backend facts shown by `describe`
     signals: tuple[Signal, ...] = ()  # measured beyond q, dq, tau (task wiring outputs)
+    # named digital inputs (a mission's input `R.X` on each rising edge) and output actions (a
+    # mission's `emit R.Y`), as the robot config names them
+    inputs: tuple[str, ...] = ()
+    outputs: tuple[str, ...] = ()
 
     def as_dict(self) -> dict[str, object]:
         """Plain data for `describe` and `status`."""
@@ -98,6 +102,8 @@ class ResourceDescription:
             "fault_reset": self.fault_reset,
             "fault_injection": list(self.fault_injection),
             "signals": [s.describe() for s in self.signals],
+            "inputs": list(self.inputs),
+            "outputs": list(self.outputs),
             **self.extra,
         }
 

@@ -43,7 +43,7 @@ import pinocchio as pin
 from orccadd.config.robot import RobotConfig
 from orccadd.drivers.ur.controller import RobotMode, SafetyMode, parse_polyscope_version
 from orccadd.drivers.ur.remote_link import RemoteLink
-from orccadd.drivers.ur.settings import RATED_PAYLOAD_KG, UrRtdeSettings
+from orccadd.drivers.ur.settings import NAME, RATED_PAYLOAD_KG, UrRtdeSettings, io_bit, output_action
 from orccadd.errors import ConfigError, ResourceError
 from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
@@ -87,6 +87,19 @@ def _check_tool(s: UrRtdeSettings, file: str) -> None:
             raise ConfigError(file, f"{key}.{name}", f"(={value!r}) must have {n} numbers")
 
 
+def _check_io(s: UrRtdeSettings, file: str) -> None:
+    """Each named input and output action: an identifier, on an I/O the controller has."""
+    for table, parse in (("digital_inputs", lambda v: io_bit(v, "I")), ("digital_outputs", output_action)):
+        for name, spec in (getattr(s, table) or {}).items():
+            key = f"resource.settings.{table}.{name}"
+            if not NAME.match(name) or name == "fault":
+                raise ConfigError(file, key, "must be an identifier (letters, digits, _), not `fault`")
+            try:
+                parse(spec)
+            except ValueError as e:
+                raise ConfigError(file, key, f"(={spec!r}) {e}") from None
+
+
 def _period_of(model: str) -> float:
     return 0.002 if model in E_SERIES else 0.008
 
@@ -121,6 +134,8 @@ class UrRtdeArm(PhysicalResource):
             device_period_s=_period_of(s.model),
             fault_reset=True,
             signals=SIGNALS,
+            inputs=tuple(s.digital_inputs or {}),
+            outputs=tuple(s.digital_outputs or {}),
         )
 
     @classmethod
@@ -131,6 +146,7 @@ class UrRtdeArm(PhysicalResource):
         if len(cfg.joints) != 6:
             raise ConfigError(file, "joints", f"a UR arm has 6 joints, the config lists {len(cfg.joints)}")
         _check_tool(s, file)
+        _check_io(s, file)
         try:
             parse_polyscope_version(s.min_version)
         except ValueError:
@@ -159,6 +175,10 @@ class UrRtdeArm(PhysicalResource):
         self._stop_t0 = 0.0  # tick time the safe stop began
         self.packets_missed = 0
         self._wrench, self._speed_scaling = self.signals["wrench"], self.signals["speed_scaling"]
+        # the named inputs' bits in RTDE's digital input bits, in the description's order
+        self._input_bits = [io_bit(v, "I") for v in (self.settings.digital_inputs or {}).values()]
+        self._inputs_were = -1  # the named inputs' levels at the last read (-1: none read yet)
+        self._rose = 0
         self._flags = 0  # the last read's status flags, repeated while a reset holds the links
 
     # ---- lifecycle ------------------------------------------------------------------------
@@ -289,6 +309,8 @@ class UrRtdeArm(PhysicalResource):
         if pkg.tcp_force:
             self._wrench[:] = pkg.tcp_force
         self._speed_scaling[0] = pkg.speed_scaling
+        if self._input_bits:
+            self._note_inputs(pkg.digital_inputs)
         robot_mode, safety_mode = pkg.robot_mode, pkg.safety_mode
         cond = pkg.condition()
         self._controller_stopped = cond is not None
@@ -308,6 +330,29 @@ class UrRtdeArm(PhysicalResource):
         if robot_mode != RobotMode.RUNNING:
             flags |= int(Status.TORQUE_OFF)
         return flags
+
+    def _note_inputs(self, bits: int) -> None:
+        levels = 0
+        for i, b in enumerate(self._input_bits):
+            levels |= (bits >> b & 1) << i
+        if self._inputs_were >= 0:  # the first read sets the levels: an input already high is no edge
+            self._rose |= levels & ~self._inputs_were
+        self._inputs_were = levels
+
+    def take_rising(self) -> int:
+        rose, self._rose = self._rose, 0
+        return rose
+
+    def set_output(self, name: str) -> None:
+        """The output action `name` (`digital_outputs`) through ur_rtde's I/O interface."""
+        spec = (self.settings.digital_outputs or {}).get(name)
+        if spec is None:
+            super().set_output(name)
+            return
+        bit, on = output_action(spec)
+        bank = "Standard" if bit < 8 else "Configurable" if bit < 16 else "Tool"
+        index = bit if bit < 8 else bit - 8 if bit < 16 else bit - 16
+        self.link.call("io", f"set{bank}DigitalOut", index, on)
 
     def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
         if not self.link.lock.acquire(blocking=False):

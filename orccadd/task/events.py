@@ -21,6 +21,7 @@ class EventKind(IntEnum):
     T3 = 3  # type 3 exception: fatal, safe stop at once, then the safe procedure
     SYNC = 4  # synchronisation signal
     PRE = 5  # the preconditions held: the law started (only for tasks with preconditions)
+    INPUT = 6  # a resource's named digital input rose (`R.X`: "task" is the resource)
 
 
 KIND_PREFIX = {
@@ -30,6 +31,7 @@ KIND_PREFIX = {
     EventKind.T3: "T3.",
     EventKind.SYNC: "sync.",
     EventKind.PRE: "",
+    EventKind.INPUT: "",
 }
 
 PRECONDITION_TIMEOUT = "PreconditionTimeout"

@@ -221,3 +221,41 @@ def test_the_computed_torque_demo_runs_on_the_controllers_direct_torque(
     started = run_started(daemon, sim, ROOT / "configs/missions/demo.mission")
     assert started[:3] == ["start Home", "start Reach", "start Inspect"], started
     assert sim.status()["protective_stops"] == 0
+
+
+TOOL_OUT_0 = 1 << 16  # RTDE's digital output bits: the tool's outputs at 16-17
+
+
+def test_a_digital_input_moves_the_mission_and_its_emits_set_the_tools_output(
+    sim: UrSimProcess, tmp_path: Path
+) -> None:
+    """configs/missions/part_io.mission through orccadd on the simulated controller: it waits
+    for the part sensor (DI0, raised through the simulator's control channel), closes the
+    gripper (TO0 on, seen in the controller's output bits), carries, opens (TO0 off), goes home.
+    `send` cannot fake the sensor."""
+    d = start_daemon_with(tmp_path, local_config(tmp_path, UR))  # it names DI0 and TO0
+    try:
+        desc = d.call("describe")
+        res = desc["resource"]  # type: ignore[index]
+        assert res["inputs"] == ["part_present"] and res["outputs"] == ["close_gripper", "open_gripper"], res
+        r = d.ctl("load", str(ROOT / "configs/missions/part_io.mission"))
+        assert r.returncode == 0, r.stderr
+        d.call("start")
+        time.sleep(0.5)
+        s = d.status()
+        assert s["state"] == "running" and s["active_task"].startswith("Hold"), s  # waiting for the part
+        r = d.ctl("send", "arm.part_present")
+        assert r.returncode != 0 and "comes from the device" in r.stderr, r.stderr
+        assert not sim.status()["digital_output_bits"] & TOOL_OUT_0
+        sim.inject("digital_input", index=0, value=True)
+        d.wait(lambda s: s["active_task"] == "Carry", timeout_s=10)
+        assert sim.status()["digital_output_bits"] & TOOL_OUT_0  # closed before the carry
+        s = d.wait(lambda s: s["state"] != "running", timeout_s=60)
+        assert s["result"] == "success", s
+        assert not sim.status()["digital_output_bits"] & TOOL_OUT_0  # opened after it
+        events = d.call("events", last=40)["events"]  # type: ignore[index]
+        instants = [e for e in events if e["kind"] == "instant"]
+        assert any("arm.part_present" in e["inputs"] for e in instants), instants
+        assert any("arm.close_gripper" in " ".join(e["actions"]) for e in instants), instants
+    finally:
+        d.stop()

@@ -305,3 +305,28 @@ def test_the_configs_payload_and_tcp_are_set_on_the_controller_and_a_bad_one_ref
         text = CONFIG.read_text().replace("[resource.settings]\n", "[resource.settings]\npayload_kg = 6.0\n")
         (tmp_path / "six.toml").write_text(text.replace('"../', f'"{CONFIG.parent.parent}/'))
         load_robot_config(tmp_path / "six.toml")
+
+
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        (
+            'digital_inputs = { part = "DI8" }',
+            r"digital_inputs\.part \(='DI8'\) is not one of DI0-DI7, CI0-CI7, TI0-TI1",
+        ),
+        ('digital_inputs = { fault = "DI0" }', r"digital_inputs\.fault must be an identifier"),
+        (
+            'digital_outputs = { close = "TO0" }',
+            r"digital_outputs\.close \(='TO0'\) must be OUTPUT=on or OUTPUT=off",
+        ),
+        ('digital_outputs = { close = "TO2=on" }', r"is not one of DO0-DO7, CO0-CO7, TO0-TO1"),
+    ],
+)
+def test_a_digital_io_the_controller_does_not_have_is_refused_naming_it(
+    tmp_path: Path, line: str, message: str
+) -> None:
+    text = CONFIG.read_text().replace('"../', f'"{CONFIG.parent.parent}/')
+    text = "\n".join(t for t in text.splitlines() if not t.startswith(("digital_inputs", "digital_outputs")))
+    (tmp_path / "io.toml").write_text(text.replace("[resource.settings]\n", f"[resource.settings]\n{line}\n"))
+    with pytest.raises(ConfigError, match=message):
+        load_robot_config(tmp_path / "io.toml")

@@ -42,6 +42,7 @@ class UrLink:
         self.receive: Any = None
         self.control: Any = None
         self.dashboard: Any = None
+        self.io: Any = None  # ur_rtde's RTDEIOInterface, where the config names outputs
         self.version: Version | None = None
         self.robot_model = ""
         # `reset` and `clear_stop` come from the daemon's command thread while the control thread
@@ -127,6 +128,10 @@ class UrLink:
             self.control = self._try(
                 lambda: rtde_control.RTDEControlInterface(host, hz, flags, 50002, prio), "the control script"
             )
+            if self.settings.digital_outputs:
+                import rtde_io
+
+                self.io = self._try(lambda: rtde_io.RTDEIOInterface(host), "RTDE's I/O inputs")
         for w in started.warnings:
             log.warning("%s: %s", self.name, w)
         self.watchdog_armed = False
@@ -158,6 +163,7 @@ class UrLink:
         the disconnect: ur_rtde's destructors disconnect (0.5 s each, joining their threads), so
         an explicit disconnect() before would cost it twice. Nothing else holds them:
         `wait_for_package` looks `receive` up at every poll."""
+        self.io = None
         self.control = None
         self.receive = None
         self.dashboard = None

@@ -38,7 +38,7 @@ from orccadd.errors import OrccaddError
 from orccadd.runtime.rt import realtime_device_process
 
 STREAM_METHODS = frozenset({"servoJ", "speedJ", "directTorque", "kickWatchdog"})
-CALL_TARGETS = frozenset({"link", "control"})
+CALL_TARGETS = frozenset({"link", "control", "io"})
 
 
 class LinkServer:
@@ -109,7 +109,10 @@ class LinkServer:
             self.send("reply", seq, False, f"no such call: {target}.{method}")
             return
         try:
-            value = getattr(self.link if target == "link" else self.link.control, method)(*args)
+            obj = {"link": self.link, "control": self.link.control, "io": self.link.io}[target]
+            if obj is None:
+                raise AttributeError(f"no {target} interface")
+            value = getattr(obj, method)(*args)
         except (OrccaddError, RuntimeError, AttributeError) as e:
             self.send("reply", seq, False, f"{type(e).__name__}: {e}")
             return

@@ -63,6 +63,7 @@ class StreamState:
     script_running: bool
     tcp_force: tuple[float, ...] = ()  # actual_TCP_force: N and N·m, base frame
     speed_scaling: float = 1.0  # the speed slider's fraction times the controller's own scaling
+    digital_inputs: int = 0  # actual_digital_input_bits: standard 0-7, configurable 8-15, tool 16-17
 
     def condition(self) -> Condition | None:
         """What stops the arm in this package (None: it may move)."""
@@ -87,6 +88,7 @@ def snapshot(link: Any, arrival_ns: int) -> StreamState:
             bool(int(r.getRobotStatus()) & ROBOT_PROGRAM_RUNNING),
             tuple(r.getActualTCPForce()),
             float(r.getSpeedScaling()),
+            int(r.getActualDigitalInputBits()),
         )
     except (RuntimeError, AttributeError):
         return StreamState(-1.0, arrival_ns, False, (), (), (), 0, 0, 0, False)
@@ -298,8 +300,8 @@ class RemoteLink:
 
     # ---- calls (not for a tick) -------------------------------------------------------------
     def call(self, target: str, method: str, *args: Any, timeout_s: float = CALL_TIMEOUT_S) -> Any:
-        """`target.method(*args)` in the link process (`link`: the `UrLink`; `control`: ur_rtde's
-        control interface); its error raised here as a `ResourceError` with its words."""
+        """`target.method(*args)` in the link process (`link`: the `UrLink`; `control`, `io`:
+        ur_rtde's control and I/O interfaces); its error raised here as a `ResourceError`."""
         with self._io:
             sock = self._sock
             if sock is None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Literal
 
@@ -44,3 +45,32 @@ class UrRtdeSettings:
     payload_kg: float | None = field(default=None, bounds=(0.0, 35.0))
     payload_cog_m: list[float] | None = field(default=None)
     tcp_m_rad: list[float] | None = field(default=None)
+    # named digital inputs, each a mission input `R.X` on its rising edge: the controller's DI0-DI7,
+    # its configurable CI0-CI7, the tool's TI0-TI1 (`{ part_present = "DI0" }`)
+    digital_inputs: dict[str, str] | None = field(default=None)
+    # named output actions, each a mission's `emit R.Y`: an output set (=on) or cleared (=off),
+    # the controller's DO0-DO7, its configurable CO0-CO7, the tool's TO0-TO1
+    # (`{ close_gripper = "TO0=on", open_gripper = "TO0=off" }`)
+    digital_outputs: dict[str, str] | None = field(default=None)
+
+
+IO_BANKS = {"D": (0, 8), "C": (8, 8), "T": (16, 2)}  # bank letter: first bit, count (RTDE's layout)
+NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+def io_bit(spec: str, kind: str) -> int:
+    """ "DI3" (kind "I") or "TO1" (kind "O") → its bit in RTDE's digital bits (standard 0-7,
+    configurable 8-15, tool 16-17); ValueError with what is allowed."""
+    m = re.fullmatch(rf"([DCT]){kind}(\d)", spec)
+    if m is None or int(m[2]) >= IO_BANKS[m[1]][1]:
+        raise ValueError(f"is not one of D{kind}0-D{kind}7, C{kind}0-C{kind}7, T{kind}0-T{kind}1")
+    first, _ = IO_BANKS[m[1]]
+    return first + int(m[2])
+
+
+def output_action(spec: str) -> tuple[int, bool]:
+    """ "TO0=on" → (bit 16, True)."""
+    pin, _, level = spec.partition("=")
+    if level not in ("on", "off"):
+        raise ValueError("must be OUTPUT=on or OUTPUT=off (e.g. TO0=on)")
+    return io_bit(pin, "O"), level == "on"
