@@ -6,8 +6,8 @@ wire time of the bytes at that rate, see `orccadd.dxlsim.link`), with the arm he
 mode and this process at SCHED_FIFO 80 where permitted:
 
 - the wire time of one cycle from the packet lengths (`drivers.dynamixel.wire`: one Fast Sync
-  Read of current, velocity and position + one Sync Write of Goal Position, 10 bits a byte, no
-  return delay): what `describe()` declares;
+  Read of current, velocity and position + one Sync Write of Goal Position, 10 bits a byte, the
+  servos' return delay): what `describe()` declares;
 - the measured cycle, back to back for `--cycle-s`: the chain's sync read + sync write alone,
   and the resource's `read()` + `write()` (units, limits and checks included): median, p99, max,
   and the chain's median over the wire time;
@@ -15,8 +15,15 @@ mode and this process at SCHED_FIFO 80 where permitted:
   skipped period: rates tried from the fastest the cycle's p99 allows, down a ladder, each run
   stopped at its first failure.
 
+The simulated chain holds each reply's tail short of a USB packet (62 bytes) for
+`--latency-timer-ms`, as an FTDI adapter does (default 1 ms, as packaging/udev sets it; the
+adapter's own default is 16 ms), and the backend writes `--return-delay-us` (default 0; the
+servos' factory value is 500 µs): run once with `--latency-timer-ms 16 --return-delay-us 500`
+to see what the settings are worth.
+
 Targets: measured cycle ≤ 1.3 × the wire time; 6 servos at 4 Mbit/s ≥ 500 Hz. Usage:
-`python benchmarks/dxl_cycle.py [--seconds 60] [--bauds 1000000,2000000,3000000,4000000]`.
+`python benchmarks/dxl_cycle.py [--seconds 60] [--bauds 1000000,2000000,3000000,4000000]
+[--latency-timer-ms 1] [--return-delay-us 0]`.
 """
 
 from __future__ import annotations
@@ -72,10 +79,16 @@ def met(ok: bool) -> str:
     return "met" if ok else "NOT met"
 
 
+RETURN_DELAY_US = 0  # set by --return-delay-us (main)
+
+
 def config_text(port: Path, baud: int, period_s: float, read_timeout_s: float) -> str:
     text = SIM.read_text().replace('"../urdf/', f'"{ROOT}/configs/urdf/')
     text = text.replace('port = "/tmp/orccadd-dxl-6axis"', f'port = "{port}"')
-    text = text.replace("baud_rate = 4_000_000", f"baud_rate = {baud}\nread_timeout_s = {read_timeout_s:g}")
+    text = text.replace(
+        "baud_rate = 4_000_000",
+        f"baud_rate = {baud}\nread_timeout_s = {read_timeout_s:g}\nreturn_delay_us = {RETURN_DELAY_US}",
+    )
     return text.replace("control_period_s = 0.005", f"control_period_s = {period_s:g}")
 
 
@@ -158,7 +171,7 @@ def run_baud(baud: int, args: argparse.Namespace, tmp: Path) -> tuple[float, flo
     port = tmp / f"tty{baud}"
     config = tmp / f"dxl-{baud}.toml"
     config.write_text(config_text(port, baud, 0.005, 0.003))
-    sim = DxlSimProcess(config)
+    sim = DxlSimProcess(config, "--latency-timer-ms", f"{args.latency_timer_ms:g}")
     try:
         servo_priority(sim, args.sim_priority)
         arm = open_arm(config)
@@ -236,9 +249,22 @@ def main() -> int:
     ap.add_argument("--cycle-s", type=float, default=5.0, help="back-to-back cycles measured for")
     ap.add_argument("--bauds", default="1000000,2000000,3000000,4000000")
     ap.add_argument("--sim-priority", type=int, default=70, help="SCHED_FIFO of the simulator (0: normal)")
+    ap.add_argument(
+        "--latency-timer-ms", type=float, default=1.0,
+        help="the simulated USB adapter's latency timer (1: as packaging/udev sets it; FTDI's default 16)",
+    )  # fmt: skip
+    ap.add_argument(
+        "--return-delay-us", type=int, default=0,
+        help="each servo's Return Delay Time, written by the backend (0: its default; the factory's: 500)",
+    )  # fmt: skip
     args = ap.parse_args()
+    global RETURN_DELAY_US
+    RETURN_DELAY_US = args.return_delay_us
     tmp = Path(tempfile.mkdtemp(prefix="dxlb"))  # short: the control socket's path has ~100 characters
-    print("dxl_cycle: 6 servos (dxl-6axis-sim: 3 x XM540-W270, 3 x XM430-W350), simulated chain on a pty")
+    print(
+        "dxl_cycle: 6 servos (dxl-6axis-sim: 3 x XM540-W270, 3 x XM430-W350), simulated chain on a pty, "
+        f"latency timer {args.latency_timer_ms:g} ms, return delay {args.return_delay_us} µs"
+    )
     results = {}
     try:
         for baud in (int(b) for b in args.bauds.split(",")):

@@ -60,6 +60,14 @@ def main(argv: list[str] | None = None) -> int:
         help="SCHED_FIFO priority of the simulator (0: time-shared); real servos answer whatever "
         "the robot PC does, this simulator only if it is real-time too (beside orccadd's loop)",
     )
+    ap.add_argument(
+        "--latency-timer-ms",
+        type=float,
+        default=0.0,
+        help="the USB adapter's latency timer between the servos and the controller: each reply "
+        "reaches it that much later (an FTDI adapter holds a short packet until its timer; its "
+        "default is 16 ms, 1 ms once set; default here 0: no adapter)",
+    )
     args = ap.parse_args(argv)
     try:
         setup_logging("orccadd.dxlsim")
@@ -88,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    server = Server(chain, link, control)
+    server = Server(chain, link, control, latency_s=args.latency_timer_ms * 1e-3)
     if args.priority:
         for warning in realtime_device_process(args.priority):
             log.warning("%s", warning)

@@ -19,6 +19,7 @@ from orccadd.dxlsim.control import ControlServer
 from orccadd.dxlsim.link import PtyLink, wire_time_s
 from orccadd.dxlsim.protocol import PacketReader
 
+USB_PACKET_DATA = 62  # an FTDI adapter's USB packet: 64 bytes, 2 of them its status
 IDLE_S = 0.001
 EARLY_S = 0.0001  # a status packet due sooner than this is written now (select's own jitter)
 RECEIVE_TIMEOUT_S = 0.1  # an unfinished packet older than this is dropped (a servo's timeout)
@@ -26,8 +27,14 @@ MAX_CATCH_UP_S = 1.0  # a longer gap (the process was stopped) is skipped, not i
 
 
 class Server:
-    def __init__(self, chain: Chain, link: PtyLink, control: ControlServer | None = None) -> None:
+    def __init__(
+        self, chain: Chain, link: PtyLink, control: ControlServer | None = None, latency_s: float = 0.0
+    ) -> None:
         self.chain = chain
+        # the USB adapter's latency timer: the part of a status packet short of a full USB packet
+        # (62 bytes of data) waits in the adapter until the timer runs out, as an FTDI chip
+        # holds it: the reply is complete at the controller that much later
+        self.latency_s = latency_s
         self.link = link
         self.control = control
         self.reader = PacketReader()
@@ -73,7 +80,9 @@ class Server:
             for reply in self.chain.handle(packet, now_s):
                 late_s = late_s or self.chain.delay_s()  # one transaction's replies late together
                 t += reply.delay_s + wire_time_s(len(reply.data), self.baud)
-                self._queue(t + late_s, self.chain.corrupt(reply.data))
+                # whole USB packets leave at once; a reply's tail shorter than one waits the timer
+                held = self.latency_s if len(reply.data) % USB_PACKET_DATA else 0.0
+                self._queue(t + late_s + held, self.chain.corrupt(reply.data))
             self.bus_free_s = t + late_s  # what follows on the bus comes after it
         if not self.reader.pending:
             self._rx_start_s = now_s

@@ -339,3 +339,26 @@ def test_a_lowered_current_limit_caps_the_grip_whatever_goal_current_says(
         bus.ph.write1ByteTxRx(bus.port, servo, TORQUE_ENABLE, 0)
         bus.ph.write2ByteTxRx(bus.port, servo, current_limit, 1193)
         bus.ph.write1ByteTxRx(bus.port, servo, operating_mode, 3)
+
+
+def test_a_usb_adapters_latency_timer_holds_every_short_reply(workdir: Path) -> None:
+    """`--latency-timer-ms 16` (an FTDI adapter as it comes): a ping's 14-byte reply reaches the
+    stock SDK no sooner than 16 ms after it left the servo; the dxl_cycle benchmark shows what
+    that costs a loop."""
+    d = workdir / "latency"
+    d.mkdir(exist_ok=True)
+    sim = DxlSimProcess(CONFIG, "--port", str(d / "ttyDXL"), "--latency-timer-ms", "16")
+    try:
+        b = Bus(sim.port, 4_000_000)
+        try:
+            times = []
+            for _ in range(5):
+                t0 = time.perf_counter()
+                _, result, _ = b.ph.ping(b.port, 1)
+                times.append((time.perf_counter() - t0) * 1e3)
+                assert result == COMM_SUCCESS
+        finally:
+            b.close()
+    finally:
+        sim.stop()
+    assert min(times) >= 16.0 and statistics.median(times) < 200.0, times

@@ -61,7 +61,7 @@ def eeprom_targets(settings: DynamixelSettings, cfg: RobotConfig) -> list[Eeprom
     for servo, units, joint in zip(settings.servos, settings.units(), cfg.joints, strict=True):
         lo, hi = units.tick_range(joint.position_min_rad, joint.position_max_rad)
         values = {
-            T.RETURN_DELAY_TIME: 0,
+            T.RETURN_DELAY_TIME: settings.return_delay_us // 2,  # 2 µs units
             T.OPERATING_MODE: MODE_NAMES[servo.operating_mode],
             T.HOMING_OFFSET: 0,
             T.MIN_POSITION_LIMIT: min(max(lo, 0), TICKS_PER_REV - 1),
