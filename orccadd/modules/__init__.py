@@ -2,7 +2,7 @@
 
 from importlib.metadata import entry_points
 
-from orccadd.modules import control, filters, trajectory, watchers  # noqa: F401 - register built-ins
+from orccadd.modules import control, filters, trajectory, ur, watchers  # noqa: F401 - register built-ins
 from orccadd.modules.base import MODULES, Module, ModuleContext, Parameter, Port, register
 
 

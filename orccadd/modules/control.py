@@ -198,3 +198,21 @@ class HoldPosition(KernelModule):
             return self._outs
 
         return hold
+
+
+@register("measured_position")
+class MeasuredPosition(KernelModule):
+    """Setpoint source for a task whose motion the device runs itself (a UR's force mode or
+    freedrive): the measured position, each tick. The joint command then says where the arm is,
+    so a task switch blends from there, never back to where the behaviour began."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        self.q = self.add_input("q", (ctx.dof,), "rad")
+        self.q_des = self.add_output("q_des", (ctx.dof,), "rad")
+
+    def kernel(self) -> Kernel:
+        def measured(t_s: float, q: list[float]) -> tuple[list[float]]:
+            return (q,)
+
+        return measured

@@ -74,6 +74,10 @@ class PhysicalResource(ABC):
         self.state = JointState(self.dof)
         # the description's other signals, preallocated: `read` fills them in place
         self.signals: dict[str, FloatArray] = {g.name: np.zeros(g.size) for g in self.description.signals}
+        # and the commands beyond the joint command (element 0: the tick that wrote it, NaN: none)
+        self.commands: dict[str, FloatArray] = {
+            g.name: np.full(g.size, np.nan) for g in self.description.commands
+        }
         self.fault: Fault | None = None  # what the device or the limits reported last (None: nothing)
         self._cmd: FloatArray = np.zeros(self.dof)
         self._last_pos_cmd: FloatArray = np.zeros(self.dof)

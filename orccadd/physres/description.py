@@ -79,6 +79,9 @@ class ResourceDescription:
     fault_injection: tuple[str, ...] = ()  # kinds `inject_fault()` accepts
     extra: dict[str, str] = field(default_factory=dict)  # backend facts shown by `describe`
     signals: tuple[Signal, ...] = ()  # measured beyond q, dq, tau (task wiring outputs)
+    # commanded beyond the joint command (optional task wiring inputs: a UR's force mode); a
+    # task's module writes the tick's time in element 0 of those it commands in that tick
+    commands: tuple[Signal, ...] = ()
     # named digital inputs (a mission's input `R.X` on each rising edge) and output actions (a
     # mission's `emit R.Y`), as the robot config names them
     inputs: tuple[str, ...] = ()
@@ -102,6 +105,7 @@ class ResourceDescription:
             "fault_reset": self.fault_reset,
             "fault_injection": list(self.fault_injection),
             "signals": [s.describe() for s in self.signals],
+            "commands": [s.describe() for s in self.commands],
             "inputs": list(self.inputs),
             "outputs": list(self.outputs),
             **self.extra,

@@ -47,6 +47,7 @@ from orccadd.drivers.ur.settings import NAME, RATED_PAYLOAD_KG, UrRtdeSettings, 
 from orccadd.errors import ConfigError, ResourceError
 from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
+from orccadd.modules.ur import FORCE_MODE_SIZE, FORCE_MODE_UNIT, FREEDRIVE_SIZE, FREEDRIVE_UNIT
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, ClockSource, Quantity, ResourceDescription, Signal, Source
 from orccadd.physres.stop_ramp import StopRamp
@@ -57,11 +58,16 @@ from orccadd.types import CommandMode, Status
 E_SERIES = ("UR3e", "UR5e", "UR10e", "UR16e", "UR20", "UR30")
 AT_REST_RAD_S = 0.01
 DIRECT_TORQUE_SINCE = (5, 26)  # ur_rtde 1.6's script calls `direct_torque` on 5.26 and later only
+NO_FRICTION_SCALE = [0.0] * 6  # what that script passes to `direct_torque`, whatever it is sent
+FORCE_MODE, FREEDRIVE = "force_mode", "freedrive"  # the commands' names (the modules' outputs')
+COMMANDS = (
+    Signal(FORCE_MODE, FORCE_MODE_SIZE, FORCE_MODE_UNIT, "the controller's force mode (ur_force_mode)"),
+    Signal(FREEDRIVE, FREEDRIVE_SIZE, FREEDRIVE_UNIT, "the controller's freedrive (ur_freedrive)"),
+)
 SIGNALS = (
     Signal("wrench", 6, "N|N.m", "the TCP's force and torque, base frame (RTDE actual_TCP_force)"),
     Signal("speed_scaling", 1, "1", "the controller's speed scaling: its speed slider times its own"),
 )
-NO_FRICTION_SCALE = [0.0] * 6  # what that script passes to `direct_torque`, whatever it is sent
 
 
 def direct_torque(config: RobotConfig) -> bool:
@@ -134,6 +140,7 @@ class UrRtdeArm(PhysicalResource):
             device_period_s=_period_of(s.model),
             fault_reset=True,
             signals=SIGNALS,
+            commands=COMMANDS,
             inputs=tuple(s.digital_inputs or {}),
             outputs=tuple(s.digital_outputs or {}),
         )
@@ -179,6 +186,8 @@ class UrRtdeArm(PhysicalResource):
         self._input_bits = [io_bit(v, "I") for v in (self.settings.digital_inputs or {}).values()]
         self._inputs_were = -1  # the named inputs' levels at the last read (-1: none read yet)
         self._rose = 0
+        self._force_cmd, self._freedrive_cmd = self.commands[FORCE_MODE], self.commands[FREEDRIVE]
+        self._behaving = ""  # the controller's behaviour a task runs: FORCE_MODE, FREEDRIVE or ""
         self._flags = 0  # the last read's status flags, repeated while a reset holds the links
 
     # ---- lifecycle ------------------------------------------------------------------------
@@ -358,9 +367,76 @@ class UrRtdeArm(PhysicalResource):
         if not self.link.lock.acquire(blocking=False):
             return 0
         try:
-            return self._send(mode, command)
+            behaviour = self._behaviour(t_s)
+            return self._send(mode, command) if behaviour is None else behaviour
+        except ResourceError as e:  # a call to the link process failed: it is gone
+            self._lose(str(e))
+            return int(Status.COMM_LOST)
         finally:
             self.link.lock.release()
+
+    # ---- the controller's own behaviours (force mode, freedrive) --------------------------
+    def _behaviour(self, t_s: float) -> int | None:
+        """Force mode or freedrive where this tick's task asks for one (its module wrote the tick's
+        time into the command): sent instead of the joint command, whose flags are returned;
+        None: neither, and one that ran is ended first (the arm then held where it is)."""
+        if not self._control_ready():
+            return None  # _send says why
+        if self._force_cmd[0] == t_s:
+            return self._force_mode(self._force_cmd)
+        if self._freedrive_cmd[0] == t_s:
+            return self._freedrive(self._freedrive_cmd)
+        if self._behaving:
+            self._end_behaviour()
+        return None
+
+    def _force_mode(self, cmd: FloatArray) -> int:
+        s = self.settings
+        frame, selection, wrench = cmd[1:7], cmd[7:13], cmd[13:19]
+        frame_type, limits = int(cmd[19]), cmd[20:26]
+        force = float(np.linalg.norm(wrench[:3] * selection[:3]))
+        speed = float(np.max(limits[:3] * selection[:3]))
+        why = ""
+        if force > s.force_mode_max_force_n:
+            why = f"{force:.4g} N asked, above force_mode_max_force_n = {s.force_mode_max_force_n:g} N"
+        elif speed > s.force_mode_max_speed_m_s:
+            limit = s.force_mode_max_speed_m_s
+            why = f"{speed:.4g} m/s allowed, above force_mode_max_speed_m_s = {limit:g} m/s"
+        if why:
+            self._set_fault(FaultKind.COMMAND, f"force mode refused: {why} ([resource.settings])")
+            return int(Status.FAULT)
+        if self._behaving == FREEDRIVE:
+            self._end_behaviour()
+        self._behaving = FORCE_MODE
+        sent = self.link.send(
+            "forceMode",
+            frame.tolist(),
+            [int(x) for x in selection],
+            wrench.tolist(),
+            frame_type,
+            limits.tolist(),
+        )
+        return 0 if sent else int(Status.COMM_LOST)
+
+    def _freedrive(self, cmd: FloatArray) -> int:
+        if self._behaving != FREEDRIVE:
+            if self._behaving == FORCE_MODE:
+                self._end_behaviour()
+            free, feature = [int(x) for x in cmd[1:7]], cmd[7:13].tolist()
+            if not self.link.call("control", "freedriveMode", free, feature):
+                self._set_fault(FaultKind.DEVICE, "the controller refused freedrive")
+                return int(Status.FAULT)
+            self._behaving = FREEDRIVE
+        self.link.send("kickWatchdog")
+        return 0
+
+    def _end_behaviour(self) -> None:
+        """The controller's behaviour ended (force_mode_stop, end_freedrive_mode: a round trip to
+        its script, once); the joint stream then holds the arm where it is."""
+        ending, self._behaving = self._behaving, ""
+        self.link.call("control", "forceModeStop" if ending == FORCE_MODE else "endFreedriveMode")
+        self._hold[:] = self.state.q_rad
+        self._cmd_v[:] = 0.0
 
     def _lose(self, why: str) -> None:
         """CommLost, said as first seen (the type 3 reports the message of its tick). The link
@@ -443,6 +519,8 @@ class UrRtdeArm(PhysicalResource):
     def _keep_alive_locked(self, t_s: float) -> None:
         if not self._control_ready():
             return
+        if not self._stop_flags and self._behaviour(t_s) is not None:
+            return  # the controller's behaviour, asked this tick, is the command
         if self._stop_flags & Status.STOPPING:
             self._ramp_step(t_s)
         elif self._stop_flags:  # at rest after the stop: no command, the watchdog still fed
@@ -453,6 +531,11 @@ class UrRtdeArm(PhysicalResource):
             self._send(self.mode, self._hold if self.mode is CommandMode.POSITION else self._zero)
 
     def _begin_safe_stop(self) -> None:
+        if self._behaving:  # the controller's behaviour first: our ramp drives the joints
+            try:
+                self._end_behaviour()
+            except ResourceError as e:
+                self._lose(str(e))
         st = self.state
         if self.mode is CommandMode.POSITION:  # from the servoJ target and its velocity: the arm
             # lags it by the lookahead, and a target pulled back to it is a deceleration step

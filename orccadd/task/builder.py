@@ -44,6 +44,7 @@ class _Node:
     inputs: dict[str, Port]
     outputs: dict[str, Port]
     module: Module | None  # None for the resource
+    optional: frozenset[str] = frozenset()  # inputs a task may leave unwired (a resource's commands)
 
 
 def _resource_node(resource: PhysicalResource, mode: CommandMode, name: str) -> _Node:
@@ -63,7 +64,12 @@ def _resource_node(resource: PhysicalResource, mode: CommandMode, name: str) -> 
         outs[sig.name] = p
     cmd_name, cmd_unit = COMMAND_PORTS[mode]
     ins = {cmd_name: Port(name, cmd_name, (n,), cmd_unit, np.float64, is_input=True)}
-    return _Node(name, ins, outs, None)
+    for c in resource.description.commands:  # the backend's own (e.g. a UR's force mode)
+        p = Port(name, c.name, (c.size,), c.unit, np.float64, is_input=True)
+        p.value = resource.commands[c.name]
+        ins[c.name] = p
+    optional = frozenset(c.name for c in resource.description.commands)
+    return _Node(name, ins, outs, None, optional)
 
 
 def build_task(
@@ -138,6 +144,9 @@ def build_task(
         nodes[ms.name] = _Node(ms.name, m.inputs, m.outputs, m)
     writers = _check_wires(spec, nodes)
     order = _schedule(spec, modules, writers, wire_name)
+    for dst, srcp in writers.items():
+        if dst.module == wire_name and dst.name in nodes[wire_name].optional:
+            srcp.value = dst.value  # a resource's command: the module writes the resource's buffer
     for dst, srcp in writers.items():
         dst.value = srcp.value  # the input *is* the output buffer
     cmd_port = next(iter(nodes[wire_name].inputs.values()))
@@ -248,7 +257,7 @@ def _check_wires(spec: TaskSpec, nodes: dict[str, _Node]) -> dict[Port, Port]:
         where[b] = i
     for node in nodes.values():
         for port in node.inputs.values():
-            if port not in writers:
+            if port not in writers and port.name not in node.optional:
                 cands = [
                     o.path
                     for n in nodes.values()

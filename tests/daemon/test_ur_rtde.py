@@ -153,7 +153,9 @@ def test_a_killed_controller_is_comm_lost_at_once_and_reset_reconnects_to_the_re
     sim.proc.kill()  # its UrSimProcess keeps UR's ports (the machine-wide lock) for this test
     sim.proc.wait()
     s = daemon.wait(lambda s: s["faulted"] and "comm_lost" in s.get("resource_status", []), timeout_s=10)
-    assert "the RTDE connection is closed" in str(s["fault"]), s["fault"]
+    # ur_rtde's clients see the socket close; its I/O client may abort the link process first
+    words = str(s["fault"])
+    assert "the RTDE connection is closed" in words or "the UR link process ended" in words, words
     assert t3_inputs(daemon) == ["T3.CommLost"], daemon.log.read_text()[-3000:]
     ticks = from_telemetry(telemetry(daemon))
     lost = int(np.argmax((ticks.status.astype(int) & Status.COMM_LOST) != 0))

@@ -9,6 +9,7 @@ import re
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -330,3 +331,107 @@ def test_a_digital_io_the_controller_does_not_have_is_refused_naming_it(
     (tmp_path / "io.toml").write_text(text.replace("[resource.settings]\n", f"[resource.settings]\n{line}\n"))
     with pytest.raises(ConfigError, match=message):
         load_robot_config(tmp_path / "io.toml")
+
+
+def _tcp_position(model: RobotModel, q: list[float]) -> np.ndarray:
+    import pinocchio as pin
+
+    m = model.model
+    data = m.createData()
+    pin.framesForwardKinematics(m, data, np.asarray(q, dtype=np.float64))
+    return np.array(data.oMf[m.getFrameId("tool0")].translation)
+
+
+@pytest.mark.parametrize("wall", [True, False])
+def test_a_guarded_move_ends_on_the_contact_the_controllers_sensor_measures(
+    sim: UrSimProcess, arm: Session, wall: bool
+) -> None:
+    """configs/tasks/approach_until_contact.toml on the simulated controller: a wall half-way
+    between the tool and where the target would bring it (placed through the simulator's
+    control channel) stops the approach on its postcondition, the controller's actual_TCP_force
+    (`arm.wrench`) above `contact.force_n`; without the wall the target is reached: `NoContact`."""
+    res = arm.resource
+    start = _tcp_position(res.model, res.state.q_rad.tolist())
+    end = _tcp_position(res.model, REACH)
+    normal = (start - end) / np.linalg.norm(start - end)
+    if wall:
+        sim.inject("wall", point_m=((start + end) / 2).tolist(), normal=normal.tolist(), stiffness_n_m=5000)
+    task = arm.task(ROOT / "configs/tasks/approach_until_contact.toml")
+    next(m for m in task.modules if m.name == "traj").configure({"target_rad": REACH, "speed_scale": 0.2})
+    loop = TickRecorder(res, resource_clock(res), overrun_limit=10**6)
+    phase = loop.run_task(task, timeout_s=30.0)
+    force = float(np.linalg.norm(res.signals["wrench"][:3]))
+    if wall:
+        assert phase is Phase.DONE and arm.event_names() == ["ApproachUntilContact.done"], arm.event_names()
+        assert force > 15.0, force
+        tcp = _tcp_position(res.model, res.state.q_rad.tolist())
+        assert abs(float((tcp - (start + end) / 2) @ normal)) < 0.02  # stopped at the wall
+    else:
+        assert phase is Phase.ABORTED and arm.event_names() == ["ApproachUntilContact.T2.NoContact"]
+        assert force < 1.0, force
+
+
+def _tcp(res: Any) -> np.ndarray:
+    return _tcp_position(res.model, res.state.q_rad.tolist())
+
+
+def _run_ur_task(arm: Session, name: str, timeout_s: float, **params: Any) -> tuple[RobotTask, Phase]:
+    task = arm.task(ROOT / f"configs/tasks/{name}.toml")
+    for path, value in params.items():
+        module, param = path.split("__")
+        next(m for m in task.modules if m.name == module).configure({param: value})
+    loop = TickRecorder(arm.resource, resource_clock(arm.resource), overrun_limit=10**6)
+    return task, loop.run_task(task, timeout_s=timeout_s)
+
+
+def test_force_mode_presses_on_a_surface_with_the_force_asked_then_a_motion_follows(
+    sim: UrSimProcess, arm: Session
+) -> None:
+    """configs/tasks/ur_press.toml: the controller's force mode, asked by the task's module
+    every tick, brings the tool down onto a surface 3 cm below it (the simulator's wall) and
+    presses with 20 N, which its sensor reads (the postcondition); the next task (a servoJ
+    motion) ends force mode and moves the arm from where force mode left it."""
+    res = arm.resource
+    z0 = float(_tcp(res)[2])
+    sim.inject("wall", point_m=[0.0, 0.0, z0 - 0.03], normal=[0.0, 0.0, 1.0], stiffness_n_m=5000)
+    _, phase = _run_ur_task(arm, "ur_press", 20.0)
+    assert phase is Phase.DONE and arm.event_names() == ["UrPress.done"], (
+        arm.event_names(),
+        res.fault_message,
+    )
+    assert float(res.signals["wrench"][2]) == pytest.approx(20.0, abs=3.0)
+    assert float(_tcp(res)[2]) == pytest.approx(z0 - 0.03, abs=0.01)
+    sim.inject("wall_remove")
+    move_task, loop = move(arm, HOME)
+    loop.run_for(0.1)  # the press task still writes nothing now: force mode ends in the first tick
+    assert loop.run_task(move_task, timeout_s=20.0) is Phase.DONE, res.fault_message
+
+
+def test_a_force_above_the_configs_limit_is_a_type_3_and_force_mode_never_starts(
+    sim: UrSimProcess, arm: Session
+) -> None:
+    res = arm.resource
+    before = _tcp(res)
+    _, phase = _run_ur_task(arm, "ur_press", 5.0, press__wrench_n_nm=[0.0, 0.0, -80.0, 0.0, 0.0, 0.0])
+    assert phase is Phase.FAULT and arm.event_names() == ["UrPress.T3.ResourceFault"], arm.event_names()
+    assert "80 N asked, above force_mode_max_force_n = 50 N" in res.fault_message
+    assert np.linalg.norm(_tcp(res) - before) < 0.002
+    assert sim.status()["motion"] != "force_mode", sim.status()
+
+
+def test_freedrive_follows_a_hand_and_a_motion_follows_it(sim: UrSimProcess, arm: Session) -> None:
+    """configs/tasks/ur_freedrive.toml: a push on the tool (the simulator's hand) moves the arm
+    while the task runs; the next task ends freedrive and moves the arm by servoJ."""
+    res = arm.resource
+    task = arm.task(ROOT / "configs/tasks/ur_freedrive.toml")
+    loop = TickRecorder(res, resource_clock(res), overrun_limit=10**6)
+    task.activate()
+    loop.active = task
+    loop.run_for(0.3)
+    before = _tcp(res)
+    sim.inject("push", force_n=[8.0, 0.0, 0.0], torque_nm=[0.0, 0.0, 0.0], duration_s=0.4)
+    loop.run_for(1.5)
+    moved = _tcp(res) - before
+    assert moved[0] > 0.01 and task.phase is Phase.RUN, (moved, res.fault_message)
+    move_task, loop2 = move(arm, HOME)
+    assert loop2.run_task(move_task, timeout_s=20.0) is Phase.DONE, res.fault_message

@@ -52,6 +52,10 @@ class UrRtdeSettings:
     # the controller's DO0-DO7, its configurable CO0-CO7, the tool's TO0-TO1
     # (`{ close_gripper = "TO0=on", open_gripper = "TO0=off" }`)
     digital_outputs: dict[str, str] | None = field(default=None)
+    # what a task may ask of the controller's force mode (`ur_force_mode`): the force it applies
+    # (the wrench's force, N) and the speed of its compliant axes (m/s); more is a type 3, unsent
+    force_mode_max_force_n: float = field(default=50.0, bounds=(0.0, 150.0))
+    force_mode_max_speed_m_s: float = field(default=0.25, bounds=(0.0, 1.5))
 
 
 IO_BANKS = {"D": (0, 8), "C": (8, 8), "T": (16, 2)}  # bank letter: first bit, count (RTDE's layout)
