@@ -27,13 +27,15 @@ for mission in "$share"/missions/*.mission; do
     if grep -q '^task .* from "' "$mission"; then
         # the shipped robot whose resources the mission names (`resource ...`)
         case "$(grep -m1 '^resource ' "$mission")" in
-            "resource arm") robot=sim-ur5e ;;
+            "resource arm") robot=sim-ur5e ;;  # a UR's digital I/O: below
             "resource gripper") robot=gripper-sim ;;
             "resource arm, gripper") robot=ur5e-gripper-sim ;;
             "resource left, right") robot=dual-arm-sim ;;
             "resource left, right, left_hand, right_hand") robot=dual-arm-grippers-sim ;;
             *) echo "smoke: no shipped robot for $(basename "$mission")" >&2; exit 1 ;;
         esac
+        # a mission using the arm's named digital I/O (`input arm.X`) needs the UR that names them
+        if grep -q '^input .*arm\.' "$mission"; then robot=ur5e-rtde-sim; fi
         "$bin/orccadctl" check "$mission" --config "$robot" >/dev/null  # every task built on it
         echo "checked $(basename "$mission") (and its tasks on $robot)"
     else  # the seed's KEEPSTABLE (an underwater vehicle): no task files for an arm
