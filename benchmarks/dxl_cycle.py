@@ -42,7 +42,7 @@ from harness import ROOT, figures
 
 from orccadd.drivers.dynamixel import table as T
 from orccadd.dxlsim.process import DxlSimProcess
-from orccadd.errors import ConfigError
+from orccadd.errors import ConfigError, ResourceError
 from orccadd.physres.dynamixel import DynamixelArm
 from orccadd.robot import create_resource, load_robot_config
 from orccadd.runtime import WallClock, enter_realtime, leave_realtime
@@ -170,7 +170,8 @@ def run_baud(baud: int, args: argparse.Namespace, tmp: Path) -> tuple[float, flo
     """(wire ms, measured chain median ms, highest rate held) for `baud`."""
     port = tmp / f"tty{baud}"
     config = tmp / f"dxl-{baud}.toml"
-    config.write_text(config_text(port, baud, 0.005, 0.003))
+    latency_s = args.latency_timer_ms * 1e-3  # each reply waits that long besides its wire time
+    config.write_text(config_text(port, baud, 0.005 + 2 * latency_s, 0.003 + latency_s))
     sim = DxlSimProcess(config, "--latency-timer-ms", f"{args.latency_timer_ms:g}")
     try:
         servo_priority(sim, args.sim_priority)
@@ -202,6 +203,9 @@ def run_baud(baud: int, args: argparse.Namespace, tmp: Path) -> tuple[float, flo
             except ConfigError as e:
                 print(f"    {rate:g} Hz: refused by the configuration check: {e.detail}")
                 continue
+            except ResourceError as e:
+                print(f"    {rate:g} Hz: the arm does not start: {e}")
+                continue
             rt = enter_realtime(80, cpus=None)
             try:
                 run = hold_rate(arm, rate, args.seconds, stop_at_first=True)
@@ -231,6 +235,9 @@ def soak(config: Path, port: Path, baud: int, args: argparse.Namespace) -> None:
         arm = open_arm(config)
     except ConfigError as e:
         print(f"    soak at {rate:g} Hz: refused by the configuration check: {e.detail}")
+        return
+    except ResourceError as e:  # the chain cannot answer within the period (the adapter's latency)
+        print(f"    soak at {rate:g} Hz: the arm does not start: {e}")
         return
     rt = enter_realtime(80, cpus=None)
     try:
