@@ -34,12 +34,15 @@ MAX_INPUT_COMBINATIONS = 1 << 16
 @dataclass(frozen=True, slots=True)
 class Top:
     """A state of the mission: which part runs (main, safe procedure, ended), its residual term,
-    and what the previous instant had of the signals some `pre(S)` tests."""
+    what the previous instant had of the signals some `pre(S)` tests, and whether it is the
+    mission's first instant (state 0 only: a resource's fault cannot come then, and it can in a
+    later instant whose residual term is the initial one, as after `await immediate S`)."""
 
     phase: int
     term: K.Term
     prev_in: int = 0
     prev_int: int = 0
+    first: bool = False
 
 
 class ReactionError(MissionError):
@@ -276,14 +279,14 @@ def compile_program(
             parent.append(via)
         return i
 
-    add(Top(MAIN, p.main), (-1, 0))
+    add(Top(MAIN, p.main, first=True), (-1, 0))
     queue = deque([0])
     while queue:
         s = queue.popleft()
         top = states[s]
         act = tuple(sorted(K.active_tasks(top.term, [])))
         ins, internal = reactor.mentions(top)
-        rel = ins & possible_inputs(p, act, first=s == 0)
+        rel = ins & possible_inputs(p, act, first=top.first)
         try:
             combos = input_combinations(p, act, rel, reps)
         except OverflowError as e:

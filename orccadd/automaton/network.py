@@ -487,13 +487,13 @@ def _compile_context(
     hole_events = sum(bits for bits, _ in classes)
     reactor = _ContextReactor(q, layout, flags)
     states = _States[Top](q, "the context's automaton", max_states)
-    states.add(Top(MAIN, q.main))
+    states.add(Top(MAIN, q.main, first=True))
     relevant, table, active = [], [], []
     while states.queue:
         s = states.queue.popleft()
         top = states.items[s]
         act = tuple(sorted(K.active_tasks(top.term, [])))
-        possible = possible_inputs(q, act, first=s == 0)
+        possible = possible_inputs(q, act, first=top.first)
         ins, internal = reactor.mentions(top)
         hole = top.phase == MAIN and _has_hole(top.term)
         # where the par is, its tasks' events count by class (`hole_classes`); elsewhere (the safe

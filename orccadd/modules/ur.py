@@ -11,12 +11,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from orccadd.drivers.ur.behaviours import (
+    FORCE_MODE,
+    FORCE_MODE_SIZE,
+    FORCE_MODE_UNIT,
+    FREEDRIVE,
+    FREEDRIVE_SIZE,
+    FREEDRIVE_UNIT,
+)
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
 
-FORCE_MODE_SIZE = 26  # tick time, task frame (6), selection (6), wrench (6), type, limits (6)
-FORCE_MODE_UNIT = "ur.force_mode"
-FREEDRIVE_SIZE = 13  # tick time, free axes (6), feature (6)
-FREEDRIVE_UNIT = "ur.freedrive"
 ZERO6 = np.zeros(6)
 # the controller's own bounds (UR's e-Series defaults): what no task may ask for; a robot
 # config's force_mode_max_* narrow them, checked by the resource in the tick
@@ -34,7 +38,7 @@ class UrForceMode(KernelModule):
 
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
-        self.out = self.add_output("force_mode", (FORCE_MODE_SIZE,), FORCE_MODE_UNIT)
+        self.out = self.add_output(FORCE_MODE, (FORCE_MODE_SIZE,), FORCE_MODE_UNIT)
         self.frame = self.add_parameter("task_frame", ZERO6, bounds=POSE_BOUNDS, unit="m|rad", shape=(6,))
         self.selection = self.add_parameter(
             "selection", np.array([0, 0, 1, 0, 0, 0]), bounds=(0, 1), unit="1", shape=(6,), integer=True
@@ -69,7 +73,7 @@ class UrFreedrive(KernelModule):
 
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
-        self.out = self.add_output("freedrive", (FREEDRIVE_SIZE,), FREEDRIVE_UNIT)
+        self.out = self.add_output(FREEDRIVE, (FREEDRIVE_SIZE,), FREEDRIVE_UNIT)
         self.free = self.add_parameter(
             "free_axes", np.ones(6), bounds=(0, 1), unit="1", shape=(6,), integer=True
         )

@@ -41,13 +41,20 @@ import numpy as np
 import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
+from orccadd.drivers.ur.behaviours import (
+    FORCE_MODE,
+    FORCE_MODE_SIZE,
+    FORCE_MODE_UNIT,
+    FREEDRIVE,
+    FREEDRIVE_SIZE,
+    FREEDRIVE_UNIT,
+)
 from orccadd.drivers.ur.controller import RobotMode, SafetyMode, parse_polyscope_version
 from orccadd.drivers.ur.remote_link import RemoteLink
 from orccadd.drivers.ur.settings import NAME, RATED_PAYLOAD_KG, UrRtdeSettings, io_bit, output_action
 from orccadd.errors import ConfigError, ResourceError
 from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
-from orccadd.modules.ur import FORCE_MODE_SIZE, FORCE_MODE_UNIT, FREEDRIVE_SIZE, FREEDRIVE_UNIT
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import MEASURED, ClockSource, Quantity, ResourceDescription, Signal, Source
 from orccadd.physres.stop_ramp import StopRamp
@@ -59,7 +66,6 @@ E_SERIES = ("UR3e", "UR5e", "UR10e", "UR16e", "UR20", "UR30")
 AT_REST_RAD_S = 0.01
 DIRECT_TORQUE_SINCE = (5, 26)  # ur_rtde 1.6's script calls `direct_torque` on 5.26 and later only
 NO_FRICTION_SCALE = [0.0] * 6  # what that script passes to `direct_torque`, whatever it is sent
-FORCE_MODE, FREEDRIVE = "force_mode", "freedrive"  # the commands' names (the modules' outputs')
 COMMANDS = (
     Signal(FORCE_MODE, FORCE_MODE_SIZE, FORCE_MODE_UNIT, "the controller's force mode (ur_force_mode)"),
     Signal(FREEDRIVE, FREEDRIVE_SIZE, FREEDRIVE_UNIT, "the controller's freedrive (ur_freedrive)"),

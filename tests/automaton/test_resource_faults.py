@@ -85,6 +85,33 @@ def test_the_hands_fault_while_the_arm_moves_enters_the_safe_procedure_at_once()
     assert "failed" in a.describe_actions(r.react(bit(p, "Arm.fault")))
 
 
+def test_a_fault_where_the_initial_term_waits_again_is_not_the_first_instants() -> None:
+    """`await immediate Go` with Go absent leaves the main procedure's term as it began: a later
+    instant there is not the first, so a resource's fault may come and enters the safe procedure
+    (the compiler took state 0's term for the first instant and ignored it; the lockstep spin
+    model found it on a random program)."""
+    main = """
+main procedure Main
+  handle
+    await immediate Go; Move
+  on fatal do
+    safe
+  end
+end
+"""
+    a = compile_text(HEADER + SAFE_ACK + main, "m.mission")
+    p = a.program
+    arm = bit(p, "Arm.fault")
+    assert not a.relevant[0] & arm  # the first instant: every resource ready
+    r = Runner(a)
+    r.react(0)
+    assert not a.active[r.state] and r.state != 0  # the initial term again, a state of its own
+    assert a.relevant[r.state] & arm
+    assert a.describe_actions(r.react(arm)) == ["safe"]
+    assert a.phase[r.state] == SAFE
+    assert verify(a).ok
+
+
 def test_the_safe_procedure_can_tell_which_resource_faulted() -> None:
     safe = """
 safe procedure Rest

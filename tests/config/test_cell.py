@@ -142,14 +142,14 @@ def test_a_cell_may_set_a_resources_loop_keys_in_its_entry(tmp_path: Path) -> No
 
 def test_the_dual_arm_cell_keeps_its_fast_arms_tolerances_in_time() -> None:
     """dual-arm-sim runs `left` at 1 kHz from sim-ur5e.toml's 500 Hz: the same 50 ms of late
-    ticks and 40 ms without a command (the daemon's plant process, by default) as `right`."""
+    ticks and 100 ms without a command (the daemon's plant process, by default) as `right`."""
     cell = load_cell_config(ROBOTS / "dual-arm-sim.toml")
     for name in ("left", "right"):
         r = with_backend(cell.resource(name), "sim_process")
         s = r.backend_settings
         assert r.daemon.overrun_limit * r.control_period_s == pytest.approx(0.05)
         for periods in (s.watchdog_periods, s.heartbeat_timeout_periods):
-            assert s.periods(periods, r.control_period_s) * r.control_period_s == pytest.approx(0.04)
+            assert s.periods(periods, r.control_period_s) * r.control_period_s == pytest.approx(0.1)
 
 
 def test_a_simulator_serves_the_one_resource_of_its_bus_or_the_one_named() -> None:

@@ -276,7 +276,7 @@ def test_ticks_without_a_command_keep_the_arm_held(resource: PhysicalResource) -
     command and none of its watchdogs trips."""
     resource.activate(CommandMode.POSITION)
     q0 = resource.read(time.monotonic()).q_rad.copy()
-    t_end = time.monotonic() + 0.3  # longer than the plant's command watchdog (20 periods)
+    t_end = time.monotonic() + 0.3  # longer than the plant's command watchdog (100 ms)
     seen = 0
     while time.monotonic() < t_end:
         now = time.monotonic()
