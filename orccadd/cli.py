@@ -32,11 +32,27 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--json", dest="global_json", action="store_true", help="print JSON replies (and errors)"
     )
+    parser.add_argument(
+        "--robot",
+        default=None,
+        metavar="NAME",
+        help="send the command to this daemon of the cell (over Zenoh; see --cell)",
+    )
+    parser.add_argument(
+        "--cell",
+        dest="global_cell",
+        default=None,
+        metavar="FILE",
+        help="the console's [cell] table, for --robot and `cell` ($ORCCADD_CELL)",
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     from orccadd.offline.commands import add_parsers as add_offline  # argparse only, until one runs
 
     add_offline(sub)
     online.add_parsers(sub)
+    from orccadd.ctl.cell import add_parser as add_cell
+
+    add_cell(sub)
     p = sub.add_parser("completion", help="print a shell completion script (bash, zsh)")
     p.add_argument("shell", choices=SHELLS, help="the shell to complete for")
     return parser
@@ -69,6 +85,8 @@ def _main(argv: list[str] | None) -> int:
         args.socket = args.global_socket
     if args.global_json and hasattr(args, "json"):
         args.json = True
+    if args.global_cell and getattr(args, "cell", None) is None:
+        args.cell = args.global_cell
     if getattr(args, "online", None):
         code: int = args.func(args)
         return code
@@ -83,7 +101,7 @@ def _unknown_command(parser: argparse.ArgumentParser, argv: list[str]) -> str:
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     words = iter(argv)
     for word in words:
-        if word == "--socket":
+        if word in ("--socket", "--robot", "--cell"):
             next(words, None)  # its value
         elif not word.startswith("-"):
             if word in sub.choices:

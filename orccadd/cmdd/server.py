@@ -23,11 +23,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+from orccadd.cellnet import keys
 from orccadd.cmdd import views
+from orccadd.cmdd.cellpeer import CellPeer
 from orccadd.cmdd.csvlog import LogDir
 from orccadd.cmdd.logsession import LogSource, TelemetryLog
 from orccadd.cmdd.urdf import urdf_path
 from orccadd.config.cell import read_cell_config
+from orccadd.config.cellnet import CellNetConfig
 from orccadd.config.robot import DaemonConfig
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.wire.commands import (
@@ -46,7 +49,7 @@ from orccadd.wire.commands import (
 )
 from orccadd.wire.roles import Roles, peer_credentials
 from orccadd.wire.schema import PROTOCOL_VERSION, H, S
-from orccadd.wire.socketdir import SocketPathError, prepare_socket_dir
+from orccadd.wire.socketdir import SocketPathError, prepare_socket_dir, urgent_socket_path
 from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 
 log = logging.getLogger("orccadd.cmdd")
@@ -60,6 +63,7 @@ ROLELESS_WAIT_S = 2.0
 RESERVED_MAX = 4
 RESERVED_WAIT_S = 2.0
 RT_MAX = 1 << 20
+CELL_TICK_S = 0.005  # the cell's publishing loop wakes at most this often
 
 
 class ClientReader(asyncio.StreamReader):
@@ -152,8 +156,10 @@ class CommandDaemon:
         telemetry: str,
         log_dir: Path | None = None,
         urdf: Path | None = None,
+        net: CellNetConfig | None = None,
     ) -> None:
         self.cfg = cfg
+        self.net = net  # `[cell]`: a peer of a cell of PCs over Zenoh
         self.socket_path = socket_path
         self.log_dir = log_dir or Path(socket_path).parent / "logs"
         self.logs = LogDir(self.log_dir, cfg.socket_group)
@@ -255,7 +261,12 @@ class CommandDaemon:
             loop.add_signal_handler(sig, self.done.set)
         self._resume_log()
         pump = asyncio.create_task(self._pump())
+        peer, cell_pump = await self._join_cell()
         await self.done.wait()
+        if cell_pump is not None:
+            cell_pump.cancel()
+        if peer is not None:
+            peer.close()
         for reader in self.readers.values():  # streams end now
             reader.ended.set()
         pump.cancel()
@@ -268,6 +279,52 @@ class CommandDaemon:
         with contextlib.suppress(FileNotFoundError):
             if os.stat(self.socket_path).st_ino == self.sock_ino:
                 os.unlink(self.socket_path)
+
+    async def _join_cell(self) -> tuple[CellPeer | None, asyncio.Task[None] | None]:
+        """With `[cell]`: the Zenoh peer and its publishing task. A cell that cannot be joined
+        (Zenoh missing, an endpoint taken, a bad certificate) is logged; the robot is served on
+        its socket all the same."""
+        if self.net is None:
+            return None, None
+        peer = CellPeer(self.net, self.answer, urgent_socket_path(self.socket_path))
+        try:
+            await peer.open()
+        except Exception as e:  # ImportError, zenoh.ZError: the daemon carries on without it
+            log.error("cell %s: cannot join: %s: %s", self.net.name, type(e).__name__, e)
+            peer.close()
+            return None, None
+        return peer, asyncio.create_task(self._cell_pump(peer))
+
+    async def _cell_pump(self, peer: CellPeer) -> None:
+        """Publish to the cell: every trace event as it comes (and the status with it), the
+        status at `status_hz`, the joint states at `joints_hz`; never faster than this loop's
+        `CELL_TICK_S` granularity."""
+        assert self.net is not None
+        trace = RingReader(self.tel.trace, self.tel.header, H.TRACE_HEAD, from_now=True)
+        joints_s = 1.0 / self.net.joints_hz if self.net.joints_hz else float("inf")
+        status_s = 1.0 / self.net.status_hz
+        next_joints = next_status = time.monotonic()
+        while True:
+            try:
+                new = trace.poll()
+                if len(new):
+                    await self.refresh()
+                    for rec in new:
+                        peer.put(keys.EVENTS, self.decode_trace(rec))
+                now = time.monotonic()
+                if len(new) or now >= next_status:
+                    await self.refresh()
+                    log_state = self.recording.describe() if self.recording else self.last_log
+                    peer.put(keys.STATUS, views.status(self.tel, self.desc, log_state, self.units()))
+                    next_status = max(next_status + status_s, now)
+                if now >= next_joints:
+                    peer.put(keys.JOINTS, views.joint_states(self.tel, self.desc, self.units()))
+                    next_joints = max(next_joints + joints_s, now)
+            except asyncio.CancelledError:
+                raise
+            except Exception as e:  # a publication lost must not end the others
+                log.warning("cell: publishing: %s: %s", type(e).__name__, e)
+            await asyncio.sleep(max(CELL_TICK_S, min(next_joints, next_status) - time.monotonic()))
 
     async def _pump(self) -> None:
         """Background: follow the log, notice the real-time process going away."""
@@ -406,39 +463,46 @@ class CommandDaemon:
         await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
 
     async def _request(self, line: bytes, role: Role | None, uid: int, writer: asyncio.StreamWriter) -> None:
+        reply = await self.answer(line, role, f"user {_user(uid)}", writer)
+        if reply:
+            writer.write(encode(reply))
+        await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
+
+    async def answer(
+        self, line: bytes, role: Role | None, who: str, writer: asyncio.StreamWriter | None = None
+    ) -> dict[str, Any]:
+        """The reply to one request line from `who` with `role`: the socket's clients and the
+        cell's peers (`writer` None: no stream) go through the same checks and the same table."""
         rid: Any = None
         try:
             rid, cmd, args = parse_request(line)
         except ProtocolError as e:
-            writer.write(encode(error_reply(e.rid, str(e))))
-            await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
-            return
+            return error_reply(e.rid, str(e))
         spec = COMMANDS[cmd]
         if role is None or (spec.role is Role.CONTROL and role is not Role.CONTROL):
             need = "the control role" if spec.role is Role.CONTROL else "the read-only role"
-            writer.write(
-                encode(error_reply(rid, f"not authorised: user {_user(uid)} lacks {need} for {cmd!r}"))
-            )
-            await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
-            return
+            return error_reply(rid, f"not authorised: {who} lacks {need} for {cmd!r}")
         if spec.where == "rt":
             reply = await self.rt.call(cmd, args, spec.reply_s)
             reply["id"] = rid
             if cmd == "load" and reply.get("ok"):
                 await self.refresh()
-            writer.write(encode(reply))
-        else:
-            try:
-                result = await self.dispatch.handler(cmd)(writer, rid, **with_defaults(spec, args))
-                writer.write(encode({"id": rid, "ok": True, "result": result}))
-            except ValueError as e:
-                writer.write(encode(error_reply(rid, str(e))))
-            except (ConnectionError, TimeoutError, asyncio.CancelledError):
-                raise
-            except Exception as e:  # a bug must not take the command daemon down
-                log.exception("%s failed: %s: %s", cmd, type(e).__name__, e)
-                writer.write(encode(error_reply(rid, f"internal error: {type(e).__name__}: {e}")))
-        await asyncio.wait_for(writer.drain(), self.cfg.stall_timeout_s)
+            return reply
+        if writer is None and (cmd == "monitor" or (cmd == "events" and args.get("follow"))):
+            return error_reply(
+                rid,
+                f"{cmd}: streams are served on the daemon's socket only (from the cell: `orccadctl cell`)",
+            )
+        try:
+            result = await self.dispatch.handler(cmd)(writer, rid, **with_defaults(spec, args))
+            return {"id": rid, "ok": True, "result": result}
+        except ValueError as e:
+            return error_reply(rid, str(e))
+        except (ConnectionError, TimeoutError, asyncio.CancelledError):
+            raise
+        except Exception as e:  # a bug must not take the command daemon down
+            log.exception("%s failed: %s: %s", cmd, type(e).__name__, e)
+            return error_reply(rid, f"internal error: {type(e).__name__}: {e}")
 
     # ---- local commands -------------------------------------------------------------------
     @handles("ping")
@@ -642,7 +706,13 @@ def main(argv: list[str] | None = None) -> int:
     log_dir = cell.resolve(cell.daemon.log_dir) if cell.daemon.log_dir else None
     try:
         d = CommandDaemon(
-            cell.daemon, args.socket, args.rt_socket, args.telemetry, log_dir, urdf_path(cell.resources[0])
+            cell.daemon,
+            args.socket,
+            args.rt_socket,
+            args.telemetry,
+            log_dir,
+            urdf_path(cell.resources[0]),
+            cell.net,
         )
     except (OSError, ValueError) as e:
         log.error("cannot attach to the real-time process: %s", e)

@@ -178,6 +178,28 @@ def status(
     return out
 
 
+def joint_states(
+    tel: TelemetryBlock, desc: dict[str, Any], units: Sequence[tuple[dict[str, Any], TelemetryBlock]] = ()
+) -> dict[str, Any]:
+    """Each resource's newest measured joint state (rad, rad/s, N m) and its tick's time (s on
+    the daemon's clock); a resource before its first tick is left out."""
+    first = (desc.get("resources") or [{}])[0]
+    blocks = [(str(u["name"]), list(u["joints"]), t) for u, t in units] or [
+        (str(first.get("name", "arm")), list(desc.get("joints", [])), tel)
+    ]
+    out: list[dict[str, Any]] = []
+    t_s = 0.0
+    for name, joints, block in blocks:
+        rec = latest_tick(block)
+        if rec is None:
+            continue
+        layout = TickLayout(len(joints))
+        t_s = max(t_s, float(rec[TICK_FIELDS.index("t_s")]))
+        vectors = {v: [float(x) for x in rec[layout.vector(v)]] for v in ("q", "dq", "tau")}
+        out.append({"name": name, "joints": joints, **vectors})
+    return {"t_s": t_s, "resources": out}
+
+
 def loop_status(tel: TelemetryBlock, tasks: list[str], joints: list[str]) -> dict[str, Any]:
     """One control loop's part of `status`, from its telemetry block: its counters and timing,
     and from its newest tick its task, phase, resource status and joints."""
@@ -236,6 +258,7 @@ def decode_trace(
         "kind": kind.name.lower(),
         "t_s": round(float(rec[R.T_S]), 6),
         "time": _clock(float(rec[R.WALL_S])),
+        "wall_s": round(float(rec[R.WALL_S]), 6),  # Unix time: a cell's events merge by it
     }
     code = int(rec[R.CODE])
     if kind is Trace.INSTANT:

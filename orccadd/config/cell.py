@@ -34,6 +34,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from orccadd.config.cellnet import CellNetConfig, load_cellnet
 from orccadd.config.robot import DaemonConfig, RobotConfig, read_robot_config, read_toml
 from orccadd.config.schema import field, load_dataclass
 from orccadd.errors import ConfigError
@@ -65,6 +66,7 @@ class CellFile:
     name: str = field()
     resources: tuple[ResourceEntry, ...] = field(min_len=1)
     daemon: DaemonConfig = field(default=DaemonConfig())
+    cell: Any = field(default=None)  # `[cell]`: this daemon as a peer of a cell of PCs
 
 
 @dataclass(frozen=True)
@@ -78,11 +80,12 @@ class CellConfig:
     resources: tuple[RobotConfig, ...]
     listed: bool = False  # written as a cell ([[resources]]), not a one-resource robot config
     overridden: tuple[frozenset[str], ...] = ()  # per resource: the settings keys the cell sets
+    net: CellNetConfig | None = None  # `[cell]`: a peer of a cell of PCs over Zenoh
 
     @classmethod
     def of(cls, cfg: RobotConfig) -> CellConfig:
         """The cell of one resource that a robot config is."""
-        return cls(cfg.name, cfg.source, cfg.daemon, (cfg,))
+        return cls(cfg.name, cfg.source, cfg.daemon, (cfg,), net=cfg.cell)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -160,6 +163,12 @@ def read_cell_config(path: str | Path) -> CellConfig:
                 file, f"{key}.config", f"(={entry.config!r}): no such file (relative to {here})"
             )
         sub = read_robot_config(sub_path)
+        if sub.cell is not None:
+            raise ConfigError(
+                file,
+                f"{key}.config",
+                f"(={entry.config!r}) has a [cell] table: a cell's [cell] is in this file",
+            )
         loop = _loop_keys(entry.loop or {}, file, f"{key}.loop")
         settings = {**(sub.resource.settings or {}), **(entry.settings or {})}
         out.append(
@@ -175,7 +184,8 @@ def read_cell_config(path: str | Path) -> CellConfig:
             )
         )
     overridden = tuple(frozenset(e.settings or {}) for e in cell.resources)
-    return CellConfig(cell.name, file, daemon, tuple(out), listed=True, overridden=overridden)
+    net = load_cellnet(cell.cell, file, cell.name) if cell.cell is not None else None
+    return CellConfig(cell.name, file, daemon, tuple(out), listed=True, overridden=overridden, net=net)
 
 
 def _loop_keys(table: dict[str, Any], file: str, key: str) -> dict[str, Any]:

@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
+from orccadd.config.cellnet import load_cellnet
 from orccadd.config.schema import field, format_range, load_dataclass
 from orccadd.errors import ConfigError
 from orccadd.wire.commands import LOAD_TIMEOUT_MAX_S
@@ -152,6 +153,7 @@ class RobotConfig:
     safe_stop: SafeStopConfig = field(default=SafeStopConfig())
     limits: LimitsConfig = field(default=LimitsConfig())
     daemon: DaemonConfig = field(default=DaemonConfig())
+    cell: Any = field(default=None)  # `[cell]`: a `CellNetConfig` once loaded (None: no cell)
     source: str = ""  # the file it was loaded from (set by the loader)
     backend_settings: Any = None  # the backend's typed settings (set by the loader)
 
@@ -212,6 +214,8 @@ def read_robot_config(path: str | Path) -> RobotConfig:
         if key in raw:
             raise ConfigError(file, key, "is not a known key")
     cfg = replace(load_dataclass(RobotConfig, raw, file), source=file)
+    if cfg.cell is not None:
+        cfg = replace(cfg, cell=load_cellnet(cfg.cell, file, cfg.name))
     _check_joints(cfg, file)
     return cfg
 

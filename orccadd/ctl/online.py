@@ -12,10 +12,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+from orccadd.cellnet.console import CellError
+from orccadd.ctl.cell import RemoteClient
 from orccadd.ctl.client import Client, ClientError, default_socket, socket_help
 from orccadd.ctl.format import error_line, format_trace
 from orccadd.ctl.format import format_status as format_status  # the demo prints it
 from orccadd.ctl.human import context_requests, format_reply
+from orccadd.errors import ConfigError
 from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, client_wait_s
 from orccadd.wire.socketdir import urgent_socket_path
 
@@ -102,6 +105,8 @@ def add_parsers(sub: Any) -> None:
 
 def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     cmd = a.online
+    if cmd == "load" and getattr(a, "robot", None):  # a name, or a path on that daemon's PC
+        return cmd, {"path": a.mission}
     if cmd == "load":  # a bare name (`demo`) the daemon finds in its mission directories
         bare = "/" not in a.mission and "." not in a.mission and not Path(a.mission).exists()
         return cmd, {"path": a.mission if bare else str(Path(a.mission).resolve())}
@@ -165,7 +170,8 @@ def run_online(a: argparse.Namespace) -> int:
     line on stderr (the daemon's own words), Ctrl-C quietly."""
     try:
         cmd, args = _args(a)
-        r = _urgent_reply(a) if a.online in URGENT_COMMANDS else None
+        remote = getattr(a, "robot", None)
+        r = _urgent_reply(a) if a.online in URGENT_COMMANDS and not remote else None
         context: dict[str, Any] = {}
         if r is None:
             online = _online(a, cmd, args)
@@ -173,7 +179,7 @@ def run_online(a: argparse.Namespace) -> int:
                 return online
             r, context = online
         return _report(a, r, context, args)
-    except ClientError as e:
+    except (ClientError, CellError, ConfigError) as e:
         _error(a, str(e))
     except BrokenPipeError:
         _stdout_gone()
@@ -202,6 +208,14 @@ def _online(
     """The reply to `cmd` through the command daemon and, for words, the replies that give it
     context (`human.context_requests`); or an exit status for the streaming commands (monitor,
     events --follow, top)."""
+    robot = getattr(a, "robot", None)
+    if (robot and cmd in ("monitor", "top")) or (robot and cmd == "events" and a.follow):
+        raise ClientError(
+            f"{cmd} --robot: streams come from the cell itself: orccadctl cell top, cell events --follow"
+        )
+    if robot:
+        with RemoteClient(a, robot) as remote:
+            return _ask(remote, a, cmd, args)
     with Client(a.socket, timeout_s=client_wait_s(cmd)) as c:
         if cmd == "monitor":
             return _monitor(c, a)
@@ -209,14 +223,21 @@ def _online(
             return _follow(c, a)
         if cmd == "top":
             return _top(c, a)
-        r = c.reply(cmd, **args)
-        context: dict[str, Any] = {}
-        if r.get("ok") and not a.json:
-            for name, (extra, extra_args) in context_requests(cmd, args).items():
-                more = c.reply(extra, **extra_args)
-                if more.get("ok"):
-                    context[name] = more["result"]
-        return r, context
+        return _ask(c, a, cmd, args)
+
+
+def _ask(
+    c: Client | RemoteClient, a: argparse.Namespace, cmd: str, args: dict[str, Any]
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The reply to `cmd` and, for words, the replies that give it context."""
+    r = c.reply(cmd, **args)
+    context: dict[str, Any] = {}
+    if r.get("ok") and not a.json:
+        for name, (extra, extra_args) in context_requests(cmd, args).items():
+            more = c.reply(extra, **extra_args)
+            if more.get("ok"):
+                context[name] = more["result"]
+    return r, context
 
 
 def _report(a: argparse.Namespace, r: dict[str, Any], context: dict[str, Any], args: dict[str, Any]) -> int:

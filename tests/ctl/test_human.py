@@ -18,6 +18,7 @@ from typing import Any, NamedTuple
 import pytest
 
 from orccadd.cli import build_parser, orccadctl_main
+from orccadd.ctl import cell as ctl_cell
 from orccadd.ctl import foxglove, online
 from orccadd.ctl.format import bounds, num
 from orccadd.offline import commands as offline
@@ -191,7 +192,7 @@ ARGV = {
     "send": ["send", "Stop"], "params": ["params"], "tune": ["tune", "A.b.c", "1"],
     "monitor": ["monitor"], "events": ["events", "--follow"], "top": ["top"],
     "log": ["log", "start"], "inject": ["inject", "resource"], "plot": ["plot", "x.csv", "-o", "x.png"],
-    "foxglove": ["foxglove", "--port", "0"],
+    "foxglove": ["foxglove", "--port", "0"], "cell": ["cell", "status", "--cell", "x.toml"],
 }  # fmt: skip
 
 
@@ -205,6 +206,7 @@ def test_ctrl_c_ends_every_command_quietly_with_130(monkeypatch: pytest.MonkeyPa
     assert subcommands - set(ARGV) == {"completion"}  # a new command gets its line here
     monkeypatch.setattr(online, "Client", interrupt)  # what every online command does first
     monkeypatch.setattr(foxglove, "Client", interrupt)
+    monkeypatch.setattr(ctl_cell, "open_console", interrupt)
     for name in ("cmd_check", "cmd_graph", "cmd_export", "cmd_modules", "cmd_plot"):
         monkeypatch.setattr(offline, name, interrupt)
     for name, argv in ARGV.items():

@@ -56,6 +56,8 @@ EVENTS: list[dict[str, Any]] = [
     {"seq": 11, "kind": "event", "t_s": 33065.994239, "time": "00:59:53.457",
      "event": "Hold.T3.ResourceFault", "event_kind": "t3"},
 ]  # fmt: skip
+for _e in EVENTS:  # Unix time, as the daemon gives it beside the clock's words
+    _e["wall_s"] = 1795000000.0 + sum(float(x) * 60**i for i, x in enumerate(reversed(_e["time"].split(":"))))
 SIZE = (100, 30)
 
 

@@ -1,0 +1,114 @@
+"""A peer's Zenoh configuration from its `[cell]` table: mode peer, explicit endpoints, no
+multicast scouting unless asked, TLS with mutual authentication, and, on a daemon, the access
+control that gives each certificate its role.
+
+The access control (Zenoh's, matching the peer certificate's common name) lets every listed peer
+subscribe to what this daemon publishes, query its `read` key and put only under its own name
+(`orccadd/<cell>/<its name>/…`: a peer cannot speak for another); the `control` key is reached
+only by the names in `control`. Everything else, and every peer not listed, is denied.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from orccadd.cellnet import keys
+from orccadd.config.cellnet import CellNetConfig
+
+LOOPBACK_ANY_PORT = "127.0.0.1:0"
+
+
+def zenoh_config(net: CellNetConfig, daemon: bool) -> dict[str, Any]:
+    """The Zenoh config (a JSON5 table) of this peer; `daemon`: with the access control."""
+    proto = "tls" if net.secured else "tcp"
+    conf: dict[str, Any] = {
+        "mode": "peer",
+        "listen": {"endpoints": list(net.listen) or [f"{proto}/{LOOPBACK_ANY_PORT}"]},
+        "connect": {"endpoints": list(net.connect)},
+        # no multicast unless asked; a peer tells its neighbours the peers it knows (gossip,
+        # over the links it has): a console connected to one daemon reaches every one
+        "scouting": {"multicast": {"enabled": net.scouting}, "gossip": {"enabled": True, "multihop": True}},
+    }
+    if net.secured:
+        ca, cert, key = (str(p) for p in net.tls_files())
+        conf["transport"] = {
+            "link": {
+                "tls": {
+                    "root_ca_certificate": ca,
+                    "enable_mtls": True,
+                    "listen_certificate": cert,
+                    "listen_private_key": key,
+                    "connect_certificate": cert,
+                    "connect_private_key": key,
+                    # peers are named by their certificates' common names, not by host names
+                    "verify_name_on_connect": False,
+                }
+            }
+        }
+        if daemon:
+            conf["access_control"] = access_control(net)
+    return conf
+
+
+def to_json5(conf: dict[str, Any]) -> str:
+    return json.dumps(conf)
+
+
+def access_control(net: CellNetConfig) -> dict[str, Any]:
+    """Zenoh's access control for a daemon: default deny; see the module's docstring."""
+    cell, me = net.name, net.robot
+    names = list(dict.fromkeys([*net.control, *net.read]))
+    rules: list[dict[str, Any]] = [
+        _rule(
+            "to-peers",
+            ["egress"],
+            [
+                "put",
+                "delete",
+                "reply",
+                "query",
+                "liveliness_token",
+                "liveliness_query",
+                "declare_subscriber",
+                "declare_liveliness_subscriber",
+                "declare_queryable",
+            ],
+            ["**"],
+        ),
+        _rule(
+            "interest",
+            ["ingress"],
+            [
+                "declare_subscriber",
+                "declare_liveliness_subscriber",
+                "liveliness_query",
+                "declare_queryable",
+                "reply",
+            ],
+            ["**"],
+        ),
+        _rule("read", ["ingress"], ["query"], [keys.robot_key(cell, me, keys.READ)]),
+        _rule("control", ["ingress"], ["query"], [keys.robot_key(cell, me, keys.CONTROL)]),
+    ]
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    for n in names:
+        own = f"own:{n}"
+        rules.append(
+            _rule(own, ["ingress"], ["put", "delete", "liveliness_token"], [keys.robot_key(cell, n, "**")])
+        )
+        subjects.append({"id": f"peer:{n}", "cert_common_names": [n]})
+        granted = ["to-peers", "interest", own, "read"] + (["control"] if n in net.control else [])
+        policies.append({"id": f"role:{n}", "rules": granted, "subjects": [f"peer:{n}"]})
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
+def _rule(rid: str, flows: list[str], messages: list[str], key_exprs: list[str]) -> dict[str, Any]:
+    return {"id": rid, "permission": "allow", "flows": flows, "messages": messages, "key_exprs": key_exprs}

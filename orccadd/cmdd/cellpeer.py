@@ -1,0 +1,173 @@
+"""The command daemon as a peer of a cell over Zenoh (`[cell]` in the robot config).
+
+It publishes what `orccadctl` reads on the socket (status, joint states, events), decimated, from
+this process: the real-time threads never touch Zenoh. It declares a liveliness token (a daemon
+gone is lost to the others within Zenoh's lease) and answers request lines on two queryables:
+`read` (read-role commands) and `control` (every command), the second reached only by peers
+whose certificate holds the control role (the access control of `cellnet.zconfig`). A request
+goes through the socket's table and checks (`CommandDaemon.answer`); `abort` and `stop` go
+straight to the real-time process's urgent socket from Zenoh's own thread, as `orccadctl` sends
+them. A malformed request gets an error reply; a malformed sample is dropped with a log line.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import contextlib
+import json
+import logging
+import socket
+import time
+from collections.abc import Callable, Coroutine
+from typing import TYPE_CHECKING, Any
+
+from orccadd.cellnet import keys
+from orccadd.cellnet.zconfig import to_json5, zenoh_config
+from orccadd.config.cellnet import CellNetConfig
+from orccadd.wire.commands import MAX_LINE, URGENT_COMMANDS, ProtocolError, Role, error_reply, parse_request
+
+if TYPE_CHECKING:
+    import zenoh
+
+log = logging.getLogger("orccadd.cmdd.cell")
+
+URGENT_WAIT_S = 2.0
+Answer = Callable[[bytes, Role, str], Coroutine[Any, Any, dict[str, Any]]]
+
+
+class CellPeer:
+    """One daemon's Zenoh session and what it declares. `answer(line, role, who)` serves a request
+    line; `urgent_path` is the real-time process's urgent socket."""
+
+    def __init__(self, net: CellNetConfig, answer: Answer, urgent_path: str) -> None:
+        self.net = net
+        self.answer = answer
+        self.urgent_path = urgent_path
+        self.session: zenoh.Session | None = None
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.declared: list[Any] = []
+        self.pubs: dict[str, Any] = {}
+        self.pending: set[asyncio.Task[None]] = set()
+
+    def key(self, *chunks: str) -> str:
+        return keys.robot_key(self.net.name, self.net.robot, *chunks)
+
+    async def open(self) -> None:
+        import zenoh  # the `[cell]` extra: only a daemon with a cell needs it
+
+        self.loop = asyncio.get_running_loop()
+        conf = zenoh.Config.from_json5(to_json5(zenoh_config(self.net, daemon=True)))
+        self.session = await asyncio.to_thread(zenoh.open, conf)
+        s = self.session
+        for chunk in (keys.STATUS, keys.JOINTS, keys.EVENTS):
+            self.pubs[chunk] = s.declare_publisher(self.key(chunk))
+        self.declared.append(s.declare_queryable(self.key(keys.READ), self._on_query(Role.READ)))
+        if self.net.secured:  # without TLS nobody can be trusted with control: no such key
+            self.declared.append(s.declare_queryable(self.key(keys.CONTROL), self._on_query(Role.CONTROL)))
+        self.declared.append(s.liveliness().declare_token(self.key(keys.ALIVE)))
+        log.info(
+            "cell %s: peer %s (zid %s), listening on %s%s",
+            self.net.name,
+            self.net.robot,
+            s.info.zid(),
+            ", ".join(self.net.listen) or "loopback",
+            "" if self.net.secured else "; no TLS: read-only",
+        )
+
+    def close(self) -> None:
+        for d in self.declared:
+            with contextlib.suppress(Exception):
+                d.undeclare()
+        self.declared.clear()
+        for p in self.pubs.values():
+            with contextlib.suppress(Exception):
+                p.undeclare()
+        self.pubs.clear()
+        if self.session is not None:
+            with contextlib.suppress(Exception):
+                self.session.close()  # type: ignore[no-untyped-call]
+            self.session = None
+
+    def put(self, chunk: str, value: Any) -> None:
+        pub = self.pubs.get(chunk)
+        if pub is not None:
+            pub.put(json.dumps(value, separators=(",", ":")))
+
+    # ---- requests --------------------------------------------------------------------------
+    def _on_query(self, role: Role) -> Callable[[zenoh.Query], None]:
+        who = f"a cell peer on {self.key(keys.CONTROL if role is Role.CONTROL else keys.READ)}"
+
+        def on_query(query: zenoh.Query) -> None:  # Zenoh's thread
+            line = query.payload.to_bytes() if query.payload is not None else b""
+            if len(line) > MAX_LINE:
+                self._reply(query, error_reply(None, f"request longer than {MAX_LINE} bytes"))
+                return
+            if role is Role.CONTROL and self._urgent(line):
+                self._reply(query, self._serve_urgent(line))
+                return
+            assert self.loop is not None
+            self.loop.call_soon_threadsafe(self._serve, query, line, role, who)
+
+        return on_query
+
+    @staticmethod
+    def _urgent(line: bytes) -> bool:
+        try:
+            return parse_request(line)[1] in URGENT_COMMANDS
+        except ProtocolError:
+            return False
+
+    def _serve_urgent(self, line: bytes) -> dict[str, Any]:
+        """`abort` or `stop` on the real-time process's urgent socket, from this thread; the
+        command daemon's own queue if that socket is not there or refuses."""
+        try:
+            with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC) as s:
+                s.settimeout(URGENT_WAIT_S)
+                s.connect(self.urgent_path)
+                s.sendall(line.rstrip(b"\n") + b"\n")
+                buf = b""
+                while not buf.endswith(b"\n"):
+                    chunk = s.recv(65536)
+                    if not chunk:
+                        break
+                    buf += chunk
+            reply = json.loads(buf)
+            if isinstance(reply, dict) and reply.get("id") == parse_request(line)[0]:
+                return reply
+        except (OSError, ValueError, ProtocolError) as e:
+            log.info("urgent socket: %s; through the command daemon", e)
+        assert self.loop is not None
+        fut: concurrent.futures.Future[dict[str, Any]] = asyncio.run_coroutine_threadsafe(
+            self.answer(line, Role.CONTROL, "a cell peer"), self.loop
+        )
+        try:
+            return fut.result(URGENT_WAIT_S * 5)
+        except Exception as e:
+            return error_reply(None, f"{type(e).__name__}: {e}")
+
+    def _serve(self, query: zenoh.Query, line: bytes, role: Role, who: str) -> None:
+        task = asyncio.get_running_loop().create_task(self._answer_query(query, line, role, who))
+        self.pending.add(task)
+        task.add_done_callback(self.pending.discard)
+
+    async def _answer_query(self, query: zenoh.Query, line: bytes, role: Role, who: str) -> None:
+        try:
+            reply = await self.answer(line, role, who)
+        except Exception as e:  # a bug must not leave the peer without an answer
+            log.exception("cell request failed")
+            reply = error_reply(None, f"internal error: {type(e).__name__}: {e}")
+        self._reply(query, reply)
+
+    def _reply(self, query: zenoh.Query, reply: dict[str, Any]) -> None:
+        try:
+            query.reply(query.key_expr, json.dumps(reply, separators=(",", ":")))
+        except Exception as e:  # the querier gave up (timeout): nothing to answer
+            log.info("cell: a reply to %s could not be sent: %s", query.key_expr, e)
+        finally:
+            with contextlib.suppress(Exception):
+                query.drop()  # type: ignore[no-untyped-call]
+
+
+def wall_ns() -> int:
+    return time.time_ns()
