@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 
@@ -279,6 +280,7 @@ class PropDecl:
 class NameDecl:
     name: str
     loc: Loc
+    link: str = ""  # an input `from "peer"`: the peer; a signal `output … to cell`: "cell"
 
 
 @dataclass(frozen=True)
@@ -292,6 +294,15 @@ class MissionAst:
     tasks: tuple[TaskDecl, ...]
     procedures: tuple[ProcDecl, ...]
     properties: tuple[PropDecl, ...]
+    lost: tuple[NameDecl, ...] = ()  # each `lost "peer"` of a condition: the peer, where
+
+
+CELL = "cell"
+
+
+def lost_input(peer: str) -> str:
+    """The input standing for `lost "peer"` (the cell lost that daemon): `lost_arm_a`."""
+    return "lost_" + re.sub(r"[^A-Za-z0-9_]", "_", peer)
 
 
 def substatements(s: Stmt) -> list[Stmt]:

@@ -116,6 +116,7 @@ class _Elaborator:
             self.declare(i.name, i.loc, "signal")
             self.resource_part(i.name, i.loc, resources, "input")
             self.add_input(i.name, -1, "operator", i.name)
+        lost = self.lost_inputs()
         for s in m.signals:
             self.declare(s.name, s.loc, "signal")
             self.resource_part(s.name, s.loc, resources, "output")
@@ -186,7 +187,29 @@ class _Elaborator:
             names=self.spellings(),
             sites=tuple(site for site in self.sites if site is not None),
             fault_inputs=tuple(faults),
+            remote_inputs=tuple((i.name, i.link) for i in m.inputs if i.link),
+            lost_inputs=tuple(lost),
+            cell_outputs=tuple(sg.name for sg in m.signals if sg.link == A.CELL),
         )
+
+    def lost_inputs(self) -> list[tuple[str, str]]:
+        """An input `lost_P` for each peer P the mission takes an input from or tests `lost "P"`
+        of: an environment input like an operator's (the cell may lose P in any instant)."""
+        m = self.m
+        peers: dict[str, A.Loc] = {}
+        for d in (*[i for i in m.inputs if i.link], *m.lost):
+            peers.setdefault(d.link or d.name, d.loc)
+        out: list[tuple[str, str]] = []
+        named: dict[str, str] = {}
+        for peer, loc in peers.items():
+            name = A.lost_input(peer)
+            if name in named:
+                raise self.err(loc, f'peers "{named[name]}" and "{peer}" cannot both be told apart ({name})')
+            named[name] = peer
+            self.declare(name, loc, "signal")
+            self.add_input(name, -1, "operator", name)
+            out.append((name, peer))
+        return out
 
     def task(self, t: A.TaskDecl, index: int) -> TaskInfo:
         declared: list[tuple[str, str, A.Loc]] = [(e.kind, e.name, e.loc) for e in t.events]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -37,6 +38,7 @@ _WORDS = {
 # run before any recursive pass, so no mission can exhaust the interpreter's stack.
 MAX_MISSION_CHARS = 1_000_000
 MAX_NESTING = 64  # statements and signal expressions nested inside one another
+PEER = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_-]{0,62}$")  # a daemon's name in a cell (`[cell] robot`)
 MAX_COUNT = 1000  # `repeat N times`, `await N C`: N copies in sequence (each counts against the limits)
 
 _NESTING_NODES = frozenset(
@@ -44,7 +46,17 @@ _NESTING_NODES = frozenset(
     "present trap exit every handle handler not_ and_expr or_expr".split()
 )
 
-_DECL_TOKENS = ("MISSION", "RESOURCE", "INPUT", "SIGNAL", "TASK", "PROCEDURE", "PROC_ROLE", "PROPERTY")
+_DECL_TOKENS = (
+    "MISSION",
+    "RESOURCE",
+    "INPUT",
+    "SIGNAL",
+    "OUTPUT",
+    "TASK",
+    "PROCEDURE",
+    "PROC_ROLE",
+    "PROPERTY",
+)
 
 
 @cache
@@ -174,6 +186,7 @@ class _Builder:
     def __init__(self, file: str, text: str) -> None:
         self.file = file
         self.text = text
+        self.lost: list[A.NameDecl] = []  # `lost "peer"` atoms, in order
 
     def loc(self, node: Any) -> A.Loc:
         if isinstance(node, lark.Token):
@@ -201,9 +214,21 @@ class _Builder:
                 name = str(d.children[1])
             elif kind == "resource_decl":
                 resources.extend(self.names(d.children[1]))
-            elif kind in ("input_decl", "signal_decl"):
-                target = inputs if kind == "input_decl" else signals
-                target.extend(self.signal_names(d.children[1]))
+            elif kind == "input_decl":
+                peer = self.peer(d.children[3]) if d.children[3] is not None else ""
+                if peer and any("." in n.name for n in self.signal_names(d.children[1])):
+                    raise self.err(d.children[3], "an input from a peer is a plain name (not R.X)")
+                inputs.extend(replace(n, link=peer) for n in self.signal_names(d.children[1]))
+            elif kind == "signal_decl":
+                signals.extend(self.signal_names(d.children[1]))
+            elif kind == "output_decl":
+                where = d.children[3]
+                if str(where) != A.CELL:
+                    raise self.err(where, f"`output … to {where}`: an output goes `to cell`")
+                named = self.signal_names(d.children[1])
+                if any("." in n.name for n in named):
+                    raise self.err(d, "an output to the cell is a plain name (not R.Y)")
+                signals.extend(replace(n, link=A.CELL) for n in named)
             elif kind == "task_decl":
                 tasks.append(self.task(d))
             elif kind == "proc_decl":
@@ -212,8 +237,15 @@ class _Builder:
                 props.append(self.prop(d))
         return A.MissionAst(
             self.file, self.text, name, tuple(resources), tuple(inputs), tuple(signals), tuple(tasks),
-            tuple(procs), tuple(props),
+            tuple(procs), tuple(props), tuple(self.lost),
         )  # fmt: skip
+
+    def peer(self, tok: Any) -> str:
+        """A peer's name in the cell, from its string: letters, digits, _ and -."""
+        name = str(tok)[1:-1]
+        if not PEER.match(name):
+            raise self.err(tok, f"peer {tok} must be a daemon's name in the cell (letters, digits, _ or -)")
+        return name
 
     def names(self, node: lark.Tree[Any]) -> list[A.NameDecl]:
         return [A.NameDecl(str(t), self.loc(t)) for t in node.children if isinstance(t, lark.Token)]
@@ -377,6 +409,10 @@ class _Builder:
         loc = self.loc(e)
         if k == "sig":
             return A.SigRef(self.qname(e.children[0]), loc)
+        if k == "lost":
+            peer = self.peer(e.children[1])
+            self.lost.append(A.NameDecl(peer, loc))
+            return A.SigRef(A.lost_input(peer), loc)
         if k == "fn":
             arg = e.children[1]
             return A.Fn(str(e.children[0]), self.qname(arg) if isinstance(arg, lark.Tree) else str(arg), loc)

@@ -94,6 +94,11 @@ class Program:
     # per declared resource: (its name, the input bit of `R.fault`: the resource safe-stopped while
     # no task of the mission runs on it; a fault while one runs is that task's type 3)
     fault_inputs: tuple[tuple[str, int], ...] = ()
+    # a cell of daemons: (input, peer) for each `input X from "peer"`, (input, peer) for each peer
+    # whose loss the mission sees (`lost "peer"`), and the internal signals `output … to cell`
+    remote_inputs: tuple[tuple[str, str], ...] = ()
+    lost_inputs: tuple[tuple[str, str], ...] = ()
+    cell_outputs: tuple[str, ...] = ()
 
     @property
     def fault_mask(self) -> int:

@@ -161,6 +161,8 @@ def verify(a: Automaton, *, one_task_per_resource: bool = False, dead_code: bool
     ]
     if one_task_per_resource:
         results.append(_check_one_task(a, g))
+    if a.program.remote_inputs:
+        results.append(_check_peer_loss(a, g))
     results.extend(_check_property(a, g, prop) for prop in a.program.properties)
     if dead_code:
         results.append(_check_dead_code(a))
@@ -323,6 +325,36 @@ def _check_one_task(a: Automaton, g: _Graph) -> CheckResult:
         "one task per resource", True,
         "at most one Robot-Task is active on each resource in any state (the daemon's need)",
     )  # fmt: skip
+
+
+def _moves(a: Automaton, s: int, bit: int) -> bool:
+    """The input `bit` alone changes state `s`'s reaction."""
+    return a.react(s, bit) != a.react(s, 0)
+
+
+def _check_peer_loss(a: Automaton, g: _Graph) -> CheckResult:
+    """A state that waits for a peer's signal (it alone changes the reaction) must react to the
+    loss of that peer too: otherwise a daemon that has gone leaves the mission waiting forever."""
+    p = a.program
+    lost = {peer: p.input_bit(name) for name, peer in p.lost_inputs}
+    waits = [(p.input_bit(name), name, peer) for name, peer in p.remote_inputs]
+    checked = 0
+    for s in sorted(g.parent):
+        for bit, name, peer in waits:
+            if not _moves(a, s, bit):
+                continue
+            checked += 1
+            if not _moves(a, s, lost[peer]):
+                return CheckResult(
+                    "peer loss", False,
+                    f'{name} from "{peer}" is awaited where the loss of "{peer}" is not handled',
+                    g.path(s),
+                    f'waiting at: {a.where[s]}; handle it (`handle … on lost "{peer}" do … end`, '
+                    f'or `do … until lost "{peer}"`)',
+                )  # fmt: skip
+    return CheckResult(
+        "peer loss", True, f"every wait for a peer's signal reacts to that peer's loss ({checked} cases)"
+    )
 
 
 def _warnings(a: Automaton, g: _Graph) -> list[str]:

@@ -33,6 +33,8 @@ if TYPE_CHECKING:
 log = logging.getLogger("orccadd.cmdd.cell")
 
 URGENT_WAIT_S = 2.0
+ARRIVALS_MAX = 10_000  # peers' signals waiting for the real-time process (beyond: dropped, logged)
+SIGNAL_MAX = 4096  # bytes of a signal's payload
 Answer = Callable[[bytes, Role, str], Coroutine[Any, Any, dict[str, Any]]]
 
 
@@ -49,6 +51,12 @@ class CellPeer:
         self.declared: list[Any] = []
         self.pubs: dict[str, Any] = {}
         self.pending: set[asyncio.Task[None]] = set()
+        # the cell's side of missions: peers' signals and losses, in arrival order, for the
+        # real-time process (one consumer: per-link order kept); peers alive now
+        self.arrivals: asyncio.Queue[tuple[str, str, str]] = asyncio.Queue(maxsize=ARRIVALS_MAX)
+        self.alive: set[str] = set()
+        self.last_seq: dict[tuple[str, str], int] = {}  # (peer, signal) -> last sequence number taken
+        self.out_seq = 0
 
     def key(self, *chunks: str) -> str:
         return keys.robot_key(self.net.name, self.net.robot, *chunks)
@@ -65,6 +73,14 @@ class CellPeer:
         self.declared.append(s.declare_queryable(self.key(keys.READ), self._on_query(Role.READ)))
         if self.net.secured:  # without TLS nobody can be trusted with control: no such key
             self.declared.append(s.declare_queryable(self.key(keys.CONTROL), self._on_query(Role.CONTROL)))
+        self.declared.append(
+            s.declare_subscriber(keys.every_robot(self.net.name, keys.SIGNAL, "*"), self._on_signal)
+        )
+        self.declared.append(
+            s.liveliness().declare_subscriber(
+                keys.every_robot(self.net.name, keys.ALIVE), self._on_liveliness, history=True
+            )
+        )
         self.declared.append(s.liveliness().declare_token(self.key(keys.ALIVE)))
         log.info(
             "cell %s: peer %s (zid %s), listening on %s%s",
@@ -88,6 +104,84 @@ class CellPeer:
             with contextlib.suppress(Exception):
                 self.session.close()  # type: ignore[no-untyped-call]
             self.session = None
+
+    def emit(self, name: str, mission: str) -> None:
+        """The mission emitted `name`, an output to the cell: published reliably, in order, with
+        a sequence number (a subscriber drops a duplicate and logs a gap)."""
+        assert self.session is not None
+        key = self.key(keys.SIGNAL, name)
+        pub = self.pubs.get(key)
+        if pub is None:
+            import zenoh
+
+            pub = self.session.declare_publisher(
+                key,
+                congestion_control=zenoh.CongestionControl.BLOCK,
+                reliability=zenoh.Reliability.RELIABLE,
+                express=True,
+            )
+            self.pubs[key] = pub
+        self.out_seq += 1
+        pub.put(json.dumps({"seq": self.out_seq, "wall_s": time.time(), "mission": mission}))
+
+    # ---- peers -----------------------------------------------------------------------------
+    def _on_signal(self, sample: zenoh.Sample) -> None:  # Zenoh's thread
+        key = str(sample.key_expr)
+        try:
+            peer = keys.robot_of(self.net.name, key)
+            name = key.rsplit("/", 1)[1]
+            raw = sample.payload.to_bytes()
+            if len(raw) > SIGNAL_MAX:
+                raise ValueError(f"{len(raw)} bytes")
+            msg = json.loads(raw)
+            seq = msg["seq"] if isinstance(msg, dict) else None
+            if not isinstance(seq, int) or isinstance(seq, bool) or seq < 1:
+                raise ValueError("no positive integer `seq`")
+        except (ValueError, KeyError, UnicodeDecodeError, RecursionError) as e:
+            log.warning("cell: a malformed signal on %s dropped: %s", key[:200], str(e)[:200])
+            return
+        if peer == self.net.robot:
+            return
+        last = self.last_seq.get((peer, name), 0)
+        if seq <= last:
+            log.info("cell: %s from %s: sequence %d again (after %d): dropped", name, peer, seq, last)
+            return
+        if last and seq > last + 1:
+            log.warning("cell: %s from %s: %d signal(s) missed before %d", name, peer, seq - last - 1, seq)
+        self.last_seq[(peer, name)] = seq
+        self._arrive(peer, name, "signal")
+
+    def _on_liveliness(self, sample: zenoh.Sample) -> None:  # Zenoh's thread
+        import zenoh
+
+        try:
+            peer = keys.robot_of(self.net.name, str(sample.key_expr))
+        except ValueError:
+            return
+        if peer == self.net.robot:
+            return
+        if sample.kind == zenoh.SampleKind.DELETE:
+            log.warning("cell %s: lost %s (its liveliness token is gone)", self.net.name, peer)
+            self._arrive(peer, "", "lost")
+        else:
+            log.info("cell %s: %s is there", self.net.name, peer)
+            self._arrive(peer, "", "joined")
+
+    def _arrive(self, peer: str, name: str, what: str) -> None:
+        assert self.loop is not None
+        self.loop.call_soon_threadsafe(self.queue, (peer, name, what))
+
+    def queue(self, item: tuple[str, str, str]) -> None:
+        peer, _, what = item
+        if what == "joined":
+            self.alive.add(peer)
+            self.last_seq = {k: v for k, v in self.last_seq.items() if k[0] != peer}  # a new run of it
+        elif what == "lost":
+            self.alive.discard(peer)
+        try:
+            self.arrivals.put_nowait(item)
+        except asyncio.QueueFull:
+            log.error("cell: %s from %s dropped: %d waiting already", item[1] or what, peer, ARRIVALS_MAX)
 
     def put(self, chunk: str, value: Any) -> None:
         pub = self.pubs.get(chunk)

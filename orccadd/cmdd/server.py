@@ -63,7 +63,7 @@ ROLELESS_WAIT_S = 2.0
 RESERVED_MAX = 4
 RESERVED_WAIT_S = 2.0
 RT_MAX = 1 << 20
-CELL_TICK_S = 0.005  # the cell's publishing loop wakes at most this often
+CELL_TICK_S = 0.002  # the cell's publishing loop wakes at most this often (with outputs to the cell)
 
 
 class ClientReader(asyncio.StreamReader):
@@ -293,7 +293,36 @@ class CommandDaemon:
             log.error("cell %s: cannot join: %s: %s", self.net.name, type(e).__name__, e)
             peer.close()
             return None, None
-        return peer, asyncio.create_task(self._cell_pump(peer))
+        arrivals = asyncio.create_task(self._cell_arrivals(peer))
+        pump = asyncio.create_task(self._cell_pump(peer))
+        pump.add_done_callback(lambda _: arrivals.cancel())
+        return peer, pump
+
+    async def _cell_arrivals(self, peer: CellPeer) -> None:
+        """Peers' signals and losses to the real-time process, one at a time in arrival order:
+        each one the running mission takes is one input of one instant (`cell_input`)."""
+        while True:
+            who, name, what = await peer.arrivals.get()
+            mission = self.desc.get("mission") or {}
+            if what == "signal":
+                taken = [name, who] in mission.get("remote_inputs", [])
+                name = name if taken else ""
+            elif what == "lost":
+                name = next((n for n, p in mission.get("lost_inputs", []) if p == who), "")
+            else:
+                continue
+            if not name:
+                continue
+            reply = await self.rt.call("cell_input", {"input": name, "peer": who})
+            if not reply.get("ok"):
+                log.warning("cell: %s from %s not taken: %s", name, who, reply.get("error"))
+
+    def _cell_started(self, peer: CellPeer) -> None:
+        """A run began: a peer it must see is not there now, so its loss is this run's first news."""
+        mission = self.desc.get("mission") or {}
+        for _, who in mission.get("lost_inputs", []):
+            if who not in peer.alive:
+                peer.queue((who, "", "lost"))
 
     async def _cell_pump(self, peer: CellPeer) -> None:
         """Publish to the cell: every trace event as it comes (and the status with it), the
@@ -309,8 +338,15 @@ class CommandDaemon:
                 new = trace.poll()
                 if len(new):
                     await self.refresh()
+                    outputs = set((self.desc.get("mission") or {}).get("cell_outputs", []))
                     for rec in new:
-                        peer.put(keys.EVENTS, self.decode_trace(rec))
+                        event = self.decode_trace(rec)
+                        for action in event.get("actions", []) if outputs else []:
+                            if action.startswith("emit ") and action[5:] in outputs:
+                                peer.emit(action[5:], str(event.get("mission")))
+                        peer.put(keys.EVENTS, event)
+                        if event.get("command") == "start":
+                            self._cell_started(peer)
                 now = time.monotonic()
                 if len(new) or now >= next_status:
                     await self.refresh()
@@ -324,7 +360,9 @@ class CommandDaemon:
                 raise
             except Exception as e:  # a publication lost must not end the others
                 log.warning("cell: publishing: %s: %s", type(e).__name__, e)
-            await asyncio.sleep(max(CELL_TICK_S, min(next_joints, next_status) - time.monotonic()))
+            waits = bool((self.desc.get("mission") or {}).get("cell_outputs"))  # the trace, often
+            nxt = min(next_joints, next_status, time.monotonic() + (CELL_TICK_S if waits else 0.05))
+            await asyncio.sleep(max(CELL_TICK_S, nxt - time.monotonic()))
 
     async def _pump(self) -> None:
         """Background: follow the log, notice the real-time process going away."""
@@ -479,6 +517,10 @@ class CommandDaemon:
         except ProtocolError as e:
             return error_reply(e.rid, str(e))
         spec = COMMANDS[cmd]
+        if spec.role is Role.CELL:
+            return error_reply(
+                rid, f"{cmd!r} is the command daemon's own: a peer's signal comes over the cell"
+            )
         if role is None or (spec.role is Role.CONTROL and role is not Role.CONTROL):
             need = "the control role" if spec.role is Role.CONTROL else "the read-only role"
             return error_reply(rid, f"not authorised: {who} lacks {need} for {cmd!r}")

@@ -243,6 +243,18 @@ class RtCommands:
         mc.react(self._trace(OperatorAction.SEND), bit)
         return {"sent": input}
 
+    @handles("cell_input")
+    def cell_input(self, input: str, peer: str) -> Result:
+        """A peer's signal or its loss: one instant with that input, if a run takes it now (a
+        mission not running, or not declaring it, lets it go by: the cell's signals are pure
+        events, present in one instant or absent)."""
+        mc = self.m.mission
+        bit = mc.cell_input(input, peer)
+        if not bit or mc.state not in (MachineState.RUNNING, MachineState.HOLDING):
+            return {"taken": False, "input": input, "peer": peer}
+        mc.react(self._trace(OperatorAction.CELL), bit)
+        return {"taken": True, "input": input, "peer": peer}
+
     @handles("stop")
     def stop(self) -> Result:
         """Graceful: the mission's own `Stop` operator input (the procedure's defined stop)."""

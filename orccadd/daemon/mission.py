@@ -58,6 +58,7 @@ class LoadedMission:
     def describe(self) -> dict[str, object]:
         p = self.automaton.program
         procs = [pr.name for pr in p.ast.procedures if pr.role == "main"]
+        cell = {n for n, _ in (*p.remote_inputs, *p.lost_inputs)}
         return {
             "name": p.name,
             "file": self.file,
@@ -67,8 +68,13 @@ class LoadedMission:
             "tunables": [t.tunable_names for t in self.tasks],  # per task: what a tune record names
             "inputs": list(p.inputs),
             "operator_inputs": [
-                n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator" and "." not in n
+                n
+                for n, k in zip(p.inputs, p.input_kind, strict=True)
+                if k == "operator" and "." not in n and n not in cell
             ],
+            "remote_inputs": [list(x) for x in p.remote_inputs],  # [input, peer]: `from "peer"`
+            "lost_inputs": [list(x) for x in p.lost_inputs],  # [input, peer]: `lost "peer"`
+            "cell_outputs": list(p.cell_outputs),  # emitted: published to the cell
             "resource_inputs": [
                 n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator" and "." in n
             ],

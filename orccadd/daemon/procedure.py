@@ -142,11 +142,28 @@ class MissionControl:
         self.react(t_s, 0)
         return main
 
+    def cell_input(self, name: str, peer: str) -> int:
+        """The input bit of `name` from `peer` (a remote input declared `from "peer"`, or the
+        peer's loss); 0 without a mission or if it takes no such input from that peer."""
+        if self.mission is None:
+            return 0
+        p = self.mission.automaton.program
+        if (name, peer) in p.remote_inputs or (name, peer) in p.lost_inputs:
+            return p.input_bit(name)
+        return 0
+
     def operator_input(self, name: str) -> int:
         mission = self.mission
         assert mission is not None
         p = mission.automaton.program
-        ops = [n for n, k in zip(p.inputs, p.input_kind, strict=True) if k == "operator" and "." not in n]
+        from_cell = {n: peer for n, peer in (*p.remote_inputs, *p.lost_inputs)}
+        if name in from_cell:
+            raise CommandError(f"{name} comes from the cell (peer {from_cell[name]!r}), not from `send`")
+        ops = [
+            n
+            for n, k in zip(p.inputs, p.input_kind, strict=True)
+            if k == "operator" and "." not in n and n not in from_cell
+        ]
         if "." in name and name in p.inputs:
             r = name.split(".", 1)[0]
             raise CommandError(

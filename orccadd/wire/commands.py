@@ -38,6 +38,7 @@ class Role(StrEnum):
 
     READ = "read"
     CONTROL = "control"
+    CELL = "cell"  # the command daemon's own, from its cell link: never a client's
 
 
 Where = Literal["rt", "cmdd"]
@@ -157,6 +158,22 @@ COMMANDS: dict[str, CommandSpec] = {
         ),
         CommandSpec("stop", C, "rt", "graceful: the mission's `Stop` operator input", urgent=True),
         CommandSpec("abort", C, "rt", "immediate safe stop; the mission ends `aborted`", urgent=True),
+        CommandSpec(
+            "cell_input",
+            Role.CELL,
+            "rt",
+            "a peer's signal, or the loss of a peer, entering the running mission as one input of one "
+            "instant: sent by the command daemon from its cell link, refused to clients",
+            (
+                Arg(
+                    "input",
+                    (str,),
+                    'the mission\'s input (`input X from "peer"`, or `lost_PEER`)',
+                    required=True,
+                ),
+                Arg("peer", (str,), "the peer it came from", required=True),
+            ),
+        ),
         CommandSpec("hold", C, "rt", "suspend the mission on the Hold task"),
         CommandSpec("resume", C, "rt", "restart the suspended task from the measured state"),
         CommandSpec(

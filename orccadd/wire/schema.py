@@ -56,6 +56,7 @@ class OperatorAction(IntEnum):
     SEND = 9
     INJECT = 10
     SHUTDOWN = 11
+    CELL = 12  # a peer's signal or its loss (`cell_input`, from the command daemon's cell link)
 
 
 class Trace(IntEnum):
