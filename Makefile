@@ -7,7 +7,13 @@ SYSTEM_STAMP := $(VENV)/.system-installed
 
 .PHONY: demo test lint typecheck unit bench setup system-deps clean
 
-setup: $(STAMP) $(SYSTEM_STAMP)
+CELL_CERTS := configs/cell/certs/ca.pem
+
+setup: $(STAMP) $(SYSTEM_STAMP) $(CELL_CERTS)
+
+# configs/cell/'s test certificates: an authority of this checkout's own, never committed
+$(CELL_CERTS): | $(STAMP)
+	$(PY) -m orccadd.cellnet.certs configs/cell/certs arm-a arm-b console viewer
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)

@@ -78,3 +78,23 @@ def make_cell_certs(out: Path, names: Sequence[str]) -> Path:
         if not ((out / f"{n}.pem").is_file() and (out / f"{n}.key").is_file()):
             make_peer(out, n)
     return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """`python -m orccadd.cellnet.certs DIR NAME…`: a test authority in DIR and a certificate for
+    each NAME (kept if there)."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m orccadd.cellnet.certs", description=main.__doc__)
+    ap.add_argument("dir", type=Path)
+    ap.add_argument("names", nargs="+")
+    a = ap.parse_args(argv)
+    try:
+        make_cell_certs(a.dir, a.names)
+    except (CertError, OSError) as e:
+        ap.exit(1, f"{ap.prog}: error: {e}\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

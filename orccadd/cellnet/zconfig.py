@@ -17,6 +17,8 @@ from orccadd.cellnet import keys
 from orccadd.config.cellnet import CellNetConfig
 
 LOOPBACK_ANY_PORT = "127.0.0.1:0"
+LEASE_MS = 1000  # a link silent this long is closed: a peer cut off is lost within about a second
+KEEP_ALIVES = 4  # per lease
 
 
 def zenoh_config(net: CellNetConfig, daemon: bool) -> dict[str, Any]:
@@ -30,21 +32,18 @@ def zenoh_config(net: CellNetConfig, daemon: bool) -> dict[str, Any]:
         # over the links it has): a console connected to one daemon reaches every one
         "scouting": {"multicast": {"enabled": net.scouting}, "gossip": {"enabled": True, "multihop": True}},
     }
+    conf["transport"] = {"link": {"tx": {"lease": LEASE_MS, "keep_alive": KEEP_ALIVES}}}
     if net.secured:
         ca, cert, key = (str(p) for p in net.tls_files())
-        conf["transport"] = {
-            "link": {
-                "tls": {
-                    "root_ca_certificate": ca,
-                    "enable_mtls": True,
-                    "listen_certificate": cert,
-                    "listen_private_key": key,
-                    "connect_certificate": cert,
-                    "connect_private_key": key,
-                    # peers are named by their certificates' common names, not by host names
-                    "verify_name_on_connect": False,
-                }
-            }
+        conf["transport"]["link"]["tls"] = {
+            "root_ca_certificate": ca,
+            "enable_mtls": True,
+            "listen_certificate": cert,
+            "listen_private_key": key,
+            "connect_certificate": cert,
+            "connect_private_key": key,
+            # peers are named by their certificates' common names, not by host names
+            "verify_name_on_connect": False,
         }
         if daemon:
             conf["access_control"] = access_control(net)

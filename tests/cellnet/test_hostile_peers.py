@@ -1,0 +1,70 @@
+"""What a peer of the cell sends a daemon cannot take it down: a malformed payload on every key
+the daemon subscribes to or answers on is dropped (or answered with an error) and logged, and
+the daemon carries on; a peer cannot speak under another's name."""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from orccadd.cellnet.zconfig import to_json5, zenoh_config
+from orccadd.config.cellnet import load_cellnet
+from tests.cellnet.conftest import Member, start_member
+
+zenoh = pytest.importorskip("zenoh")
+
+GARBAGE = [b"", b"\xff\xfe\x00", b"{", b"[1, 2]", b'{"seq": "one"}', b'{"seq": -3}', b'{"seq": true}',
+           b"[" * 5000, b"x" * 100_000, b'{"seq": 1e400}']  # fmt: skip
+
+
+@pytest.fixture
+def arm_a(tmp_path: Path, certs: Path) -> Iterator[Member]:
+    m = start_member(tmp_path, "test", "arm-a", certs, [], control=("console",))
+    try:
+        yield m
+    finally:
+        m.daemon.stop()
+
+
+def peer_session(certs: Path, name: str, endpoint: str) -> zenoh.Session:
+    raw = {"name": "test", "robot": name, "connect": [endpoint], "ca": str(certs / "ca.pem"),
+           "certificate": str(certs / f"{name}.pem"), "private_key": str(certs / f"{name}.key")}  # fmt: skip
+    net = load_cellnet(raw, "<test>", name)
+    s = zenoh.open(zenoh.Config.from_json5(to_json5(zenoh_config(net, daemon=False))))
+    time.sleep(0.5)  # connected
+    return s
+
+
+def test_malformed_payloads_are_dropped_with_a_log_line(arm_a: Member, certs: Path) -> None:
+    s = peer_session(certs, "console", arm_a.endpoint)
+    try:
+        for raw in GARBAGE:
+            s.put("orccadd/test/console/signal/PartPlaced", raw)
+        replies = []
+        for key in ("orccadd/test/arm-a/read", "orccadd/test/arm-a/control"):
+            for raw in GARBAGE:
+                for r in s.get(key, payload=raw, timeout=5.0):
+                    replies.append(json.loads(r.ok.payload.to_bytes()))
+        time.sleep(0.5)
+    finally:
+        s.close()
+    assert len(replies) == 2 * len(GARBAGE)
+    assert all(r["ok"] is False and r["error"] for r in replies), replies
+    log = arm_a.daemon.log_text()
+    assert log.count("a malformed signal on orccadd/test/console/signal/PartPlaced dropped") == len(GARBAGE)
+    assert arm_a.daemon.call("ping")["pong"]
+    assert arm_a.daemon.status()["state"] == "idle"
+
+
+def test_a_peer_cannot_speak_under_another_name(arm_a: Member, certs: Path) -> None:
+    s = peer_session(certs, "console", arm_a.endpoint)
+    try:
+        s.put("orccadd/test/arm-b/signal/PartPlaced", b"{")  # denied by arm-a's access control
+        time.sleep(0.5)
+    finally:
+        s.close()
+    assert "arm-b/signal" not in arm_a.daemon.log_text()
