@@ -57,6 +57,7 @@ class CellPeer:
         self.alive: set[str] = set()
         self.last_seq: dict[tuple[str, str], int] = {}  # (peer, signal) -> last sequence number taken
         self.out_seq = 0
+        self.ros: Any = None  # a `cellnet.ros2.Ros2Node` with `ros2 = true`
 
     def key(self, *chunks: str) -> str:
         return keys.robot_key(self.net.name, self.net.robot, *chunks)
@@ -82,6 +83,11 @@ class CellPeer:
             )
         )
         self.declared.append(s.liveliness().declare_token(self.key(keys.ALIVE)))
+        if self.net.ros2:
+            from orccadd.cellnet.ros2 import Ros2Node
+
+            self.ros = Ros2Node(s, self.net.robot, "orccadd", self.net.ros2_domain_id)
+            log.info("ROS 2 (rmw_zenoh): node %s%s", self.ros.namespace, "/orccadd")
         log.info(
             "cell %s: peer %s (zid %s), listening on %s%s",
             self.net.name,
@@ -92,6 +98,10 @@ class CellPeer:
         )
 
     def close(self) -> None:
+        if self.ros is not None:
+            with contextlib.suppress(Exception):
+                self.ros.close()
+            self.ros = None
         for d in self.declared:
             with contextlib.suppress(Exception):
                 d.undeclare()
@@ -187,6 +197,23 @@ class CellPeer:
         pub = self.pubs.get(chunk)
         if pub is not None:
             pub.put(json.dumps(value, separators=(",", ":")))
+        if self.ros is not None:
+            if chunk == keys.JOINTS:
+                self._ros_joints(value)
+            elif chunk == keys.EVENTS:
+                self.ros.publish_log(time.time_ns(), *ros_log(value))
+
+    def _ros_joints(self, js: dict[str, Any]) -> None:
+        """One JointState of every resource's joints (named `resource/joint` when there are several)."""
+        units = js.get("resources", [])
+        if not units:
+            return
+        several = len(units) > 1
+        names = [f"{u['name']}/{j}" if several else j for u in units for j in u["joints"]]
+        q = [x for u in units for x in u["q"]]
+        dq = [x for u in units for x in u["dq"]]
+        tau = [x for u in units for x in u["tau"]]
+        self.ros.publish_joint_state(time.time_ns(), names, q, dq, tau)
 
     # ---- requests --------------------------------------------------------------------------
     def _on_query(self, role: Role) -> Callable[[zenoh.Query], None]:
@@ -263,5 +290,18 @@ class CellPeer:
                 query.drop()  # type: ignore[no-untyped-call]
 
 
-def wall_ns() -> int:
-    return time.time_ns()
+def ros_log(event: dict[str, Any]) -> tuple[int, str]:
+    """(rcl_interfaces/msg/Log level, text) of one trace event."""
+    kind = event.get("kind")
+    if kind == "fault":
+        return 40, f"fault: {json.dumps(event.get('fault'))}"
+    if kind == "instant":
+        inputs, actions = ", ".join(event.get("inputs", [])), ", ".join(event.get("actions", []))
+        text = (
+            f"{event.get('mission')}: instant {event.get('from')}->{event.get('to')} "
+            f"inputs {{{inputs}}} actions {{{actions}}}"
+        )
+        return (30 if "t3" in event.get("input_kinds", []) else 20), text
+    if kind == "event":
+        return (30 if event.get("event_kind") == "t3" else 20), f"event {event.get('event')}"
+    return 20, f"command {event.get('command')}"
