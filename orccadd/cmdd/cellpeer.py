@@ -58,6 +58,9 @@ class CellPeer:
         self.last_seq: dict[tuple[str, str], int] = {}  # (peer, signal) -> last sequence number taken
         self.out_seq = 0
         self.ros: Any = None  # a `cellnet.ros2.Ros2Node` with `ros2 = true`
+        # (peer, signal, "signal" | "lost") to the real-time process from Zenoh's thread; False:
+        # not sent (queued instead). The command daemon sets it.
+        self.deliver_now: Callable[[str, str, str], bool] = lambda peer, name, what: False
 
     def key(self, *chunks: str) -> str:
         return keys.robot_key(self.net.name, self.net.robot, *chunks)
@@ -178,16 +181,22 @@ class CellPeer:
             self._arrive(peer, "", "joined")
 
     def _arrive(self, peer: str, name: str, what: str) -> None:
+        """From Zenoh's thread: straight to the real-time process if nothing waits before it
+        (`deliver_now`: one datagram on the link, no hop through this process's event loop),
+        else after what waits, in order."""
         assert self.loop is not None
-        self.loop.call_soon_threadsafe(self.queue, (peer, name, what))
+        delivered = what != "joined" and self.arrivals.empty() and self.deliver_now(peer, name, what)
+        self.loop.call_soon_threadsafe(self.queue, (peer, name, what), delivered)
 
-    def queue(self, item: tuple[str, str, str]) -> None:
+    def queue(self, item: tuple[str, str, str], delivered: bool = False) -> None:
         peer, _, what = item
         if what == "joined":
             self.alive.add(peer)
             self.last_seq = {k: v for k, v in self.last_seq.items() if k[0] != peer}  # a new run of it
         elif what == "lost":
             self.alive.discard(peer)
+        if delivered:
+            return
         try:
             self.arrivals.put_nowait(item)
         except asyncio.QueueFull:

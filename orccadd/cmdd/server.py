@@ -19,7 +19,9 @@ import pwd
 import signal
 import socket
 import stat
+import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -63,7 +65,10 @@ ROLELESS_WAIT_S = 2.0
 RESERVED_MAX = 4
 RESERVED_WAIT_S = 2.0
 RT_MAX = 1 << 20
-CELL_TICK_S = 0.002  # the cell's publishing loop wakes at most this often (with outputs to the cell)
+CELL_TICK_S = 0.005  # the cell's publishing loop wakes at most this often
+CELL_SWITCH_INTERVAL_S = 0.0005  # with a cell: Zenoh's threads get the GIL this soon
+CELL_STATUS_MIN_S = 0.1  # a status on an event: not more often (its timing figures cost ~1 ms)
+CELL_TRACE_S = 0.05  # ... and at least this often (the trace's events to the cell)
 
 
 class ClientReader(asyncio.StreamReader):
@@ -98,6 +103,8 @@ class RtLink:
         self.reader: asyncio.Task[None] | None = None
         self.next_id = 0
         self.closed = False
+        self.on_push: Callable[[dict[str, Any]], None] = lambda msg: None  # unasked: `{"push": …}`
+        self.oneway_id = 0  # requests whose reply nobody awaits: negative ids, counting down
 
     async def _read_replies(self) -> None:
         loop = asyncio.get_running_loop()
@@ -109,6 +116,9 @@ class RtLink:
                 try:
                     reply = json.loads(data)
                 except ValueError:
+                    continue
+                if isinstance(reply, dict) and "push" in reply:
+                    self.on_push(reply)
                     continue
                 rid = reply.get("id") if isinstance(reply, dict) else None
                 fut = self.waiting.pop(rid, None) if isinstance(rid, int) else None
@@ -293,24 +303,54 @@ class CommandDaemon:
             log.error("cell %s: cannot join: %s: %s", self.net.name, type(e).__name__, e)
             peer.close()
             return None, None
+        self.rt.on_push = lambda msg: self._pushed(peer, msg)
+        peer.deliver_now = self._deliver_now
         arrivals = asyncio.create_task(self._cell_arrivals(peer))
         pump = asyncio.create_task(self._cell_pump(peer))
         pump.add_done_callback(lambda _: arrivals.cancel())
         return peer, pump
 
+    @staticmethod
+    def _pushed(peer: CellPeer, msg: dict[str, Any]) -> None:
+        """The real-time process's own news: a mission's output to the cell, emitted just now."""
+        if msg.get("push") == "cell_output" and isinstance(msg.get("name"), str):
+            try:
+                peer.emit(msg["name"], str(msg.get("mission", "")))
+            except Exception as e:  # a session closing: the peers see it lost
+                log.warning("cell: output %s not published: %s", msg["name"], e)
+
+    def _mission_input(self, who: str, name: str, what: str) -> str:
+        """The loaded mission's input for a peer's signal or loss ("" if it takes none)."""
+        mission = self.desc.get("mission") or {}
+        if what == "signal":
+            return name if [name, who] in mission.get("remote_inputs", []) else ""
+        if what == "lost":
+            return next((n for n, p in mission.get("lost_inputs", []) if p == who), "")
+        return ""
+
+    def _deliver_now(self, who: str, name: str, what: str) -> bool:
+        """From Zenoh's thread: a `cell_input` datagram on the link, its reply not awaited (the
+        real-time process serves it on arrival and traces it); False if it could not be sent."""
+        taken = self._mission_input(who, name, what)
+        if not taken:
+            return True  # nothing to deliver: done
+        if self.rt.closed:
+            return False
+        self.rt.oneway_id -= 1
+        msg = {"id": self.rt.oneway_id, "cmd": "cell_input", "args": {"input": taken, "peer": who}}
+        try:
+            self.rt.sock.send(json.dumps(msg).encode())
+            return True
+        except OSError:  # the link's buffer full, or gone: the queue's way
+            return False
+
     async def _cell_arrivals(self, peer: CellPeer) -> None:
-        """Peers' signals and losses to the real-time process, one at a time in arrival order:
-        each one the running mission takes is one input of one instant (`cell_input`)."""
+        """Peers' signals and losses to the real-time process, one at a time in arrival order,
+        when they could not go straight (`_deliver_now`): each one the running mission takes is
+        one input of one instant (`cell_input`)."""
         while True:
             who, name, what = await peer.arrivals.get()
-            mission = self.desc.get("mission") or {}
-            if what == "signal":
-                taken = [name, who] in mission.get("remote_inputs", [])
-                name = name if taken else ""
-            elif what == "lost":
-                name = next((n for n, p in mission.get("lost_inputs", []) if p == who), "")
-            else:
-                continue
+            name = self._mission_input(who, name, what)
             if not name:
                 continue
             reply = await self.rt.call("cell_input", {"input": name, "peer": who})
@@ -333,26 +373,24 @@ class CommandDaemon:
         joints_s = 1.0 / self.net.joints_hz if self.net.joints_hz else float("inf")
         status_s = 1.0 / self.net.status_hz
         next_joints = next_status = time.monotonic()
+        status_at = 0.0
         while True:
             try:
                 new = trace.poll()
                 if len(new):
                     await self.refresh()
-                    outputs = set((self.desc.get("mission") or {}).get("cell_outputs", []))
                     for rec in new:
                         event = self.decode_trace(rec)
-                        for action in event.get("actions", []) if outputs else []:
-                            if action.startswith("emit ") and action[5:] in outputs:
-                                peer.emit(action[5:], str(event.get("mission")))
                         peer.put(keys.EVENTS, event)
                         if event.get("command") == "start":
                             self._cell_started(peer)
                 now = time.monotonic()
-                if len(new) or now >= next_status:
+                if now >= next_status or (len(new) and now - status_at >= CELL_STATUS_MIN_S):
                     await self.refresh()
                     log_state = self.recording.describe() if self.recording else self.last_log
                     peer.put(keys.STATUS, views.status(self.tel, self.desc, log_state, self.units()))
                     next_status = max(next_status + status_s, now)
+                    status_at = now
                 if now >= next_joints:
                     peer.put(keys.JOINTS, views.joint_states(self.tel, self.desc, self.units()))
                     next_joints = max(next_joints + joints_s, now)
@@ -360,8 +398,7 @@ class CommandDaemon:
                 raise
             except Exception as e:  # a publication lost must not end the others
                 log.warning("cell: publishing: %s: %s", type(e).__name__, e)
-            waits = bool((self.desc.get("mission") or {}).get("cell_outputs"))  # the trace, often
-            nxt = min(next_joints, next_status, time.monotonic() + (CELL_TICK_S if waits else 0.05))
+            nxt = min(next_joints, next_status, time.monotonic() + CELL_TRACE_S)
             await asyncio.sleep(max(CELL_TICK_S, nxt - time.monotonic()))
 
     async def _pump(self) -> None:
@@ -745,6 +782,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.exit(2, f"{ap.prog}: error: {e}\n")
     _above_clients()
     cell = read_cell_config(args.config)
+    if cell.net is not None:  # a peer's signal waits for the GIL in Zenoh's thread: not 5 ms
+        sys.setswitchinterval(CELL_SWITCH_INTERVAL_S)
     log_dir = cell.resolve(cell.daemon.log_dir) if cell.daemon.log_dir else None
     try:
         d = CommandDaemon(

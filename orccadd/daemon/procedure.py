@@ -74,6 +74,9 @@ class MissionControl:
         self.result = MissionResult.NONE
         # per resource (loop index): the mission task the automaton wants active on it
         self.current: list[RobotTask | None] = [None] * len(self.loops)
+        # an output to the cell the instant emitted: (its name, the mission's) to the command
+        # daemon at once (the real-time process sets it; the trace says it too, later)
+        self.cell_output: Callable[[str, str], None] = lambda name, mission: None
 
     @property
     def running(self) -> bool:
@@ -269,7 +272,10 @@ class MissionControl:
     def _outputs(self, a: Automaton, actions: int) -> None:
         """The resources' output actions the instant emits (`emit R.Y`), in declaration order.
         One the device refuses is said, and the run goes on (the mission cannot see it)."""
+        cell = a.program.cell_outputs
         for k, name in enumerate(a.program.internals):
+            if cell and name in cell and actions >> (a.emit_base + k) & 1:
+                self.cell_output(name, a.program.name)
             if "." in name and actions >> (a.emit_base + k) & 1:
                 r, y = name.split(".", 1)
                 try:

@@ -80,6 +80,11 @@ def decode(data: bytes) -> Request | dict[str, Any]:
         return {"id": e.rid, "ok": False, "error": str(e)}
 
 
+# served the moment they arrive: abort and stop, and a peer's signal, which enters the automaton
+# as a task's event does (one reaction, at this thread's priority, never a tick's work)
+ON_ARRIVAL = URGENT_COMMANDS | {"cell_input"}
+
+
 def rt_socket_path(public: str) -> str:
     return public + ".rt"
 
@@ -330,6 +335,7 @@ class RealtimeProcess:
         if self.conn is not None:  # a new command daemon attaches: it replaces the old link
             self.conn.close()
         self.conn = conn
+        self.machine.mission.cell_output = self._push_cell_output
         self.inbox.clear()  # requests of the old link: their client has gone
         self.pending.clear()
         self.machine.note("command daemon attached")
@@ -360,7 +366,7 @@ class RealtimeProcess:
             if isinstance(req, dict):
                 self._send(req)
                 continue
-            if req[1] in URGENT_COMMANDS and len(data) <= URGENT_MAX_BYTES:
+            if req[1] in ON_ARRIVAL and len(data) <= URGENT_MAX_BYTES:
                 self._serve(req)  # on arrival, ahead of any queue
                 continue
             if not self.inbox:
@@ -419,6 +425,10 @@ class RealtimeProcess:
         if len(still) != len(self.pending):
             self.machine.publish()  # a reply went out: the state it changed
         self.pending = still
+
+    def _push_cell_output(self, name: str, mission: str) -> None:
+        """The instant emitted `name`, an output to the cell: the command daemon publishes it."""
+        self._send({"push": "cell_output", "name": name, "mission": mission})
 
     def _send(self, reply: dict[str, Any]) -> None:
         # if the command daemon is not reading, it times out; the loop carries on
