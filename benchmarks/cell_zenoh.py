@@ -255,18 +255,21 @@ def run_scale(certs: Path, sizes: list[int], refreshes: int) -> list[str]:
             console = console_for(certs, endpoints_of(ds))
             seen = len(console.robots())
             refresh, trip = [], []
+            unanswered = 0
             for i in range(refreshes):
                 t0 = time.monotonic()
                 replies = console.status_all()
                 refresh.append((time.monotonic() - t0) * 1e3)
-                assert all(r.get("ok") for r in replies.values()), replies
+                unanswered += sum(not r.get("ok") for r in replies.values()) + n - len(replies)
                 t0 = time.monotonic()
                 r = console.request(names[i % n], "describe")
                 trip.append((time.monotonic() - t0) * 1e3)
-                assert r.get("ok"), r
+                unanswered += not r.get("ok")
+            overruns = sum(int(d.status()["overruns"]) for d in ds)
             console.close()
         lines.append(f"  {n} daemon(s) ({seen} seen): refresh {figures(refresh, 'ms', 2)}")
         lines.append(f"  {n} daemon(s): command round trip {figures(trip, 'ms', 2)}")
+        lines.append(f"  {n} daemon(s): {unanswered} requests unanswered; the loops' overruns {overruns}")
     return lines
 
 

@@ -8,6 +8,7 @@ in a robot config); what it may do on each daemon is that daemon's say (its acce
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import queue
 import threading
@@ -59,6 +60,7 @@ class CellConsole:
         except zenoh.ZError as e:
             raise CellError(f"cell {net.name}: cannot open a Zenoh session: {e}") from None
         self.next_id = 0
+        self._ids = itertools.count(1)  # one per request, from any thread (`status_all`'s)
         self._settle()
 
     def _settle(self) -> None:
@@ -97,8 +99,8 @@ class CellConsole:
     def request(self, robot: str, cmd: str, timeout_s: float | None = None, **args: Any) -> dict[str, Any]:
         """One request to `robot`, on its `control` key if the command needs that role, else on
         its `read` key: its reply as the socket gives it, or an error reply saying why none came."""
-        self.next_id += 1
-        line = json.dumps({"id": self.next_id, "cmd": cmd, "args": args, "protocol": PROTOCOL_VERSION})
+        rid = self.next_id = next(self._ids)
+        line = json.dumps({"id": rid, "cmd": cmd, "args": args, "protocol": PROTOCOL_VERSION})
         spec = COMMANDS.get(cmd)
         chunk = keys.CONTROL if spec is not None and spec.role is Role.CONTROL else keys.READ
         key = keys.robot_key(self.net.name, robot, chunk)
@@ -108,10 +110,10 @@ class CellConsole:
                 try:
                     reply = json.loads(r.ok.payload.to_bytes())
                 except ValueError:
-                    return {"id": self.next_id, "ok": False, "error": f"{robot}: an unreadable reply"}
+                    return {"id": rid, "ok": False, "error": f"{robot}: an unreadable reply"}
                 if isinstance(reply, dict):
                     return reply
-        return {"id": self.next_id, "ok": False, "error": self._why_silent(robot, cmd, chunk)}
+        return {"id": rid, "ok": False, "error": self._why_silent(robot, cmd, chunk)}
 
     def _why_silent(self, robot: str, cmd: str, chunk: str) -> str:
         online = self.robots(wait_s=0.3)
