@@ -49,6 +49,13 @@ for f in systemd/orccadd.service systemd/orccadd-can@.service udev/60-orccadd-cp
     [ -f "$work/venv/share/orccadd/$f" ] || { echo "smoke: the wheel lacks share/orccadd/$f" >&2; exit 1; }
 done
 [ -f "$work/venv/share/doc/orccadd/install.md" ] || { echo "smoke: the wheel lacks install.md" >&2; exit 1; }
+# the cell of PCs (the [cell] extra): its shipped configs, test certificates, a console's refusal
+[ -f "$share/cell/arm-a.toml" ] || { echo "smoke: the wheel lacks configs/cell/arm-a.toml" >&2; exit 1; }
+"$bin/python" -m orccadd.cellnet.certs "$work/certs" console >/dev/null
+if "$bin/orccadctl" --cell "$share/cell/console.toml" cell status 2>"$work/cell.err"; then
+    echo "smoke: a console without its certificates must be refused" >&2; exit 1
+fi
+grep -q "cell.ca .*no such file" "$work/cell.err"
 "$bin/orccadctl" completion bash | bash -n
 "$bin/orccadctl" modules --config sim-ur5e | grep -q "target_rad .*default required"
 

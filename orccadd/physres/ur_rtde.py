@@ -373,6 +373,8 @@ class UrRtdeArm(PhysicalResource):
         if not self.link.lock.acquire(blocking=False):
             return 0
         try:
+            if not self._control_ready():
+                return int(Status.COMM_LOST)
             behaviour = self._behaviour(t_s)
             return self._send(mode, command) if behaviour is None else behaviour
         except ResourceError as e:  # a call to the link process failed: it is gone
@@ -385,9 +387,8 @@ class UrRtdeArm(PhysicalResource):
     def _behaviour(self, t_s: float) -> int | None:
         """Force mode or freedrive where this tick's task asks for one (its module wrote the tick's
         time into the command): sent instead of the joint command, whose flags are returned;
-        None: neither, and one that ran is ended first (the arm then held where it is)."""
-        if not self._control_ready():
-            return None  # _send says why
+        None: neither, and one that ran is ended first (the arm then held where it is). The
+        caller has checked the link (`_control_ready`), once per tick."""
         if self._force_cmd[0] == t_s:
             return self._force_mode(self._force_cmd)
         if self._freedrive_cmd[0] == t_s:
@@ -471,8 +472,7 @@ class UrRtdeArm(PhysicalResource):
         return True
 
     def _send(self, mode: CommandMode, command: FloatArray) -> int:
-        if not self._control_ready():
-            return int(Status.COMM_LOST)
+        """The joint command (the link checked by the caller, `_control_ready`)."""
         s = self.settings
         if mode is CommandMode.POSITION:
             np.subtract(command, self._hold, out=self._cmd_v)

@@ -34,6 +34,14 @@ def test_the_console_sees_every_daemon_and_commands_one(
     assert described["result"]["mission"]["name"] == "PickDemo"  # demo.mission's module
     other = json.loads(ctl("--cell", str(console), "--robot", "arm-c", "--json", "describe").stdout)
     assert other["result"]["mission"] is None  # only arm-b loaded it
+    merged = [
+        json.loads(x)
+        for x in ctl("--cell", str(console), "cell", "events", "--json", "--last", "5").stdout.splitlines()
+    ]
+    assert [e["robot"] for e in merged if e.get("command") == "load"] == ["arm-b"], merged
+    assert [e["wall_s"] for e in merged] == sorted(e["wall_s"] for e in merged)  # one time order
+    top = json.loads(ctl("--cell", str(console), "cell", "top", "--json", "--count", "1").stdout)
+    assert sorted(top["robots"]) == ["arm-a", "arm-b", "arm-c"] and top["lost"] == []
 
 
 def test_a_read_only_peer_reads_and_cannot_command(
@@ -49,9 +57,10 @@ def test_a_read_only_peer_reads_and_cannot_command(
 
 
 def test_peers_without_a_listed_or_valid_certificate_get_nothing(
-    tmp_path: Path, certs: Path, cell_of_three: list[Member], tmp_path_factory: object
+    tmp_path: Path, certs: Path, cell_of_three: list[Member]
 ) -> None:
     from orccadd.cellnet.certs import make_cell_certs
+    from orccadd.cellnet.console import CellConsole, read_console_config
 
     endpoint = [cell_of_three[0].endpoint]
     stranger = console_file(tmp_path, "test", "stranger", certs, endpoint)  # the CA's, not listed
@@ -61,9 +70,20 @@ def test_peers_without_a_listed_or_valid_certificate_get_nothing(
     plain.write_text(
         f'[cell]\nname = "test"\nrobot = "plain"\nconnect = ["{endpoint[0].replace("tls/", "tcp/")}"]\n'
     )
+    commands = [
+        ("load", {"path": "demo"}),
+        ("start", {}),
+        ("tune", {"path": "Hold.pd.kp", "value": 1}),
+        ("abort", {}),
+    ]
     for who in (stranger, rogue, plain):
-        r = ctl("--cell", str(who), "cell", "status", "--json")
-        assert json.loads(r.stdout)["robots"] == {}, (who, r.stdout)
-        r = ctl("--cell", str(who), "--robot", "arm-a", "abort")
-        assert r.returncode != 0, (who, r.stdout)
-        assert "not in cell" in r.stderr or "not authorised" in r.stderr, r.stderr
+        with CellConsole(read_console_config(str(who))) as console:
+            assert console.robots(wait_s=0.5) == [], who
+            for cmd, args in commands:
+                r = console.request("arm-a", cmd, timeout_s=1.0, **args)
+                assert not r["ok"] and "not in cell" in r["error"], (who, cmd, r)
+    r = ctl("--cell", str(stranger), "--robot", "arm-a", "abort")  # as orccadctl says it
+    assert r.returncode != 0 and "not in cell 'test'" in r.stderr, r.stderr
+    for m in cell_of_three:  # nothing loaded, nothing moved, nothing stopped
+        st = m.daemon.status()
+        assert st["state"] == "idle" and st["mission"] is None and not st["faulted"], st
