@@ -24,9 +24,9 @@ the attachment lost its key strings, ros2/rmw_zenoh#601) to 0.2.10.
   sequence, LEB128 length 0x10 and 16 bytes; 33 bytes.
 - Payload: CDR, 4-byte encapsulation header 00 01 00 00 (little endian), as Fast-CDR writes it:
   alignment counted from the end of the header, none before an empty array.
-- Gid: rmw_zenoh hashes the token with XXH3-128, we with BLAKE2b-128 (xxhash is no dependency).
-  Subscribers use it to tell publishers apart and count lost samples, which holds; only the gid
-  that `ros2 topic info -v` derives from our token differs from the samples' `publisher_gid`.
+- Gid: XXH3-128 of the whole liveliness token, its low 64 bits then its high 64 bits, each in
+  the machine's (little-endian) order (liveliness_utils.cpp, `Entity::Entity`): the gid
+  `ros2 topic info -v` derives from our token is the one our samples carry.
 
 Type hashes (RIHS01, REP 2011) come from rosbags' Jazzy typestore; tests/cellnet/test_ros2.py pins
 them to values published elsewhere (a captured rmw_zenoh /rosout token, `ros2 topic info -v`).
@@ -39,7 +39,6 @@ that is where rqt_console, `ros2 topic echo /rosout` and rosbag look, not a topi
 
 from __future__ import annotations
 
-import hashlib
 import re
 import struct
 import threading
@@ -51,6 +50,7 @@ from functools import cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import xxhash
 from numpy.typing import ArrayLike, NDArray
 from rosbags.typesys import Stores, get_typestore
 
@@ -192,8 +192,8 @@ def publisher_token(
 
 
 def gid_of(token: str) -> bytes:
-    """A publisher's 16-byte gid, from its token (BLAKE2b-128; see the module docstring)."""
-    return hashlib.blake2b(token.encode(), digest_size=GID_SIZE).digest()
+    """A publisher's 16-byte gid, from its token as rmw_zenoh derives it (the module docstring)."""
+    return int(xxhash.xxh3_128_intdigest(token.encode())).to_bytes(GID_SIZE, "little")
 
 
 def attachment(sequence: int, source_timestamp_ns: int, gid: bytes) -> bytes:

@@ -302,3 +302,9 @@ def test_a_node_refuses_a_qos_it_cannot_keep(sessions: tuple[Any, Any]) -> None:
     """rcl's own /rosout QoS is TRANSIENT_LOCAL: that needs a cache of samples, which we do not keep."""
     with pytest.raises(ValueError, match="not offered"):
         ros2.Ros2Node(sessions[0], "arm-a", "orccadd", log_qos=ros2.Qos(1000, transient_local=True))
+
+
+def test_a_gid_is_the_xxh3_128_of_the_token_low_half_first() -> None:
+    # XXH3-128 of no bytes is 99aa06d3014798d8 (high) 6001c324468d497f (low), xxHash's own test
+    # vector; rmw_zenoh copies the low then the high 64 bits, each little-endian, into the gid
+    assert ros2.gid_of("") == bytes.fromhex("7f498d4624c30160" "d8984701d306aa99")  # fmt: skip
