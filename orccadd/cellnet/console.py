@@ -28,8 +28,8 @@ from orccadd.wire.schema import PROTOCOL_VERSION
 if TYPE_CHECKING:
     import zenoh
 
-DISCOVER_S = 1.5  # a console's first look at the cell: at most this long for its peers
-SETTLE_S = 0.3  # ... and done once no new peer came for this long
+DISCOVER_S = 3.0  # a console's first look at the cell: at most this long for its peers
+SETTLE_S = 0.5  # ... and done once no new peer came for this long (gossip under load is slow)
 
 
 class CellError(Exception):
