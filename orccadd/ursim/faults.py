@@ -23,6 +23,7 @@ The world and the I/O (`simulator.UrSimulator.inject`; `world.World`):
     {"inject": "configurable_digital_input", "index": 0, "value": true}  CI 0-7 (bits 8-15)
     {"inject": "tool_digital_input", "index": 1, "value": true}          TDI 0-1 (bits 16-17)
     {"inject": "ft_noise", "force_n": 0.5, "torque_nm": 0.02, "seed": 1}  sensor noise (std)
+    {"inject": "speed_slider", "fraction": 0.5}   the teach pendant's speed slider, set by hand
     {"status": true}   -> modes, program, joint positions, cycles, connections, ports, the
                           wall, tcp_force, external_wrench, motion, payload_kg, I/O bits
 

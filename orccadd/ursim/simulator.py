@@ -53,7 +53,7 @@ FAULTS = (
     "drop_connection",
     "controller_restart",
 )
-WORLD = ("wall", "wall_remove", "push", "ft_noise")
+WORLD = ("wall", "wall_remove", "push", "ft_noise", "speed_slider")
 # input name -> (first bit of actual_digital_input_bits, count)
 DIGITAL_INPUTS = {
     "digital_input": (0, 8),
@@ -166,6 +166,13 @@ class UrSimulator:
                 raise ValueError(f"ft_noise: unknown parameter(s) {', '.join(sorted(unknown))}")
             noise = (float(params.get("force_n", 0.0)), float(params.get("torque_nm", 0.0)))
             ctl.forces.sensor.set_noise(*noise, int(params.get("seed", 0)))
+        elif what == "speed_slider":  # a person's hand on the teach pendant's slider
+            value = params.get("fraction")
+            if set(params) != {"fraction"} or isinstance(value, bool) or not isinstance(value, int | float):
+                raise ValueError(f'speed_slider takes "fraction", a number in [0, 1] (got {params})')
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"speed_slider: fraction (={value!r}) must be in [0, 1]")
+            ctl.speed.slider = float(value)
         else:
             first, count = DIGITAL_INPUTS[what]
             if set(params) != {"index", "value"}:

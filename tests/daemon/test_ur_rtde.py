@@ -261,3 +261,65 @@ def test_a_digital_input_moves_the_mission_and_its_emits_set_the_tools_output(
         assert any("arm.close_gripper" in " ".join(e["actions"]) for e in instants), instants
     finally:
         d.stop()
+
+
+SLIDER_MISSION = """
+mission Slider
+resource arm
+input Go
+task Out on arm from "{tasks}/ur_move_joints.toml"
+  set traj.target_rad = [0.6, -1.3, 1.4, -1.6, -1.5708, 0.3]
+  post
+end
+task Back on arm from "{tasks}/ur_move_joints.toml"
+  set traj.target_rad = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+  post
+end
+main procedure OutAndBack
+  handle
+    Out; await Go; Back
+  on fatal do
+    safe
+  end
+end
+safe procedure Rest
+  nothing
+end
+"""
+
+
+def task_seconds(events: list[dict[str, object]], task: str) -> float:
+    """From the instant that started `task` to the one its postcondition ended (trace times)."""
+    start = next(float(e["t_s"]) for e in events if f"start {task}" in e.get("actions", []))  # type: ignore[arg-type,operator]
+    done = next(float(e["t_s"]) for e in events if f"{task}.done" in e.get("inputs", []))  # type: ignore[arg-type,operator]
+    return done - start
+
+
+def test_the_pendants_speed_slider_slows_a_scaled_motion_through_the_daemon(
+    sim: UrSimProcess, tmp_path: Path
+) -> None:
+    """ur_move_joints.toml (Ruckig scaled by the controller's `speed_scaling`) through orccadd on
+    the simulated controller: Out at the slider's 100 %, then the slider set to 50 % on the
+    pendant (the simulator's control channel), and Back over the same path takes about twice as
+    long; the controller's own scaling, read from RTDE each tick, is what slows it."""
+    (tmp_path / "slider.mission").write_text(SLIDER_MISSION.format(tasks=ROOT / "configs/tasks"))
+    config = local_config(tmp_path, UR)
+    config.write_text(config.read_text().replace("mission_dirs = [", f'mission_dirs = ["{tmp_path}", ', 1))
+    d = start_daemon_with(tmp_path, config)
+    try:
+        assert d.ctl("load", str(tmp_path / "slider.mission")).returncode == 0
+        d.call("start")
+        deadline = time.monotonic() + 60
+        while not any("Out.done" in e.get("inputs", []) for e in d.call("events", last=50)["events"]):  # type: ignore[index]
+            assert time.monotonic() < deadline, d.status()
+            time.sleep(0.05)  # Out at the slider's 100 %, to its end: the mission waits for Go
+        sim.inject("speed_slider", fraction=0.5)
+        time.sleep(0.5)  # the controller's scaling follows its slider within a few cycles
+        d.call("send", input="Go")
+        s = d.wait(lambda s: s["state"] != "running" or s["faulted"], timeout_s=90)
+        assert s["result"] == "success" and not s["faulted"], (s.get("fault"), sim.log_text()[-3000:])
+        events = d.call("events", last=200)["events"]  # type: ignore[index]
+        out, back = task_seconds(events, "Out"), task_seconds(events, "Back")
+        assert back / out > 1.5, (out, back)
+    finally:
+        d.stop()
