@@ -67,16 +67,19 @@ def arm(rig: Rig) -> Iterator[Canopen402Arm]:
 
 
 def run(arm: Canopen402Arm, seconds: float, command: Callable[[float], np.ndarray] | None = None) -> int:
-    """Tick the resource on the wall clock (missed periods skipped, like the executor): read, then
-    the command or `keep_alive`; the OR of the status flags seen."""
+    """Tick the resource `seconds / period` times on the wall clock (missed periods skipped, like
+    the executor): read, then the command or `keep_alive`; the OR of the status flags seen. The
+    command is given the tick's time as a trajectory generator sees it, one period per tick: after
+    a stall of the test's thread it goes on from where it was instead of jumping (which the
+    resource rightly clamps as faster than max_velocity). A stall makes the run longer, not shorter."""
     period = arm.config.control_period_s
-    t0 = nxt = time.monotonic()
+    nxt = time.monotonic()
     seen = 0
-    while nxt - t0 < seconds:
+    for k in range(round(seconds / period)):
         st = arm.read(nxt)
         seen |= st.status
         if command is not None:
-            seen |= arm.write(nxt, command(nxt - t0))
+            seen |= arm.write(nxt, command(k * period))
         else:
             arm.keep_alive(nxt)
         nxt += period
