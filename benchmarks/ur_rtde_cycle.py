@@ -17,11 +17,12 @@ at the same period and priority, half of --duration-s just before our loop and h
   is a packet missed (the backend's `packets_missed`), told apart into cycles the simulator
   skipped itself, packages its sender replaced unsent, and the rest (ur_rtde's thread or ours);
 - wake-up latency: ur_rtde runs in the link process (`drivers.ur.link_server`), whose stream
-  thread polls ur_rtde every POLL_S and sends each new package to us; the tick's release is
-  the instant that poll saw it, and the wake-up is from there to our control thread running
-  (the hop between the two processes included), judged against cyclictest's p99. Also the
-  package's age at release (since its cycle's start: the simulator's wake-up, its cycle, its
-  sender, loopback TCP, ur_rtde's thread, the link process's poll);
+  thread reads the controller's RTDE stream by a blocking read (`drivers.ur.rtde_stream`) and
+  sends each package to us; the tick's release is the instant that read returned, and the
+  wake-up is from there to our control thread running (the hop between the two processes
+  included), judged against cyclictest's p99. Also the package's age at release (since its
+  cycle's start: the simulator's wake-up, its cycle, its sender, loopback TCP, the link
+  process's read);
 - our tick's compute (release -> servoJ sent), and when the servoJ left, since the cycle of
   the package it answers: after the next cycle's start it can only reach the one after;
 - command-to-motion latency, on the controller's time (each command at its package's cycle,
@@ -55,7 +56,6 @@ import numpy as np
 from harness import ROOT, cyclictest, figures
 
 from orccadd.daemon.rtproc import GIL_SWITCH_INTERVAL_S
-from orccadd.drivers.ur.link import POLL_S
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.ur_rtde import UrRtdeArm
 from orccadd.robot import create_resource, load_robot_config
@@ -348,7 +348,7 @@ def report(run: Run, base_us: np.ndarray | None, halves: tuple[np.ndarray, np.nd
     if origin is not None:
         cycle_ns = (rec.stamp_s + float(origin)) * 1e9  # each package's cycle: its scheduled start
         wake_us = rec.wake_ns * 1e-3
-        row(f"wake-up, package seen (polled every {POLL_S * 1e6:g} µs) -> release", wake_us, "µs")
+        row("wake-up, package read (blocking) -> release", wake_us, "µs")
         row("package age at release (since its cycle)", (rel - cycle_ns) * 1e-3, "µs")
         row("tick compute (release -> servoJ sent)", (rec.sent_ns - rel) * 1e-3, "µs")
         row("servoJ sent, since the package's cycle", (rec.sent_ns - cycle_ns) * 1e-3, "µs")

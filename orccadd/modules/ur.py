@@ -1,4 +1,5 @@
-"""A UR controller's own behaviours, asked tick by tick: force mode and freedrive.
+"""A UR controller's own behaviours, asked tick by tick: force mode and freedrive; and the tool
+(payload and TCP) a task sets at its start.
 
 Each module's output is wired to the `ur_rtde` resource's command of the same name
 (`ctl.force_mode -> arm.force_mode`): the controller runs the behaviour while a task writes it,
@@ -18,6 +19,9 @@ from orccadd.drivers.ur.behaviours import (
     FREEDRIVE,
     FREEDRIVE_SIZE,
     FREEDRIVE_UNIT,
+    TOOL,
+    TOOL_SIZE,
+    TOOL_UNIT,
 )
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
 
@@ -86,3 +90,31 @@ class UrFreedrive(KernelModule):
             return ([t_s, *free.tolist(), *feature.tolist()],)
 
         return freedrive
+
+
+@register("ur_tool")
+class UrTool(KernelModule):
+    """The tool the arm carries while this task runs, set on the controller in the task's first
+    tick (URScript set_payload and set_tcp): the payload's mass and centre of gravity (flange
+    frame; the controller's gravity compensation and its collision detection use them) and the
+    TCP (the pose of the tool point in the flange frame: actual_TCP_pose, force mode's frame).
+    The resource checks the mass against the arm's rated payload and the controller checks it
+    again; either refusal is a type 3 and nothing is sent. The tool stays set after the task, until
+    another task sets one (a part in the gripper is still there): after a reset the resource sends
+    it again."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        self.out = self.add_output(TOOL, (TOOL_SIZE,), TOOL_UNIT)
+        self.mass = self.add_parameter("payload_kg", 0.0, bounds=(0.0, 35.0), unit="kg", required=True)
+        self.cog = self.add_parameter("payload_cog_m", np.zeros(3), bounds=(-1.0, 1.0), unit="m", shape=(3,))
+        self.tcp = self.add_parameter("tcp_m_rad", ZERO6, bounds=POSE_BOUNDS, unit="m|rad", shape=(6,))
+
+    def kernel(self) -> Kernel:
+        mass, cog, tcp = self.mass.value, self.cog.value, self.tcp.value  # read each tick: a tune or
+        # a `configure` after the kernel was made changes them in place
+
+        def set_tool(t_s: float) -> tuple[list[float]]:
+            return ([t_s, float(mass), *cog.tolist(), *tcp.tolist()],)
+
+        return set_tool

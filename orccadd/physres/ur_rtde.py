@@ -48,6 +48,9 @@ from orccadd.drivers.ur.behaviours import (
     FREEDRIVE,
     FREEDRIVE_SIZE,
     FREEDRIVE_UNIT,
+    TOOL,
+    TOOL_SIZE,
+    TOOL_UNIT,
 )
 from orccadd.drivers.ur.controller import RobotMode, SafetyMode, parse_polyscope_version
 from orccadd.drivers.ur.remote_link import RemoteLink
@@ -69,6 +72,7 @@ NO_FRICTION_SCALE = [0.0] * 6  # what that script passes to `direct_torque`, wha
 COMMANDS = (
     Signal(FORCE_MODE, FORCE_MODE_SIZE, FORCE_MODE_UNIT, "the controller's force mode (ur_force_mode)"),
     Signal(FREEDRIVE, FREEDRIVE_SIZE, FREEDRIVE_UNIT, "the controller's freedrive (ur_freedrive)"),
+    Signal(TOOL, TOOL_SIZE, TOOL_UNIT, "the payload and TCP a task sets at its start (ur_tool)"),
 )
 SIGNALS = (
     Signal("wrench", 6, "N|N.m", "the TCP's force and torque, base frame (RTDE actual_TCP_force)"),
@@ -194,6 +198,8 @@ class UrRtdeArm(PhysicalResource):
         self._rose = 0
         self._force_cmd, self._freedrive_cmd = self.commands[FORCE_MODE], self.commands[FREEDRIVE]
         self._behaving = ""  # the controller's behaviour a task runs: FORCE_MODE, FREEDRIVE or ""
+        self._tool_cmd = self.commands[TOOL]
+        self._task_tool: tuple[float, ...] | None = None  # the tool a task set (kept across resets)
         self._flags = 0  # the last read's status flags, repeated while a reset holds the links
 
     # ---- lifecycle ------------------------------------------------------------------------
@@ -237,6 +243,7 @@ class UrRtdeArm(PhysicalResource):
                 raise ResourceError(f"{self.name}: powered off by the stop: power it on at the pendant")
             self.link.power_on()
             self.link.restart_script()
+            self._restore_tool()
             self._off_by_us = False
         self._hold_here()
 
@@ -260,6 +267,7 @@ class UrRtdeArm(PhysicalResource):
         if cond.unlockable:  # the controller allows it 5 s after the stop began, and says so
             self.link.unlock_protective_stop()
         self.link.restart_script()
+        self._restore_tool()
         self.fault = None
         st.fault_code = 0
 
@@ -271,6 +279,7 @@ class UrRtdeArm(PhysicalResource):
         self._flags = self._read_locked(time.monotonic(), self.state)
         if self._comm_lost:
             raise ResourceError(f"{self.fault_message}: reconnected, but no package has come")
+        self._restore_tool()
         self._hold_here()
         self._begin_safe_stop()
         self.fault = None
@@ -375,6 +384,9 @@ class UrRtdeArm(PhysicalResource):
         try:
             if not self._control_ready():
                 return int(Status.COMM_LOST)
+            refused = self._tool(t_s)
+            if refused:
+                return refused
             behaviour = self._behaviour(t_s)
             return self._send(mode, command) if behaviour is None else behaviour
         except ResourceError as e:  # a call to the link process failed: it is gone
@@ -382,6 +394,47 @@ class UrRtdeArm(PhysicalResource):
             return int(Status.COMM_LOST)
         finally:
             self.link.lock.release()
+
+    # ---- the tool a task sets ---------------------------------------------------------------
+    def _tool(self, t_s: float) -> int:
+        """The payload and TCP this tick's task asks for (`ur_tool`), set on the controller when
+        they differ from what is set (a round trip to its script each: the task's first tick).
+        Above the arm's rated payload, or refused by the controller: a type 3, nothing sent. 0:
+        nothing asked, or set."""
+        cmd = self._tool_cmd
+        if cmd[0] != t_s:
+            return 0
+        wanted = tuple(cmd[1:].tolist())
+        if wanted == self._task_tool:
+            return 0
+        model = self.settings.model
+        rated = RATED_PAYLOAD_KG[model]
+        if wanted[0] > rated:
+            why = f"payload {wanted[0]:g} kg asked by the task exceeds the {model}'s rated {rated:g} kg"
+            self._set_fault(FaultKind.COMMAND, why)
+            return int(Status.FAULT)
+        why = self._set_tool(wanted)
+        if why:
+            self._set_fault(FaultKind.DEVICE, why)
+            return int(Status.FAULT)
+        self._task_tool = wanted
+        return 0
+
+    def _set_tool(self, tool: tuple[float, ...]) -> str:
+        """setPayload then setTcp; '' or what the controller refused."""
+        mass, cog, tcp = tool[0], list(tool[1:4]), list(tool[4:10])
+        if not self.link.call("control", "setPayload", mass, cog):
+            return f"the controller refused payload {mass:g} kg (centre of gravity {cog} m)"
+        if not self.link.call("control", "setTcp", tcp):
+            return f"the controller refused the TCP {tcp}"
+        return ""
+
+    def _restore_tool(self) -> None:
+        """After the script restarted (which sets the config's tool): the tool a task set, again."""
+        if self._task_tool is not None:
+            why = self._set_tool(self._task_tool)
+            if why:
+                raise ResourceError(f"{self.name}: after the restart, {why}")
 
     # ---- the controller's own behaviours (force mode, freedrive) --------------------------
     def _behaviour(self, t_s: float) -> int | None:
@@ -525,8 +578,8 @@ class UrRtdeArm(PhysicalResource):
     def _keep_alive_locked(self, t_s: float) -> None:
         if not self._control_ready():
             return
-        if not self._stop_flags and self._behaviour(t_s) is not None:
-            return  # the controller's behaviour, asked this tick, is the command
+        if not self._stop_flags and (self._tool(t_s) or self._behaviour(t_s) is not None):
+            return  # a refused tool (a type 3 follows), or the controller's behaviour asked this tick
         if self._stop_flags & Status.STOPPING:
             self._ramp_step(t_s)
         elif self._stop_flags:  # at rest after the stop: no command, the watchdog still fed

@@ -435,3 +435,54 @@ def test_freedrive_follows_a_hand_and_a_motion_follows_it(sim: UrSimProcess, arm
     assert moved[0] > 0.01 and task.phase is Phase.RUN, (moved, res.fault_message)
     move_task, loop2 = move(arm, HOME)
     assert loop2.run_task(move_task, timeout_s=20.0) is Phase.DONE, res.fault_message
+
+
+def _tool_on_controller(res: Any) -> tuple[float, np.ndarray]:
+    """The payload the controller reports (RTDE), and its TCP less the flange (base frame)."""
+    d = res.diagnostics().details
+    tcp = np.array([float(x) for x in str(d["tcp_pose_m_rad"]).split()])[:3]
+    return float(d["payload_kg"]), tcp - _tcp(res)
+
+
+def test_a_task_sets_the_payload_and_tcp_at_its_start_and_they_stay_across_a_reset(
+    sim: UrSimProcess, arm: Session
+) -> None:
+    """configs/tasks/ur_carry.toml: its `ur_tool` sets 1.5 kg and a TCP 0.15 m beyond the flange
+    in its first tick; the motion then runs to its target; the tool stays for the next task, and
+    after a protective stop's reset (whose script restart sets the config's tool) it is sent again."""
+    res = arm.resource
+    _, phase = _run_ur_task(arm, "ur_carry", 30.0, traj__target_rad=REACH)
+    assert phase is Phase.DONE and arm.event_names() == ["UrCarry.done"], (arm.event_names(), res.fault_message)
+    mass, offset = _tool_on_controller(res)
+    assert mass == pytest.approx(1.5) and np.linalg.norm(offset) == pytest.approx(0.15, abs=2e-3)
+    sim.inject("protective_stop")
+    loop = TickRecorder(res, resource_clock(res), overrun_limit=10**6)
+    loop.run_for(0.3)
+    assert res.state.status & Status.FAULT
+    res.safe_stop()
+    deadline = time.monotonic() + 10
+    while True:  # the controller allows the unlock 1 s after the stop (here)
+        try:
+            res.reset_fault()
+            break
+        except ResourceError as e:
+            assert "reset again then" in str(e) and time.monotonic() < deadline, e
+            loop.run_for(0.2)
+    loop.run_for(0.5)
+    res.clear_stop()
+    mass, offset = _tool_on_controller(res)
+    assert mass == pytest.approx(1.5) and np.linalg.norm(offset) == pytest.approx(0.15, abs=2e-3)
+    task, loop2 = move(arm, HOME)
+    assert loop2.run_task(task, timeout_s=20.0) is Phase.DONE, res.fault_message
+
+
+def test_a_payload_above_the_arms_rating_asked_by_a_task_is_a_type_3_and_nothing_moves(
+    sim: UrSimProcess, arm: Session
+) -> None:
+    res = arm.resource
+    before, (mass_before, _) = _tcp(res), _tool_on_controller(res)
+    _, phase = _run_ur_task(arm, "ur_carry", 5.0, traj__target_rad=REACH, tool__payload_kg=6.0)
+    assert phase is Phase.FAULT and arm.event_names() == ["UrCarry.T3.ResourceFault"], arm.event_names()
+    assert "payload 6 kg asked by the task exceeds the UR5e's rated 5 kg" in res.fault_message
+    assert np.linalg.norm(_tcp(res) - before) < 0.002
+    assert _tool_on_controller(res)[0] == mass_before

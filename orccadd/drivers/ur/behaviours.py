@@ -10,3 +10,6 @@ FORCE_MODE_UNIT = "ur.force_mode"
 FREEDRIVE = "freedrive"
 FREEDRIVE_SIZE = 13  # tick time, free axes (6), feature (6)
 FREEDRIVE_UNIT = "ur.freedrive"
+TOOL = "tool"
+TOOL_SIZE = 11  # tick time, payload kg, payload centre of gravity (3, flange frame), TCP pose (6)
+TOOL_UNIT = "ur.tool"

@@ -1,5 +1,6 @@
 """The UR controller's links, owned together: the dashboard server (power, brakes, protective-stop
-unlock, version and model), the RTDE stream (`RTDEReceiveInterface`) and the control script
+unlock, version and model), ur_rtde's RTDE receive interface (the slow reads: the condition at a
+reset, the measured currents and TCP pose; the tick's stream is `rtde_stream`'s) and the control script
 (`RTDEControlInterface`: servoJ, speedJ, servoStop, speedStop, the RTDE watchdog), all through the
 `ur-rtde` package; ur_rtde's I/O threads at our real-time priority; and the lock a reset holds
 while it replaces them.
@@ -29,7 +30,7 @@ from orccadd.runtime.rt import ThreadsStartedHere
 
 log = logging.getLogger("orccadd.ur")
 
-POLL_S = 0.0001  # wait_for_package: how often the controller's timestamp is looked at
+SLOW_RECEIVE_HZ = 125.0  # ur_rtde's receive interface: the slow reads only (the stream is ours)
 
 
 class UrLink:
@@ -118,10 +119,11 @@ class UrLink:
         import rtde_receive
 
         host, hz, prio = self.settings.host, 1.0 / self.period_s, self.settings.rtde_priority
+        slow_hz = min(hz, SLOW_RECEIVE_HZ)
         # ur_rtde sets its threads' priority on a PREEMPT_RT kernel only: ours sets it on any
         with ThreadsStartedHere(prio) as started:
             self.receive = self._try(
-                lambda: rtde_receive.RTDEReceiveInterface(host, hz, [], False, False, prio),
+                lambda: rtde_receive.RTDEReceiveInterface(host, slow_hz, [], False, False, prio),
                 f"RTDE at {host}:30004",
             )
             flags = rtde_control.RTDEControlInterface.FLAG_UPLOAD_SCRIPT
@@ -162,7 +164,7 @@ class UrLink:
         controller, it reconnects by itself from its own thread). Dropping the last reference is
         the disconnect: ur_rtde's destructors disconnect (0.5 s each, joining their threads), so
         an explicit disconnect() before would cost it twice. Nothing else holds them:
-        `wait_for_package` looks `receive` up at every poll."""
+        the stream is the link process's own (`rtde_stream`)."""
         self.io = None
         self.control = None
         self.receive = None
@@ -181,31 +183,14 @@ class UrLink:
         self.control.stopScript()  # ur_rtde clears the command registers (no stale servoJ target)
         self.control.reuploadScript()
         self.watchdog_armed = False
+        deadline = time.monotonic() + self.settings.connect_timeout_s
+        while not self.control.isProgramRunning():  # uploaded, started within a few cycles
+            if time.monotonic() > deadline:
+                raise ResourceError(f"{self.name}: the control script did not start again")
+            time.sleep(self.period_s)
         self._set_tool()
 
     # ---- the stream (tick-safe) ------------------------------------------------------------
-    def wait_for_package(self, last_stamp: float, timeout_s: float) -> int:
-        """Until ur_rtde's receive thread has a package with a controller timestamp other than
-        `last_stamp`: its arrival (CLOCK_MONOTONIC ns), or -1 after `timeout_s`, without a link
-        or while a reset replaces the links."""
-        if self.receive is None or self.lock.locked():
-            time.sleep(timeout_s)
-            return -1
-        end = time.monotonic() + timeout_s
-        while True:
-            receive = self.receive  # looked up each time: a reset may drop it meanwhile
-            if receive is None:
-                return -1
-            try:
-                if receive.getTimestamp() != last_stamp:
-                    return time.monotonic_ns()
-            except RuntimeError:
-                return -1
-            del receive
-            if time.monotonic() >= end:
-                return -1
-            time.sleep(POLL_S)
-
     def script_running(self) -> bool:
         return bool(int(self.receive.getRobotStatus()) & ROBOT_PROGRAM_RUNNING)
 

@@ -10,9 +10,11 @@ sees the link gone (CommLost), and `reset` starts a new one.
 Messages are pickled tuples (`remote_link` has the protocol). The settings come first, from the
 parent; this process answers `("ready", version, model)` or `("failed", words)`, then:
 
-- a stream thread sends `("state", StreamState)` for every RTDE package with a new controller
-  timestamp (the parent's tick is released by its arrival), or at once when ur_rtde's links go
-  down (a period without a package), and stops after one that says so;
+- a stream thread reads the controller's RTDE output stream itself, by a blocking read on its
+  socket (`rtde_stream.RtdeStream`: ur_rtde's receive interface has no wait, only getters its
+  own thread refreshes every 100 µs), and sends `("state", StreamState)` for every package the
+  moment the read returns (the parent's tick is released by its arrival); when the stream breaks
+  it sends one that says so, and stops;
 - the main thread executes requests in order: `("send", method, args)` (a stream command:
   servoJ, speedJ, directTorque, kickWatchdog; nothing comes back unless the controller refuses it
   or ur_rtde raises: `("refused", method, words)`), `("call", seq, target, method, args)` (a call
@@ -33,13 +35,13 @@ import time
 from typing import Any
 
 from orccadd.drivers.ur.link import UrLink
-from orccadd.drivers.ur.remote_link import MAX_MESSAGE, snapshot
+from orccadd.drivers.ur.remote_link import MAX_MESSAGE, StreamState
+from orccadd.drivers.ur.rtde_stream import RtdeError, RtdeStream
 from orccadd.errors import OrccaddError
 from orccadd.runtime.rt import realtime_device_process
 
 STREAM_METHODS = frozenset({"servoJ", "speedJ", "directTorque", "kickWatchdog", "forceMode"})
 CALL_TARGETS = frozenset({"link", "control", "io"})
-QUIET_SHARE = 0.6  # of a period after a package: no poll (the controller's cycle is steady)
 
 
 class LinkServer:
@@ -55,27 +57,36 @@ class LinkServer:
             self.stopping = True
 
     # ---- the stream ------------------------------------------------------------------------
-    def stream(self) -> None:
-        last = -1.0
+    def stream(self, rtde: RtdeStream) -> None:
         while not self.stopping:
-            arrival_ns = self.link.wait_for_package(last, self.link.period_s)
-            if arrival_ns < 0:  # no package this period: said at once if the links are down
-                if self._connected():
-                    continue
-                arrival_ns = time.monotonic_ns()
-            state = snapshot(self.link, arrival_ns)
-            last = state.stamp
+            try:
+                pkg, arrival_ns = rtde.read()
+            except RtdeError:
+                self.send("state", StreamState(-1.0, time.monotonic_ns(), False, (), (), (), 0, 0, 0, False))
+                return  # ur_rtde would reconnect by itself: the parent ends this process first
+            state = StreamState(
+                pkg.stamp,
+                arrival_ns,
+                self._connected(),
+                pkg.q_rad,
+                pkg.dq_rad_s,
+                pkg.target_moment_nm,
+                pkg.robot_mode,
+                pkg.safety_mode,
+                pkg.runtime_state,
+                pkg.script_running,
+                pkg.tcp_force,
+                pkg.speed_scaling,
+                pkg.digital_inputs,
+            )
             self.send("state", state)
             if not state.connected:
-                return  # ur_rtde would reconnect by itself: the parent ends this process first
-            # the next package is a period away: polling ur_rtde (every POLL_S) only from
-            # QUIET_SHARE of it on spares the CPUs thousands of real-time wake-ups a second
-            time.sleep(self.link.period_s * QUIET_SHARE)
+                return
 
     def _connected(self) -> bool:
-        c, r = self.link.control, self.link.receive
+        c = self.link.control
         try:
-            return bool(c is not None and r is not None and c.isConnected() and r.isConnected())
+            return bool(c is not None and c.isConnected())
         except RuntimeError:
             return False
 
@@ -135,11 +146,15 @@ def main() -> int:
     server = LinkServer(sock, link)
     try:
         link.connect()
+        rtde = RtdeStream(settings.host, 1.0 / period_s, timeout_s=settings.connect_timeout_s)
+    except RtdeError as e:
+        server.send("failed", f"{name}: cannot read the RTDE stream: {e}")
+        return 1
     except (OrccaddError, RuntimeError) as e:
         server.send("failed", str(e))
         return 1
     server.send("ready", link.version, link.robot_model, warnings)
-    threading.Thread(target=server.stream, name="ur-stream", daemon=True).start()
+    threading.Thread(target=server.stream, args=(rtde,), name="ur-stream", daemon=True).start()
     server.serve()
     server.stopping = True
     time.sleep(0.06)  # the stream thread's last wait

@@ -32,7 +32,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from orccadd.drivers.ur.controller import ROBOT_PROGRAM_RUNNING, Condition, Version, condition
+from orccadd.drivers.ur.controller import Condition, Version, condition
 from orccadd.drivers.ur.settings import UrRtdeSettings
 from orccadd.errors import ResourceError
 
@@ -68,30 +68,6 @@ class StreamState:
     def condition(self) -> Condition | None:
         """What stops the arm in this package (None: it may move)."""
         return condition(self.robot_mode, self.safety_mode, self.runtime_state, self.script_running)
-
-
-def snapshot(link: Any, arrival_ns: int) -> StreamState:
-    """The package `link` (a `UrLink`) has now (in the link process)."""
-    r, c = link.receive, link.control
-    try:
-        connected = bool(c is not None and r is not None and c.isConnected() and r.isConnected())
-        return StreamState(
-            float(r.getTimestamp()),
-            arrival_ns,
-            connected,
-            tuple(r.getActualQ()),
-            tuple(r.getActualQd()),
-            tuple(r.getTargetMoment()),
-            int(r.getRobotMode()),
-            int(r.getSafetyMode()),
-            int(r.getRuntimeState()),
-            bool(int(r.getRobotStatus()) & ROBOT_PROGRAM_RUNNING),
-            tuple(r.getActualTCPForce()),
-            float(r.getSpeedScaling()),
-            int(r.getActualDigitalInputBits()),
-        )
-    except (RuntimeError, AttributeError):
-        return StreamState(-1.0, arrival_ns, False, (), (), (), 0, 0, 0, False)
 
 
 class RemoteLink:
