@@ -172,7 +172,8 @@ def run_baud(baud: int, args: argparse.Namespace, tmp: Path) -> tuple[float, flo
     config = tmp / f"dxl-{baud}.toml"
     latency_s = args.latency_timer_ms * 1e-3  # each reply waits that long besides its wire time
     config.write_text(config_text(port, baud, 0.005 + 2 * latency_s, 0.003 + latency_s))
-    sim = DxlSimProcess(config, "--latency-timer-ms", f"{args.latency_timer_ms:g}")
+    cpu = [] if args.sim_cpu is None else ["--cpu", str(args.sim_cpu)]
+    sim = DxlSimProcess(config, "--latency-timer-ms", f"{args.latency_timer_ms:g}", *cpu)
     try:
         servo_priority(sim, args.sim_priority)
         arm = open_arm(config)
@@ -256,6 +257,9 @@ def main() -> int:
     ap.add_argument("--cycle-s", type=float, default=5.0, help="back-to-back cycles measured for")
     ap.add_argument("--bauds", default="1000000,2000000,3000000,4000000")
     ap.add_argument("--sim-priority", type=int, default=70, help="SCHED_FIFO of the simulator (0: normal)")
+    ap.add_argument(
+        "--sim-cpu", type=int, default=None, help="the simulator on this core only (default: any)"
+    )
     ap.add_argument(
         "--latency-timer-ms", type=float, default=1.0,
         help="the simulated USB adapter's latency timer (1: as packaging/udev sets it; FTDI's default 16)",

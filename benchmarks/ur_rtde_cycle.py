@@ -423,6 +423,9 @@ def main() -> int:
     ap.add_argument("--duration-s", type=float, default=60.0)
     ap.add_argument("--priority", type=int, default=80, help="SCHED_FIFO of our loop and of cyclictest")
     ap.add_argument("--sim-priority", type=int, default=70, help="SCHED_FIFO of the simulator (0: normal)")
+    ap.add_argument(
+        "--sim-cpu", type=int, default=None, help="the simulator on this core only (default: any)"
+    )
     args = ap.parse_args()
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # the same clean-up as Ctrl-C
     print(
@@ -430,6 +433,7 @@ def main() -> int:
         f"the UR simulator (SCHED_FIFO {args.sim_priority}), {args.duration_s:g} s"
     )
     sim_args = ["--boot", "running"] + (["--priority", str(args.sim_priority)] if args.sim_priority else [])
+    sim_args += [] if args.sim_cpu is None else ["--cpu", str(args.sim_cpu)]
     with sigint_blocked():  # (waits while another simulator holds UR's ports)
         sim = UrSimProcess(CONFIG, *sim_args)
     try:

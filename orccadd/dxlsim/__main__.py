@@ -36,6 +36,14 @@ def _floats(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of numbers") from None
 
 
+def _firmware_item(text: str) -> tuple[int, int]:
+    dxl_id, _, version = text.partition("=")
+    try:
+        return int(dxl_id), int(version)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not ID=VERSION (e.g. 3=44)") from None
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m orccadd.dxlsim",
@@ -61,6 +69,21 @@ def main(argv: list[str] | None = None) -> int:
         "the robot PC does, this simulator only if it is real-time too (beside orccadd's loop)",
     )
     ap.add_argument(
+        "--firmware",
+        action="append",
+        default=[],
+        type=_firmware_item,
+        metavar="ID=VERSION",
+        help="a servo's Firmware Version, where not its model's (e.g. 3=44: no Fast Sync Read, "
+        "which came with 45); may be given for several servos",
+    )
+    ap.add_argument(
+        "--cpu",
+        type=int,
+        default=None,
+        help="run on this core only (a device has its own processor; default: any core)",
+    )
+    ap.add_argument(
         "--latency-timer-ms",
         type=float,
         default=0.0,
@@ -80,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
             raise OrccaddError(
                 f"--initial-q-rad has {len(args.initial_q_rad)} angles, the arm {cfg.dof} joints"
             )
-        chain = Chain(cfg, settings, args.initial_q_rad)
+        chain = Chain(cfg, settings, args.initial_q_rad, dict(args.firmware))
         port = args.port or settings.port
         link = PtyLink(port)
     except (OrccaddError, OSError) as e:
@@ -97,8 +120,8 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     server = Server(chain, link, control, latency_s=args.latency_timer_ms * 1e-3)
-    if args.priority:
-        for warning in realtime_device_process(args.priority):
+    if args.priority or args.cpu is not None:
+        for warning in realtime_device_process(args.priority, args.cpu):
             log.warning("%s", warning)
     gc.collect()
     gc.freeze()  # the model and tables are long-lived: keep the collector's passes short

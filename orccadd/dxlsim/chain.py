@@ -41,6 +41,7 @@ VISCOUS_NM_S_RAD = 0.01
 FAULTS = ("overload", "overheating", "unplug", "replug", "noise", "late", "object", "remove_object", "clear")
 READS = (Instruction.READ, Instruction.SYNC_READ, Instruction.BULK_READ)
 FAST_READS = (Instruction.FAST_SYNC_READ, Instruction.FAST_BULK_READ)
+FAST_READ_FIRMWARE = 45  # X-series firmware with Fast Sync/Bulk Read (ROBOTIS e-Manual)
 
 
 @dataclass(frozen=True)
@@ -76,11 +77,21 @@ class Obstacle:
 
 
 class Chain:
-    def __init__(self, cfg: RobotConfig, settings: ChainSettings, q0_rad: list[float] | None = None) -> None:
+    def __init__(
+        self,
+        cfg: RobotConfig,
+        settings: ChainSettings,
+        q0_rad: list[float] | None = None,
+        firmware: dict[int, int] | None = None,
+    ) -> None:
+        """`firmware`: servo id → its Firmware Version, where not the model's (an older one)."""
         self.settings = settings
         self.baud = settings.baud_rate
         baud_index = T.BAUD_RATES_BIT_S.index(self.baud)
         self.servos = [Servo(MODELS[s.model], s.id, baud_index) for s in settings.servos]
+        for servo in self.servos:
+            if firmware and servo.dxl_id in firmware:
+                servo.table.set(T.FIRMWARE_VERSION, firmware[servo.dxl_id])
         # horn angle = k · (q - offset), joint torque = k · horn torque
         self._k = [s.direction * s.gear_ratio for s in settings.servos]
         self._offset = [s.offset_rad for s in settings.servos]
@@ -189,6 +200,8 @@ class Chain:
 
     @staticmethod
     def _answers(servo: Servo, inst: int) -> bool:
+        if inst in FAST_READS and servo.firmware < FAST_READ_FIRMWARE:
+            return False  # an instruction it does not know: no reply to a broadcast
         level = servo.status_return_level
         return inst == Instruction.PING or level == 2 or (level == 1 and inst in READS + FAST_READS)
 

@@ -80,8 +80,12 @@ class Servo:
         return int(error) | (ALERT if self.table.get(T.HARDWARE_ERROR_STATUS) else 0)
 
     # ---- instructions ---------------------------------------------------------------------
+    @property
+    def firmware(self) -> int:
+        return self.table.get(T.FIRMWARE_VERSION)
+
     def ping(self) -> bytes:
-        return T.encode(T.MODEL_NUMBER, self.model.model_number) + bytes((self.model.firmware_version,))
+        return T.encode(T.MODEL_NUMBER, self.model.model_number) + bytes((self.firmware,))
 
     def read(self, address: int, length: int, now_s: float) -> bytes | Error:
         if address + length > T.REALTIME_TICK.address:

@@ -38,6 +38,7 @@ last goal.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -46,6 +47,7 @@ from typing import Any
 
 from orccadd.config.robot import RobotConfig
 from orccadd.drivers.dynamixel import table as T
+from orccadd.drivers.dynamixel import wire
 from orccadd.drivers.dynamixel.chain import READ_OK, READ_TIMEOUT, ChainError, ServoChain
 from orccadd.drivers.dynamixel.errors import ALERT, hardware_error_text
 from orccadd.drivers.dynamixel.goals import Goals
@@ -62,6 +64,7 @@ from orccadd.physres.stop_ramp import StopRamp
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Status
 
+FAST_READ_FIRMWARE = 45  # X-series firmware with Fast Sync Read (ROBOTIS e-Manual)
 log = logging.getLogger("orccadd.dynamixel")
 
 AT_REST_RAD_S = 0.05  # two velocity units (0.024 rad/s each) at the horn
@@ -138,6 +141,7 @@ class DynamixelArm(PhysicalResource):
         self._watchdog_armed = False
         self._last_send_s = 0.0
         self.latency_s = 0.0
+        self.sync_read = "fast sync read" if s.fast_sync_read else "sync read (fast_sync_read = false)"
 
     # ---- lifecycle ------------------------------------------------------------------------
     def _on_configure(self) -> None:
@@ -148,6 +152,7 @@ class DynamixelArm(PhysicalResource):
         try:
             for j, servo in enumerate(s.servos):
                 ch.check_model(j, MODELS[servo.model].model_number)
+            self.sync_read = self._choose_sync_read()
             for j in range(self.dof):
                 if bits := ch.read(j, T.HARDWARE_ERROR_STATUS):
                     log.warning(
@@ -170,6 +175,36 @@ class DynamixelArm(PhysicalResource):
             ch.close()
             raise
         self.goals.set_operating_modes(self._op_modes)
+
+    def _choose_sync_read(self) -> str:
+        """Fast Sync Read where every servo's firmware has it (45 and up), else a plain Sync Read
+        (one status packet per servo, each held by the adapter's latency timer): refused where
+        that no longer fits in the period. What was chosen and why, for `describe`."""
+        s, ch = self.settings, self.chain
+        if not s.fast_sync_read:
+            ch.fast = False
+            return "sync read (fast_sync_read = false)"
+        old = [
+            (j, fw) for j in range(self.dof) if (fw := ch.read(j, T.FIRMWARE_VERSION)) < FAST_READ_FIRMWARE
+        ]
+        ch.fast = not old
+        if not old:
+            return "fast sync read"
+        who = ", ".join(f"{ch.labels[j]} has firmware {fw}" for j, fw in old)
+        why = f"{who}, without Fast Sync Read (firmware {FAST_READ_FIRMWARE} and up)"
+        plain_s = wire.read_time_s(s.n, T.CYCLIC_LENGTH, s.baud_rate, s.return_delay_us * 1e-6, fast=False)
+        busy_s = plain_s + s.write_time_s() + s.n * self.latency_s
+        period = self.config.control_period_s
+        if busy_s + s.read_timeout_s > period:
+            raise ResourceError(
+                f"{self.name}: {why}: a plain sync read of the chain takes {busy_s * 1e3:.3g} ms with the "
+                f"write and the adapter's latency, which with read_timeout_s = {s.read_timeout_s:g} does "
+                f"not fit in control_period_s = {period:g}. Update the servos' firmware (DYNAMIXEL "
+                "Wizard 2.0), or lengthen control_period_s"
+            )
+        self.description = dataclasses.replace(self.description, read_time_s=plain_s)
+        log.warning("%s: %s: the cyclic read is a plain sync read (%.3g ms)", self.name, why, busy_s * 1e3)
+        return f"sync read: {why}"
 
     def _on_activate(self, mode: CommandMode) -> None:
         """Operating modes, profiles off, then every servo enabled holding where it is (a servo
@@ -557,6 +592,7 @@ class DynamixelArm(PhysicalResource):
             "port": self.settings.port,
             "baud_rate": self.settings.baud_rate,
             "latency_timer_ms": self.latency_s * 1e3,
+            "sync_read": self.sync_read,
             "reads": ch.reads,
             "timeouts": ch.timeouts,
             "timeouts_by_servo": ", ".join(

@@ -121,16 +121,19 @@ def enter_realtime(
     return rep
 
 
-def realtime_device_process(priority: int) -> list[str]:
+def realtime_device_process(priority: int, cpu: int | None = None) -> list[str]:
     """Every thread of this process at SCHED_FIFO `priority`, and every thread it starts from now
     on (inherited: no reset-on-fork here), for a simulated device: hardware answers whatever the
     host's load, so its simulator must not wait behind time-shared work. (`enter_realtime` is
     for one loop thread: the threads a loop's process starts later run at normal priority.)
     Its memory is locked too (a page fault in a reply's path delays it by milliseconds, as a real
-    device's never is). Returns the warnings; nothing is changed where the system refuses."""
+    device's never is). With `cpu`, every thread on that core only (a device has its own
+    processor; later threads inherit it). Returns the warnings; nothing is changed where the
+    system refuses."""
+    warnings = [] if cpu is None else _pin(_thread_ids(), cpu)
     if priority <= 0:
-        return []
-    rep = RealtimeReport()
+        return warnings
+    rep = RealtimeReport(warnings=warnings)
     _lock_memory(rep)
     try:
         _fifo(_thread_ids(), priority)
@@ -169,6 +172,15 @@ class ThreadsStartedHere:
                 f"SCHED_FIFO {self.priority} refused for {len(new)} I/O thread(s) ({e.strerror or e}): "
                 "they run at normal priority and may fall behind on a busy machine"
             )
+
+
+def _pin(tids: set[int], cpu: int) -> list[str]:
+    try:
+        for tid in tids:
+            os.sched_setaffinity(tid, {cpu})
+    except (OSError, ValueError) as e:
+        return [f"CPU {cpu} refused ({e}): the simulator's threads may run on any core"]
+    return []
 
 
 def _thread_ids() -> set[int]:

@@ -102,6 +102,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="SCHED_FIFO priority of the simulator's threads (0: time-shared); a real controller "
         "keeps its cycle whatever the robot PC does, this one only if it is real-time too",
     )
+    ap.add_argument(
+        "--cpu",
+        type=int,
+        default=None,
+        help="run on this core only (a device has its own processor; default: any core)",
+    )
     return ap.parse_args(argv)
 
 
@@ -142,8 +148,8 @@ def main(argv: list[str] | None = None) -> int:
     except OrccaddError as e:
         log.error("%s", e)
         return 1
-    if args.priority:
-        for warning in realtime_device_process(args.priority):
+    if args.priority or args.cpu is not None:
+        for warning in realtime_device_process(args.priority, args.cpu):
             log.warning("%s", warning)
     try:
         sim.open()

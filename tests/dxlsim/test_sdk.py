@@ -362,3 +362,26 @@ def test_a_usb_adapters_latency_timer_holds_every_short_reply(workdir: Path) -> 
     finally:
         sim.stop()
     assert min(times) >= 16.0 and statistics.median(times) < 200.0, times
+
+
+def test_a_servo_with_firmware_before_45_answers_sync_read_but_not_fast_sync_read(workdir: Path) -> None:
+    """`--firmware 3=44`: servo 3 reports firmware 44 (ping, Firmware Version(6)) and, as a
+    servo that does not know the instruction, is silent to a Fast Sync Read: the one packet
+    stops where its part should be. A plain Sync Read gets all six."""
+    d = workdir / "firmware"
+    d.mkdir(exist_ok=True)
+    sim = DxlSimProcess(CONFIG, "--port", str(d / "ttyDXL"), "--firmware", "3=44")
+    try:
+        b = Bus(sim.port, 4_000_000)
+        try:
+            assert b.ph.read1ByteTxRx(b.port, 3, 6)[:2] == (44, COMM_SUCCESS)
+            assert b.ph.read1ByteTxRx(b.port, 2, 6)[:2] == (46, COMM_SUCCESS)
+            read = GroupSyncRead(b.port, b.ph, 126, 10)
+            for i in IDS:
+                assert read.addParam(i)
+            assert read.fastSyncRead() != COMM_SUCCESS
+            assert read.txRxPacket() == COMM_SUCCESS
+        finally:
+            b.close()
+    finally:
+        sim.stop()

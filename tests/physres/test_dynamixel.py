@@ -402,3 +402,42 @@ def test_the_plain_sync_read_names_a_missing_servo_too(rig: DxlRig) -> None:
         assert "servo 2 (shoulder, XM540-W270) does not answer" in res.fault_message
     finally:
         res.shutdown()
+
+
+def test_a_servo_without_fast_sync_read_makes_the_cycle_a_plain_sync_read_and_describe_says_so(
+    tmp_path: Path,
+) -> None:
+    """Fast Sync Read came with firmware 45: a servo with older firmware does not answer it, so
+    the backend checks every servo's Firmware Version at startup and reads the chain by plain
+    Sync Read (one status packet per servo) where one lacks it; where that would not fit in the
+    period, it is refused naming the servo."""
+    with dxl_rig(tmp_path, sim_args=("--firmware", "3=44")) as rig:
+        res = create_resource(load_robot_config(rig.config))
+        try:
+            res.configure()
+            res.activate(CommandMode.POSITION)
+            seen = 0
+            for _ in range(40):
+                now = time.monotonic()
+                seen |= res.read(now).status
+                res.keep_alive(now)
+                time.sleep(0.005)
+            assert not seen & (Status.FAULT | Status.COMM_LOST), res.fault_message
+            said = str(res.diagnostics().details["sync_read"])
+            assert said.startswith("sync read: servo 3 (") and "has firmware 44" in said, said
+            assert res.description.read_time_s == pytest.approx((20 + 6 * 21) * 10 / 4e6)
+        finally:
+            res.shutdown()
+        tight = rig.variant(
+            ("control_period_s = 0.005", "control_period_s = 0.0014"),
+            (SETTINGS, f"{SETTINGS}\nread_timeout_s = 0.001"),
+            name="tight.toml",
+        )  # the fast read (0.39 ms with the write) and its timeout fit in 1.4 ms, the plain one not
+        res = create_resource(load_robot_config(tight))
+        with pytest.raises(ResourceError, match=r"servo 3 \(.*has firmware 44.*Update the servos' firmware"):
+            res.configure()
+        res.shutdown()
+
+
+def test_servos_with_fast_sync_read_keep_it() -> None:
+    assert DynamixelArm.describe(load_robot_config(SIM)).read_time_s < (20 + 6 * 21) * 10 / 4e6

@@ -65,6 +65,27 @@ def test_a_simulated_device_runs_every_thread_at_real_time_priority_with_its_mem
     assert r.stdout.split() == ["True", "True", "True"], r.stdout + r.stderr
 
 
+DEVICE_ON_A_CORE = """
+import os, threading
+from orccadd.runtime.rt import realtime_device_process
+before = threading.Event()
+t1 = threading.Thread(target=before.wait)
+t1.start()
+warnings = realtime_device_process(0, cpu=0)  # time-shared, on core 0 only
+seen = {}
+t2 = threading.Thread(target=lambda: seen.update(later=os.sched_getaffinity(0)))
+t2.start(); t2.join()
+seen["before"] = os.sched_getaffinity(t1.native_id)
+before.set(); t1.join()
+print(warnings == [], seen["before"] == {0}, seen["later"] == {0}, os.sched_getaffinity(0) == {0})
+"""
+
+
+def test_a_simulated_device_may_have_a_core_of_its_own_for_every_thread() -> None:
+    r = subprocess.run([sys.executable, "-c", DEVICE_ON_A_CORE], capture_output=True, text=True, timeout=60)
+    assert r.stdout.split() == ["True"] * 4, r.stdout + r.stderr
+
+
 LIBRARY_THREADS = """
 import os, threading
 from orccadd.runtime.rt import ThreadsStartedHere, enter_realtime

@@ -63,6 +63,9 @@ class ServoChain:
             for s, joint in zip(settings.servos, joint_names, strict=True)
         ]
         self.lock = threading.Lock()
+        # the cyclic read by Fast Sync Read (one status packet), else Sync Read (one per servo):
+        # the config's choice, turned off at configure where a servo's firmware lacks it
+        self.fast = settings.fast_sync_read
         self.ph = PacketHandler(2.0)
         self.port: BlockingPort | None = None
         n = len(self.ids)
@@ -210,7 +213,7 @@ class ServoChain:
             group = GroupSyncRead(port, self.ph, item.address, item.size)
             for j in self._order:
                 group.addParam(self.ids[j])
-            result = group.fastSyncRead() if self.settings.fast_sync_read else group.txRxPacket()
+            result = group.fastSyncRead() if self.fast else group.txRxPacket()
             if result != COMM_SUCCESS:
                 raise ChainError(f"sync read of {item}: {comm_text(result)}")
             values = {j: group.getData(self.ids[j], item.address, item.size) for j in self._order}
@@ -234,7 +237,7 @@ class ServoChain:
         READ_TIMEOUT (no or a short reply: `cut_at` names the first servo missing) or
         READ_CORRUPT (a damaged reply), the values kept from the last good read."""
         with self.lock:
-            result = self._fast_read() if self.settings.fast_sync_read else self._plain_read()
+            result = self._fast_read() if self.fast else self._plain_read()
         self.reads += 1
         self.last_result = result
         if result == READ_OK:
@@ -256,7 +259,7 @@ class ServoChain:
         reads): the request's and the reply's wire time, the adapter's latency, `read_timeout_s`."""
         port, n = self._p(), len(self._order)
         request = 14 + n  # header, id, length, instruction, address, size, the ids, CRC
-        if self.settings.fast_sync_read:
+        if self.fast:
             return port.deadline_s(request, 8 + n * (T.CYCLIC_LENGTH + 4))
         return port.deadline_s(request, 11 + T.CYCLIC_LENGTH)
 

@@ -5,7 +5,8 @@
     baud_rate = 4000000              # every servo's Baud Rate(8): 57600, 115200, 1M, 2M, 3M, 4M
     read_timeout_s = 0.003           # a status packet later than its wire time plus this: timeout
     comm_errors_in_a_row = 5         # failed cyclic reads (timeouts, CRC) in a row: CommLost
-    fast_sync_read = true            # one status packet for the chain (firmware 45 and up)
+    fast_sync_read = true            # one status packet for the chain (firmware 45 and up: checked
+                                     # at startup, a plain sync read where a servo has older)
     bus_watchdog_ms = 100            # velocity and current modes: the servos stop if we go silent
     torque_off_at_rest = false       # safe stop category 1 switches torque off at rest (no brakes!)
     reboot_timeout_s = 1.0           # reset: how long a rebooted servo may stay silent
