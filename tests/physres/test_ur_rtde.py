@@ -452,7 +452,8 @@ def test_a_task_sets_the_payload_and_tcp_at_its_start_and_they_stay_across_a_res
     after a protective stop's reset (whose script restart sets the config's tool) it is sent again."""
     res = arm.resource
     _, phase = _run_ur_task(arm, "ur_carry", 30.0, traj__target_rad=REACH)
-    assert phase is Phase.DONE and arm.event_names() == ["UrCarry.done"], (arm.event_names(), res.fault_message)
+    events = arm.event_names()
+    assert phase is Phase.DONE and events == ["UrCarry.done"], (events, res.fault_message)
     mass, offset = _tool_on_controller(res)
     assert mass == pytest.approx(1.5) and np.linalg.norm(offset) == pytest.approx(0.15, abs=2e-3)
     sim.inject("protective_stop")
