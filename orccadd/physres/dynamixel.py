@@ -147,7 +147,7 @@ class DynamixelArm(PhysicalResource):
     def _on_configure(self) -> None:
         s, ch = self.settings, self.chain
         busy = s.read_time_s() + s.write_time_s()
-        self.latency_s = check_latency(s.port, self.config.control_period_s, busy)
+        self.latency_s = check_latency(s.port, self.config.control_period_s, busy, set_it=s.set_latency_timer)
         ch.open(self.latency_s)
         try:
             for j, servo in enumerate(s.servos):

@@ -21,8 +21,8 @@ loaded host, a USB adapter that holds bytes back. Later than that, the read is a
 per servo whose part was missing); `comm_errors_in_a_row` failed reads in a row are CommLost.
 `cycle_deadline_s` says what that deadline is for the cyclic read.
 
-`latency_timer_s` reads an FTDI adapter's latency timer from sysfs; `check_latency` refuses a
-period it cannot meet, with the fix.
+`latency_timer_s` reads an FTDI adapter's latency timer from sysfs; `check_latency` refuses one
+above 1 ms (or writes 1 ms, by config) and a period it cannot meet, each with the fix.
 """
 
 from __future__ import annotations
@@ -37,6 +37,9 @@ from dynamixel_sdk import PortHandler
 from orccadd.errors import ResourceError
 
 SYSFS_USB_SERIAL = Path("/sys/bus/usb-serial/devices")
+MAX_LATENCY_S = 0.001  # what a control loop can live with (FTDI's default is 16 ms)
+# the rule that sets 1 ms when an adapter is plugged (installed from the wheel: docs/install.md)
+UDEV_RULE = "share/orccadd/udev/60-orccadd-dynamixel.rules (packaging/udev/ in a checkout)"
 
 
 class BlockingPort(PortHandler):  # type: ignore[misc]  # the SDK is untyped
@@ -142,27 +145,55 @@ def open_port(path: str, baud_bit_s: int, read_timeout_s: float, latency_s: floa
 def latency_timer_s(port_path: str, sysfs: Path = SYSFS_USB_SERIAL) -> float | None:
     """The USB-serial adapter's latency timer behind `port_path` (a link such as
     /dev/serial/by-id/... is followed), or None when the device is no USB-serial tty (a
-    pseudo-terminal, a CDC-ACM board, a native UART)."""
-    name = Path(os.path.realpath(port_path)).name
-    f = sysfs / name / "latency_timer"
+    pseudo-terminal, a CDC-ACM board, a native UART). A timer that is there but cannot be read is
+    a `ResourceError` naming the file."""
+    f = _timer_file(port_path, sysfs)
+    if not f.exists():
+        return None
     try:
         return int(f.read_text().strip()) * 1e-3
-    except (OSError, ValueError):
-        return None
+    except (OSError, ValueError) as e:
+        raise ResourceError(
+            f"{port_path}: cannot read the USB adapter's latency timer {f} ({e}): it decides how late "
+            "every reply comes; make it readable (it is world-readable unless changed)"
+        ) from None
 
 
-def check_latency(port_path: str, period_s: float, busy_s: float, sysfs: Path = SYSFS_USB_SERIAL) -> float:
-    """The adapter's latency (0 when it has no latency timer); a `ResourceError` with the fix
-    when a reply held back by it would not fit in the period with the wire time `busy_s`."""
+def check_latency(
+    port_path: str, period_s: float, busy_s: float, sysfs: Path = SYSFS_USB_SERIAL, set_it: bool = False
+) -> float:
+    """The adapter's latency (0 when it has no latency timer). Above MAX_LATENCY_S it is written
+    down to 1 ms where `set_it` (the config's `set_latency_timer`), else refused naming the file
+    and the udev rule that fixes it; a latency that with the wire time `busy_s` does not fit in
+    the period is refused too."""
     latency = latency_timer_s(port_path, sysfs)
     if latency is None:
         return 0.0
+    f = _timer_file(port_path, sysfs)
+    if latency > MAX_LATENCY_S and set_it:
+        try:
+            f.write_text("1\n")
+        except OSError as e:
+            raise ResourceError(
+                f"{port_path}: set_latency_timer: cannot write 1 ms to {f} ({e.strerror or e}): run as "
+                f"root, or install the udev rule {UDEV_RULE} (then re-plug the adapter)"
+            ) from None
+        latency = latency_timer_s(port_path, sysfs) or 0.0
+    if latency > MAX_LATENCY_S:
+        raise ResourceError(
+            f"{port_path}: the USB adapter's latency timer ({f}) is {latency * 1e3:g} ms: it holds "
+            f"every reply back that long, and a control loop needs 1 ms or less. Set it now: echo 1 | "
+            f"sudo tee {f}; for good: install the udev rule {UDEV_RULE} and re-plug the adapter; or "
+            "let orccadd write it at startup: set_latency_timer = true in [resource.settings] (root)"
+        )
     if latency + busy_s > period_s:
-        name = Path(os.path.realpath(port_path)).name
-        path = sysfs / name / "latency_timer"
         raise ResourceError(
             f"{port_path}: the USB adapter's latency timer is {latency * 1e3:g} ms: with the chain's "
-            f"{busy_s * 1e3:.2g} ms of wire time it cannot meet control_period_s = {period_s:g}. "
-            f"Set it to 1 ms: echo 1 | sudo tee {path}"
+            f"{busy_s * 1e3:.2g} ms of wire time it cannot meet control_period_s = {period_s:g}: "
+            "lengthen the period"
         )
     return latency
+
+
+def _timer_file(port_path: str, sysfs: Path) -> Path:
+    return sysfs / Path(os.path.realpath(port_path)).name / "latency_timer"

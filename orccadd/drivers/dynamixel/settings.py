@@ -7,6 +7,8 @@
     comm_errors_in_a_row = 5         # failed cyclic reads (timeouts, CRC) in a row: CommLost
     fast_sync_read = true            # one status packet for the chain (firmware 45 and up: checked
                                      # at startup, a plain sync read where a servo has older)
+    set_latency_timer = false        # a USB adapter's latency timer above 1 ms: refused (false) or
+                                     # written down to 1 ms at startup (true: needs root)
     bus_watchdog_ms = 100            # velocity and current modes: the servos stop if we go silent
     torque_off_at_rest = false       # safe stop category 1 switches torque off at rest (no brakes!)
     reboot_timeout_s = 1.0           # reset: how long a rebooted servo may stay silent
@@ -78,6 +80,9 @@ class DynamixelSettings:
     read_timeout_s: float = field(default=0.003, bounds=(0.0002, 0.1))
     comm_errors_in_a_row: int = field(default=5, bounds=(1, 1000))
     fast_sync_read: bool = field(default=True)
+    # the USB adapter's latency timer above 1 ms: written down to 1 ms at startup (needs write
+    # access to sysfs: root) rather than refused
+    set_latency_timer: bool = field(default=False)
     bus_watchdog_ms: int = field(default=100, bounds=(0, 2540))
     torque_off_at_rest: bool = field(default=False)
     reboot_timeout_s: float = field(default=1.0, bounds=(0.05, 30.0))

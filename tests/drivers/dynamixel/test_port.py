@@ -29,19 +29,55 @@ def adapter(tmp_path: Path, latency_ms: int) -> tuple[Path, Path]:
     return link, sysfs
 
 
-def test_the_16_ms_default_cannot_meet_a_5_ms_period(tmp_path: Path) -> None:
+@pytest.mark.parametrize("period_s", [0.005, 0.05])
+def test_the_16_ms_default_is_refused_naming_the_file_and_the_udev_rule(
+    tmp_path: Path, period_s: float
+) -> None:
     link, sysfs = adapter(tmp_path, 16)
     assert latency_timer_s(str(link), sysfs) == pytest.approx(0.016)
     with pytest.raises(ResourceError) as e:
-        check_latency(str(link), 0.005, 0.0004, sysfs)
+        check_latency(str(link), period_s, 0.0004, sysfs)  # above 1 ms: refused whatever the period
     msg = str(e.value)
-    assert "the USB adapter's latency timer is 16 ms" in msg
+    assert f"the USB adapter's latency timer ({sysfs}/ttyUSB0/latency_timer) is 16 ms" in msg
     assert f"echo 1 | sudo tee {sysfs}/ttyUSB0/latency_timer" in msg
+    assert "60-orccadd-dynamixel.rules" in msg and "set_latency_timer = true" in msg
 
 
 def test_one_ms_passes(tmp_path: Path) -> None:
     link, sysfs = adapter(tmp_path, 1)
     assert check_latency(str(link), 0.005, 0.0004, sysfs) == pytest.approx(0.001)
+
+
+def test_one_ms_that_does_not_fit_the_period_is_refused(tmp_path: Path) -> None:
+    link, sysfs = adapter(tmp_path, 1)
+    with pytest.raises(ResourceError, match="cannot meet control_period_s = 0.0012"):
+        check_latency(str(link), 0.0012, 0.0004, sysfs)
+
+
+def test_set_latency_timer_writes_1_ms(tmp_path: Path) -> None:
+    link, sysfs = adapter(tmp_path, 16)
+    assert check_latency(str(link), 0.005, 0.0004, sysfs, set_it=True) == pytest.approx(0.001)
+    assert (sysfs / "ttyUSB0" / "latency_timer").read_text().strip() == "1"
+
+
+def test_set_latency_timer_that_cannot_write_says_what_to_do(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    link, sysfs = adapter(tmp_path, 16)
+
+    def refused(self: Path, *args: object, **kwargs: object) -> int:
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(Path, "write_text", refused)  # as sysfs answers a user without root
+    with pytest.raises(ResourceError, match=r"cannot write 1 ms to .*Permission denied.*udev rule"):
+        check_latency(str(link), 0.005, 0.0004, sysfs, set_it=True)
+
+
+def test_a_latency_timer_that_cannot_be_read_is_an_error_naming_it(tmp_path: Path) -> None:
+    link, sysfs = adapter(tmp_path, 1)
+    (sysfs / "ttyUSB0" / "latency_timer").write_text("garbage\n")
+    with pytest.raises(ResourceError, match=f"cannot read the USB adapter's latency timer {sysfs}/ttyUSB0"):
+        check_latency(str(link), 0.005, 0.0004, sysfs)
 
 
 def test_a_pseudo_terminal_has_no_latency_timer(tmp_path: Path) -> None:
