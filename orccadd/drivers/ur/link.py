@@ -222,6 +222,7 @@ class UrLink:
                 "actual_current_a": " ".join(f"{i:.3f}" for i in r.getActualCurrent()),
                 "tcp_pose_m_rad": " ".join(f"{x:.4f}" for x in r.getActualTCPPose()),
                 "payload_kg": float(r.getPayload()),
+                "speed_slider": round(float(r.getTargetSpeedFraction()), 3),  # the pendant's slider
             }
         except RuntimeError:
             return {}
