@@ -377,6 +377,17 @@ def test_mode_switches_hold_the_arm(rig: DxlRig, session: Session) -> None:
         assert np.abs(res.state.q_rad - q0).max() < 0.02, mode
 
 
+def tick_holding(res: DynamixelArm, ticks: int) -> int:
+    """`ticks` ticks of read + keep_alive 5 ms apart: the OR of the status flags read."""
+    seen = 0
+    for _ in range(ticks):
+        now = time.monotonic()
+        seen |= res.read(now).status
+        res.keep_alive(now)
+        time.sleep(0.005)
+    return seen
+
+
 def test_the_plain_sync_read_names_a_missing_servo_too(rig: DxlRig) -> None:
     """`fast_sync_read = false` (firmware without it): one status packet per servo."""
     plain = rig.variant((SETTINGS, f"{SETTINGS}\nfast_sync_read = false"))
@@ -386,13 +397,7 @@ def test_the_plain_sync_read_names_a_missing_servo_too(rig: DxlRig) -> None:
     try:
         res.configure()
         res.activate(CommandMode.POSITION)
-        seen = 0
-        for _ in range(20):
-            now = time.monotonic()
-            seen |= res.read(now).status
-            res.keep_alive(now)
-            time.sleep(0.005)
-        assert not seen & (Status.FAULT | Status.COMM_LOST), res.fault_message
+        assert not tick_holding(res, 20) & (Status.FAULT | Status.COMM_LOST), res.fault_message
         rig.sim.inject("unplug", device=2)
         for _ in range(20):
             now = time.monotonic()
@@ -416,13 +421,7 @@ def test_a_servo_without_fast_sync_read_makes_the_cycle_a_plain_sync_read_and_de
         try:
             res.configure()
             res.activate(CommandMode.POSITION)
-            seen = 0
-            for _ in range(40):
-                now = time.monotonic()
-                seen |= res.read(now).status
-                res.keep_alive(now)
-                time.sleep(0.005)
-            assert not seen & (Status.FAULT | Status.COMM_LOST), res.fault_message
+            assert not tick_holding(res, 40) & (Status.FAULT | Status.COMM_LOST), res.fault_message
             said = str(res.diagnostics().details["sync_read"])
             assert said.startswith("sync read: servo 3 (") and "has firmware 44" in said, said
             assert res.description.read_time_s == pytest.approx((20 + 6 * 21) * 10 / 4e6)

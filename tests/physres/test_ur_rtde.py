@@ -55,6 +55,19 @@ def move(s: Session, target: list[float]) -> tuple[RobotTask, TickRecorder]:
     return task, loop
 
 
+def reset_once_unlockable(res: Any, loop: TickRecorder) -> None:
+    """`reset` after a protective stop, again while the controller does not allow the unlock yet
+    (1 s after the stop here; 5 s on a real one), the loop ticking meanwhile."""
+    deadline = time.monotonic() + 10
+    while True:
+        try:
+            res.reset_fault()
+            return
+        except ResourceError as e:
+            assert "reset again then" in str(e) and time.monotonic() < deadline, e
+            loop.run_for(0.2)
+
+
 def test_a_motion_is_paced_by_the_controllers_stream_and_reaches_its_target(arm: Session) -> None:
     task, loop = move(arm, REACH)
     phase = loop.run_task(task, timeout_s=20.0)
@@ -87,14 +100,7 @@ def test_protective_stop_mid_motion_is_a_type_3_then_reset_unlocks_and_it_moves_
     assert_safe_stop_in_time(ticks, status_shows(ticks, Status.FAULT))
     assert_commands_within_limits(ticks, arm.config)
     res = arm.resource
-    deadline = time.monotonic() + 10
-    while True:  # the controller allows the unlock 1 s (here; 5 s on a real one) after the stop
-        try:
-            res.reset_fault()
-            break
-        except ResourceError as e:
-            assert "reset again then" in str(e) and time.monotonic() < deadline, e
-            loop.run_for(0.2)
+    reset_once_unlockable(res, loop)
     loop.run_for(1.0)
     assert not res.state.status & Status.FAULT, res.fault_message
     assert res.state.status & Status.STOPPED
@@ -461,14 +467,7 @@ def test_a_task_sets_the_payload_and_tcp_at_its_start_and_they_stay_across_a_res
     loop.run_for(0.3)
     assert res.state.status & Status.FAULT
     res.safe_stop()
-    deadline = time.monotonic() + 10
-    while True:  # the controller allows the unlock 1 s after the stop (here)
-        try:
-            res.reset_fault()
-            break
-        except ResourceError as e:
-            assert "reset again then" in str(e) and time.monotonic() < deadline, e
-            loop.run_for(0.2)
+    reset_once_unlockable(res, loop)
     loop.run_for(0.5)
     res.clear_stop()
     mass, offset = _tool_on_controller(res)

@@ -32,11 +32,12 @@ import socket
 import sys
 import threading
 import time
+from dataclasses import replace
 from typing import Any
 
 from orccadd.drivers.ur.link import UrLink
-from orccadd.drivers.ur.remote_link import MAX_MESSAGE, StreamState
-from orccadd.drivers.ur.rtde_stream import RtdeError, RtdeStream
+from orccadd.drivers.ur.remote_link import MAX_MESSAGE
+from orccadd.drivers.ur.rtde_stream import RtdeError, RtdeStream, StreamState
 from orccadd.errors import OrccaddError
 from orccadd.runtime.rt import realtime_device_process
 
@@ -60,25 +61,12 @@ class LinkServer:
     def stream(self, rtde: RtdeStream) -> None:
         while not self.stopping:
             try:
-                pkg, arrival_ns = rtde.read()
+                state = rtde.read()
             except RtdeError:
-                self.send("state", StreamState(-1.0, time.monotonic_ns(), False, (), (), (), 0, 0, 0, False))
+                self.send("state", StreamState.lost(time.monotonic_ns()))
                 return  # ur_rtde would reconnect by itself: the parent ends this process first
-            state = StreamState(
-                pkg.stamp,
-                arrival_ns,
-                self._connected(),
-                pkg.q_rad,
-                pkg.dq_rad_s,
-                pkg.target_moment_nm,
-                pkg.robot_mode,
-                pkg.safety_mode,
-                pkg.runtime_state,
-                pkg.script_running,
-                pkg.tcp_force,
-                pkg.speed_scaling,
-                pkg.digital_inputs,
-            )
+            if not self._connected():
+                state = replace(state, connected=False)
             self.send("state", state)
             if not state.connected:
                 return

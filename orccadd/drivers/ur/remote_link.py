@@ -29,10 +29,10 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass
 from typing import Any
 
-from orccadd.drivers.ur.controller import Condition, Version, condition
+from orccadd.drivers.ur.controller import Condition, Version
+from orccadd.drivers.ur.rtde_stream import StreamState
 from orccadd.drivers.ur.settings import UrRtdeSettings
 from orccadd.errors import ResourceError
 
@@ -45,29 +45,6 @@ CALL_TIMEOUT_S = 5.0  # a call on the script or the dashboard answers well withi
 
 class LinkDownError(ResourceError):
     """The link process has ended, or did not answer a call in time."""
-
-
-@dataclass(frozen=True, slots=True)
-class StreamState:
-    """One RTDE package as the tick uses it."""
-
-    stamp: float  # the controller's timestamp, s
-    arrival_ns: int  # CLOCK_MONOTONIC when the link process saw it
-    connected: bool  # ur_rtde's control and receive interfaces both connected
-    q_rad: tuple[float, ...]
-    dq_rad_s: tuple[float, ...]
-    target_moment_nm: tuple[float, ...]
-    robot_mode: int
-    safety_mode: int
-    runtime_state: int
-    script_running: bool
-    tcp_force: tuple[float, ...] = ()  # actual_TCP_force: N and N·m, base frame
-    speed_scaling: float = 1.0  # the speed slider's fraction times the controller's own scaling
-    digital_inputs: int = 0  # actual_digital_input_bits: standard 0-7, configurable 8-15, tool 16-17
-
-    def condition(self) -> Condition | None:
-        """What stops the arm in this package (None: it may move)."""
-        return condition(self.robot_mode, self.safety_mode, self.runtime_state, self.script_running)
 
 
 class RemoteLink:

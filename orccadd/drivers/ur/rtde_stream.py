@@ -22,7 +22,7 @@ import struct
 import time
 from dataclasses import dataclass
 
-from orccadd.drivers.ur.controller import ROBOT_PROGRAM_RUNNING
+from orccadd.drivers.ur.controller import ROBOT_PROGRAM_RUNNING, Condition, condition
 
 PORT = 30004
 PROTOCOL_VERSION = 2
@@ -34,7 +34,7 @@ FORMATS = {
     "BOOL": "?", "UINT8": "B", "UINT32": "I", "UINT64": "Q", "INT32": "i", "DOUBLE": "d",
     "VECTOR3D": "3d", "VECTOR6D": "6d", "VECTOR6INT32": "6i", "VECTOR6UINT32": "6I",
 }  # fmt: skip
-# what the tick needs, in `Package`'s order
+# what the tick needs, in `StreamState`'s order
 RECIPE = (
     "timestamp", "actual_q", "actual_qd", "target_moment", "robot_mode", "safety_mode",
     "runtime_state", "robot_status_bits", "actual_TCP_force", "speed_scaling", "actual_digital_input_bits",
@@ -49,11 +49,13 @@ class RtdeError(Exception):
     """The controller refused the setup, or the connection broke (the words say which)."""
 
 
-@dataclass(frozen=True)
-class Package:
-    """One output package of `RECIPE`."""
+@dataclass(frozen=True, slots=True)
+class StreamState:
+    """One output package of `RECIPE` as the tick uses it (sent by the link process as it is)."""
 
-    stamp: float
+    stamp: float  # the controller's timestamp, s
+    arrival_ns: int  # CLOCK_MONOTONIC when the link process's read returned it
+    connected: bool  # the stream and ur_rtde's control interface both connected
     q_rad: tuple[float, ...]
     dq_rad_s: tuple[float, ...]
     target_moment_nm: tuple[float, ...]
@@ -61,9 +63,18 @@ class Package:
     safety_mode: int
     runtime_state: int
     script_running: bool
-    tcp_force: tuple[float, ...]
-    speed_scaling: float
-    digital_inputs: int
+    tcp_force: tuple[float, ...] = ()  # actual_TCP_force: N and N·m, base frame
+    speed_scaling: float = 1.0  # the speed slider's fraction times the controller's own scaling
+    digital_inputs: int = 0  # actual_digital_input_bits: standard 0-7, configurable 8-15, tool 16-17
+
+    @classmethod
+    def lost(cls, arrival_ns: int) -> StreamState:
+        """What the link process sends when the stream breaks."""
+        return cls(-1.0, arrival_ns, False, (), (), (), 0, 0, 0, False)
+
+    def condition(self) -> Condition | None:
+        """What stops the arm in this package (None: it may move)."""
+        return condition(self.robot_mode, self.safety_mode, self.runtime_state, self.script_running)
 
 
 class RtdeStream:
@@ -127,19 +138,20 @@ class RtdeStream:
                 raise RtdeError(f"{self.where}: the controller closed the connection")
             buf += chunk
 
-    def read(self) -> tuple[Package, int]:
-        """Block until the next data package of our recipe: it, and its arrival (CLOCK_MONOTONIC ns,
-        taken when the read returned)."""
+    def read(self) -> StreamState:
+        """Block until the next data package of our recipe; its arrival is CLOCK_MONOTONIC when
+        the read returned."""
         while True:
             kind, body = self._next()
             if kind == DATA_PACKAGE and body and body[0] == self.recipe_id and len(body) == self._data.size:
-                arrival_ns = time.monotonic_ns()
-                return self._unpack(self._data.unpack(body)), arrival_ns
+                return self._unpack(self._data.unpack(body), time.monotonic_ns())
 
     @staticmethod
-    def _unpack(v: tuple[float | int | bool, ...]) -> Package:
-        return Package(
+    def _unpack(v: tuple[float | int | bool, ...], arrival_ns: int) -> StreamState:
+        return StreamState(
             stamp=float(v[1]),
+            arrival_ns=arrival_ns,
+            connected=True,
             q_rad=tuple(map(float, v[2:8])),
             dq_rad_s=tuple(map(float, v[8:14])),
             target_moment_nm=tuple(map(float, v[14:20])),

@@ -26,8 +26,8 @@ def test_every_controller_cycle_is_read_in_order_and_agrees_with_stock_ur_rtde()
     with UrSimProcess(CONFIG, "--boot", "running"):
         stream = RtdeStream("127.0.0.1", 500.0)
         try:
-            stamps = [stream.read()[0].stamp for _ in range(200)]
-            pkg, _ = stream.read()
+            stamps = [stream.read().stamp for _ in range(200)]
+            pkg = stream.read()
             stock = rtde_receive.RTDEReceiveInterface("127.0.0.1", 500.0)
             q_stock = stock.getActualQ()
             stock.disconnect()
@@ -115,7 +115,7 @@ def test_packages_of_another_recipe_and_text_messages_are_skipped(fake: FakeCont
     assert fake.ready.wait(5) and fake.conn is not None
     fake.conn.sendall(fake.data(4, 1.0) + fake.package("M", b"\x00\x02hi") + fake.data(5, 2.0)[:20])
     fake.conn.sendall(fake.data(5, 2.0)[20:])  # split across reads
-    pkg, _ = stream.read()
+    pkg = stream.read()
     assert pkg.stamp == 2.0 and pkg.q_rad == (0.1,) * 6 and pkg.script_running  # bit 1: program running
     assert pkg.speed_scaling == 0.5 and pkg.digital_inputs == 3 and len(RECIPE) == len(EXPECTED_TYPES)
     stream.close()
