@@ -37,13 +37,23 @@ class CellError(Exception):
 
 
 def read_console_config(path: str) -> CellNetConfig:
-    """The `[cell]` table of `path` (a console's file, or a robot config with one)."""
+    """The `[cell]` table of `path` (a console's file, or a robot config with one). With TLS, a
+    console names the daemons it takes answers from (`daemons`): without them it could not tell
+    a daemon's reply from another certificate's."""
     raw = read_toml(Path(path))
     if "cell" not in raw:
         raise ConfigError(
             path, "cell", "is missing: a console needs a [cell] table (name, connect, TLS files)"
         )
-    return load_cellnet(raw["cell"], path, "console")
+    net = load_cellnet(raw["cell"], path, "console")
+    if net.secured and not net.daemons:
+        raise ConfigError(
+            path,
+            "cell.daemons",
+            "is missing: a console takes answers only from the daemons it names, each by its "
+            'certificate\'s common name (e.g. daemons = ["arm-a", "arm-b"])',
+        )
+    return net
 
 
 class CellConsole:
@@ -88,7 +98,8 @@ class CellConsole:
 
     def robots(self, wait_s: float = 1.0) -> list[str]:
         """The daemons whose liveliness token is there, sorted (each peer answers at once;
-        `wait_s` bounds the wait for one that does not)."""
+        `wait_s` bounds the wait for one that does not). With TLS, only this console's
+        `daemons`, each token from its own certificate (the access control)."""
         found: set[str] = set()
         for r in self.session.liveliness().get(keys.every_robot(self.net.name, keys.ALIVE), timeout=wait_s):
             if r.ok is not None:
@@ -98,24 +109,46 @@ class CellConsole:
 
     def request(self, robot: str, cmd: str, timeout_s: float | None = None, **args: Any) -> dict[str, Any]:
         """One request to `robot`, on its `control` key if the command needs that role, else on
-        its `read` key: its reply as the socket gives it, or an error reply saying why none came."""
-        rid = self.next_id = next(self._ids)
-        line = json.dumps({"id": rid, "cmd": cmd, "args": args, "protocol": PROTOCOL_VERSION})
+        its `read` key: its reply as the socket gives it, or an error reply saying why none came.
+
+        Only `robot`'s own certificate can answer (the console's access control drops any other
+        peer's reply); a reply to another request, or under another key, is not taken either. A
+        command that changes what the robot does and gets no such reply is not confirmed: the
+        error says so, and the robot must be taken as still doing what it did."""
+        if robot not in self.net.daemons and self.net.secured:
+            raise CellError(
+                f"{robot!r} is not one of this console's daemons ({', '.join(self.net.daemons)}): "
+                f"add it to [cell] daemons in {self.net.source} to take its answers"
+            )
         spec = COMMANDS.get(cmd)
         chunk = keys.CONTROL if spec is not None and spec.role is Role.CONTROL else keys.READ
+        if chunk == keys.CONTROL and not self.net.secured:
+            raise CellError(
+                f"{cmd!r} to {robot}: this console has no TLS (ca, certificate, private_key in "
+                f"{self.net.source}), so no reply could be told from another peer's and no daemon "
+                "takes a command from it; `make setup` makes the shipped cell's certificates"
+            )
+        rid = self.next_id = next(self._ids)
+        line = json.dumps({"id": rid, "cmd": cmd, "args": args, "protocol": PROTOCOL_VERSION})
         key = keys.robot_key(self.net.name, robot, chunk)
         wait = timeout_s if timeout_s is not None else client_wait_s(cmd)
         for r in self.session.get(key, payload=line, timeout=wait):
-            if r.ok is not None:
-                try:
-                    reply = json.loads(r.ok.payload.to_bytes())
-                except ValueError:
-                    return {"id": rid, "ok": False, "error": f"{robot}: an unreadable reply"}
-                if isinstance(reply, dict):
-                    return reply
-        return {"id": rid, "ok": False, "error": self._why_silent(robot, cmd, chunk)}
+            if r.ok is None or str(r.ok.key_expr) != key:
+                continue
+            try:
+                reply = json.loads(r.ok.payload.to_bytes())
+            except ValueError:
+                return {"id": rid, "ok": False, "error": f"{robot}: an unreadable reply"}
+            if isinstance(reply, dict) and reply.get("id") == rid:
+                return reply
+        why = self._why_silent(robot, cmd, chunk)
+        if chunk == keys.CONTROL:
+            why = f"{cmd} NOT confirmed by {robot}: {why}"
+        return {"id": rid, "ok": False, "error": why}
 
     def _why_silent(self, robot: str, cmd: str, chunk: str) -> str:
+        if not self.reaches_anyone():
+            return self.why_alone()
         online = self.robots(wait_s=0.3)
         if robot not in online:
             there = ", ".join(online) or "none"
@@ -126,6 +159,23 @@ class CellConsole:
                 f"({self.net.robot!r}): its certificate holds no control role there, or the cell is read-only"
             )
         return f"{robot} did not answer {cmd!r}: not authorised (its certificate holds no role there) or busy"
+
+    def reaches_anyone(self) -> bool:
+        return bool(list(self.session.info.peers_zid()))
+
+    def why_alone(self) -> str:
+        """Why this console reaches no peer at all: the words a newcomer needs."""
+        where = ", ".join(self.net.connect) or "none (connect = [])"
+        tls = (
+            "with TLS (its certificate from the cell's authority)"
+            if self.net.secured
+            else "without TLS: a daemon with TLS takes no plain tcp/ peer"
+        )
+        return (
+            f"this console reaches no peer of cell {self.net.name!r} at {where}, {tls}: is a daemon "
+            "running there, with the same protocol (tls/ or tcp/) and authority? (`make setup` makes "
+            "the shipped cell's certificates)"
+        )
 
     def status_all(self) -> dict[str, dict[str, Any]]:
         """Every daemon's `status` reply, by name, asked all at once."""

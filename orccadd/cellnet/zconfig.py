@@ -6,6 +6,11 @@ The access control (Zenoh's, matching the peer certificate's common name) lets e
 subscribe to what this daemon publishes, query its `read` key and put only under its own name
 (`orccadd/<cell>/<its name>/…`: a peer cannot speak for another); the `control` key is reached
 only by the names in `control`. Everything else, and every peer not listed, is denied.
+
+A console's access control (`console_access_control`) is the other side: it sends anything, and
+takes in only what each daemon of its `daemons` says under its own name (replies, samples,
+liveliness tokens, queryables), matched on that daemon's certificate. A reply to a request to
+arm-b can then come from arm-b's certificate alone.
 """
 
 from __future__ import annotations
@@ -19,6 +24,17 @@ from orccadd.config.cellnet import CellNetConfig
 LOOPBACK_ANY_PORT = "127.0.0.1:0"
 LEASE_MS = 1000  # a link silent this long is closed: a peer cut off is lost within about a second
 KEEP_ALIVES = 4  # per lease
+EVERY_MESSAGE = [
+    "put",
+    "delete",
+    "reply",
+    "query",
+    "liveliness_token",
+    "liveliness_query",
+    "declare_subscriber",
+    "declare_liveliness_subscriber",
+    "declare_queryable",
+]
 
 
 def zenoh_config(net: CellNetConfig, daemon: bool) -> dict[str, Any]:
@@ -47,6 +63,8 @@ def zenoh_config(net: CellNetConfig, daemon: bool) -> dict[str, Any]:
         }
         if daemon:
             conf["access_control"] = access_control(net)
+        elif net.daemons:
+            conf["access_control"] = console_access_control(net)
     return conf
 
 
@@ -59,22 +77,7 @@ def access_control(net: CellNetConfig) -> dict[str, Any]:
     cell, me = net.name, net.robot
     names = list(dict.fromkeys([*net.control, *net.read]))
     rules: list[dict[str, Any]] = [
-        _rule(
-            "to-peers",
-            ["egress"],
-            [
-                "put",
-                "delete",
-                "reply",
-                "query",
-                "liveliness_token",
-                "liveliness_query",
-                "declare_subscriber",
-                "declare_liveliness_subscriber",
-                "declare_queryable",
-            ],
-            ["**"],
-        ),
+        _rule("to-peers", ["egress"], EVERY_MESSAGE, ["**"]),
         _rule(
             "interest",
             ["ingress"],
@@ -100,6 +103,43 @@ def access_control(net: CellNetConfig) -> dict[str, Any]:
         subjects.append({"id": f"peer:{n}", "cert_common_names": [n]})
         granted = ["to-peers", "interest", own, "read"] + (["control"] if n in net.control else [])
         policies.append({"id": f"role:{n}", "rules": granted, "subjects": [f"peer:{n}"]})
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
+def console_access_control(net: CellNetConfig) -> dict[str, Any]:
+    """A console's access control: default deny; everything it sends allowed; from each daemon D
+    of `net.daemons` (its certificate), what D says under `orccadd/<cell>/D/` and the interest
+    declarations a link needs; from every other certificate, nothing."""
+    rules: list[dict[str, Any]] = [
+        _rule("to-daemons", ["egress"], EVERY_MESSAGE, ["**"]),
+        _rule(
+            "interest",
+            ["ingress"],
+            ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+            ["**"],
+        ),
+    ]
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    for d in net.daemons:
+        own = f"says:{d}"
+        rules.append(
+            _rule(
+                own,
+                ["ingress"],
+                ["put", "delete", "reply", "liveliness_token", "declare_queryable"],
+                [keys.robot_key(net.name, d, "**")],
+            )
+        )
+        subjects.append({"id": f"daemon:{d}", "cert_common_names": [d]})
+        policies.append({"id": f"trust:{d}", "rules": ["interest", own], "subjects": [f"daemon:{d}"]})
+    policies.append({"id": "send", "rules": ["to-daemons"], "subjects": [s["id"] for s in subjects]})
     return {
         "enabled": True,
         "default_permission": "deny",

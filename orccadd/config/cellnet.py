@@ -11,9 +11,14 @@
     private_key = "certs/arm-a.key"
     control = ["console", "arm-b"]       # certificate names with the control role here
     read = ["viewer"]                    # with the read role only (control ⊃ read)
+    daemons = ["arm-a", "arm-b"]         # a console's: the daemons it takes answers from
 
 A peer's role here comes from its certificate (Zenoh's access control matches its common
-name), never from what it says. Without the TLS files the cell is read-only: nobody controls this
+name), never from what it says. A console runs its own side of that control: it takes
+replies, samples and liveliness tokens under `orccadd/<cell>/<D>/` only from the certificate
+named D, and only for the daemons in `daemons`; every other peer reaches nothing in it (a
+certificate of the same authority cannot answer for a daemon, nor show a robot that is not
+there). Without the TLS files the cell is read-only: nobody controls this
 daemon from it, and no remote input enters its missions. Paths are relative to the config file.
 """
 
@@ -44,6 +49,9 @@ class CellNetConfig:
     private_key: str = field(default="", doc="TLS: this peer's private key (PEM)")
     control: tuple[str, ...] = field(default=(), doc="certificate names with the control role")
     read: tuple[str, ...] = field(default=(), doc="certificate names with the read role")
+    daemons: tuple[str, ...] = field(
+        default=(), doc="a console's: the daemons (certificate names) it takes answers from"
+    )
     joints_hz: float = field(default=50.0, bounds=(0.0, 500.0), doc="joint states published (0: none)")
     status_hz: float = field(default=2.0, bounds=(0.1, 50.0), doc="status published")
     ros2: bool = field(default=False, doc="also publish for ROS 2 (rmw_zenoh)")
@@ -102,8 +110,13 @@ def load_cellnet(raw: Any, file: str, default_robot: str, key: str = "cell") -> 
         )
     for k, v in tls.items():
         if v and not net.resolve(v).is_file():
-            raise ConfigError(file, f"{key}.{k}", f"(={v!r}): no such file (relative to {Path(file).parent})")
-    for name in ("control", "read"):
+            raise ConfigError(
+                file,
+                f"{key}.{k}",
+                f"(={v!r}): no such file (relative to {Path(file).parent}); in a checkout, `make setup` "
+                "makes the shipped cell's test certificates",
+            )
+    for name in ("control", "read", "daemons"):
         names = getattr(net, name)
         if names and not net.secured:
             raise ConfigError(

@@ -76,6 +76,10 @@ def _error(a: argparse.Namespace, message: str) -> None:
 
 def _status(console: CellConsole, a: argparse.Namespace) -> int:
     replies = console.status_all()
+    if not replies:
+        why = console.why_alone() if not console.reaches_anyone() else "no daemon of this console's is online"
+        _error(a, f"cell {console.net.name}: {why}")
+        return EXIT_REFUSED
     if a.json:
         print(json.dumps({"cell": console.net.name, "robots": replies}, indent=1))
     else:

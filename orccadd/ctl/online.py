@@ -133,6 +133,12 @@ def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
             args["signals"] = a.signals or ["q", "dq", "tau", "cmd"]
             if a.name:  # the daemon writes into its own log directory; `log stop -o` copies it
                 args["name"] = a.name
+        elif a.output and getattr(a, "robot", None):
+            raise ClientError(
+                f"log stop -o with --robot: the log is on {a.robot}'s PC, and its paths there mean "
+                "nothing here (nothing is copied from a path another PC names); stop it without -o: "
+                "it stays in that daemon's log directory"
+            )
         elif a.name:
             raise ClientError("log stop: --name is for `log start`")
         elif a.signals:
@@ -284,24 +290,32 @@ def _fetch_log(info: dict[str, Any], dest: Path, quiet: bool) -> int:
 
 
 def copy_to(src: Path, dest: Path) -> None:
-    """Copy `src` to `dest`: `dest` opened without following a link at its end (O_NOFOLLOW: a
-    link planted there is refused, ELOOP) and only if it is, or becomes, a regular file (a FIFO
-    or a device is refused without blocking); created 0644 less the umask, truncated if it is
-    an existing file of ours."""
-    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC | os.O_NOCTTY
-    with open(src, "rb") as fin:
-        fd = os.open(dest, flags, 0o644)
+    """Copy `src` to `dest` with this user's rights: `src` opened without following a link at its
+    end and only if it is a regular file; `dest` likewise (O_NOFOLLOW: a link planted there is
+    refused, ELOOP; a FIFO or a device is refused without blocking), created with `src`'s
+    permission bits at most (0644 less the umask: a 0600 log stays 0600), truncated if it is an
+    existing file of ours."""
+    nofollow = os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC | os.O_NOCTTY
+    fin = os.open(src, os.O_RDONLY | nofollow)
+    try:
+        st = os.fstat(fin)
+        if not stat.S_ISREG(st.st_mode):
+            raise OSError(errno.EINVAL, f"{src} is not a regular file")
+        os.set_blocking(fin, True)
+        fd = os.open(dest, os.O_WRONLY | os.O_CREAT | nofollow, 0o644 & stat.S_IMODE(st.st_mode))
         try:
             if not stat.S_ISREG(os.fstat(fd).st_mode):
                 raise OSError(errno.EINVAL, "not a regular file")
             os.set_blocking(fd, True)
             os.ftruncate(fd, 0)
-            while chunk := fin.read(1 << 20):
+            while chunk := os.read(fin, 1 << 20):
                 view = memoryview(chunk)
                 while view:
                     view = view[os.write(fd, view) :]
         finally:
             os.close(fd)
+    finally:
+        os.close(fin)
 
 
 def _stdout_gone() -> None:

@@ -38,6 +38,7 @@ def cell_table(
     control: tuple[str, ...] = (),
     read: tuple[str, ...] = (),
     extra: str = "",
+    daemons: tuple[str, ...] = (),
 ) -> str:
     lines = [
         "[cell]",
@@ -54,6 +55,8 @@ def cell_table(
             f"control = {list(control)!r}".replace("'", '"'),
             f"read = {list(read)!r}".replace("'", '"'),
         ]
+        if daemons:
+            lines.append(f"daemons = {list(daemons)!r}".replace("'", '"'))
     return "\n".join(lines) + "\n" + extra
 
 
@@ -78,9 +81,15 @@ def start_member(
     return Member(name, endpoint, start_daemon_with(d, config), d)
 
 
-def console_file(tmp: Path, cell: str, who: str, certs: Path | None, connect: list[str]) -> Path:
+DAEMONS = ("arm-a", "arm-b", "arm-c")
+
+
+def console_file(
+    tmp: Path, cell: str, who: str, certs: Path | None, connect: list[str], daemons: tuple[str, ...] = DAEMONS
+) -> Path:
+    """A console's `[cell]` file: with TLS, it takes answers from `daemons` only."""
     path = tmp / f"{who}.toml"
-    path.write_text(cell_table(cell, who, certs, [], connect))
+    path.write_text(cell_table(cell, who, certs, [], connect, daemons=daemons if certs else ()))
     return path
 
 

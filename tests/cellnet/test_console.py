@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from tests.cellnet.conftest import Member, console_file
 
 ORCCADCTL = [sys.executable, "-m", "orccadd.cli"]
@@ -60,7 +62,7 @@ def test_peers_without_a_listed_or_valid_certificate_get_nothing(
     tmp_path: Path, certs: Path, cell_of_three: list[Member]
 ) -> None:
     from orccadd.cellnet.certs import make_cell_certs
-    from orccadd.cellnet.console import CellConsole, read_console_config
+    from orccadd.cellnet.console import CellConsole, CellError, read_console_config
 
     endpoint = [cell_of_three[0].endpoint]
     stranger = console_file(tmp_path, "test", "stranger", certs, endpoint)  # the CA's, not listed
@@ -76,14 +78,22 @@ def test_peers_without_a_listed_or_valid_certificate_get_nothing(
         ("tune", {"path": "Hold.pd.kp", "value": 1}),
         ("abort", {}),
     ]
-    for who in (stranger, rogue, plain):
+    for who in (stranger, rogue):
         with CellConsole(read_console_config(str(who))) as console:
             assert console.robots(wait_s=0.5) == [], who
             for cmd, args in commands:
                 r = console.request("arm-a", cmd, timeout_s=1.0, **args)
-                assert not r["ok"] and "not in cell" in r["error"], (who, cmd, r)
+                assert not r["ok"], (who, cmd, r)
+                assert "not in cell" in r["error"] or "reaches no peer" in r["error"], (who, cmd, r)
+    with CellConsole(read_console_config(str(plain))) as console:  # nothing to send a command with
+        assert console.robots(wait_s=0.5) == []
+        assert "reaches no peer" in console.request("arm-a", "status", timeout_s=1.0)["error"]
+        for cmd, args in commands[:1]:
+            with pytest.raises(CellError, match="no TLS"):
+                console.request("arm-a", cmd, timeout_s=1.0, **args)
     r = ctl("--cell", str(stranger), "--robot", "arm-a", "abort")  # as orccadctl says it
-    assert r.returncode != 0 and "not in cell 'test'" in r.stderr, r.stderr
+    assert r.returncode != 0 and "abort NOT confirmed by arm-a" in r.stderr, r.stderr
+    assert "not in cell 'test'" in r.stderr, r.stderr
     for m in cell_of_three:  # nothing loaded, nothing moved, nothing stopped
         st = m.daemon.status()
         assert st["state"] == "idle" and st["mission"] is None and not st["faulted"], st

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from orccadd.cellnet.zconfig import access_control, zenoh_config
+from orccadd.cellnet.zconfig import access_control, console_access_control, zenoh_config
 from orccadd.config.cell import read_cell_config
 from orccadd.config.cellnet import load_cellnet
 from orccadd.errors import ConfigError
@@ -68,7 +68,37 @@ def test_the_access_control_denies_by_default_and_grants_by_certificate_name(tmp
     conf = zenoh_config(net, daemon=True)
     assert conf["scouting"]["multicast"]["enabled"] is False
     assert conf["transport"]["link"]["tls"]["enable_mtls"] is True
-    assert "access_control" not in zenoh_config(net, daemon=False)  # a console's
+    assert "access_control" not in zenoh_config(net, daemon=False)  # a peer that names no daemons
+
+
+def test_a_console_takes_in_only_what_each_of_its_daemons_says_under_its_own_name(tmp_path: Path) -> None:
+    net = load_cellnet(
+        {"name": "c", **tls(tmp_path), "daemons": ["arm-a", "arm-b"]}, str(tmp_path / "k.toml"), "console"
+    )
+    acl = zenoh_config(net, daemon=False)["access_control"]
+    assert acl == console_access_control(net) and acl["default_permission"] == "deny"
+    rules = {r["id"]: r for r in acl["rules"]}
+    subjects = {s["id"]: s["cert_common_names"] for s in acl["subjects"]}
+    assert subjects == {"daemon:arm-a": ["arm-a"], "daemon:arm-b": ["arm-b"]}
+    said = rules["says:arm-b"]
+    assert said["flows"] == ["ingress"] and said["key_exprs"] == ["orccadd/c/arm-b/**"]
+    assert {"reply", "put", "liveliness_token", "declare_queryable"} <= set(said["messages"])
+    trusted = {p["id"]: (set(p["rules"]), p["subjects"]) for p in acl["policies"]}
+    assert trusted["trust:arm-a"] == ({"interest", "says:arm-a"}, ["daemon:arm-a"])  # not arm-b's keys
+    assert all("reply" not in r["messages"] for r in acl["rules"] if r["flows"] == ["ingress"] and
+               r["key_exprs"] == ["**"])  # fmt: skip
+
+
+def test_a_console_with_tls_must_name_its_daemons(tmp_path: Path) -> None:
+    from orccadd.cellnet.console import read_console_config
+
+    files = tls(tmp_path)
+    path = tmp_path / "console.toml"
+    path.write_text("[cell]\nname = \"c\"\nrobot = \"console\"\n" + "".join(
+        f'{k} = "{v}"\n' for k, v in files.items()))  # fmt: skip
+    with pytest.raises(ConfigError) as e:
+        read_console_config(str(path))
+    assert e.value.key == "cell.daemons" and "takes answers only from the daemons it names" in str(e.value)
 
 
 def test_the_shipped_cell_configs_read(tmp_path: Path) -> None:
