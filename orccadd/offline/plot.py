@@ -38,6 +38,29 @@ class CsvLogData:
     events: list[tuple[float, str, str]] = field(default_factory=list)  # (time_s, kind, name)
 
 
+def log_parts(log: Path) -> list[Path]:
+    """The files `log stop -o LOG` wrote for a cell's log, where `LOG` itself is not one of them:
+    LOG's stem with each resource's name (`run.left.csv`), and the cell's MCAP (`run.mcap`)."""
+    parts = sorted(log.parent.glob(f"{log.stem}.*{log.suffix}")) if log.suffix else []
+    return [*parts, *(p for p in (log.with_suffix(".mcap"),) if p != log and p.is_file())]
+
+
+def resolve_log(log: Path) -> Path:
+    """`log`, or where there is no such file but a cell's log under that name (`log_parts`), its
+    MCAP (every resource in one file); else a `FileNotFoundError` that says which files exist."""
+    if log.exists():
+        return log
+    parts = log_parts(log)
+    mcap = log.with_suffix(".mcap")
+    if mcap in parts:
+        return mcap
+    if parts:
+        raise FileNotFoundError(
+            f"{log}: no such file; this log is in {len(parts)} parts: {', '.join(str(p) for p in parts)}"
+        )
+    raise FileNotFoundError(f"{log}: no such file")
+
+
 def read_log(log: Path) -> CsvLogData:
     """The columns, rows, header and events of a log, CSV or MCAP; `ValueError` if it is neither."""
     with log.open("rb") as fh:
@@ -179,6 +202,7 @@ def output_format(out: Path, fmt: str | None) -> str:
 def plot_csv(log: Path, out: Path, prefixes: list[str], fmt: str | None = None) -> str:
     """Plot `log` to `out` (PNG or SVG: `fmt`, else the suffix of `out`, else PNG)."""
     form = output_format(out, fmt)
+    asked, log = log, resolve_log(log)
     d = read_log(log)
     groups: dict[str, list[int]] = {}
     for i, name in enumerate(d.columns[1:], start=1):
@@ -236,7 +260,8 @@ def plot_csv(log: Path, out: Path, prefixes: list[str], fmt: str | None = None) 
         plt.close(fig)
     unnamed = sum(1 for r in rows if r < 0)
     skipped = f", {unnamed} not named (no room)" if unnamed else ""
+    source = f" from {log} (a cell's log: every resource in its MCAP)" if log != asked else ""
     return (
         f"{out}: {len(groups)} plots, {len(d.data)} samples over {t[-1] - t[0]:.2f} s, "
-        f"{len(marks)} events{skipped} ({form})"
+        f"{len(marks)} events{skipped} ({form}){source}"
     )

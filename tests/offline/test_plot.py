@@ -159,3 +159,19 @@ def test_legends_stand_beside_the_panels(log: Path, tmp_path: Path, monkeypatch:
     for ax in panels:  # the legend's box starts right of the panel's: it covers no trace
         legend = ax.get_legend()
         assert legend is not None and legend.get_window_extent().x0 >= ax.get_window_extent().x1
+
+
+def test_a_cells_log_under_the_name_given_to_log_stop_plots_from_its_mcap(log: Path, tmp_path: Path) -> None:
+    """`log stop -o run.csv` of a cell writes run.left.csv, run.right.csv and run.mcap: `plot
+    run.csv` plots the MCAP (every resource); without it, the error names the parts."""
+    cell = tmp_path / "cell"
+    cell.mkdir()
+    for part in ("run.left.csv", "run.right.csv"):
+        (cell / part).write_bytes(log.read_bytes())
+    with pytest.raises(FileNotFoundError, match=r"run.csv: no such file; this log is in 2 parts: .*run.left.csv"):
+        plot_csv(cell / "run.csv", tmp_path / "x.png", [])
+    (cell / "run.mcap").write_bytes(log.with_suffix(".mcap").read_bytes())
+    info = plot_csv(cell / "run.csv", tmp_path / "x.png", [])
+    assert "from " in info and "run.mcap" in info and (tmp_path / "x.png").read_bytes()[:8] == PNG_MAGIC
+    with pytest.raises(FileNotFoundError, match=r"nothing.csv: no such file$"):
+        plot_csv(cell / "nothing.csv", tmp_path / "x.png", [])
