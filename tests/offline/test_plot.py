@@ -168,7 +168,8 @@ def test_a_cells_log_under_the_name_given_to_log_stop_plots_from_its_mcap(log: P
     cell.mkdir()
     for part in ("run.left.csv", "run.right.csv"):
         (cell / part).write_bytes(log.read_bytes())
-    with pytest.raises(FileNotFoundError, match=r"run.csv: no such file; this log is in 2 parts: .*run.left.csv"):
+    parts = r"run.csv: no such file; this log is in 2 parts: .*run.left.csv"
+    with pytest.raises(FileNotFoundError, match=parts):
         plot_csv(cell / "run.csv", tmp_path / "x.png", [])
     (cell / "run.mcap").write_bytes(log.with_suffix(".mcap").read_bytes())
     info = plot_csv(cell / "run.csv", tmp_path / "x.png", [])
