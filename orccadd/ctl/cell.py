@@ -12,8 +12,9 @@ from typing import Any
 
 from orccadd.cellnet import keys
 from orccadd.cellnet.console import CellConsole, CellError, read_console_config
-from orccadd.ctl.format import error_line, format_trace
+from orccadd.ctl.format import error_line, format_trace, state_words
 from orccadd.errors import ConfigError
+from orccadd.fault import cause_words
 
 EXIT_OK, EXIT_REFUSED, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
 LOST_LABEL = "LOST"
@@ -76,14 +77,14 @@ def _error(a: argparse.Namespace, message: str) -> None:
 
 def _status(console: CellConsole, a: argparse.Namespace) -> int:
     replies = console.status_all()
-    if not replies:
-        why = console.why_alone() if not console.reaches_anyone() else "no daemon of this console's is online"
-        _error(a, f"cell {console.net.name}: {why}")
+    if not replies and not console.reaches_anyone():
+        _error(a, f"cell {console.net.name}: {console.why_alone()}")
         return EXIT_REFUSED
+    absent = set(console.net.daemons) - set(replies)  # the console's daemons not online
     if a.json:
-        print(json.dumps({"cell": console.net.name, "robots": replies}, indent=1))
+        print(json.dumps({"cell": console.net.name, "robots": replies, "lost": sorted(absent)}, indent=1))
     else:
-        print(status_table(console.net.name, replies))
+        print(status_table(console.net.name, replies, absent))
     return EXIT_OK if replies else EXIT_REFUSED
 
 
@@ -98,17 +99,21 @@ def status_table(cell: str, replies: dict[str, dict[str, Any]], lost: set[str] |
             lines.append(f"{robot:<16} {'?':<10} {str(r.get('error'))[:70]}")
             continue
         st = r["result"]
-        p99 = st.get("timing", {}).get("wake_p99_us")
+        p99 = (st.get("timing") or {}).get("wake_p99_us")
         wake = f"{p99:.0f} µs" if isinstance(p99, int | float) else "-"
-        fault = st.get("fault") or ""
-        if isinstance(fault, dict):
-            fault = fault.get("message") or fault.get("cause") or json.dumps(fault)[:60]
+        faults = [st] + [x for x in st.get("resources") or [] if x.get("fault")]
+        fault = "; ".join(
+            (f"{x['name']}: " if x is not st else "") + cause_words(x.get("fault"))
+            for x in faults
+            if x.get("fault") or (x is st and st.get("faulted"))
+        )
+        fault += " (`reset` needed)" if fault else ""
         lines.append(
-            f"{robot:<16} {st.get('state', '?'):<10} {st.get('mission') or '-'!s:<22} "
+            f"{robot:<16} {state_words(st):<10} {st.get('mission') or '-'!s:<22} "
             f"{st.get('result', '?'):<10} {wake:>9} {st.get('overruns', 0):>8}  {fault}"
         )
     for robot in sorted(lost or ()):
-        lines.append(f"{robot:<16} {LOST_LABEL:<10} (its liveliness token is gone)")
+        lines.append(f"{robot:<16} {LOST_LABEL:<10} (not online: its liveliness token is gone or never came)")
     return "\n".join(lines)
 
 
@@ -142,7 +147,7 @@ def _top(console: CellConsole, a: argparse.Namespace) -> int:
     """The status table refreshed; a daemon whose token goes shows as LOST until it is back."""
     if a.rate <= 0:
         raise CellError(f"cell top: --rate (={a.rate:g}) must be positive")
-    seen: set[str] = set()
+    seen: set[str] = set(console.net.daemons)  # a daemon of the console's never seen is lost too
     n = 0
     t_end = time.monotonic() + a.duration if a.duration else float("inf")
     while (not a.count or n < a.count) and time.monotonic() < t_end:

@@ -94,6 +94,7 @@ def test_an_abort_without_arm_b_is_not_confirmed(tmp_path: Path, certs: Path) ->
             assert f"{cmd} NOT confirmed by arm-b" in r.stderr, r.stderr
         r = ctl("--cell", str(console), "cell", "status")
         assert r.returncode != 0 and "ghost" not in r.stdout + r.stderr, r
+        assert "arm-b            LOST" in r.stdout, r.stdout  # the console's daemon, not online
     finally:
         _close(kept)
 
