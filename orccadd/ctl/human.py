@@ -181,7 +181,11 @@ def _tune(r: dict[str, Any], ctx: dict[str, Any]) -> str:
     """In one round trip: the reply names the value applied, its unit and the tick."""
     unit = "" if r["unit"] in ("", "1") else " " + str(r["unit"])
     change = f"{num(r['previous'])} → {num(r['value'])}{unit}"
-    return f"{r['tuned']}: {change} (applied at tick {r['applied_at_tick']})"
+    where = f"applied at tick {r['applied_at_tick']}"
+    if r.get("task_active") is False:
+        task = str(r["tuned"]).split(".", 1)[0]
+        where += f"; {task} is not running now: it takes effect the next time it runs"
+    return f"{r['tuned']}: {change} ({where})"
 
 
 def _stop(r: dict[str, Any], _: dict[str, Any]) -> str:

@@ -372,7 +372,15 @@ class RtCommands:
             if tick is None:
                 return None
             self._trace_tune(t_posted, task, split_index(rest)[0], change, old, tick)
-            return {"tuned": path, "value": value, "previous": old, "unit": unit, "applied_at_tick": tick}
+            return {
+                "tuned": path,
+                "value": value,
+                "previous": old,
+                "unit": unit,
+                "applied_at_tick": tick,
+                # set either way; it acts only while the task runs (the next time it does)
+                "task_active": loop.active is task,
+            }
 
         def expire() -> Result:
             raise CommandError(

@@ -89,6 +89,7 @@ def test_params_and_tune(daemon: Daemon) -> None:
     # acknowledged once the control thread applied it, with that tick's (telemetry record) number
     assert isinstance(reply, dict) and reply["previous"] == 500.0 and reply["tuned"] == "Reach.ct.kp[2]"
     assert reply["unit"] == kp["unit"]  # its unit in the same reply: no second request
+    assert reply["task_active"] is False  # loaded, not started: set now, acting when Reach runs
     assert before <= reply["applied_at_tick"] <= after + 1, (before, reply, after)
     applied = daemon.call("tune", path="Reach.ct.kp[5]", value=400)
     # the trace (and every log) says which parameter, before → after, and the tick that applied it
