@@ -58,6 +58,14 @@ class Hub:
         self.max_backlog = max_backlog_bytes
         self.hold_off_s = hold_off_s
         self.frames = 0
+        self.clients: set[asyncio.Task[None]] = set()  # one per connection, to end them on stop
+
+    async def close_clients(self) -> None:
+        """End every connection's task (on stop), so that none is left to be cancelled by the
+        event loop's shutdown (Python 3.11's stream callback then logs a CancelledError)."""
+        for task in list(self.clients):
+            task.cancel()
+        await asyncio.gather(*self.clients, return_exceptions=True)
 
     # ---- one client -------------------------------------------------------------------------
     async def serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
@@ -66,6 +74,10 @@ class Hub:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SNDBUF_BYTES)
         addr = writer.get_extra_info("peername")
         peer = Peer(writer, f"{addr[0]}:{addr[1]}" if addr else "?")
+        task = asyncio.current_task()
+        if task is not None:
+            self.clients.add(task)
+            task.add_done_callback(self.clients.discard)
         writer.write(b"< hi >")
         buf = b""
         try:
@@ -89,6 +101,8 @@ class Hub:
                 for channel, frames in out.items():
                     self._broadcast(peer, channel, b"".join(frames), len(frames))
         except (ConnectionError, asyncio.IncompleteReadError):
+            return
+        except asyncio.CancelledError:  # the hub stops (`close_clients`): this connection ends
             return
         finally:
             self._leave(peer)
@@ -182,6 +196,7 @@ async def run(port: int, port_file: str, max_backlog: int) -> None:
     print(f"orccadd.vcan: listening on {HOST}:{bound}", flush=True)
     async with server:
         await stop.wait()
+        await hub.close_clients()
     log.info("stopped after %d frames", hub.frames)
 
 

@@ -168,3 +168,16 @@ def test_reports_its_port_and_stops_on_sigterm(tmp_path: Path) -> None:
         assert int(port_file.read_text()) == h.port
     finally:
         assert h.stop() == 0
+
+
+def test_stops_on_sigterm_with_clients_connected_without_a_traceback() -> None:
+    h = HubProcess()
+    buses = connect(h, 2)
+    try:
+        buses[0].send(can.Message(arbitration_id=0x80, data=b"", is_extended_id=False))
+        drain(buses[1], 1)
+        assert h.stop() == 0
+        assert "Traceback" not in h.stderr_text() and "CancelledError" not in h.stderr_text(), h.stderr_text()
+    finally:
+        shutdown(buses)
+        h.stop()
