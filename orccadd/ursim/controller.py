@@ -148,8 +148,8 @@ class UrController:
         if nxt is RobotMode.POWER_OFF:
             self._power_off()
             return
-        if nxt is RobotMode.POWER_ON:
-            self._power_step_at_s = now + BOOT_S
+        if nxt is RobotMode.POWER_ON and self.robot_mode is not RobotMode.POWER_ON:
+            self._power_step_at_s = now + BOOT_S  # (already booting: its end stays where it was)
         elif nxt is RobotMode.IDLE and self._release_pending:
             self._power_step_at_s = now + RELEASE_S
         elif nxt is RobotMode.RUNNING:

@@ -87,6 +87,8 @@ POWER_TRANSITIONS: dict[tuple[RobotMode, PowerEvent], RobotMode] = {
     (RobotMode.POWER_OFF, PowerEvent.POWER_ON): RobotMode.POWER_ON,
     # an e-Series "brake release" from power off powers on first, then releases
     (RobotMode.POWER_OFF, PowerEvent.BRAKE_RELEASE): RobotMode.POWER_ON,
+    # a brake release while booting is taken: the brakes open once the joints have booted
+    (RobotMode.POWER_ON, PowerEvent.BRAKE_RELEASE): RobotMode.POWER_ON,
     (RobotMode.POWER_ON, PowerEvent.BOOTED): RobotMode.IDLE,
     (RobotMode.IDLE, PowerEvent.BRAKE_RELEASE): RobotMode.IDLE,  # releasing: RUNNING at RELEASED
     (RobotMode.IDLE, PowerEvent.RELEASED): RobotMode.RUNNING,

@@ -195,6 +195,22 @@ def test_power_sequence_follows_the_table(ur5e: RobotConfig) -> None:
     assert ctl.state.robot_status_bits & RobotStatus.POWER_ON
 
 
+def test_a_brake_release_while_booting_opens_the_brakes_once_booted(ur5e: RobotConfig) -> None:
+    """A stock script's power on then brake release at once: the controller does what it said."""
+    clocked = Clocked(make_controller(ur5e))
+    ctl = clocked.ctl
+    clocked.run(0.01)
+    ctl.power_event(PowerEvent.POWER_OFF)
+    ctl.power_event(PowerEvent.POWER_ON)
+    clocked.run(BOOT_S / 2)
+    ctl.power_event(PowerEvent.BRAKE_RELEASE)  # still booting
+    assert ctl.robot_mode is RobotMode.POWER_ON
+    clocked.run(BOOT_S / 2 + 0.01)  # the boot ends when it would have without the release
+    assert ctl.robot_mode is RobotMode.IDLE
+    clocked.run(RELEASE_S + 0.01)
+    assert ctl.robot_mode is RobotMode.RUNNING and ctl.arm.brakes_released
+
+
 def test_emergency_stop_stops_then_powers_off(clocked: Clocked) -> None:
     ctl = clocked.ctl
     start_script(ctl)
