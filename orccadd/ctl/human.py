@@ -77,17 +77,26 @@ def _describe(r: dict[str, Any], ctx: dict[str, Any]) -> str:
     else:
         lines.append("mission: none loaded (`orccadctl load FILE`)")
     params = (ctx.get("params") or {}).get("params")
+    on = _task_resources(m, len(units) > 1)
     if params:
         lines.append("tasks: modules and their parameters (values: `orccadctl params TASK`)")
-        lines += table(_modules(params), "  ")
+        lines += table(_modules({f"{t}{on.get(t, '')}": p for t, p in params.items()}), "  ")
     else:
-        lines.append("tasks: " + ", ".join(r["tasks"]))
+        lines.append("tasks: " + ", ".join(f"{t}{on.get(t, '')}" for t in r["tasks"]))
     if r.get("fault"):
         lines.append(f"fault: {cause_words(r['fault'])} (`reset` needed)")
     if r.get("log"):
         lines.append("recent")
         lines += ["  " + str(n) for n in r["log"]]
     return "\n".join(lines)
+
+
+def _task_resources(mission: dict[str, Any] | None, cell: bool) -> dict[str, str]:
+    """In a cell, " (on RESOURCE)" by task name, from the mission's description; else nothing."""
+    if not mission or not cell:
+        return {}
+    pairs = zip(mission.get("tasks") or [], mission.get("task_resources") or [], strict=False)
+    return {t: f" (on {res})" for t, res in pairs}
 
 
 def _modules(params: dict[str, list[dict[str, Any]]]) -> list[tuple[str, ...]]:

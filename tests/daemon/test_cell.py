@@ -183,6 +183,12 @@ def test_orccadctl_describes_and_shows_each_resource_in_words(dual: Daemon) -> N
     status = ctl("status")
     assert "left: task Hold_left (run), resource ok" in status and "right: task Hold_right" in status
     assert status.count("  loop: ") == 2, status
+    dual.call("load", path=MISSION)
+    mission = cast(dict[str, Any], dual.call("describe"))["mission"]
+    text = ctl("describe")
+    for task, res in zip(mission["tasks"], mission["task_resources"], strict=True):
+        assert f"{task} (on {res})" in text, text  # each task with the resource it runs on
+    assert set(mission["task_resources"]) == {"left", "right"}
 
 
 def test_a_reset_or_an_injection_naming_no_resource_is_refused_and_nothing_changes(dual: Daemon) -> None:
