@@ -112,7 +112,10 @@ def render(
     error = f"fault: {fault} (`reset` needed)" if fault else last_error
     flags = ", ".join(status.get("resource_status") or []) or "ok"
     c = state_colour(status) if colour else ""
-    error_line = _fit(f"error    {error or '-'}", width, RED if colour and error else "", 9)
+    # a type 2 the mission handled is no error: shown as handled, not in red
+    handled = bool(error) and not fault and ".T2." in error and ".T3." not in error and "stop" not in error
+    label = "handled  " if handled else "error    "
+    error_line = _fit(f"{label}{error or '-'}", width, RED if colour and error and not handled else "", 9)
     head = [_fit(title, width), _fit(state, width, c, 9, 9 + len(words))]
     note_line = _fit(f"> {note}" if note else "", width)
     if units:  # a cell: each resource's goal, status, loop and joints

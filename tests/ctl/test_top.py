@@ -129,6 +129,9 @@ def test_the_last_error_is_the_fault_first_then_the_newest_exception() -> None:
     reset = {**RUNNING, "state": "ready", "active_task": "Hold"}  # after `reset`: the fault is gone
     frame = render(reset, EVENTS, SIZE, last_error="00:59:53.457 Hold.T3.ResourceFault")
     assert line(frame, "error") == "error    00:59:53.457 Hold.T3.ResourceFault"
+    success = {**RUNNING, "state": "ready", "result": "success"}  # a type 2 the mission handled
+    frame = render(success, EVENTS, SIZE, colour=True, last_error="00:59:53.300 Close.T2.Missed")
+    assert line(frame, "handled") == "handled  00:59:53.300 Close.T2.Missed"  # no error, not red
     held = render(HOLDING, [], SIZE)
     assert line(held, "goal") == "goal     Hold (run): the mission is suspended (r resumes)"
 
