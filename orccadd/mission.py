@@ -21,7 +21,9 @@ from orccadd.automaton.program import Program
 from orccadd.automaton.verify import CheckResult
 from orccadd.config.robot import MAX_TOML_BYTES
 from orccadd.confine import Confinement
-from orccadd.errors import ConfigError, MissionError, OrccaddError, ParameterError
+from orccadd.errors import ConfigError, MissionError, OrccaddError, ParameterError, did_you_mean
+from orccadd.model import RobotModel
+from orccadd.modules import MODULES, ModuleContext, module_class
 from orccadd.physres.base import PhysicalResource
 from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
 from orccadd.task.events import EventKind
@@ -216,3 +218,57 @@ def check_on_robot(
 
 def _rest(e: OrccaddError) -> str:
     return "\n       ".join(str(e).splitlines()[1:])
+
+
+def check_parameter_names(automaton: Automaton | Network, model: RobotModel) -> CheckResult:
+    """Every task's module types and parameter names, in its task file and in the mission's
+    `set` lines. They do not depend on the robot, so `orccadctl check` runs this one with no
+    robot too: `model` (a stand-in's, when there is no robot) only sizes the modules; values,
+    shapes, bounds and joints are load's checks on the robot."""
+    p = automaton.program
+    ctx = ModuleContext(task="check", model=model, period_s=STAND_IN_PERIOD_S)
+    for decl in p.ast.tasks:
+        if not decl.source:
+            continue
+        src = Path(decl.source) if Path(decl.source).is_absolute() else Path(p.file).parent / decl.source
+        try:
+            spec = load_task_file(src)
+            known = {ms.name: _parameter_names(ms.name, ms.type, ctx, src) for ms in spec.modules}
+            for ms in spec.modules:
+                for key in ms.parameters:
+                    _known_name(known[ms.name], ms.name, key, f"{src}: modules.{ms.name}.{key}")
+        except OrccaddError as e:
+            return CheckResult("parameter names", False, f"task {decl.name}: {e}")
+        for ps in decl.params:
+            where = f"{ps.loc.file}:{ps.loc.line}:{ps.loc.col}: task {decl.name}: {ps.module}.{ps.param}"
+            try:
+                if ps.module not in known:
+                    raise OrccaddError(f"{where}: no module {ps.module!r} (modules: {', '.join(known)})")
+                _known_name(known[ps.module], ps.module, ps.param, where)
+            except OrccaddError as e:
+                return CheckResult("parameter names", False, str(e))
+    return CheckResult("parameter names", True, "every module type and parameter name is known")
+
+
+STAND_IN_PERIOD_S = 0.002  # sizes nothing a name depends on
+
+
+def _parameter_names(name: str, type_name: str, ctx: ModuleContext, src: Path) -> set[str] | None:
+    """The parameter names of module type `type_name`; None where it cannot be built on the
+    stand-in robot (its names are then load's to check)."""
+    cls = module_class(type_name)
+    if cls is None:
+        known = ", ".join(sorted(MODULES))
+        raise OrccaddError(f"{src}: modules.{name}.type (={type_name!r}) is not a module type (known: {known})")
+    try:
+        return set(cls(name, ctx).parameters)
+    except (OrccaddError, ValueError, IndexError):
+        return None
+
+
+def _known_name(known: set[str] | None, module: str, key: str, where: str) -> None:
+    if known is not None and key not in known:
+        raise OrccaddError(
+            f"{where} is not a parameter of {module}{did_you_mean(key, known)} "
+            f"(parameters: {', '.join(sorted(known)) or 'none'})"
+        )

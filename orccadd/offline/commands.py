@@ -121,7 +121,7 @@ def cmd_check(args: argparse.Namespace) -> int:
             report = verify_network(a) if isinstance(a, Network) else verify(a)
         else:
             a, report = check_mission(args.file, args.max_states, _progress())
-            report.results.append(_on_robot(a, args.config))
+            report.results.extend(_on_robot(a, args.config))
     except MissionError as e:
         if args.json:
             print(
@@ -158,28 +158,37 @@ def cmd_check(args: argparse.Namespace) -> int:
     return EXIT_OK if report.ok else EXIT_FAILED
 
 
-def _on_robot(a: Any, config: str | None) -> Any:
+STAND_IN_ROBOT = "sim-ur5e"  # sizes the modules whose parameter names `check` reads without a robot
+
+
+def _on_robot(a: Any, config: str | None) -> list[Any]:
     """`load`'s checks on a robot (every task built on it: parameter names, shapes, bounds,
-    joints): `config`'s, else the service's on this PC; without either, a warning that says
-    which checks did not run (never a silent ok)."""
+    joints): `config`'s, else the service's on this PC; without either, the parameter names
+    alone (they do not depend on the robot) and a warning that says which checks did not run
+    (never a silent ok)."""
     from orccadd.automaton.verify import WARNING, CheckResult
     from orccadd.config.shipped import SERVICE_CONFIG, robot_config_path
-    from orccadd.mission import check_on_robot
+    from orccadd.mission import check_on_robot, check_parameter_names
     from orccadd.robot import create_resource, load_cell_config
 
     if config is None and not SERVICE_CONFIG.is_file():
-        return CheckResult(
-            "robot",
-            False,
-            "not checked: no --config and no service config here "
-            f"({SERVICE_CONFIG}): the tasks' parameter names, shapes and bounds and their joints "
-            "are load's checks on a robot; run `check --config ROBOT` (a file or a shipped name "
-            "such as sim-ur5e)",
-            level=WARNING,
-        )
+        stand_in = load_cell_config(robot_config_path(STAND_IN_ROBOT), check_model=False)
+        names = check_parameter_names(a, create_resource(stand_in.resources[0]).model)
+        return [
+            names,
+            CheckResult(
+                "robot",
+                False,
+                "not checked: no --config and no service config here "
+                f"({SERVICE_CONFIG}): the tasks' parameter values, shapes and bounds and their joints "
+                "are load's checks on a robot; run `check --config ROBOT` (a file or a shipped name "
+                "such as sim-ur5e)",
+                level=WARNING,
+            ),
+        ]
     path = robot_config_path(config) if config is not None else SERVICE_CONFIG
     cell = load_cell_config(path, check_model=False)  # ConfigError: exit 2, naming file and key
-    return check_on_robot(a, [create_resource(r) for r in cell.resources], cell.name)
+    return [check_on_robot(a, [create_resource(r) for r in cell.resources], cell.name)]
 
 
 def cmd_graph(args: argparse.Namespace) -> int:

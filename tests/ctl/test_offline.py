@@ -135,7 +135,9 @@ def test_check_config_builds_every_task_on_the_robot(tmp_path: Path) -> None:
     )
     mission = tmp_path / "m.mission"
     mission.write_text(text)
-    assert ctl("check", str(mission)).returncode == 0
+    r = ctl("check", str(mission))  # a parameter's name does not depend on the robot: caught without
+    assert r.returncode == 1 and "FAIL parameter names" in r.stdout, r.stdout
+    assert "traj.target_rads is not a parameter of traj; did you mean target_rad?" in r.stdout, r.stdout
     r = ctl("check", str(mission), "--config", "sim-ur5e")
     assert r.returncode == 1, r.stdout + r.stderr
     assert "FAIL robot ur5e" in r.stdout and "traj.target_rads is not a parameter" in r.stdout
@@ -188,8 +190,9 @@ def test_check_without_a_robot_says_which_checks_it_did_not_run_and_runs_them_on
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """`check` ran only the language's checks without --config and printed ok for a misspelt
-    parameter that `load` refuses: now it warns that the robot's checks did not run (--strict
-    fails), and on a PC with the service's robot config it runs them on that robot."""
+    parameter that `load` refuses: now it checks parameter names on a stand-in robot and warns
+    that the robot's other checks did not run (--strict fails), and on a PC with the service's
+    robot config it runs them on that robot."""
     from orccadd.cli import orccadctl_main as main
     from orccadd.config import shipped
     from tests.daemon.conftest import robot_config
@@ -199,10 +202,20 @@ def test_check_without_a_robot_says_which_checks_it_did_not_run_and_runs_them_on
     typo = tmp_path / "typo.mission"
     typo.write_text(text.replace("set lost.threshold_rad", "set lost.treshold_rad"))
     monkeypatch.setattr(shipped, "SERVICE_CONFIG", tmp_path / "absent.toml")
-    assert main(["check", str(typo)]) == 0
-    assert "warn robot: not checked: no --config and no service config here" in capsys.readouterr().out
-    assert main(["check", "--strict", str(typo)]) == 1
+    assert main(["check", str(typo)]) == 1
+    out = capsys.readouterr().out
+    assert "warn robot: not checked: no --config and no service config here" in out
+    assert "FAIL parameter names: " in out and "lost.treshold_rad is not a parameter of lost" in out
+    assert f"{typo}:" in out  # the `set` line's place
+    assert main(["check", str(ROOT / "configs/missions/demo.mission")]) == 0  # names known: a warning
+    assert main(["check", "--strict", str(ROOT / "configs/missions/demo.mission")]) == 1
     capsys.readouterr()
+    task = tmp_path / "typo_task.toml"  # a misspelt name in a task file: the file and key named
+    task.write_text((ROOT / "configs/tasks/move_joints.toml").read_text().replace("tolerance_rad", "tolerence_rad"))
+    typo.write_text(text.replace(f'"{ROOT}/configs/tasks/move_joints.toml"', f'"{task}"'))
+    assert main(["check", str(typo)]) == 1
+    out = capsys.readouterr().out
+    assert f"{task}: modules." in out and "tolerence_rad is not a parameter" in out, out
     monkeypatch.setattr(shipped, "SERVICE_CONFIG", robot_config(tmp_path))  # this PC's robot
     assert main(["check", str(typo)]) == 1
     assert "FAIL robot ur5e:" in capsys.readouterr().out
