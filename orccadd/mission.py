@@ -259,7 +259,9 @@ def _parameter_names(name: str, type_name: str, ctx: ModuleContext, src: Path) -
     cls = module_class(type_name)
     if cls is None:
         known = ", ".join(sorted(MODULES))
-        raise OrccaddError(f"{src}: modules.{name}.type (={type_name!r}) is not a module type (known: {known})")
+        raise OrccaddError(
+            f"{src}: modules.{name}.type (={type_name!r}) is not a module type (known: {known})"
+        )
     try:
         return set(cls(name, ctx).parameters)
     except (OrccaddError, ValueError, IndexError):

@@ -211,7 +211,8 @@ def test_check_without_a_robot_says_which_checks_it_did_not_run_and_runs_them_on
     assert main(["check", "--strict", str(ROOT / "configs/missions/demo.mission")]) == 1
     capsys.readouterr()
     task = tmp_path / "typo_task.toml"  # a misspelt name in a task file: the file and key named
-    task.write_text((ROOT / "configs/tasks/move_joints.toml").read_text().replace("tolerance_rad", "tolerence_rad"))
+    original = (ROOT / "configs/tasks/move_joints.toml").read_text()
+    task.write_text(original.replace("tolerance_rad", "tolerence_rad"))
     typo.write_text(text.replace(f'"{ROOT}/configs/tasks/move_joints.toml"', f'"{task}"'))
     assert main(["check", str(typo)]) == 1
     out = capsys.readouterr().out
