@@ -17,7 +17,9 @@
   error only where the program spins or halts with nothing running and no way out, otherwise a
   note (waiting for the operator forever is legitimate);
 - conflicts: no reachable state has two active tasks claiming the same resource or joints;
-- the mission's own properties (observers): `never E`, `A -> eventually B`, `A and B alternate`;
+- the mission's own properties (observers): `never E`, `A -> eventually B`, `A and B alternate`
+  (`-> eventually`, a liveness property, on the runs without a type 3 exception or a resource's
+  fault, as liveness; the others on every run);
 - dead code: every task activation, `emit` and branch is executed by some reachable reaction (a
   warning, an error in a strict report).
 
@@ -206,6 +208,13 @@ def _check_safety(a: Automaton, g: _Graph) -> CheckResult:
 def _nominal(a: Automaton, inputs: int) -> bool:
     p = a.program
     return not any(inputs >> i & 1 and p.input_kind[i] in ("T2", "T3", "fault") for i in range(len(p.inputs)))
+
+
+def _abandons(a: Automaton, inputs: int) -> bool:
+    """Whether an instant with `inputs` hands the run to the safe procedure: a type 3 exception
+    or a resource's fault in it."""
+    p = a.program
+    return any(inputs >> i & 1 and p.input_kind[i] in ("T3", "fault") for i in range(len(p.inputs)))
 
 
 def _backward(
@@ -702,11 +711,15 @@ def _check_property(a: Automaton, g: _Graph, prop: A.PropDecl) -> CheckResult:
         return CheckResult(
             name, False, f"`pre(...)` in what must eventually happen ({A.show(b)}): not supported"
         )
-    can_b = (
-        _backward(a, g, lambda i, act, n: holds(b, i, act, n), lambda i: True)
-        if prop.kind == "eventually"
-        else set()
-    )
+
+    # `-> eventually` is a liveness property: checked, as liveness is, on the runs that no type 3
+    # exception or resource fault hands to the safe procedure (those are safety's); `never` and
+    # `alternate` hold on every run
+    def kept(inputs: int) -> bool:
+        return prop.kind != "eventually" or not _abandons(a, inputs)
+
+    eventually = prop.kind == "eventually"
+    can_b = _backward(a, g, lambda i, act, n: holds(b, i, act, n), kept) if eventually else set()
     while queue and bad is None:
         node = queue.popleft()
         s, obs, prev = node
@@ -715,6 +728,8 @@ def _check_property(a: Automaton, g: _Graph, prop: A.PropDecl) -> CheckResult:
             bad = (node, None, f"after {A.show(prop.a)}, {A.show(b)} {why}")
             break
         for inputs, (n, actions) in a.table[s].items():
+            if not kept(inputs):
+                continue
             ha, hb = holds(prop.a, inputs, actions, n, prev), holds(b, inputs, actions, n, prev)
             step = Step(inputs, actions)
             if prop.kind == "never":

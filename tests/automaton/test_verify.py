@@ -142,7 +142,7 @@ def test_a_cycle_waiting_for_the_operator_is_progress() -> None:
         ("never (active(Move) and active(Grip))", False),
         ("never (active(Move) and active(Swing))", True),
         ("start(Move) -> eventually stop(Move)", True),
-        ("Go -> eventually start(Swing)", False),
+        ("Go -> eventually start(Swing)", True),  # on the runs no fault hands to the safe procedure
         ("start(Move) and stop(Move) alternate", True),
         ("stop(Move) and start(Move) alternate", False),
     ],
@@ -201,3 +201,21 @@ def test_t3_inside_the_safe_procedure_ends_the_mission_failed() -> None:
     assert a.describe_actions(actions) == ["stop Move", "start Grip", "safe"]
     s, actions = a.react(s, grip_t3)
     assert a.describe_actions(actions) == ["stop Grip", "failed"]
+
+
+def test_eventually_is_checked_like_liveness_on_runs_without_a_fault_or_a_type_3() -> None:
+    """A resource's fault in Go's own instant (`{Go, Arm.fault} -> safe`) refuted every
+    `Go -> eventually X` of a mission with a resource, while liveness assumed no exceptions."""
+    text = HEADER.replace("safe procedure Rest\n  nothing\nend", "safe procedure Rest\n  Grip\nend")
+    body = (
+        "main procedure P\n handle await Go; Move; Swing on fatal do safe end\nend\n"
+        "property Starts: Go -> eventually start(Move)\n"
+        "property Swings: start(Move) -> eventually start(Swing)\n"
+        "property Again: start(Swing) -> eventually start(Move)\n"
+        "property NoGrip: never start(Grip)\n"
+    )
+    report = verify(compile_text(text + body, "m.mission"))
+    assert not report.failed("property Starts") and not report.failed("property Swings"), report.format()
+    assert report.failed("property Again")  # still refuted where no fault is needed to refute it
+    # a `never` still holds on every run: the safe procedure (after a fault) starts Grip
+    assert report.failed("property NoGrip")
