@@ -15,9 +15,10 @@ the drives of every bus move the one arm.
 
 It prints `drivesim: ready, control 127.0.0.1:PORT` once the nodes have booted.
 
-The drives are strict as real ones are (see `axis.Strictness`); `--lenient heartbeat_consumer`
-or `--lenient cob_id_valid_bit` relaxes one, `--mode-display-delay-ms` sets how late 0x6061
-shows a new mode (`inf`: never).
+The drives are strict as real ones are (see `axis.Strictness`); `--lenient heartbeat_consumer`,
+`--lenient cob_id_valid_bit` or `--lenient supported_modes` relaxes one. A new mode (0x6060) is
+shown in 0x6061 before its write is confirmed; `--mode-display-delay-ms` makes the drives show it
+that much later instead (`inf`: never), for a master's test against drives that lag.
 """
 
 from __future__ import annotations
@@ -136,7 +137,8 @@ def main(argv: list[str] | None = None) -> int:
         "--mode-display-delay-ms",
         type=float,
         default=Strictness.mode_display_delay_s * 1e3,
-        help="how late the drives show a new mode of operation (0x6061); inf: never",
+        help="how late the drives show a new mode of operation (0x6061); 0 (default): at once, "
+        "before the write is confirmed; inf: never",
     )
     args = ap.parse_args(argv)
     strict = Strictness(

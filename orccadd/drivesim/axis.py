@@ -7,8 +7,11 @@ second, torques in thousandths of the rated torque (0x6076, motor side), through
     increments = rad × counts_per_rev × gear_ratio / 2π
     per mille  = τ_joint / (gear_ratio × rated_torque_nm) × 1000
 
-The drive runs in the mode its display shows (0x6061), which follows a write of 0x6060 after
-`Strictness.mode_display_delay_s` (real drives take a few ms). Every SYNC (`cycle`): in
+The drive runs in the mode its display shows (0x6061). A mode written to 0x6060 is shown at
+once, before the write is confirmed (a real drive takes it within its own cycle, before it
+answers), or `Strictness.mode_display_delay_s` later for a drive made to lag; a mode its
+supported drive modes (0x6502) do not list is refused, SDO abort 0x06090030, and 0x6061 stays
+(`Strictness.supported_modes`; an RPDO's refused mode is ignored). Every SYNC (`cycle`): in
 OPERATION ENABLED the target of the mode (CSP 0x607A, CSV 0x60FF, CST 0x6071, plus the torque
 offset 0x60B2 if mapped) becomes the joint's reference; a quick stop or a fault reaction ramps
 the joint down at the quick-stop deceleration (0x6085) and then switches the power stage off;
@@ -35,7 +38,7 @@ from orccadd.drivers.canopen.cia402 import (
     State,
 )
 from orccadd.drivesim.plant import Drive, DriveTrainArm
-from orccadd.drivesim.slave import SlaveNode
+from orccadd.drivesim.slave import ABORT_VALUE_RANGE, SdoAbortError, SlaveNode
 
 # EMCY error codes (CiA 301 / CiA 402)
 EMCY_OVERCURRENT = 0x2310
@@ -61,7 +64,10 @@ class Strictness:
 
     heartbeat_consumer: bool = True  # a heartbeat watched (0x1016) and lost: FAULT, EMCY 0x8130
     cob_id_valid_bit: bool = True  # a valid COB-ID's identifier cannot change: abort 0x06090030
-    mode_display_delay_s: float = 0.001  # 0x6061 shows a new 0x6060 this much later (NEVER: never)
+    supported_modes: bool = True  # a mode 0x6502 does not list: abort 0x06090030, 0x6061 unchanged
+    # 0x6061 shows a new 0x6060 this much later (0: at once, before the write is confirmed; NEVER:
+    # never), for a master's test against a drive that lags
+    mode_display_delay_s: float = 0.0
 
 
 STRICT = Strictness()
@@ -103,6 +109,7 @@ class Axis:
         self.sto = False  # Safe Torque Off active: the power stage cannot be enabled
         node.on_write[(0x6040, 0)] = self._controlword
         node.on_write[(0x6060, 0)] = self._mode_asked
+        node.checks[(0x6060, 0)] = self._check_mode
         node.on_reset_node = self.reset
         if strict.heartbeat_consumer:
             node.on_heartbeat_lost = lambda producer: self.fault(EMCY_HEARTBEAT, ERR_REG_COMM)
@@ -188,7 +195,20 @@ class Axis:
         self._stop_v0 = float(self.arm.dq[self.j])
         self._stop_t0 = float(self.arm.t_sim_s or 0.0)
 
+    def _check_mode(self, mode: int) -> None:
+        """A mode of operation asked (0x6060), before it is stored: refused (SDO abort 0x06090030,
+        value range exceeded) unless the drive's supported drive modes (0x6502) list it."""
+        if self.strict.supported_modes and not supports_mode(self._get(0x6502, 0), int(mode)):
+            raise SdoAbortError(ABORT_VALUE_RANGE)
+
     def _mode_asked(self, mode: int) -> None:
+        """A mode of operation taken (0x6060 stored): shown (0x6061) and run at once, within the
+        handling of the write that brought it (before an SDO write's confirmation goes out), or
+        `mode_display_delay_s` later."""
+        if self.strict.mode_display_delay_s <= 0:
+            self._mode_due = None
+            self._set(0x6061, int(mode))
+            return
         self._mode_due = (int(mode), self.node.now_s + self.strict.mode_display_delay_s)
         self.poll(self.node.now_s)
 
@@ -299,6 +319,18 @@ class Axis:
         if abs(arm.dq[j]) < STOP_SPEED_RAD_S:
             sw |= SW_TARGET_REACHED
         self._set(0x6041, sw)
+
+
+def supports_mode(supported: int, mode: int) -> bool:
+    """Whether supported drive modes `supported` (0x6502) list mode of operation `mode` (0x6060):
+    CiA 402 gives mode m = 1..16 bit m - 1 (1 pp, 2 vl, 3 pv, 4 tq, 6 hm, 7 ip, 8 csp, 9 csv,
+    10 cst) and bits 16-31 to the manufacturer, read here as modes -1..-16. Mode 0 (no mode
+    assigned) is always taken; so is every mode where 0x6502 is 0 (a description that leaves it
+    empty says nothing)."""
+    if supported == 0 or mode == 0:
+        return True
+    bit = mode - 1 if mode > 0 else 15 - mode
+    return 0 <= bit < 32 and bool(supported >> bit & 1)
 
 
 def _range(data_type: int | None) -> tuple[int, int]:

@@ -5,7 +5,8 @@ the nodes of its bus, a SYNC runs the cycle of every drive on its bus (synchrono
 applied, references to the arm, actual values sampled, TPDOs sent), and the arm integrates on
 the wall clock in between, so it keeps moving (or falls, braked) whatever the bus does. Faults
 are injected with `inject`. The drives are as strict as real ones (`Strictness`: heartbeat
-consumer, COB-ID valid bit, a mode display that lags) unless told otherwise.
+consumer, COB-ID valid bit, supported modes only) unless told otherwise; a mode display that
+lags is one such option.
 
 Drives on several buses (`AxisSpec.bus`) share the one arm, so one process serves them all: the
 joints are coupled by the arm's dynamics, and one integration in one process keeps them so

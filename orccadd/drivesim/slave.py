@@ -8,11 +8,17 @@ through the `send` callable given at construction. What it does:
 - SDO server: expedited and segmented upload and download, abort codes of CiA 301 for a
   missing object or sub-index, a read-only object, a wrong length, a value out of range,
   a toggle error; block transfers are refused (abort "command not valid");
+- an expedited download without a size indication (e = 1, s = 0, which CiA 301 allows) is
+  taken as the object's own size from the 4 data bytes and logged, naming the object; bytes
+  beyond that size that are not zero (nor the sign extension of a signed value) would be lost:
+  aborted 0x06070012 (docs/simulators.md, "drivesim where CiA 301 and CiA 402 leave room");
 - PDOs from 0x1400/0x1600 (receive) and 0x1800/0x1A00 (transmit), reconfigurable over SDO
-  following CiA 301's procedure (disable the PDO, set the count to 0, write the entries, set
-  the count), entries checked (exists, mappable, at most 64 bits); RPDOs with a synchronous
-  transmission type are applied at the next SYNC, others at once; TPDOs of type 1-240 go out
-  every n-th SYNC, type 0 on SYNC when changed, 254/255 on their event timer;
+  following CiA 301's procedure only (disable the PDO, set the count to 0, write the entries,
+  set the count, enable): a mapping write while the PDO is valid, or an entry while the count
+  is not 0, is aborted 0x06010000; entries checked (exists 0x06020000, mappable 0x06040041), a
+  count beyond the entries or 64 bits 0x06040042; RPDOs with a synchronous transmission type
+  are applied at the next SYNC, others at once; TPDOs of type 1-240 go out every n-th SYNC,
+  type 0 on SYNC when changed, 254/255 on their event timer;
 - heartbeat producer (0x1017) and consumer (0x1016, a lost producer is reported to the owner),
   EMCY (0x1014, default 0x80 + node id) with the error register 0x1001;
 - COB-IDs as strict drives keep them (`strict_cob_ids`, on by default): a write that changes the
@@ -21,11 +27,13 @@ through the `send` callable given at construction. What it does:
   bit 31 says "not valid".
 
 Write hooks (`on_write`) let the drive behind the node react to controlword and friends,
-whether they arrive by PDO or SDO.
+whether they arrive by PDO or SDO; checks (`checks`) let it refuse a value before it is stored
+(an SDO download is aborted with the check's code, an RPDO's entry left as it was).
 """
 
 from __future__ import annotations
 
+import logging
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -38,6 +46,8 @@ from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 
 from orccadd.drivers.canopen.capabilities import object_dictionary
 
+log = logging.getLogger("orccadd.drivesim")
+
 # SDO abort codes (CiA 301, 7.2.4.3.17)
 ABORT_TOGGLE = 0x05030000
 ABORT_COMMAND = 0x05040001
@@ -48,6 +58,7 @@ ABORT_NO_OBJECT = 0x06020000
 ABORT_NOT_MAPPABLE = 0x06040041
 ABORT_PDO_LENGTH = 0x06040042
 ABORT_LENGTH = 0x06070010
+ABORT_TOO_LONG = 0x06070012  # data type does not match, length of service parameter too high
 ABORT_NO_SUBINDEX = 0x06090011
 ABORT_VALUE_RANGE = 0x06090030
 ABORT_VALUE_HIGH = 0x06090031
@@ -55,6 +66,17 @@ ABORT_VALUE_LOW = 0x06090032
 ABORT_DEVICE_STATE = 0x08000022
 
 ABORT_GENERAL = 0x08000000
+# a mapping written out of CiA 301's order (the PDO still valid, or an entry while the count is not
+# 0): CiA 301 names no code for it; CANopenNode and Copley's drives answer "unsupported access"
+ABORT_MAPPING_ORDER = ABORT_UNSUPPORTED_ACCESS
+_VARIABLE_SIZE = frozenset(
+    {
+        canopen.objectdictionary.VISIBLE_STRING,
+        canopen.objectdictionary.OCTET_STRING,
+        canopen.objectdictionary.UNICODE_STRING,
+        canopen.objectdictionary.DOMAIN,
+    }
+)
 
 COB_NMT, COB_SYNC = 0x000, 0x080
 _EMPTY: dict[int, Any] = {
@@ -129,6 +151,9 @@ class SlaveNode:
                     self.vars[(sub.index, sub.subindex)] = sub
         self.values: dict[tuple[int, int], Any] = {}
         self.on_write: dict[tuple[int, int], Callable[[Any], None]] = {}
+        # raise SdoAbortError to refuse a value before it is stored (SDO: aborted; RPDO: ignored)
+        self.checks: dict[tuple[int, int], Callable[[Any], None]] = {}
+        self.unsized_logged: set[tuple[int, int]] = set()  # objects an unsized download was logged for
         self.on_heartbeat_lost: Callable[[int], None] = lambda producer: None
         self.on_reset_node: Callable[[], None] = lambda: None  # the application resets too
         self.nmt = Nmt.INITIALISING
@@ -347,6 +372,12 @@ class SlaveNode:
             if (index, sub) not in self.vars:  # dummy mapping
                 continue
             value = self.vars[(index, sub)].decode_raw(chunk)
+            check = self.checks.get((index, sub))
+            if check is not None:
+                try:
+                    check(value)
+                except SdoAbortError:
+                    continue  # refused: the object keeps its value (no one to abort to)
             self.values[(index, sub)] = value
             hook = self.on_write.get((index, sub))
             if hook is not None:
@@ -357,24 +388,26 @@ class SlaveNode:
         self._emit(pdo.cob_id, data)
 
     def _check_mapping_write(self, index: int, sub: int, value: int) -> None:
+        """CiA 301's procedure: (1) the PDO not valid, (2) the count 0, (3) the entries, each one
+        existing (0x06020000) and mappable (0x06040041), (4) the count, within the entries there
+        are and 64 bits (0x06040042). A write out of that order: 0x06010000."""
         pdo = self._pdo_by_mapping(index)
         if pdo is None:
             return
         if pdo.valid:
-            raise SdoAbortError(ABORT_DEVICE_STATE)  # disable the PDO first (CiA 301)
-        if sub == 0:
-            if value > 8:
-                raise SdoAbortError(ABORT_VALUE_HIGH)
-            total = 0
-            for s in range(1, value + 1):
-                e = int(self.values.get((index, s), 0))
-                total += self._check_entry(e, pdo.transmit)
-            if total > 64:
-                raise SdoAbortError(ABORT_PDO_LENGTH)
-        elif int(self.values.get((index, 0), 0)) != 0:
-            raise SdoAbortError(ABORT_DEVICE_STATE)  # set the count to 0 first (CiA 301)
-        else:
+            raise SdoAbortError(ABORT_MAPPING_ORDER)  # step 1 first: bit 31 of the COB-ID set
+        if sub != 0:
+            if int(self.values.get((index, 0), 0)) != 0:
+                raise SdoAbortError(ABORT_MAPPING_ORDER)  # step 2 first: the count at 0
             self._check_entry(value, pdo.transmit)
+            return
+        if value > sum(1 for i, s in self.vars if i == index and s > 0):
+            raise SdoAbortError(ABORT_PDO_LENGTH)
+        bits = sum(
+            self._check_entry(int(self.values.get((index, s), 0)), pdo.transmit) for s in range(1, value + 1)
+        )
+        if bits > 64:
+            raise SdoAbortError(ABORT_PDO_LENGTH)
 
     def _check_cob_id_write(self, key: tuple[int, int], value: int) -> None:
         """Strict drives: a valid COB-ID keeps its identifier (CiA 301)."""
@@ -461,13 +494,38 @@ class SlaveNode:
             raise SdoAbortError(ABORT_READ_ONLY)
         expedited, sized = bool(cmd & 0x02), bool(cmd & 0x01)
         if expedited:
-            n = 4 - (cmd >> 2 & 0x3) if sized else 4
-            self._store(var, bytes(req[4 : 4 + n]))
+            data = bytes(req[4 : 8 - (cmd >> 2 & 0x3)]) if sized else self._unsized(var, bytes(req[4:8]))
+            self._store(var, data)
             self._sdo_reply(struct.pack("<BHB", 0x60, index, sub) + b"\x00" * 4)
         else:
             total: int | None = struct.unpack_from("<I", req, 4)[0] if sized else None
             self._seg = _Segmented(index, sub, upload=False, data=bytearray(), size=total)
             self._sdo_reply(struct.pack("<BHB", 0x60, index, sub) + b"\x00" * 4)
+
+    def _unsized(self, var: ODVariable, data: bytes) -> bytes:
+        """An expedited download without a size indication (e = 1, s = 0, allowed by CiA 301): the
+        object's own size taken from the 4 bytes, logged once per object. Bytes beyond it other than
+        padding (zeros, or the sign extension of a negative value) would be lost: aborted."""
+        size = 4 if var.data_type in _VARIABLE_SIZE else len(var) // 8
+        if size > 4:  # more than an expedited transfer carries
+            raise SdoAbortError(ABORT_LENGTH)
+        value, rest = data[:size], data[size:]
+        negative = var.data_type in canopen.objectdictionary.SIGNED_TYPES and bool(value[-1] & 0x80)
+        if rest.strip(b"\x00") and not (negative and not rest.strip(b"\xff")):
+            raise SdoAbortError(ABORT_TOO_LONG)
+        key = (var.index, var.subindex)
+        if key not in self.unsized_logged:
+            self.unsized_logged.add(key)
+            log.warning(
+                "node %d: expedited SDO download to 0x%04X:%02X without a size indication (e=1, s=0): "
+                "taken as the object's %d bytes (%s); logged once per object",
+                self.node_id,
+                var.index,
+                var.subindex,
+                size,
+                value.hex(" "),
+            )
+        return value
 
     def _segment(self, req: bytes) -> None:
         seg = self._seg
@@ -496,24 +554,21 @@ class SlaveNode:
         self._sdo_reply(bytes([0x20 | toggle << 4]) + b"\x00" * 7)
 
     def _store(self, var: ODVariable, data: bytes) -> None:
-        fixed = var.data_type not in (
-            canopen.objectdictionary.VISIBLE_STRING,
-            canopen.objectdictionary.OCTET_STRING,
-            canopen.objectdictionary.UNICODE_STRING,
-            canopen.objectdictionary.DOMAIN,
-        )
-        if fixed and len(data) != len(var) // 8:
+        if var.data_type not in _VARIABLE_SIZE and len(data) != len(var) // 8:
             raise SdoAbortError(ABORT_LENGTH)
         value = var.decode_raw(data)
+        key = (var.index, var.subindex)
+        if isinstance(value, int):  # the PDO rules first: CiA 301 names their codes
+            self._check_mapping_write(var.index, var.subindex, value)
+            self._check_cob_id_write(key, value)
         if isinstance(value, int | float):
             if var.max is not None and value > var.max:
                 raise SdoAbortError(ABORT_VALUE_HIGH)
             if var.min is not None and value < var.min:
                 raise SdoAbortError(ABORT_VALUE_LOW)
-        key = (var.index, var.subindex)
-        if isinstance(value, int):
-            self._check_mapping_write(var.index, var.subindex, value)
-            self._check_cob_id_write(key, value)
+        check = self.checks.get(key)
+        if check is not None:
+            check(value)
         self.values[key] = value
         pdo = self._pdo_by_comm(var.index) or self._pdo_by_mapping(var.index)
         if pdo is not None:  # a PDO's parameters changed: it follows at once

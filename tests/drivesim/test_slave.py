@@ -136,10 +136,11 @@ def test_pdo_remap_over_sdo_and_tpdo_on_sync(h: Harness) -> None:
 
 
 def test_mapping_rules_of_cia_301(h: Harness) -> None:
-    # an enabled PDO's mapping cannot change; entries need the count at 0; unmappable refused
+    # an enabled PDO's mapping cannot change (0x06010000, docs/simulators.md); entries need the
+    # count at 0; unmappable refused (test_pdo_mapping.py has each rule)
     with pytest.raises(canopen.SdoAbortedError) as e:
         h.master.sdo[0x1A00][0].raw = 0
-    assert e.value.code == 0x08000022
+    assert e.value.code == 0x06010000
     h.master.sdo[0x1800][1].raw = h.node.tpdos[0x1800].cob_id | 1 << 31
     h.master.sdo[0x1A00][0].raw = 0
     with pytest.raises(canopen.SdoAbortedError) as e:

@@ -43,6 +43,7 @@ import numpy as np
 
 from orccadd.drivers.canopen import cia402
 from orccadd.drivers.canopen.capabilities import MODE_CODES, object_dictionary
+from orccadd.drivers.canopen.pdo_mapping import abort_text
 from orccadd.drivers.canopen.port import BusPort
 from orccadd.drivers.canopen.settings import CanopenSettings
 from orccadd.drivers.canopen.startup import CONTROLLER_NODE_ID, configure_drive
@@ -398,9 +399,8 @@ class CanopenMaster:
             return
         if data[0] == 0x80:
             code = struct.unpack_from("<I", data, 4)[0]
-            a.sdo_error = (
-                f"node {a.node_id} ({a.name}): SDO request 0x{index:04X} refused (abort 0x{code:08X})"
-            )
+            where = f"0x{index:04X}:{sub:02X}"
+            a.sdo_error = f"node {a.node_id} ({a.name}): SDO request {where} refused, {abort_text(code)}"
         elif index == 0x6061 and data[0] & 0xE2 == 0x42:  # expedited upload
             a.mode_shown = struct.unpack_from("<b", data, 4)[0]
         a.sdo_pending = None

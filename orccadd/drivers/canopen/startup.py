@@ -6,10 +6,13 @@ heartbeat (0x1016), the following error window in the drive's increments, the EM
 SYNC COB-ID, the communication cycle, the interpolation period and the mode of operation, then
 waits until the drive shows that mode (0x6061).
 
-COB-IDs (0x1014, PDO communication sub 1) follow CiA 301: the identifier may change only while
-bit 31 says "not valid". Each is first written back with bit 31 set and its identifier as it is,
-then with the new identifier (and the mapping, for a PDO) still not valid, and last valid: a
-drive that refuses to change a valid COB-ID (SDO abort 0x06090030) accepts every step.
+COB-IDs (0x1014, PDO communication sub 1) and PDO mappings follow CiA 301's procedures
+(`pdo_mapping`): the identifier changes only while bit 31 says "not valid", a mapping only while
+its PDO is not valid and its count is 0. Each COB-ID is first written back with bit 31 set and its
+identifier as it is, then with the new identifier (and the mapping, for a PDO: count 0, entries,
+count) still not valid, and last valid: a drive that refuses a write out of that order (SDO abort
+0x06090030 for a COB-ID, commonly 0x06010000 for a mapping) accepts every step, and a refused
+step is an error naming the node, the step, the object and the abort code.
 """
 
 from __future__ import annotations
@@ -20,16 +23,22 @@ from dataclasses import dataclass
 import canopen
 import numpy as np
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable
-from canopen.sdo.base import SdoVariable
 
 from orccadd.drivers.canopen.capabilities import MODE_CODES, MODES, consumer_entry, mode_name
+from orccadd.drivers.canopen.pdo_mapping import (
+    SYNCHRONOUS,
+    PdoPlan,
+    check_described,
+    cob_id_steps,
+    disable_steps,
+    mapping_steps,
+    read_value,
+    run_steps,
+)
 from orccadd.drivers.canopen.settings import CanopenSettings
 from orccadd.errors import ResourceError
 
 CONTROLLER_NODE_ID = 0x7F  # our heartbeat's producer id (drives consume it)
-COB_INVALID = 1 << 31  # CiA 301: bit 31 of a COB-ID, 1 = not valid
-COB_RTR_NOT_ALLOWED = 1 << 30  # PDO COB-IDs
-COB_IDENTIFIER = 0x3FFFFFFF  # bits 0-29: what may change only while not valid
 MODE_POLL_S = 0.001  # between two reads of 0x6061 while the drive switches mode
 
 
@@ -51,12 +60,12 @@ def configure_drive(
     who = f"node {node.id} ({name})"
     od = node.object_dictionary
     _check_supported_mode(node, who, s.mode)
-    has_tq, rx = _map_pdos(node, s.axes[i].node_id, s.mode)
+    has_tq, rx = _map_pdos(node, who, s.eds_paths[i], s.axes[i].node_id, s.mode)
     node.sdo[0x1017].raw = s.heartbeat_ms
     consumer_ok = _watch_our_heartbeat(node, who, s, s.eds_paths[i], warnings)
     _set_following_error(node, s, i)
     if _writable(od.get(0x1014)):  # some descriptions fix it (e35: 0xA0 for all)
-        write_cob_id(node, 0x1014, 0, 0x80 + s.axes[i].node_id)
+        write_cob_id(node, 0x1014, 0, 0x80 + s.axes[i].node_id, who)
     if 0x1005 in od:
         node.sdo[0x1005].raw = 0x80
     if 0x1006 in od:
@@ -66,20 +75,13 @@ def configure_drive(
     return DriveSetup(has_torque_actual=has_tq, consumer_ok=consumer_ok, rx_objects=tuple(rx[1:]))
 
 
-def write_cob_id(node: canopen.RemoteNode, index: int, sub: int, cob_id: int) -> None:
+def write_cob_id(node: canopen.RemoteNode, index: int, sub: int, cob_id: int, who: str = "") -> None:
     """Set the COB-ID at `index`[`sub`] (sub ignored for a plain variable such as 0x1014) to
     `cob_id`, valid, the CiA 301 way: bit 31 set first, then the new identifier, then valid.
-    Nothing is written when it already has that value."""
-    obj = node.sdo[index]
-    var = obj if isinstance(obj, SdoVariable) else obj[sub]
-    current = int(var.raw)
-    if current == cob_id:
-        return
-    if not current & COB_INVALID:
-        var.raw = current | COB_INVALID
-    if (current ^ cob_id) & COB_IDENTIFIER:
-        var.raw = cob_id | COB_INVALID
-    var.raw = cob_id
+    Nothing is written when it already has that value. `ResourceError` naming the step refused."""
+    who = who or f"node {node.id}"
+    what = f"COB-ID 0x{index:04X}"
+    run_steps(node, who, cob_id_steps(what, index, sub, read_value(node, who, what, index, sub), cob_id))
 
 
 def _check_supported_mode(node: canopen.RemoteNode, who: str, mode: str) -> None:
@@ -93,9 +95,12 @@ def _check_supported_mode(node: canopen.RemoteNode, who: str, mode: str) -> None
         )
 
 
-def _map_pdos(node: canopen.RemoteNode, node_id: int, mode: str) -> tuple[bool, list[int]]:
+def _map_pdos(
+    node: canopen.RemoteNode, who: str, source: str, node_id: int, mode: str
+) -> tuple[bool, list[int]]:
     """RPDO1: controlword, the mode's target and the one it may switch with; TPDO1: statusword,
-    position and torque actual; every other PDO disabled. (has torque actual, RPDO objects)."""
+    position and torque actual; both synchronous, on 0x200/0x180 + node id; every other PDO not
+    valid. Each by CiA 301's steps (`pdo_mapping`). (has torque actual, RPDO objects)."""
     od = node.object_dictionary
 
     def mappable(index: int) -> bool:
@@ -103,34 +108,55 @@ def _map_pdos(node: canopen.RemoteNode, node_id: int, mode: str) -> tuple[bool, 
         return isinstance(var, ODVariable) and bool(var.pdo_mappable)
 
     has_tq = mappable(0x6077)
-    node.tpdo.read()  # type: ignore[no-untyped-call]
-    node.rpdo.read()  # type: ignore[no-untyped-call]
     target = MODES[mode][0]
     # the mode's target, and the one it may switch with at run time: torque, or from torque, position
     partner = 0x607A if target == 0x6071 else 0x6071
     rx = [0x6040, target] + ([partner] if mappable(partner) else [])
     tx = [0x6041, 0x6064] + ([0x6077] if has_tq else [])
-    for pdos, objs, base in ((node.rpdo, rx, 0x200), (node.tpdo, tx, 0x180)):
-        for k, pdo in (pdos.map or {}).items():
-            _invalidate(pdo)
-            pdo.clear()
-            pdo.enabled = k == 1
-            if k == 1:
-                for index in objs:
-                    pdo.add_variable(index)
-                pdo.cob_id = base + node_id
-                pdo.trans_type = 1
-            pdo.save()  # COB-ID (not valid), parameters, mapping, then the COB-ID valid if enabled
+    _set_pdos(node, who, source, "RPDO", 0x1400, 0x200 + node_id, rx)
+    _set_pdos(node, who, source, "TPDO", 0x1800, 0x180 + node_id, tx)
     return has_tq, rx
 
 
-def _invalidate(pdo: canopen.pdo.PdoMap) -> None:
-    """Bit 31 set on a valid PDO's COB-ID, its identifier unchanged: the first step of CiA 301's
-    procedure (canopen's `save` would change the identifier and the bit in one write)."""
-    if not pdo.enabled or pdo.cob_id is None:
-        return
-    rtr = 0 if pdo.rtr_allowed else COB_RTR_NOT_ALLOWED
-    pdo.com_record[1].raw = pdo.cob_id | rtr | COB_INVALID
+def _set_pdos(
+    node: canopen.RemoteNode, who: str, source: str, kind: str, comm0: int, cob_id: int, objs: list[int]
+) -> None:
+    """The first PDO of `kind` (communication parameters at `comm0`, mapping at `comm0` + 0x200)
+    mapped to `objs` on `cob_id`, synchronous; every other one the description has not valid."""
+    od = node.object_dictionary
+    if comm0 not in od or comm0 + 0x200 not in od:
+        raise ResourceError(f"{who}: {source} has no {kind}1 (0x{comm0:04X}, 0x{comm0 + 0x200:04X})")
+    for n in range(512):
+        comm, mapping = comm0 + n, comm0 + 0x200 + n
+        if comm not in od or mapping not in od:
+            continue
+        name = f"{kind}{n + 1}"
+        current = read_value(node, who, f"{name} COB-ID", comm, 1)
+        if n > 0:
+            run_steps(node, who, disable_steps(name, comm, current))
+            continue
+        entries = tuple((index, 0, len(od[index])) for index in objs)
+        plan = PdoPlan(name, comm, mapping, cob_id, entries, _trans_type(node, who, name, comm))
+        steps = mapping_steps(plan, current)
+        check_described(od, who, source, steps)
+        run_steps(node, who, steps)
+
+
+def _trans_type(node: canopen.RemoteNode, who: str, name: str, comm: int) -> int | None:
+    """The transmission type to write (synchronous), or None where the description fixes it (then
+    the drive's must be synchronous already) or lacks it."""
+    record = node.object_dictionary.get(comm)
+    if not isinstance(record, ODRecord | ODArray) or 2 not in record:
+        return None
+    if record[2].writable:
+        return SYNCHRONOUS
+    fixed = read_value(node, who, f"{name} transmission type", comm, 2)
+    if fixed != SYNCHRONOUS:
+        raise ResourceError(
+            f"{who}: {name} transmission type 0x{comm:04X}:02 is {fixed}, fixed (not writable in its "
+            f"description): the cyclic exchange needs {SYNCHRONOUS} (every SYNC)"
+        )
+    return None
 
 
 def _watch_our_heartbeat(
