@@ -5,8 +5,8 @@ would block it once full), waits for its ready line on stdout, and stops it (SIG
 SIGKILL after `STOP_TIMEOUT_S`). The child gets SIGTERM when its parent dies (Linux
 `PR_SET_PDEATHSIG`): a test killed half-way, even by pytest-timeout's `os._exit`, leaves no
 simulator running at real-time priority behind it. `SimulatorProcess` adds the device
-simulators' control channel (`orccadd.runtime.sim_control`'s protocol: inject, status). Standard
-library only.
+simulators' control channel (`orccadd.runtime.sim_control`'s protocol: inject, status), whose
+client, `control_request`, `python -m orccadd.simctl` uses too. Standard library only.
 """
 
 from __future__ import annotations
@@ -162,6 +162,51 @@ def ready_fields(line: str) -> dict[str, str]:
     return {p[0]: p[1] for p in pairs if len(p) == 2}
 
 
+def control_address(control: str) -> tuple[str, int] | str:
+    """A control channel's address as a simulator's ready line names it: `HOST:PORT` (TCP), or a
+    UNIX socket's path (one with a `/`, or an existing socket); `ValueError` for anything else."""
+    if "/" in control or Path(control).is_socket():
+        return control
+    host, sep, port = control.rpartition(":")
+    if sep and host and port.isdigit() and 0 < int(port) < 65536:
+        return host, int(port)
+    raise ValueError(
+        f"control address (={control!r}) must be HOST:PORT or a UNIX socket's path, as the "
+        "simulator's ready line names it (`control 127.0.0.1:PORT`)"
+    )
+
+
+def control_connect(control: str, timeout_s: float) -> socket.socket:
+    """A connection to the simulator's control channel at `control` (`control_address`)."""
+    address = control_address(control)
+    if isinstance(address, tuple):
+        return socket.create_connection(address, timeout=timeout_s)
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    s.settimeout(timeout_s)
+    try:
+        s.connect(address)
+    except OSError:
+        s.close()
+        raise
+    return s
+
+
+def control_request(control: str, req: dict[str, Any], timeout_s: float = 10.0) -> dict[str, Any]:
+    """One request of the control protocol (`orccadd.runtime.sim_control`) on `control`, and the
+    simulator's reply as it came, a refusal (`{"ok": false, "error": ...}`) included. `OSError`
+    if the channel cannot be reached or closes, `ValueError` if the reply is not a JSON object."""
+    with control_connect(control, timeout_s) as s, s.makefile("rwb") as f:
+        f.write(json.dumps(req).encode() + b"\n")
+        f.flush()
+        line = f.readline()
+    if not line:
+        raise ConnectionError(f"{control} closed the connection without a reply")
+    reply = json.loads(line)
+    if not isinstance(reply, dict):
+        raise ValueError(f"{control} replied {line[:200]!r}, not a JSON object")
+    return reply
+
+
 class SimulatorProcess(ChildProcess):
     """A device simulator (`python -m MODULE --config CONFIG ...`) and its control channel: the
     `control` address of its ready line, `127.0.0.1:PORT` or a UNIX socket's path."""
@@ -177,25 +222,9 @@ class SimulatorProcess(ChildProcess):
         self.fields = ready_fields(self.ready_line)
         self.control = self.fields["control"]
 
-    def _connect(self, timeout_s: float) -> socket.socket:
-        if self.control.startswith("/"):
-            s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-            s.settimeout(timeout_s)
-            try:
-                s.connect(self.control)
-            except OSError:
-                s.close()
-                raise
-            return s
-        host, _, port = self.control.rpartition(":")
-        return socket.create_connection((host, int(port)), timeout=timeout_s)
-
     def request(self, req: dict[str, Any], timeout_s: float = 10.0) -> dict[str, Any]:
         """One request, its reply; `RuntimeError` with the simulator's words if it refused."""
-        with self._connect(timeout_s) as s, s.makefile("rwb") as f:
-            f.write(json.dumps(req).encode() + b"\n")
-            f.flush()
-            reply: dict[str, Any] = json.loads(f.readline())
+        reply = control_request(self.control, req, timeout_s)
         if not reply.get("ok"):
             raise RuntimeError(f"{self.what}: {reply.get('error')}")
         return reply

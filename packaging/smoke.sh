@@ -36,6 +36,8 @@ for mission in "$share"/missions/*.mission; do
         esac
         # a mission using the arm's named digital I/O (`input arm.X`) needs the UR that names them
         if grep -q '^input .*arm\.' "$mission"; then robot=ur5e-rtde-sim; fi
+        # and one whose tasks need the UR controller (force mode, freedrive, its sensor, its slider)
+        if grep -Eq 'from "\.\./tasks/(ur_|approach_until_contact)' "$mission"; then robot=ur5e-rtde-sim; fi
         "$bin/orccadctl" check "$mission" --config "$robot" >/dev/null  # every task built on it
         echo "checked $(basename "$mission") (and its tasks on $robot)"
     else  # the seed's KEEPSTABLE (an underwater vehicle): no task files for an arm
