@@ -5,7 +5,8 @@
     status             JSON, `orccadctl status`'s result, at `status_hz` and on each event
     joints             JSON {t_s, resources: [{name, joints, q, dq, tau}]}, at `joints_hz`
     events             JSON, one trace event each (as `orccadctl events` prints them)
-    signal/<NAME>      JSON {seq, t_s}: the mission emitted output NAME to the cell
+    signal/<NAME>      JSON {seq, wall_s, mission}: the mission emitted output NAME to the cell
+                       (taken only from a peer with the control role, at most 4 KiB)
     read               queryable: a read-role request line (the socket's protocol)
     control            queryable: any request line (only peers with the control role reach it)
 """

@@ -3,9 +3,14 @@ multicast scouting unless asked, TLS with mutual authentication, and, on a daemo
 control that gives each certificate its role.
 
 The access control (Zenoh's, matching the peer certificate's common name) lets every listed peer
-subscribe to what this daemon publishes, query its `read` key and put only under its own name
-(`orccadd/<cell>/<its name>/…`: a peer cannot speak for another); the `control` key is reached
-only by the names in `control`. Everything else, and every peer not listed, is denied.
+subscribe to what this daemon publishes, query its `read` key and declare its liveliness token
+under its own name; the names in `control` alone put there (`orccadd/<cell>/<its name>/…`: their
+signals; a peer cannot speak for another, and a read-only one feeds no mission) and reach the
+`control` key. Everything else, and every peer not listed, is denied.
+
+A daemon takes no Zenoh message longer than `DAEMON_RX_MESSAGE_MAX` (reassembled from a link's
+fragments): what it is sent is a request line (at most `MAX_LINE` bytes), a signal (at most 4 KiB)
+or a declaration; a longer one is dropped by Zenoh before it is stored whole.
 
 A console's access control (`console_access_control`) is the other side: it sends anything, and
 takes in only what each daemon of its `daemons` says under its own name (replies, samples,
@@ -20,8 +25,13 @@ from typing import Any
 
 from orccadd.cellnet import keys
 from orccadd.config.cellnet import CellNetConfig
+from orccadd.wire.commands import MAX_LINE
 
 LOOPBACK_ANY_PORT = "127.0.0.1:0"
+# Zenoh's `transport.link.rx.max_message_size` on a daemon (its default is 1 GiB: a peer's 200 MiB
+# put was held whole in memory before any callback saw it). A request line with Zenoh's headers
+# fits; a message beyond it is dropped on reassembly, the link kept (zenoh 1.10; not counted here).
+DAEMON_RX_MESSAGE_MAX = 2 * MAX_LINE
 LEASE_MS = 1000  # a link silent this long is closed: a peer cut off is lost within about a second
 KEEP_ALIVES = 4  # per lease
 EVERY_MESSAGE = [
@@ -49,6 +59,8 @@ def zenoh_config(net: CellNetConfig, daemon: bool) -> dict[str, Any]:
         "scouting": {"multicast": {"enabled": net.scouting}, "gossip": {"enabled": True, "multihop": True}},
     }
     conf["transport"] = {"link": {"tx": {"lease": LEASE_MS, "keep_alive": KEEP_ALIVES}}}
+    if daemon:
+        conf["transport"]["link"]["rx"] = {"max_message_size": DAEMON_RX_MESSAGE_MAX}
     if net.secured:
         ca, cert, key = (str(p) for p in net.tls_files())
         conf["transport"]["link"]["tls"] = {
@@ -97,9 +109,9 @@ def access_control(net: CellNetConfig) -> dict[str, Any]:
     policies: list[dict[str, Any]] = []
     for n in names:
         own = f"own:{n}"
-        rules.append(
-            _rule(own, ["ingress"], ["put", "delete", "liveliness_token"], [keys.robot_key(cell, n, "**")])
-        )
+        # a read-only peer says nothing a mission takes: its liveliness token only (its loss is news)
+        says = ["put", "delete", "liveliness_token"] if n in net.control else ["liveliness_token"]
+        rules.append(_rule(own, ["ingress"], says, [keys.robot_key(cell, n, "**")]))
         subjects.append({"id": f"peer:{n}", "cert_common_names": [n]})
         granted = ["to-peers", "interest", own, "read"] + (["control"] if n in net.control else [])
         policies.append({"id": f"role:{n}", "rules": granted, "subjects": [f"peer:{n}"]})

@@ -8,6 +8,11 @@ whose certificate holds the control role (the access control of `cellnet.zconfig
 goes through the socket's table and checks (`CommandDaemon.answer`); `abort` and `stop` go
 straight to the real-time process's urgent socket from Zenoh's own thread, as `orccadctl` sends
 them. A malformed request gets an error reply; a malformed sample is dropped with a log line.
+
+What a peer may cost it is bounded (`cmdd.cellguard`): the signals it takes (`SignalIntake`:
+control peers only, the mission's declared inputs, a rate per peer, a size), the requests served
+at once on each key (beyond: `busy` at once). The mission's outputs are published or counted lost
+(`OutputLedger`); every drop is counted in `report()` (`status`'s `cell`) and logged, throttled.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from orccadd.cellnet import keys
 from orccadd.cellnet.zconfig import to_json5, zenoh_config
+from orccadd.cmdd.cellguard import InFlight, LogThrottle, OutputLedger, SignalIntake
 from orccadd.config.cellnet import CellNetConfig
 from orccadd.wire.commands import MAX_LINE, URGENT_COMMANDS, ProtocolError, Role, error_reply, parse_request
 
@@ -33,14 +39,20 @@ if TYPE_CHECKING:
 log = logging.getLogger("orccadd.cmdd.cell")
 
 URGENT_WAIT_S = 2.0
-ARRIVALS_MAX = 10_000  # peers' signals waiting for the real-time process (beyond: dropped, logged)
-SIGNAL_MAX = 4096  # bytes of a signal's payload
+ARRIVALS_MAX = 10_000  # peers' signals waiting for the real-time process (beyond: dropped, counted)
+REPORT_S = 1.0  # the log's summaries and the outputs' ledger, this often
 Answer = Callable[[bytes, Role, str], Coroutine[Any, Any, dict[str, Any]]]
 
 
 class CellPeer:
     """One daemon's Zenoh session and what it declares. `answer(line, role, who)` serves a request
-    line; `urgent_path` is the real-time process's urgent socket."""
+    line; `urgent_path` is the real-time process's urgent socket.
+
+    What a peer may cost it is bounded: a peer's signals are taken only if it holds the control
+    role, the loaded mission declares that input from it (`mission_changed`), and it keeps within
+    `signal_rate_hz`/`signal_burst`; requests on each queryable at most `read_requests_max` /
+    `control_requests_max` at once. What is dropped is counted (`report`) and said, the same
+    words at most `LogThrottle.burst` times per window, then how many more."""
 
     def __init__(self, net: CellNetConfig, answer: Answer, urgent_path: str) -> None:
         self.net = net
@@ -55,12 +67,24 @@ class CellPeer:
         # real-time process (one consumer: per-link order kept); peers alive now
         self.arrivals: asyncio.Queue[tuple[str, str, str]] = asyncio.Queue(maxsize=ARRIVALS_MAX)
         self.alive: set[str] = set()
-        self.last_seq: dict[tuple[str, str], int] = {}  # (peer, signal) -> last sequence number taken
+        self.cell_outputs: frozenset[str] = frozenset()  # the mission's outputs to the cell
         self.out_seq = 0
         self.ros: Any = None  # a `cellnet.ros2.Ros2Node` with `ros2 = true`
         # (peer, signal, "signal" | "lost") to the real-time process from Zenoh's thread; False:
         # not sent (queued instead). The command daemon sets it.
         self.deliver_now: Callable[[str, str, str], bool] = lambda peer, name, what: False
+        self.say = LogThrottle(log)
+        self.intake = SignalIntake(net, self.say)  # which signals are taken, what is dropped
+        self.requests = {
+            Role.READ: InFlight(net.read_requests_max),
+            Role.CONTROL: InFlight(net.control_requests_max),
+        }
+        self.outputs = OutputLedger()
+        self.published = 0
+        self.not_published = 0
+        self.trace_lost = 0  # trace records the cell's pump did not see (outputs unchecked)
+        self.closing = False
+        self.reporter: asyncio.Task[None] | None = None
 
     def key(self, *chunks: str) -> str:
         return keys.robot_key(self.net.name, self.net.robot, *chunks)
@@ -86,6 +110,7 @@ class CellPeer:
             )
         )
         self.declared.append(s.liveliness().declare_token(self.key(keys.ALIVE)))
+        self.reporter = self.loop.create_task(self._report_every(REPORT_S))
         if self.net.ros2:
             from orccadd.cellnet.ros2 import Ros2Node
 
@@ -101,6 +126,10 @@ class CellPeer:
         )
 
     def close(self) -> None:
+        self.closing = True  # Zenoh's threads may still call back: they do nothing now
+        if self.reporter is not None:
+            self.reporter.cancel()
+            self.reporter = None
         if self.ros is not None:
             with contextlib.suppress(Exception):
                 self.ros.close()
@@ -120,7 +149,28 @@ class CellPeer:
 
     def emit(self, name: str, mission: str) -> None:
         """The mission emitted `name`, an output to the cell: published reliably, in order, with
-        a sequence number (a subscriber drops a duplicate and logs a gap)."""
+        a sequence number (a subscriber drops a duplicate and logs a gap). One that cannot be
+        published (the session closing) is counted and said; so is one the real-time process
+        emitted (its trace shows it) and never told of (`OutputLedger`). From the event loop."""
+        now = time.monotonic()
+        self.outputs.pushed(name, now)
+        try:
+            self._publish(name, mission)
+        except Exception as e:  # a session closing: the peers see it lost
+            self.not_published += 1
+            self.say(
+                "cell: outputs not published",
+                logging.WARNING,
+                "cell: output %s not published: %s: %s (%d so far)",
+                name,
+                type(e).__name__,
+                e,
+                self.not_published,
+            )
+            return
+        self.published += 1
+
+    def _publish(self, name: str, mission: str) -> None:
         assert self.session is not None
         key = self.key(keys.SIGNAL, name)
         pub = self.pubs.get(key)
@@ -137,62 +187,128 @@ class CellPeer:
         self.out_seq += 1
         pub.put(json.dumps({"seq": self.out_seq, "wall_s": time.time(), "mission": mission}))
 
+    def traced(self, event: dict[str, Any]) -> None:
+        """A trace event (decoded): an instant that emitted an output to the cell is one the
+        real-time process must have told of (`emit`). From the event loop."""
+        if event.get("kind") != "instant" or not self.cell_outputs:
+            return
+        now = time.monotonic()
+        for action in event.get("actions", []):
+            if action.startswith("emit ") and action[5:] in self.cell_outputs:
+                self.outputs.traced(action[5:], now)
+
+    def untraced(self, records: int) -> None:
+        """The trace ring overran: `records` records this daemon did not see, the outputs they
+        show not checked against what was published; counted and said. From the event loop."""
+        self.trace_lost += records
+        self.say(
+            "cell: trace records not seen",
+            logging.WARNING,
+            "cell: the trace overran: %d record(s) not seen, outputs to the cell in them not checked "
+            "(%d in all)",
+            records,
+            self.trace_lost,
+        )
+
+    def mission_changed(self, mission: dict[str, Any] | None) -> None:
+        """The loaded mission's description (`describe`'s `mission`; None: none): the inputs it
+        takes from peers (signals of no other name or peer are dropped unstored) and its outputs
+        to the cell. From the event loop."""
+        m = mission or {}
+        self.intake.mission_changed(frozenset((str(p), str(n)) for n, p in m.get("remote_inputs", [])))
+        self.cell_outputs = frozenset(str(n) for n in m.get("cell_outputs", []))
+
+    def report(self) -> dict[str, Any]:
+        """What the cell cost and what was dropped, for `status`'s `cell` section: signals by peer
+        (`taken`, and dropped: `not_control`, `undeclared`, `over_rate`, `malformed`, `duplicate`,
+        `queue_full`; `gaps`, `restarts` taken), the mission's outputs (`published`,
+        `not_published`, `lost`, `unchecked_trace_records`), the requests on each key
+        (`in_flight`, `max`, `served`, `busy`)."""
+        return {
+            "signals": self.intake.counts.report(),
+            "signal_rate_hz": self.net.signal_rate_hz,
+            "signal_burst": self.net.signal_burst,
+            "outputs": {
+                "published": self.published,
+                "not_published": self.not_published,
+                "lost": self.outputs.lost,
+                "unchecked_trace_records": self.trace_lost,
+            },
+            "requests": {
+                keys.READ: self.requests[Role.READ].report(),
+                keys.CONTROL: self.requests[Role.CONTROL].report(),
+            },
+        }
+
+    async def _report_every(self, period_s: float) -> None:
+        """The outputs traced and never told of, counted and said; the log's summaries."""
+        while True:
+            await asyncio.sleep(period_s)
+            now = time.monotonic()
+            lost = self.outputs.expire(now)
+            if lost:
+                self.say(
+                    "cell: outputs lost",
+                    logging.ERROR,
+                    "cell: %d output(s) to the cell emitted and NOT published: the real-time process's "
+                    "word of them did not reach the command daemon (%d in all)",
+                    lost,
+                    self.outputs.lost,
+                )
+            self.say.flush()
+
     # ---- peers -----------------------------------------------------------------------------
     def _on_signal(self, sample: zenoh.Sample) -> None:  # Zenoh's thread
+        """A peer's signal, to the real-time process if `intake` admits it."""
+        if self.closing:
+            return
         key = str(sample.key_expr)
         try:
             peer = keys.robot_of(self.net.name, key)
-            name = key.rsplit("/", 1)[1]
-            raw = sample.payload.to_bytes()
-            if len(raw) > SIGNAL_MAX:
-                raise ValueError(f"{len(raw)} bytes")
-            msg = json.loads(raw)
-            seq = msg["seq"] if isinstance(msg, dict) else None
-            if not isinstance(seq, int) or isinstance(seq, bool) or seq < 1:
-                raise ValueError("no positive integer `seq`")
-        except (ValueError, KeyError, UnicodeDecodeError, RecursionError) as e:
-            log.warning("cell: a malformed signal on %s dropped: %s", key[:200], str(e)[:200])
+        except ValueError:  # not under the subscription's key expression: cannot happen
             return
         if peer == self.net.robot:
             return
-        last = self.last_seq.get((peer, name), 0)
-        if seq <= last:
-            log.info("cell: %s from %s: sequence %d again (after %d): dropped", name, peer, seq, last)
-            return
-        if last and seq > last + 1:
-            log.warning("cell: %s from %s: %d signal(s) missed before %d", name, peer, seq - last - 1, seq)
-        self.last_seq[(peer, name)] = seq
-        self._arrive(peer, name, "signal")
+        name = key.rsplit("/", 1)[1]
+        if self.intake.admit(peer, name, sample.payload, key):
+            self._arrive(peer, name, "signal")
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:  # Zenoh's thread
         import zenoh
 
+        if self.closing:
+            return
         try:
             peer = keys.robot_of(self.net.name, str(sample.key_expr))
         except ValueError:
             return
         if peer == self.net.robot:
             return
+        who = self.intake.who(peer)
         if sample.kind == zenoh.SampleKind.DELETE:
-            log.warning("cell %s: lost %s (its liveliness token is gone)", self.net.name, peer)
+            words = "cell %s: lost %s (its liveliness token is gone)"
+            self.say(f"cell: {who} lost", logging.WARNING, words, self.net.name, peer[:64])
             self._arrive(peer, "", "lost")
         else:
-            log.info("cell %s: %s is there", self.net.name, peer)
+            self.say(f"cell: {who} there", logging.INFO, "cell %s: %s is there", self.net.name, peer[:64])
             self._arrive(peer, "", "joined")
 
     def _arrive(self, peer: str, name: str, what: str) -> None:
         """From Zenoh's thread: straight to the real-time process if nothing waits before it
         (`deliver_now`: one datagram on the link, no hop through this process's event loop),
-        else after what waits, in order."""
+        else after what waits, in order. A signal sent straight costs the event loop nothing."""
         assert self.loop is not None
         delivered = what != "joined" and self.arrivals.empty() and self.deliver_now(peer, name, what)
-        self.loop.call_soon_threadsafe(self.queue, (peer, name, what), delivered)
+        if delivered and what == "signal":
+            return
+        with contextlib.suppress(RuntimeError):  # the loop closed: the daemon is stopping
+            self.loop.call_soon_threadsafe(self.queue, (peer, name, what), delivered)
 
     def queue(self, item: tuple[str, str, str], delivered: bool = False) -> None:
         peer, _, what = item
         if what == "joined":
             self.alive.add(peer)
-            self.last_seq = {k: v for k, v in self.last_seq.items() if k[0] != peer}  # a new run of it
+            self.intake.joined(peer)
         elif what == "lost":
             self.alive.discard(peer)
         if delivered:
@@ -200,7 +316,16 @@ class CellPeer:
         try:
             self.arrivals.put_nowait(item)
         except asyncio.QueueFull:
-            log.error("cell: %s from %s dropped: %d waiting already", item[1] or what, peer, ARRIVALS_MAX)
+            who = self.intake.who(peer)
+            self.intake.counts.add(who, "queue_full")
+            self.say(
+                f"cell: arrivals from {who} dropped (queue_full)",
+                logging.ERROR,
+                "cell: %s from %s dropped: %d waiting already for the real-time process",
+                item[1] or what,
+                peer[:64],
+                ARRIVALS_MAX,
+            )
 
     def put(self, chunk: str, value: Any) -> None:
         pub = self.pubs.get(chunk)
@@ -226,20 +351,47 @@ class CellPeer:
 
     # ---- requests --------------------------------------------------------------------------
     def _on_query(self, role: Role) -> Callable[[zenoh.Query], None]:
-        who = f"a cell peer on {self.key(keys.CONTROL if role is Role.CONTROL else keys.READ)}"
+        chunk = keys.CONTROL if role is Role.CONTROL else keys.READ
+        who = f"a cell peer on {self.key(chunk)}"
+        gate = self.requests[role]
+        setting = f"{chunk}_requests_max"
 
         def on_query(query: zenoh.Query) -> None:  # Zenoh's thread
-            line = query.payload.to_bytes() if query.payload is not None else b""
-            if len(line) > MAX_LINE:
+            if self.closing:
+                return
+            payload = query.payload
+            if payload is not None and len(payload) > MAX_LINE:  # not copied, not decoded
                 self._reply(query, error_reply(None, f"request longer than {MAX_LINE} bytes"))
                 return
+            line = payload.to_bytes() if payload is not None else b""
             if role is Role.CONTROL and self._urgent(line):
                 self._reply(query, self._serve_urgent(line))
                 return
-            assert self.loop is not None
-            self.loop.call_soon_threadsafe(self._serve, query, line, role, who)
+            if not gate.enter():
+                self._busy(query, line, chunk, gate, setting)
+                return
+            try:
+                assert self.loop is not None
+                self.loop.call_soon_threadsafe(self._serve, query, line, role, who)
+            except RuntimeError:  # the loop closed: the daemon is stopping
+                gate.leave()
 
         return on_query
+
+    def _busy(self, query: zenoh.Query, line: bytes, chunk: str, gate: InFlight, setting: str) -> None:
+        """A request beyond the bound: an error reply at once (nothing queued), counted and said."""
+        why = (
+            f"busy: {gate.limit} requests already in flight on {self.net.robot}'s {chunk} key "
+            f"(its bound: [cell] {setting}); try again"
+        )
+        self._reply(query, error_reply(request_id(line), why))
+        self.say(
+            f"cell: requests on {chunk} refused (busy)",
+            logging.WARNING,
+            "cell: a request on %s refused: %s",
+            chunk,
+            why,
+        )
 
     @staticmethod
     def _urgent(line: bytes) -> bool:
@@ -266,7 +418,12 @@ class CellPeer:
             if isinstance(reply, dict) and reply.get("id") == parse_request(line)[0]:
                 return reply
         except (OSError, ValueError, ProtocolError) as e:
-            log.info("urgent socket: %s; through the command daemon", e)
+            self.say(
+                "cell: urgent socket unused",
+                logging.INFO,
+                "urgent socket: %s; through the command daemon",
+                e,
+            )
         assert self.loop is not None
         fut: concurrent.futures.Future[dict[str, Any]] = asyncio.run_coroutine_threadsafe(
             self.answer(line, Role.CONTROL, "a cell peer"), self.loop
@@ -287,16 +444,32 @@ class CellPeer:
         except Exception as e:  # a bug must not leave the peer without an answer
             log.exception("cell request failed")
             reply = error_reply(None, f"internal error: {type(e).__name__}: {e}")
+        finally:
+            self.requests[role].leave()
         self._reply(query, reply)
 
     def _reply(self, query: zenoh.Query, reply: dict[str, Any]) -> None:
         try:
             query.reply(query.key_expr, json.dumps(reply, separators=(",", ":")))
         except Exception as e:  # the querier gave up (timeout): nothing to answer
-            log.info("cell: a reply to %s could not be sent: %s", query.key_expr, e)
+            self.say(
+                "cell: replies not sent",
+                logging.INFO,
+                "cell: a reply to %s could not be sent: %s",
+                query.key_expr,
+                e,
+            )
         finally:
             with contextlib.suppress(Exception):
                 query.drop()  # type: ignore[no-untyped-call]
+
+
+def request_id(line: bytes) -> Any:
+    """A request line's id, if it has one that can be read (for an error reply to carry)."""
+    try:
+        return parse_request(line)[0]
+    except ProtocolError as e:
+        return e.rid
 
 
 def ros_log(event: dict[str, Any]) -> tuple[int, str]:

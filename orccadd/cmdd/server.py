@@ -170,6 +170,7 @@ class CommandDaemon:
     ) -> None:
         self.cfg = cfg
         self.net = net  # `[cell]`: a peer of a cell of PCs over Zenoh
+        self.cell: CellPeer | None = None  # its Zenoh peer, once joined
         self.socket_path = socket_path
         self.log_dir = log_dir or Path(socket_path).parent / "logs"
         self.logs = LogDir(self.log_dir, cfg.socket_group)
@@ -202,6 +203,8 @@ class CommandDaemon:
                 self.desc_mark = mark
                 self.missions = {int(m["generation"]): m for m in self.desc.get("missions", [])}
                 self._attach_units()
+                if self.cell is not None:  # the inputs it takes from the cell, its outputs to it
+                    self.cell.mission_changed(self.desc.get("mission"))
 
     def _attach_units(self) -> None:
         """A cell's other resources' telemetry blocks (the first's is `tel`), once."""
@@ -305,6 +308,8 @@ class CommandDaemon:
             return None, None
         self.rt.on_push = lambda msg: self._pushed(peer, msg)
         peer.deliver_now = self._deliver_now
+        peer.mission_changed(self.desc.get("mission"))
+        self.cell = peer
         arrivals = asyncio.create_task(self._cell_arrivals(peer))
         pump = asyncio.create_task(self._cell_pump(peer))
         pump.add_done_callback(lambda _: arrivals.cancel())
@@ -314,10 +319,7 @@ class CommandDaemon:
     def _pushed(peer: CellPeer, msg: dict[str, Any]) -> None:
         """The real-time process's own news: a mission's output to the cell, emitted just now."""
         if msg.get("push") == "cell_output" and isinstance(msg.get("name"), str):
-            try:
-                peer.emit(msg["name"], str(msg.get("mission", "")))
-            except Exception as e:  # a session closing: the peers see it lost
-                log.warning("cell: output %s not published: %s", msg["name"], e)
+            peer.emit(msg["name"], str(msg.get("mission", "")))  # one not published: counted, said
 
     def _mission_input(self, who: str, name: str, what: str) -> str:
         """The loaded mission's input for a peer's signal or loss ("" if it takes none)."""
@@ -355,7 +357,14 @@ class CommandDaemon:
                 continue
             reply = await self.rt.call("cell_input", {"input": name, "peer": who})
             if not reply.get("ok"):
-                log.warning("cell: %s from %s not taken: %s", name, who, reply.get("error"))
+                peer.say(
+                    f"cell: {name} from {who} not taken",
+                    logging.WARNING,
+                    "cell: %s from %s not taken: %s",
+                    name,
+                    who,
+                    reply.get("error"),
+                )
 
     def _cell_started(self, peer: CellPeer) -> None:
         """A run began: a peer it must see is not there now, so its loss is this run's first news."""
@@ -376,19 +385,23 @@ class CommandDaemon:
         status_at = 0.0
         while True:
             try:
+                seen = trace.lost
                 new = trace.poll()
+                if trace.lost > seen:  # the ring overran: the outputs in those records unchecked
+                    peer.untraced(trace.lost - seen)
                 if len(new):
                     await self.refresh()
                     for rec in new:
                         event = self.decode_trace(rec)
                         peer.put(keys.EVENTS, event)
+                        peer.traced(event)  # an output it emitted: told of, or counted lost
                         if event.get("command") == "start":
                             self._cell_started(peer)
                 now = time.monotonic()
                 if now >= next_status or (len(new) and now - status_at >= CELL_STATUS_MIN_S):
                     await self.refresh()
                     log_state = self.recording.describe() if self.recording else self.last_log
-                    peer.put(keys.STATUS, views.status(self.tel, self.desc, log_state, self.units()))
+                    peer.put(keys.STATUS, self._status(log_state))
                     next_status = max(next_status + status_s, now)
                     status_at = now
                 if now >= next_joints:
@@ -397,7 +410,13 @@ class CommandDaemon:
             except asyncio.CancelledError:
                 raise
             except Exception as e:  # a publication lost must not end the others
-                log.warning("cell: publishing: %s: %s", type(e).__name__, e)
+                peer.say(
+                    "cell: publishing failed",
+                    logging.WARNING,
+                    "cell: publishing: %s: %s",
+                    type(e).__name__,
+                    e,
+                )
             nxt = min(next_joints, next_status, time.monotonic() + CELL_TRACE_S)
             await asyncio.sleep(max(CELL_TICK_S, nxt - time.monotonic()))
 
@@ -591,8 +610,14 @@ class CommandDaemon:
     @handles("status")
     async def do_status(self, writer: asyncio.StreamWriter, rid: Any) -> dict[str, Any]:
         await self.refresh()
-        log = self.recording.describe() if self.recording else self.last_log
-        return views.status(self.tel, self.desc, log, self.units())
+        return self._status(self.recording.describe() if self.recording else self.last_log)
+
+    def _status(self, log_state: dict[str, Any] | None) -> dict[str, Any]:
+        """`status`'s result; with a cell, its `cell` section (what was dropped, and why)."""
+        out = views.status(self.tel, self.desc, log_state, self.units())
+        if self.cell is not None:
+            out["cell"] = self.cell.report()
+        return out
 
     @handles("monitor")
     async def do_monitor(

@@ -12,6 +12,10 @@
     control = ["console", "arm-b"]       # certificate names with the control role here
     read = ["viewer"]                    # with the read role only (control ⊃ read)
     daemons = ["arm-a", "arm-b"]         # a console's: the daemons it takes answers from
+    signal_rate_hz = 200                 # a control peer's signals taken per second (1-1000)...
+    signal_burst = 50                    # ... and at once (1-1000); beyond: dropped, counted, said
+    read_requests_max = 16               # requests on `read` served at once (1-256; beyond: busy)
+    control_requests_max = 16            # on `control` (1-256): a share a read flood cannot take
 
 A peer's role here comes from its certificate (Zenoh's access control matches its common
 name), never from what it says. A console runs its own side of that control: it takes
@@ -54,6 +58,18 @@ class CellNetConfig:
     )
     joints_hz: float = field(default=50.0, bounds=(0.0, 500.0), doc="joint states published (0: none)")
     status_hz: float = field(default=2.0, bounds=(0.1, 50.0), doc="status published")
+    signal_rate_hz: float = field(
+        default=200.0,
+        bounds=(1.0, 1000.0),
+        doc="a control peer's signals taken per second, on average (beyond: dropped and counted)",
+    )
+    signal_burst: int = field(default=50, bounds=(1, 1000), doc="... and at once, above that rate")
+    read_requests_max: int = field(
+        default=16, bounds=(1, 256), doc="requests on the read key served at once (beyond: `busy` at once)"
+    )
+    control_requests_max: int = field(
+        default=16, bounds=(1, 256), doc="requests on the control key served at once (its own share)"
+    )
     ros2: bool = field(default=False, doc="also publish for ROS 2 (rmw_zenoh)")
     ros2_domain_id: int = field(default=0, bounds=(0, 232))
     source: str = ""  # the file it was read from (set by the loader)

@@ -39,7 +39,33 @@ def peer_session(certs: Path, name: str, endpoint: str) -> zenoh.Session:
     return s
 
 
+PART_FROM_CONSOLE = """
+mission TakesPart
+
+resource arm
+input Stop
+input PartPlaced from "console"
+
+main procedure Main
+  handle
+    do
+      await PartPlaced
+    until Stop
+  on lost "console" do
+    safe
+  end
+end
+
+safe procedure Rest
+  nothing
+end
+"""
+
+
 def test_malformed_payloads_are_dropped_with_a_log_line(arm_a: Member, certs: Path) -> None:
+    mission = arm_a.dir / "takes_part.mission"  # a signal is decoded only if a mission takes it
+    mission.write_text(PART_FROM_CONSOLE)
+    arm_a.daemon.call("load", path=str(mission))
     s = peer_session(certs, "console", arm_a.endpoint)
     try:
         for raw in GARBAGE:
@@ -60,7 +86,7 @@ def test_malformed_payloads_are_dropped_with_a_log_line(arm_a: Member, certs: Pa
         time.sleep(0.1)
     assert arm_a.daemon.log_text().count(line) == len(GARBAGE)
     assert arm_a.daemon.call("ping")["pong"]
-    assert arm_a.daemon.status()["state"] == "idle"
+    assert arm_a.daemon.status()["state"] == "ready"  # the mission loaded, nothing started
 
 
 def test_a_peer_cannot_speak_under_another_name(arm_a: Member, certs: Path) -> None:

@@ -64,7 +64,9 @@ def test_the_access_control_denies_by_default_and_grants_by_certificate_name(tmp
     policies = {p["subjects"][0]: set(p["rules"]) for p in acl["policies"]}
     assert "control" in policies["peer:console"] and "control" not in policies["peer:viewer"]
     assert rules["control"]["key_exprs"] == ["orccadd/c/arm-a/control"]
-    assert rules["own:viewer"]["key_exprs"] == ["orccadd/c/viewer/**"]  # puts under its own name only
+    assert rules["own:viewer"]["key_exprs"] == ["orccadd/c/viewer/**"]  # under its own name only,
+    assert rules["own:viewer"]["messages"] == ["liveliness_token"]  # and a read peer puts nothing
+    assert "put" in rules["own:console"]["messages"]  # a control peer's signals
     conf = zenoh_config(net, daemon=True)
     assert conf["scouting"]["multicast"]["enabled"] is False
     assert conf["transport"]["link"]["tls"]["enable_mtls"] is True
