@@ -41,6 +41,7 @@ from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.urgent import UrgentSocket
 from orccadd.errors import OrccaddError, ResourceError
 from orccadd.logsetup import LogSetupError, setup_logging
+from orccadd.physres.base import PhysicalResource
 from orccadd.robot import create_resource, load_cell_config, with_backend
 from orccadd.runtime import enter_realtime, leave_realtime
 from orccadd.runtime.rt import RealtimeReport, lock_memory_early
@@ -63,6 +64,7 @@ RESPAWN_MAX_S = 60.0
 RESPAWN_STABLE_S = 10.0  # a command daemon that lived this long had started fine
 GIL_SWITCH_INTERVAL_S = 0.0002
 JOIN_S = 2.0  # how long shutdown waits for a thread (one stuck in a device call is named, then left)
+RELEASE_S = 8.0  # how long shutdown waits for the resources' release (one that hangs: named, then left)
 URGENT_MAX_BYTES = 4096  # an abort or a stop is a short message; longer ones are not looked into
 RECEIVE_MAX = 256  # messages read per wake-up (the command daemon has fewer in flight)
 SERVE_BUDGET_PERIODS = 0.3  # other requests served per slack; the rest at the next one
@@ -536,15 +538,39 @@ class RealtimeProcess:
             self.urgent.close()
         with contextlib.suppress(FileNotFoundError):
             os.unlink(self.rt_path)
-        for res in self.resources:
-            res.shutdown()
+        released = self._release()
         for tel in self.tels:
             tel.close()
+        what = "hardware released" if released else "hardware not all released"
         if stopped:
-            log.info("%s at rest, hardware released", "arm" if len(self.resources) == 1 else "every resource")
+            log.log(
+                logging.INFO if released else logging.ERROR,
+                "%s at rest, %s",
+                "arm" if len(self.resources) == 1 else "every resource",
+                what,
+            )
         else:
-            log.error("safe stop not confirmed, hardware released")
-        return 1 if self.control_error or not stopped else 0
+            log.error("safe stop not confirmed, %s", what)
+        return 1 if self.control_error or not stopped or not released else 0
+
+    def _release(self) -> bool:
+        """Each resource's `shutdown` in a thread of its own, all waited for `RELEASE_S` in all:
+        a device call that never returns (a port or a bus gone) must not keep SIGTERM from
+        ending the process. One that fails or hangs is named in the log; True if none did."""
+        failed: list[str] = []
+
+        def release(res: PhysicalResource) -> None:
+            try:
+                res.shutdown()
+            except Exception:
+                log.exception("%s: releasing its hardware failed", res.name)
+                failed.append(res.name)
+
+        group = ThreadGroup("release")
+        for res in self.resources:
+            group.start(release, res, name=res.name)
+        left = group.join(RELEASE_S)  # names those still running
+        return not failed and not left
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -6,14 +6,21 @@ recorded (`fault`, in words) so that nothing starts until `reset`. A reset is a 
 several control ticks (the device leaves its fault, then the stop is cleared) and talks to the
 device (a servo's reboot, a controller's unlock or reconnection: up to seconds): that part runs
 in a thread of its own, and the automaton thread answers with a `Pending` reply that it polls.
+Whatever ends that thread is the reset's answer: an error of any kind (a device's OSError, a
+bug) is a refusal in words naming the resource, never a success; a thread that hangs is named
+with the step it is in and the line it waits at, in the reply and in every later refusal.
 """
 
 from __future__ import annotations
 
+import logging
+import sys
+import sysconfig
 import time
 from collections import deque
 from collections.abc import Callable
 from logging import WARNING
+from pathlib import Path
 
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.loop import SwitchingLoop
@@ -25,6 +32,9 @@ from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.threads import ThreadGroup
 from orccadd.types import Status
 from orccadd.wire.commands import RESET_REPLY_S
+
+log = logging.getLogger("orccadd.machine")
+STDLIB = sysconfig.get_paths()["stdlib"]  # `_DeviceReset.where` names the first frame outside it
 
 FAULTS_KEPT = 32  # the last stop causes `describe` lists, for the logs' fault records
 RESET_WAIT_S = 2.0  # longest wait for a device to leave its fault after a reset (bus round trips)
@@ -114,7 +124,12 @@ class Supervisor:
             return {"reset": True}
 
         def expire() -> Result:
-            raise CommandError(f"the reset did not end within {RESET_DEVICE_S + wait_s:g} s")
+            why = (
+                f"the reset of {res.name} did not end within {RESET_DEVICE_S + wait_s:g} s (still running "
+                f"{device.where()}): a new reset is refused until it ends (if it never does: restart orccadd)"
+            )
+            self.note(why, WARNING)
+            raise CommandError(why)
 
         return Pending(poll, time.monotonic_ns() + int((RESET_DEVICE_S + wait_s) * 1e9), expire)
 
@@ -127,7 +142,10 @@ class Supervisor:
                 f"the safe stop of {self.resource.name} is still under way: wait until it is at rest"
             )
         if self._resetting is not None and self._resetting.running():
-            raise CommandError("a reset is already under way")
+            raise CommandError(
+                f"a reset of {self.resource.name} is already under way ({self._resetting.where()}): "
+                "a new one is refused until it ends (if it never does: restart orccadd)"
+            )
 
 
 class _DeviceReset:
@@ -135,36 +153,62 @@ class _DeviceReset:
     has one), a wait (up to `wait_s`) for its reads to show neither fault nor lost link, the Hold
     task restarted from the measured state while the stop still holds (the outgoing task's last
     command is stale: the arm may be elsewhere now, after a controller's restart), then the
-    stop cleared. `done()` re-raises its error as a CommandError."""
+    stop cleared. `done()` re-raises its error as a CommandError: whatever the thread raised (an
+    OrccaddError's words; any other exception by type and words, naming the resource and the
+    step), so that a reset whose device work failed never answers success."""
 
     def __init__(
         self, threads: ThreadGroup, resource: PhysicalResource, loop: SwitchingLoop, wait_s: float
     ) -> None:
         self._error = ""
+        self._started = time.monotonic()
+        self.step = "starting"  # what the thread does now, in words (`where`)
         self._thread = threads.start(self._run, resource, loop, wait_s, name="device-reset")
 
     def _run(self, res: PhysicalResource, loop: SwitchingLoop, wait_s: float) -> None:
         try:
             if res.description.fault_reset:
+                self.step = "the device's fault reset (reset_fault)"
                 res.reset_fault()
+            self.step = "the wait for reads without a fault"
             end = time.monotonic() + wait_s
             while res.state.status & (Status.FAULT | Status.COMM_LOST):  # the ticks' reads
                 if time.monotonic() > end:
                     self._error = f"the device still reports a fault after the reset ({res.fault_message})"
                     return
                 time.sleep(0.01)
+            self.step = "the wait for the control loop to take the Hold task"
             request = loop.request_switch(loop.hold, fresh=True)
             while not loop.switched(request):
                 if time.monotonic() > end:
                     self._error = "the control loop did not take the Hold task"
                     return
                 time.sleep(0.002)
+            self.step = "clearing the stop (clear_stop)"
             res.clear_stop()
         except OrccaddError as e:
             self._error = str(e)
+        except Exception as e:  # a device's OSError, a bug: a refusal that says so, never a success
+            log.error("reset of %s: %s failed", res.name, self.step, exc_info=True)
+            self._error = f"the reset of {res.name} failed in {self.step}: {type(e).__name__}: {e}"
+        finally:
+            self.step = "ended"
 
     def running(self) -> bool:
         return self._thread.is_alive()
+
+    def where(self) -> str:
+        """For how long it runs, its step, and the line it is at outside the standard library
+        (the words for a reset that hangs: `for 41 s, in ..., at orccadd/x.py:123 (read_cycle)`)."""
+        frame = sys._current_frames().get(self._thread.ident or -1)
+        while frame is not None and frame.f_code.co_filename.startswith(STDLIB) and frame.f_back:
+            frame = frame.f_back
+        at = ""
+        if frame is not None:
+            parts = Path(frame.f_code.co_filename).parts
+            path = Path(*parts[parts.index("orccadd") :]) if "orccadd" in parts else Path(*parts[-2:])
+            at = f", at {path}:{frame.f_lineno} ({frame.f_code.co_name})"
+        return f"for {time.monotonic() - self._started:.0f} s, in {self.step}{at}"
 
     def done(self) -> bool:
         if self._thread.is_alive():

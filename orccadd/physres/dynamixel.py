@@ -28,7 +28,16 @@ or any TTL/RS-485 adapter), through ROBOTIS's `dynamixel_sdk` (`orccadd.drivers.
 - reset_fault: the faulted servos are rebooted (Reboot instruction), answer again, show no
   hardware error, and are re-enabled holding where they are if the rest of the arm is enabled;
   a lost servo that answers again is rebooted the same way. It blocks for the servos' boot
-  (`reboot_timeout_s`), the bus shared with the ticks transaction by transaction.
+  (`reboot_timeout_s`), the bus shared with the ticks transaction by transaction;
+- the port gone (the USB adapter unplugged; `drivers.dynamixel.port`): CommLost naming the port
+  in the first tick that finds it, and from then on the ticks touch nothing (no servo can be
+  read or commanded). The safe stop cannot reach the servos: each holds its last goal (position
+  modes; the ramp's or the motion's, one period ahead) or stops on its Bus Watchdog
+  (`bus_watchdog_ms`, velocity and current modes), so the stop counts as done once that time
+  has passed since the last goal went out. `reset` opens the port again (refused naming it while
+  the device is absent), checks the chain as configure does (latency timer, models, latched
+  errors, EEPROM, the operating modes of the mode it was in, each servo's torque as found) and
+  holds where the arm now is; `clear_stop` then enables the servos that are off.
 
 In velocity and current modes the servos' Bus Watchdog(98) stops them if the bus goes quiet
 for `bus_watchdog_ms` (this process died or stalled: a Goal Current left alone would accelerate
@@ -42,17 +51,17 @@ import dataclasses
 import logging
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from orccadd.config.robot import RobotConfig
 from orccadd.drivers.dynamixel import table as T
 from orccadd.drivers.dynamixel import wire
-from orccadd.drivers.dynamixel.chain import READ_OK, READ_TIMEOUT, ChainError, ServoChain
+from orccadd.drivers.dynamixel.chain import READ_LOST, READ_OK, READ_TIMEOUT, ChainError, ServoChain
 from orccadd.drivers.dynamixel.errors import ALERT, hardware_error_text
 from orccadd.drivers.dynamixel.goals import Goals
 from orccadd.drivers.dynamixel.models import MODE_NAMES, MODELS
-from orccadd.drivers.dynamixel.port import check_latency
+from orccadd.drivers.dynamixel.port import check_latency, failure_text
 from orccadd.drivers.dynamixel.settings import DynamixelSettings, load_dynamixel_settings
 from orccadd.drivers.dynamixel.startup import eeprom_targets, goal_item, operating_modes
 from orccadd.errors import ResourceError
@@ -129,6 +138,8 @@ class DynamixelArm(PhysicalResource):
         self._hw_error = [0] * n  # latched Hardware Error Status bits per servo
         self._lost = [False] * n
         self._comm_lost = ""
+        self._port_gone = ""  # why the port is gone: set by the tick that finds it, cleared by reset
+        self._silent = False  # this tick found the port gone: nothing goes to the servos
         self._switch_fault = ""
         self._fault_key: tuple[object, ...] = ()
         self._op_modes = [MODE_NAMES[v.operating_mode] for v in s.servos]
@@ -150,31 +161,42 @@ class DynamixelArm(PhysicalResource):
         self.latency_s = check_latency(s.port, self.config.control_period_s, busy, set_it=s.set_latency_timer)
         ch.open(self.latency_s)
         try:
-            for j, servo in enumerate(s.servos):
-                ch.check_model(j, MODELS[servo.model].model_number)
-            self.sync_read = self._choose_sync_read()
-            for j in range(self.dof):
-                if bits := ch.read(j, T.HARDWARE_ERROR_STATUS):
-                    log.warning(
-                        "%s: %s latched from before: rebooting it", ch.labels[j], hardware_error_text(bits)
-                    )
-                    self._reboot(j)
-            for j, target in enumerate(self.targets):
-                diff = target.differences(ch.read_bytes(j, 0, T.EEPROM_END))
-                on = bool(ch.read(j, T.TORQUE_ENABLE))
-                if diff and on:
-                    items = ", ".join(f"{item} = {v}" for item, v in diff.items())
-                    raise ResourceError(
-                        f"{self.name}: {ch.labels[j]} has its torque on and needs {items} (EEPROM, "
-                        "written only with the torque off): switch it off with the arm supported"
-                    )
-                for item, v in diff.items():
-                    ch.write(j, item, v)
-                self._enabled[j] = on
+            self._check_chain(self._op_modes)
         except Exception:
             ch.close()
             raise
         self.goals.set_operating_modes(self._op_modes)
+
+    def _check_chain(self, modes: Sequence[int]) -> None:
+        """Every servo: its model, the sync read it can do, a hardware error latched from before
+        (rebooted), its EEPROM (written where it differs, Operating Mode `modes[j]`: only with
+        the torque off), its torque as found. At configure, and in a reset after the port was lost."""
+        ch = self.chain
+        for j, servo in enumerate(self.settings.servos):
+            ch.check_model(j, MODELS[servo.model].model_number)
+        self.sync_read = self._choose_sync_read()
+        for j in range(self.dof):
+            if bits := ch.read(j, T.HARDWARE_ERROR_STATUS):
+                log.warning(
+                    "%s: %s latched from before: rebooting it", ch.labels[j], hardware_error_text(bits)
+                )
+                self._reboot(j)
+        for j, target in enumerate(self.targets):
+            block = ch.read_bytes(j, 0, T.EEPROM_END)
+            diff = target.differences(block)
+            diff.pop(T.OPERATING_MODE, None)
+            if T.OPERATING_MODE.decode(block, T.OPERATING_MODE.address) != modes[j]:
+                diff[T.OPERATING_MODE] = modes[j]
+            on = bool(ch.read(j, T.TORQUE_ENABLE))
+            if diff and on:
+                items = ", ".join(f"{item} = {v}" for item, v in diff.items())
+                raise ResourceError(
+                    f"{self.name}: {ch.labels[j]} has its torque on and needs {items} (EEPROM, "
+                    "written only with the torque off): switch it off with the arm supported"
+                )
+            for item, v in diff.items():
+                ch.write(j, item, v)
+            self._enabled[j] = on
 
     def _choose_sync_read(self) -> str:
         """Fast Sync Read where every servo's firmware has it (45 and up), else a plain Sync Read
@@ -242,6 +264,8 @@ class DynamixelArm(PhysicalResource):
         self._mode_targets[mode] = operating_modes(self.settings, self.config, mode)
 
     def _on_perform_mode_switch(self, mode: CommandMode) -> None:
+        if self._port_gone:  # nothing reaches the servos: the reset sets the modes of `mode`
+            return
         target = self._mode_targets[mode]
         try:
             self._switch(mode, target)
@@ -290,7 +314,15 @@ class DynamixelArm(PhysicalResource):
         self.goals.set_operating_modes(modes)
 
     def _on_deactivate(self) -> None:
-        self._disarm_watchdog()
+        if self._port_gone or self.chain.lost:
+            log.warning(
+                "%s: the port %s is gone: the servos are left as they are", self.name, self.settings.port
+            )
+            return
+        try:
+            self._disarm_watchdog()
+        except ChainError as e:
+            log.warning("%s: %s", self.name, e)
         for j in range(self.dof):
             if self.chain.active[j]:
                 try:
@@ -340,7 +372,11 @@ class DynamixelArm(PhysicalResource):
 
     def _on_reset_fault(self) -> None:
         """Reboot the faulted (and lost) servos, check they came back clean, re-enable them if
-        the rest of the arm is enabled. Blocks for their boot (see the module's doc)."""
+        the rest of the arm is enabled. Blocks for their boot (see the module's doc). After the
+        port was lost: `_reconnect`."""
+        if self._port_gone:
+            self._reconnect()
+            return
         ch = self.chain
         bad = [j for j in range(self.dof) if self._hw_error[j] or self._lost[j]]
         hold = any(self._enabled[j] for j in range(self.dof) if j not in bad)
@@ -364,11 +400,53 @@ class DynamixelArm(PhysicalResource):
             self._op_modes = [-1] * self.dof
             self._switch(self.mode, target)
             self._check_switch(target)
+        self._clear_faults()
+
+    def _clear_faults(self) -> None:
         self._comm_lost = ""
         self._switch_fault = ""
-        ch.in_a_row = 0
+        self.chain.in_a_row = 0
         self.fault = None
         self.state.fault_code = 0
+
+    def _reconnect(self) -> None:
+        """After the port was lost, the arm safe-stopped: the port opened again (refused naming it
+        while the device is still absent), the chain checked as at configure with the operating
+        modes of the current mode (servos powered off meanwhile have lost their RAM), the state
+        read, and the stop's hold taken from where the arm now is; only then do the ticks read
+        and send again. Blocks (the checks, a reboot)."""
+        s, ch = self.settings, self.chain
+        busy = s.read_time_s() + s.write_time_s()
+        # an adapter plugged again may be another one: its latency timer checked as at configure
+        self.latency_s = check_latency(s.port, self.config.control_period_s, busy, set_it=s.set_latency_timer)
+        try:
+            ch.reopen(self.latency_s)
+        except ResourceError as e:
+            raise ResourceError(
+                f"{self.name}: the port {s.port} is still gone ({e}): plug its adapter back in, "
+                "then reset again"
+            ) from None
+        self._lost = [False] * self.dof
+        self._hw_error = [0] * self.dof
+        for j in range(self.dof):
+            ch.set_active(j, True)
+        mode = self.mode
+        target = operating_modes(s, self.config, mode)
+        self._check_chain(target)
+        self._set_modes(target)
+        everyone = dict.fromkeys(range(self.dof), 0)
+        ch.sync_write(T.PROFILE_ACCELERATION, everyone)
+        ch.sync_write(T.PROFILE_VELOCITY, everyone)
+        self._read_blocking()
+        self._ramp.hold(self.goals.joint_positions(ch.present_position), self.state.t_s)
+        self._goal = self._holding_goals(mode)
+        self._holding = False
+        self._watchdog_armed = bool(self._watchdog) and mode is not CommandMode.POSITION
+        if self._watchdog_armed:  # cleared (a servo that stayed on has seen it expire), then set
+            self._rearm_watchdog()
+        log.info("%s: the port %s is open again, the servos checked", self.name, s.port)
+        self._clear_faults()
+        self._port_gone = ""  # last: the ticks read and send again
 
     def _reboot(self, j: int) -> None:
         ch = self.chain
@@ -409,11 +487,18 @@ class DynamixelArm(PhysicalResource):
     # ---- tick hooks -------------------------------------------------------------------------
     def _read_into(self, t_s: float, state: JointState) -> int:
         ch = self.chain
+        if self._port_gone:  # until a reset opens it again: nothing read, nothing sent
+            self._silent = True
+            return self._flags(state)
+        self._silent = False
         try:
             result = ch.read_cycle()
-        except OSError as e:
-            result = READ_TIMEOUT
-            self._lose(-1, f"the port {self.settings.port} failed: {e}")
+        except OSError as e:  # the port answers its failures as READ_LOST: this is unforeseen
+            self._lose_port(failure_text(e))
+            return self._flags(state)
+        if result == READ_LOST:
+            self._lose_port(ch.lost)
+            return self._flags(state)
         g = self.goals
         if result == READ_OK:
             q = g.joint_positions(ch.present_position)
@@ -453,6 +538,16 @@ class DynamixelArm(PhysicalResource):
             counts = f"{ch.timeouts} timeouts, {ch.crc_errors} CRC errors in {ch.reads} reads"
             self._lose(-1, f"{n} sync reads in a row failed, the last reply {what} ({counts}; {waited})")
         ch.in_a_row = 0
+
+    def _lose_port(self, why: str) -> None:
+        """The port is gone (the rare path of a tick: its words made once): CommLost naming it,
+        and the ticks leave the servos alone until a reset."""
+        self._silent = True
+        self._port_gone = (
+            f"the port {self.settings.port} is gone ({why}): no servo can be read or commanded; "
+            "`reset` opens it again once its adapter is back"
+        )
+        self._comm_lost = self._port_gone  # what any servo's silence before it was about
 
     def _lose(self, j: int, why: str) -> None:
         if j >= 0:
@@ -499,6 +594,9 @@ class DynamixelArm(PhysicalResource):
 
     def _send(self, t_s: float, mode: CommandMode, goals: list[int]) -> int:
         self._goal = goals
+        if self._silent:  # the port is gone: nothing can be sent
+            return COMM_LOST
+        ch = self.chain
         try:
             if (
                 self._watchdog_armed
@@ -506,9 +604,15 @@ class DynamixelArm(PhysicalResource):
             ):
                 self._rearm_watchdog()
             self._last_send_s = t_s
-            self.chain.write_goals(goal_item(mode), goals)
+            ch.write_goals(goal_item(mode), goals)
         except (OSError, ChainError) as e:
-            self._lose(-1, f"the port {self.settings.port} failed: {e}")
+            if not ch.lost:
+                self._lose(-1, f"the port {self.settings.port} failed: {e}")
+                self._flags(self.state)  # the fault in words now: this tick's type 3 reports it
+                return COMM_LOST
+        if ch.lost:  # found gone by this write
+            self._lose_port(ch.lost)
+            self._flags(self.state)
             return COMM_LOST
         return 0
 
@@ -547,7 +651,8 @@ class DynamixelArm(PhysicalResource):
         self._stop_t0 = st.t_s
         self._rest_ticks = 0
         if self.config.safe_stop.category == 0:
-            self._torque_off_all()
+            if not self._silent:
+                self._torque_off_all()
             return
         start = self._last_pos_cmd if self.mode is CommandMode.POSITION else st.q_rad
         live = [self._enabled[j] and self.chain.active[j] for j in range(self.dof)]
@@ -556,6 +661,11 @@ class DynamixelArm(PhysicalResource):
 
     def _stop_step(self, t_s: float) -> None:
         cfg = self.config.safe_stop
+        if self._silent:  # the port is gone: the servos stop on their own (see the module)
+            watchdog_s = self._watchdog * T.BUS_WATCHDOG_UNIT_S if self._watchdog_armed else 0.0
+            if t_s - self._last_send_s >= watchdog_s:
+                self._mark_stopped(False)
+            return
         if cfg.category != 0:
             self._ramp.step(t_s, cfg.deceleration_rad_s2)
             if any(self._enabled):

@@ -16,6 +16,7 @@ from typing import cast
 
 import pytest
 
+from orccadd.fault import cause_words
 from tests.daemon.conftest import ROOT, Daemon, mission_dirs, moving, start_daemon_with
 from tests.physres.test_dynamixel import SIM, DxlRig, dxl_rig
 
@@ -143,3 +144,62 @@ def test_an_unplugged_servo_is_comm_lost_naming_it_and_the_arm_safe_stops(
     assert moved < HELD_RAD, f"the stopped arm moved {moved:.4f} rad in 0.5 s"
     d.call("stop")
     d.wait(lambda s: s["state"] == "ready")
+
+
+def test_the_port_vanishing_mid_motion_is_comm_lost_the_loop_ticks_on_and_reset_reopens_it_once_back(
+    rig_daemon: tuple[DxlRig, Daemon],
+) -> None:
+    """The servo simulator killed mid-motion, as a USB adapter unplugged (issue 40, high item 3:
+    the control thread spun at SCHED_FIFO 80 in the port's drop of a late reply and ticked no
+    more, status said not faulted, `reset` timed out, then answered "already under way" for
+    ever, SIGTERM did nothing). Now: CommLost naming the port, the arm's safe stop, the control
+    thread ticking on; `reset` refused naming the port while it is gone; the simulator restarted
+    on the same link: `reset` opens it again, the arm holds, and the mission runs again."""
+    rig, d = rig_daemon
+    d.call("load", path=DEMO)
+    d.call("start")
+    d.wait(lambda s: s["active_task"] == "Reach" and moving(s))
+    rig.sim.kill()
+    s = d.wait(_safe_stopped, timeout_s=30)
+    assert "comm_lost" in _resource(s), _resource(s)
+    assert _t3_inputs(d) == ["Reach.T3.CommLost"]
+    assert f"arm: the port {rig.port} is gone (" in cause_words(s["fault"]), s["fault"]
+    ticks = int(s["ticks"])
+    d.wait(lambda s: int(s["ticks"]) > ticks + 100, timeout_s=30)  # the control thread ticks on
+    d.call("stop")
+    d.wait(lambda s: s["state"] == "ready")
+    r = d.ctl("reset")
+    assert r.returncode != 0, r.stdout + r.stderr
+    assert f"the port {rig.port} is still gone" in r.stdout + r.stderr, r.stdout + r.stderr
+    assert d.status()["faulted"]
+    r = d.ctl("reset")  # refused again in the same words: no reset left "under way"
+    assert r.returncode != 0 and f"the port {rig.port} is still gone" in r.stdout + r.stderr, r.stderr
+    q = [j["q_rad"] for j in cast(list[dict[str, float]], d.status()["joints"])]
+    rig.restart("--initial-q-rad", ",".join(f"{x:.6f}" for x in q))  # at the same priority
+    r = d.ctl("reset")
+    assert r.returncode == 0, r.stdout + r.stderr
+    d.wait(lambda s: not s["faulted"] and "comm_lost" not in _resource(s))
+    assert all(sv["torque_enable"] == 1 for sv in rig.sim.status()["servos"])
+    moved = _held(rig, list(range(6)))
+    assert moved < HELD_RAD, f"the arm moved {moved:.4f} rad in 0.5 s after the reset"
+    r = d.ctl("start")
+    assert r.returncode == 0, r.stderr
+    s = d.wait(lambda s: s["state"] != "running", timeout_s=60)
+    assert s["result"] == "success" and not s["faulted"], s
+
+
+def test_sigterm_with_the_port_gone_stops_the_daemon(tmp_path: Path) -> None:
+    """SIGTERM after the port vanished: the daemon exits by itself (it needed SIGKILL), the stop
+    counted as done (the servos hold their last goals), the servos left as they are."""
+    with dxl_daemon_rig(tmp_path) as rig:
+        d = start_daemon_with(tmp_path, rig.config)
+        try:
+            rig.sim.kill()
+            s = d.wait(_safe_stopped, timeout_s=30)
+            assert f"arm: the port {rig.port} is gone (" in cause_words(s["fault"]), s["fault"]
+        finally:
+            code = d.stop()  # SIGTERM, SIGKILL after 20 s
+    log = d.log_text()
+    assert code == 0, f"exit code {code}\n{log[-4000:]}"
+    assert f"the port {rig.port} is gone: the servos are left as they are" in log, log[-4000:]
+    assert "at rest, hardware released" in log, log[-4000:]

@@ -1,13 +1,14 @@
 """The dynamixel resource against the simulated servo chain in another process (`python -m
 orccadd.dxlsim` on a pseudo-terminal): startup checks, a position motion under a Robot-Task on
-the wall clock, an overload and its reset, an unplugged servo, CRC noise, mode switches.
-Timing is checked to orders of magnitude only (a shared 2-core VM)."""
+the wall clock, an overload and its reset, an unplugged servo, the port itself vanishing, CRC
+noise, mode switches. Timing is checked to orders of magnitude only (a shared 2-core VM)."""
 
 from __future__ import annotations
 
 import re
+import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +20,7 @@ from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 from orccadd.drivers.dynamixel import table as T
 from orccadd.dxlsim.process import DxlSimProcess
 from orccadd.errors import ConfigError, ResourceError
+from orccadd.fault import FaultKind
 from orccadd.physres.dynamixel import DynamixelArm
 from orccadd.robot import create_resource, load_robot_config
 from orccadd.session import Session
@@ -43,6 +45,18 @@ LOOP_AT_REALTIME = False
 class DxlRig:
     config: Path  # the robot config the simulator serves (its port)
     sim: DxlSimProcess
+    sim_args: tuple[str, ...] = ()  # what it was started with
+
+    @property
+    def port(self) -> str:
+        """The link the simulator serves: the resource's port."""
+        return str(self.sim.port)
+
+    def restart(self, *extra: str) -> None:
+        """A new simulator on the same link (after `sim.kill()`: a USB adapter unplugged, then
+        plugged back in): fresh servos, their torque off, their EEPROM the factory's."""
+        self.sim.stop()
+        self.sim = DxlSimProcess(self.config, *self.sim_args, *extra)
 
     def variant(self, *edits: tuple[str, str], name: str = "variant.toml") -> Path:
         """The rig's config with more edits (the resource's view; the simulator keeps its own)."""
@@ -67,11 +81,11 @@ def dxl_rig(
     config.write_text(variant_text(base, (port_line[0], f'port = "{tmp / "ttyDXL"}"'), *edits))
     # the servos are hardware: at real-time priority, above the test's loop (tests/physres/conftest.py)
     priority = () if "--priority" in sim_args else ("--priority", "70")
-    sim = DxlSimProcess(config, *priority, *sim_args)
+    rig = DxlRig(config, DxlSimProcess(config, *priority, *sim_args), (*priority, *sim_args))
     try:
-        yield DxlRig(config, sim)
+        yield rig
     finally:
-        sim.stop()
+        rig.sim.stop()
 
 
 @pytest.fixture
@@ -303,6 +317,165 @@ def test_an_unplugged_servo_is_comm_lost_naming_it(rig: DxlRig, session: Session
     assert_commands_within_limits(ticks, session.config)
     settle(session, loop, Status.STOPPED, 5.0)  # the other five are still read and stopped
     assert res.diagnostics().details["lost"] == "servo 5 (wrist_angle, XM430-W350)"
+
+
+def _until(ok: Callable[[], bool], what: str, timeout_s: float = 20.0) -> None:
+    """Poll `ok` until it holds (a generous bound: this is a condition, not a timing check)."""
+    end = time.monotonic() + timeout_s
+    while not ok():
+        assert time.monotonic() < end, f"{what}: not within {timeout_s:g} s"
+        time.sleep(0.01)
+
+
+def test_the_port_vanishing_mid_motion_is_comm_lost_naming_it_and_a_reset_reopens_it_once_back(
+    rig: DxlRig, session: Session
+) -> None:
+    """The servo simulator killed mid-motion, as a USB adapter unplugged: its pseudo-terminal hangs
+    up (always readable, reads end of file, writes and tcflush fail with EIO). It was: the tick
+    that met it raised termios.error, the next one spun for ever in `drop_late_reply` holding the
+    chain's lock (no more ticks, no CommLost, a reset and SIGTERM waiting on the lock). Now:
+    CommLost naming the port in the first tick after the kill, the safe stop in that tick, the
+    loop ticking on; `reset` refused naming the port while it is gone; the simulator restarted
+    on the same link: `reset` opens it and checks the chain (fresh servos: EEPROM written, torque
+    off), `clear_stop` enables them holding, and the arm moves again."""
+    res = session.resource
+    assert isinstance(res, DynamixelArm)
+    task, loop = move(session, TARGET)
+    loop.run_for(0.2)
+    before = len(loop.ticks().seq)
+    rig.sim.kill()
+    loop.executor.run(max_ticks=200, until=lambda: task.phase is not Phase.RUN)
+    assert task.phase is Phase.FAULT, (task.phase, res.fault_message)
+    loop.executor.run(max_ticks=5)  # the next tick's read shows the stop
+    assert [n for n in session.event_names() if ".T3." in n] == ["MoveJointsCSP.T3.CommLost"]
+    assert f"arm: the port {rig.port} is gone (" in res.fault_message, res.fault_message
+    ticks = loop.ticks()
+    lost = [i for i in range(len(ticks.seq)) if int(ticks.status[i]) & Status.COMM_LOST]
+    assert lost and lost[0] - before < 2, (before, lost[:3])  # the first tick after the kill
+    assert_safe_stop_in_time(ticks, status_shows(ticks, Status.COMM_LOST))
+    assert_commands_within_limits(ticks, session.config)
+    settle(session, loop, Status.STOPPED, 20.0)  # position mode: each servo holds its last goal
+    assert loop.executor.run(max_ticks=40) == 40  # the loop ticks on, the port left alone
+    with pytest.raises(ResourceError) as e:
+        res.reset_fault()
+    assert f"arm: the port {rig.port} is still gone (cannot open the DYNAMIXEL port {rig.port}" in str(
+        e.value
+    )
+    assert "plug its adapter back in, then reset again" in str(e.value)
+    rig.restart("--initial-q-rad", ",".join(f"{q:.6f}" for q in res.state.q_rad))
+    res.reset_fault()
+    loop.executor.run(max_ticks=400, until=lambda: not res.state.status & Status.COMM_LOST)
+    assert not res.state.status & (Status.COMM_LOST | Status.FAULT), res.fault_message
+    assert res.fault_message == ""
+    assert [res.chain.read(j, T.RETURN_DELAY_TIME) for j in range(6)] == [0] * 6  # EEPROM written again
+    res.clear_stop()
+    assert all(sv["torque_enable"] == 1 for sv in rig.sim.status()["servos"])
+    again, loop = move(session, BACK)
+    loop.executor.run(max_ticks=1000, until=lambda: again.phase is not Phase.RUN)
+    assert again.phase is Phase.DONE, (again.fault_reason, res.fault_message)
+    np.testing.assert_allclose(rig.sim.status()["q_rad"], BACK, atol=0.01)
+
+
+def test_the_port_found_gone_by_a_write_is_comm_lost_in_words_in_that_tick(
+    rig: DxlRig, session: Session
+) -> None:
+    """A tick's write may be the first to meet the vanished port (write(2) and tcflush fail with
+    EIO): the CommLost it returns already has the words, for the type 3 of that tick."""
+    res = session.resource
+    assert isinstance(res, DynamixelArm)
+    assert not tick_holding(res, 10) & (Status.FAULT | Status.COMM_LOST), res.fault_message
+    rig.sim.kill()
+    assert res.write(time.monotonic(), res.state.q_rad.copy()) & Status.COMM_LOST  # hold where it is
+    assert res.fault is not None and res.fault.kind is FaultKind.COMM_LOST, res.fault
+    assert f"arm: the port {rig.port} is gone (" in res.fault_message, res.fault_message
+    assert res.read(time.monotonic()).status & Status.COMM_LOST
+
+
+class Ticker:
+    """Read + keep_alive every 5 ms in a thread of its own, as the daemon's control thread: the
+    safe stop called in the tick that first reads CommLost (as a task's type 3 would)."""
+
+    def __init__(self, res: DynamixelArm) -> None:
+        self.res = res
+        self.ticks = 0
+        self.first_lost = -1  # the tick that first read CommLost
+        self.seen = 0  # the status flags read (`forget` starts again)
+        self._forget = threading.Event()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="ticker", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        res = self.res
+        while not self._stop.is_set():
+            now = time.monotonic()
+            status = res.read(now).status
+            if self._forget.is_set():
+                self._forget.clear()
+                self.seen = 0
+            self.seen |= status
+            if status & Status.COMM_LOST and self.first_lost < 0:
+                self.first_lost = self.ticks
+                res.safe_stop()
+            res.keep_alive(now)
+            self.ticks += 1
+            time.sleep(0.005)
+
+    def forget(self) -> None:
+        """`seen` from the next tick on (the ticker's own thread clears it)."""
+        self._forget.set()
+        _until(lambda: not self._forget.is_set(), "the ticker forgetting")
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(20.0)
+        assert not self._thread.is_alive(), "a tick never returned"
+
+
+@pytest.mark.parametrize("mode", [CommandMode.POSITION, CommandMode.VELOCITY])
+def test_the_port_vanishing_while_holding_is_comm_lost_the_ticks_go_on_and_a_reset_reopens_it(
+    rig: DxlRig, session: Session, mode: CommandMode
+) -> None:
+    """The port vanishes while the arm holds (no task: read and keep_alive, as the Hold task):
+    CommLost naming the port within two ticks of the kill, the ticks go on, and the stop counts
+    as done: at once in position mode (each servo holds its last goal), once the Bus Watchdog's
+    time has passed in velocity mode (the servos stop on it). The simulator restarted, `reset`
+    and `clear_stop` run beside the ticks (as the daemon's reset thread does): the fresh servos
+    take the mode's Operating Mode and hold the arm, the ticks never stopping."""
+    res = session.resource
+    assert isinstance(res, DynamixelArm)
+    if mode is not CommandMode.POSITION:
+        res.switch_mode(mode)
+    assert not tick_holding(res, 20) & (Status.FAULT | Status.COMM_LOST), res.fault_message
+    ticker = Ticker(res)
+    try:
+        _until(lambda: ticker.ticks > 20, "the ticker running")
+        at_kill = ticker.ticks
+        rig.sim.kill()
+        _until(lambda: ticker.first_lost >= 0, "CommLost")
+        assert ticker.first_lost - at_kill <= 2, (at_kill, ticker.first_lost)
+        assert f"arm: the port {rig.port} is gone (" in res.fault_message, res.fault_message
+        _until(lambda: bool(res.state.status & Status.STOPPED), "the stop counted as done")
+        ticks = ticker.ticks
+        _until(lambda: ticker.ticks > ticks + 40, "the ticks going on")
+        with pytest.raises(ResourceError, match="is still gone"):
+            res.reset_fault()
+        rig.restart("--initial-q-rad", ",".join(f"{q:.6f}" for q in res.state.q_rad))
+        res.reset_fault()
+        _until(lambda: not res.state.status & Status.COMM_LOST, "reads without CommLost")
+        res.clear_stop()
+        ticker.forget()
+        ticks = ticker.ticks
+        q0 = rig.sim.status()["q_rad"]
+        _until(lambda: ticker.ticks > ticks + 60, "the ticks holding")
+        q1 = rig.sim.status()["q_rad"]
+    finally:
+        ticker.stop()
+    assert not ticker.seen & (Status.FAULT | Status.COMM_LOST | Status.TORQUE_OFF), res.fault_message
+    code = {CommandMode.POSITION: 3, CommandMode.VELOCITY: 1}[mode]
+    servos = rig.sim.status()["servos"]
+    assert all(sv["operating_mode"] == code and sv["torque_enable"] == 1 for sv in servos), servos
+    assert max(abs(a - b) for a, b in zip(q0, q1, strict=True)) < 0.02, (q0, q1)  # held
 
 
 def test_crc_noise_below_the_threshold_is_counted_and_the_motion_completes(

@@ -12,6 +12,10 @@
 Every method is one transaction, or a few, under `lock`: the control thread's ticks and a
 lifecycle call from another thread (reset, clear_stop) never interleave on the wire. The cyclic
 pair (`read_cycle`, `write_goals`) allocates only the SDK's packet lists.
+
+A port whose device is gone (`BlockingPort.lost`: the adapter unplugged) makes the cyclic pair
+answer at once (READ_LOST, a failed write) without touching it, and every other transaction a
+`ChainError` naming the port; `reopen` opens the device path again (the backend's reset).
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from dynamixel_sdk import (
     COMM_RX_CORRUPT,
     COMM_RX_TIMEOUT,
     COMM_SUCCESS,
+    COMM_TX_FAIL,
     GroupSyncRead,
     GroupSyncWrite,
     PacketHandler,
@@ -44,8 +49,8 @@ _PART = struct.Struct("<BBhii")  # error, id, Present Current (or Load), Velocit
 
 LIFECYCLE_TIMEOUT_S = 0.05  # beyond the wire time, for a transaction outside the cycle
 
-# what the last cyclic read did
-READ_OK, READ_TIMEOUT, READ_CORRUPT = 0, 1, 2
+# what the last cyclic read did (READ_LOST: the port is gone, `ServoChain.lost` says why)
+READ_OK, READ_TIMEOUT, READ_CORRUPT, READ_LOST = 0, 1, 2, 3
 
 
 class ChainError(ResourceError):
@@ -99,10 +104,34 @@ class ServoChain:
             if self.port is not None and self.port.is_open:
                 self.port.closePort()
 
+    def reopen(self, latency_s: float = 0.0) -> None:
+        """After the port was lost: the old one closed, the device path opened again (a
+        `ResourceError` naming it while it is still absent: the old port stays, lost), the
+        group objects rebuilt for the joints active. Not for a tick."""
+        s = self.settings
+        with self.lock:
+            if self.port is not None and self.port.is_open:
+                self.port.closePort()
+            self.port = open_port(s.port, s.baud_rate, s.read_timeout_s, latency_s)
+            self._rebuild()
+
+    @property
+    def lost(self) -> str:
+        """Why the port is gone, in words ("" while it works, or before it was opened)."""
+        port = self.port
+        return port.lost if port is not None else ""
+
     def _p(self) -> BlockingPort:
         if self.port is None:
             raise ResourceError(f"the DYNAMIXEL port {self.settings.port} is not open")
         return self.port
+
+    def _live(self) -> BlockingPort:
+        """The port for a transaction (under the lock): a `ChainError` naming it if it is gone."""
+        port = self._p()
+        if port.lost:
+            raise ChainError(f"the DYNAMIXEL port {self.settings.port} is gone ({port.lost})")
+        return port
 
     def _rebuild(self) -> None:
         """The group objects for the joints now active (under the lock or before any tick)."""
@@ -126,7 +155,7 @@ class ServoChain:
     def _once(self) -> Iterator[BlockingPort]:
         """The lock and a patient port: a servo's first answer after a while may be slow."""
         with self.lock:
-            port = self._p()
+            port = self._live()
             with port.patient(LIFECYCLE_TIMEOUT_S):
                 yield port
 
@@ -137,7 +166,7 @@ class ServoChain:
     @contextmanager
     def _cyclic(self) -> Iterator[BlockingPort]:
         with self.lock:
-            yield self._p()
+            yield self._live()
 
     def ping(self, j: int) -> int:
         """The model number servo j answers with."""
@@ -202,7 +231,7 @@ class ServoChain:
             self._sync_write(item, values)
 
     def _sync_write(self, item: T.Item, values: Mapping[int, int]) -> int:
-        group = GroupSyncWrite(self._p(), self.ph, item.address, item.size)
+        group = GroupSyncWrite(self._live(), self.ph, item.address, item.size)
         for j, v in values.items():
             group.addParam(self.ids[j], item.encode(v))
         return int(group.txPacket())
@@ -234,10 +263,18 @@ class ServoChain:
     def read_cycle(self) -> int:
         """One (fast) sync read of the active servos' Present Current/Load, Velocity and
         Position (tick-safe). READ_OK with the values in `present_*` and `error_byte`; otherwise
-        READ_TIMEOUT (no or a short reply: `cut_at` names the first servo missing) or
-        READ_CORRUPT (a damaged reply), the values kept from the last good read."""
+        READ_TIMEOUT (no or a short reply: `cut_at` names the first servo missing),
+        READ_CORRUPT (a damaged reply), or READ_LOST (the port is gone: `lost` says why; nothing
+        sent once it is), the values kept from the last good read."""
         with self.lock:
+            port = self.port
+            if port is None or port.lost:
+                self.last_result = READ_LOST
+                return READ_LOST
             result = self._fast_read() if self.fast else self._plain_read()
+            if port.lost:  # found gone in this transaction
+                self.last_result = READ_LOST
+                return READ_LOST
         self.reads += 1
         self.last_result = result
         if result == READ_OK:
@@ -249,7 +286,10 @@ class ServoChain:
                 if self.cut_at >= 0:
                     self.timeouts_by_servo[self.cut_at] += 1
                 with self.lock:  # its late end must not be read as the next cycle's reply
-                    self.late_bytes_dropped += self._p().drop_late_reply()
+                    self.late_bytes_dropped += port.drop_late_reply()
+                if port.lost:
+                    self.last_result = READ_LOST
+                    return READ_LOST
             else:
                 self.crc_errors += 1
         return result
@@ -315,11 +355,14 @@ class ServoChain:
 
     def write_goals(self, item: T.Item, values: Sequence[int]) -> int:
         """One Sync Write of `item` to every active servo, `values` per joint (tick-safe).
-        The SDK's result (COMM_SUCCESS, or the port failed)."""
+        The SDK's result (COMM_SUCCESS, or the port failed; COMM_TX_FAIL at once on a lost one)."""
         with self.lock:
+            port = self.port
+            if port is None or port.lost:
+                return int(COMM_TX_FAIL)
             group = self._writers.get(item)
             if group is None:
-                group = self._writers[item] = GroupSyncWrite(self._p(), self.ph, item.address, item.size)
+                group = self._writers[item] = GroupSyncWrite(port, self.ph, item.address, item.size)
             ids, size, signed = self.ids, item.size, item.signed
             for j in self._order:
                 data = list(values[j].to_bytes(size, "little", signed=signed))

@@ -13,7 +13,14 @@ here, and a timeout far beyond a control period. `BlockingPort` keeps the SDK's 
 - time is CLOCK_MONOTONIC (the SDK uses the wall clock);
 - after a read that timed out, the rest of its late reply is waited out and dropped
   (`drop_late_reply`), so that it does not arrive in the next request's time and read as its
-  reply (the SDK's `clearPort` drops only what is already there when the next request goes).
+  reply (the SDK's `clearPort` drops only what is already there when the next request goes);
+- a port whose device is gone (a USB adapter unplugged, the simulator's pseudo-terminal closed)
+  is `lost`: its descriptor is always readable and reads end of file, or the calls fail with
+  EIO, ENODEV, ENXIO, EBADF (`tcflush` with a `termios.error`, which is no OSError). The first
+  such answer sets `lost` (in words); from then on nothing touches the descriptor, a write sends
+  nothing (the SDK's transactions fail: COMM_TX_FAIL) and a read waits for nothing (its
+  packet has timed out): no busy loop, no exception out of a tick. Only a new port (`open_port`
+  again, by the backend's reset) works again.
 
 So the chain may answer up to `read_timeout_s` (default 3 ms) later than the wire time of the
 request and of its reply at the baud rate, plus the adapter's latency timer: a servo busy, a
@@ -27,8 +34,10 @@ above 1 ms (or writes 1 ms, by config) and a period it cannot meet, each with th
 
 from __future__ import annotations
 
+import errno
 import os
 import select
+import termios
 import time
 from pathlib import Path
 
@@ -40,62 +49,136 @@ SYSFS_USB_SERIAL = Path("/sys/bus/usb-serial/devices")
 MAX_LATENCY_S = 0.001  # what a control loop can live with (FTDI's default is 16 ms)
 # the rule that sets 1 ms when an adapter is plugged (installed from the wheel: docs/install.md)
 UDEV_RULE = "share/orccadd/udev/60-orccadd-dynamixel.rules (packaging/udev/ in a checkout)"
+HUNG_UP = "hung up: end of file"  # readable, and a read returns nothing: the device is gone
+LATE_REPLY_MAX_BYTES = 1024  # the SDK's longest status packet: `drop_late_reply` drops no more
+
+
+def failure_text(e: BaseException) -> str:
+    """An OSError's or a termios.error's errno in words: `EIO: Input/output error`."""
+    code = getattr(e, "errno", None)
+    if code is None and e.args and isinstance(e.args[0], int):
+        code = e.args[0]  # termios.error(errno, text)
+    if isinstance(code, int) and code in errno.errorcode:
+        return f"{errno.errorcode[code]}: {os.strerror(code)}"
+    return str(e) or type(e).__name__
 
 
 class BlockingPort(PortHandler):  # type: ignore[misc]  # the SDK is untyped
-    """`PortHandler` with blocking reads and deadlines from the wire time (see the module)."""
+    """`PortHandler` with blocking reads and deadlines from the wire time, and a device that is
+    gone reported as `lost` instead of a busy loop or an exception (see the module)."""
 
     def __init__(self, port_name: str, read_timeout_s: float, latency_s: float = 0.0) -> None:
         super().__init__(port_name)
         self.latency_ms = latency_s * 1e3
         self.extra_ms = read_timeout_s * 1e3 + self.latency_ms
         self.last_tx_bytes = 0
+        self.lost = ""  # why the port is gone, in words ("" while it works, until closed)
         self._fd = -1
 
     def setupPort(self, cflag_baud: int) -> bool:  # noqa: N802 - the SDK's name
         ok = bool(super().setupPort(cflag_baud))
         self._fd = self.ser.fileno()
+        self.lost = ""  # a descriptor of its own now
         return ok
+
+    def _gone(self, why: str) -> None:
+        """The device answered as one that is gone (the rare path: words made once)."""
+        if not self.lost:
+            self.lost = why
+
+    def closePort(self) -> None:  # noqa: N802
+        """Close it (a port whose device is gone closes too; an error closing it is ignored).
+        Closed, it is `lost` ("closed"): no call touches a descriptor number reused since."""
+        try:
+            super().closePort()
+        except (OSError, termios.error) as e:
+            self._gone(failure_text(e))
+            self.is_open = False
+        self._fd = -1
+        self._gone("closed")
+
+    def clearPort(self) -> None:  # noqa: N802
+        """Drop what arrived before a request (tcflush); on a lost port, nothing."""
+        if self.lost:
+            return
+        try:
+            termios.tcflush(self._fd, termios.TCIFLUSH)
+        except (OSError, termios.error) as e:  # termios.error is no OSError: EIO once hung up
+            self._gone(failure_text(e))
 
     def writePort(self, packet: list[int]) -> int:  # noqa: N802
         """The packet in one write(2) (pyserial's own write waits in `select` first); the rest,
-        if the driver took only part of it, through pyserial."""
+        if the driver took only part of it, through pyserial. Bytes written: 0 on a lost port."""
+        if self.lost:
+            return 0
         data = bytes(packet)
         self.last_tx_bytes = len(data)
         try:
-            n = os.write(self._fd, data)
-        except BlockingIOError:
-            n = 0
-        return n if n == len(data) else n + int(self.ser.write(data[n:]))
+            try:
+                n = os.write(self._fd, data)
+            except BlockingIOError:
+                n = 0
+            if n != len(data):
+                n += int(self.ser.write(data[n:]))
+        except OSError as e:  # EIO, ENODEV, ENXIO, EBADF; pyserial's SerialException too
+            self._gone(failure_text(e))
+            return 0
+        return n
 
     def readPort(self, length: int) -> bytes:  # noqa: N802
         """What has arrived of the `length` bytes the SDK still needs, waiting for the first of
-        them until the packet's deadline (bytes already there are taken even past it)."""
+        them until the packet's deadline (bytes already there are taken even past it); b"" on a
+        lost port (or one found lost now: readable, with nothing to read)."""
+        if self.lost or length <= 0:
+            return b""
         remaining_s = (self.packet_timeout - (self.getCurrentTime() - self.packet_start_time)) * 1e-3
         ready, _, _ = select.select((self._fd,), (), (), max(0.0, remaining_s))
         if not ready:
             return b""
         try:
-            return os.read(self._fd, length)
+            data = os.read(self._fd, length)
         except BlockingIOError:
             return b""
+        except OSError as e:
+            self._gone(failure_text(e))
+            return b""
+        if not data:  # readable, yet nothing: a hang-up (pyserial says the same, "disconnected")
+            self._gone(HUNG_UP)
+        return data
+
+    def isPacketTimeout(self) -> bool:  # noqa: N802
+        """The SDK's receive loop ends at once on a lost port (it would poll to its deadline)."""
+        return bool(self.lost) or bool(super().isPacketTimeout())
 
     def drop_late_reply(self) -> int:
         """After a timeout: drop the late reply, if it comes within another `read_timeout_s` (and
         the adapter's latency), then whatever follows until the line has been quiet for the wire
-        time of a few bytes. Bytes dropped (tick-safe: bounded by the port's margins)."""
+        time of a few bytes, at most a status packet's worth of wire time and margins (a line
+        that never goes quiet: noise). Bytes dropped (tick-safe: bounded by the port's margins;
+        a port found lost ends it at once)."""
         quiet_s = max(0.0003, self.tx_time_per_byte * 16e-3)
         wait_s = self.extra_ms * 1e-3  # for its first byte
+        end = time.monotonic() + wait_s + quiet_s + self.tx_time_per_byte * LATE_REPLY_MAX_BYTES * 1e-3
         dropped = 0
-        while True:
+        while not self.lost:
             ready, _, _ = select.select((self._fd,), (), (), wait_s)
             if not ready:
                 return dropped
             try:
-                dropped += len(os.read(self._fd, 4096))
+                data = os.read(self._fd, 4096)
             except BlockingIOError:
                 return dropped
-            wait_s = quiet_s
+            except OSError as e:
+                self._gone(failure_text(e))
+                return dropped
+            if not data:
+                self._gone(HUNG_UP)
+                return dropped
+            dropped += len(data)
+            wait_s = min(quiet_s, end - time.monotonic())
+            if wait_s <= 0.0:
+                return dropped
+        return dropped
 
     def deadline_s(self, request_bytes: int, reply_bytes: int) -> float:
         """How long a reply of `reply_bytes` to a request of `request_bytes` is waited for."""
