@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import compileall
+import ctypes
+import os
+import subprocess
 from collections.abc import Callable
 from pathlib import Path
 
@@ -13,6 +16,39 @@ UR5E = ROOT / "configs" / "robots" / "sim-ur5e.toml"
 PANDA = ROOT / "configs" / "robots" / "sim-panda.toml"
 MOVE_TASK = ROOT / "configs" / "tasks" / "move_joints.toml"
 URDF_DIR = ROOT / "configs" / "urdf"
+
+
+CLONE_NEWNET = 0x40000000
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """A pytest-xdist worker (`make test` runs two) gets a network namespace of its own, with its
+    own loopback: the fixed ports of the devices the tests simulate (UR's 30004 and 29999, a
+    cell's Zenoh endpoints, the CAN hub's) are then each worker's, and two workers never meet on
+    them. Taken in the worker's main thread before any other starts: every thread and process
+    the tests start inherits it. Where it cannot be had (not root), the workers share the host's
+    loopback, and UR's port lock (`orccadd.ursim.process.PortsLock`) keeps them apart."""
+    if not os.environ.get("PYTEST_XDIST_WORKER") or os.environ.get("ORCCADD_TEST_SHARED_NET"):
+        return
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.unshare(CLONE_NEWNET) != 0:
+        return
+    up = subprocess.run(["ip", "link", "set", "lo", "up"], capture_output=True, text=True, check=False)
+    if up.returncode != 0:
+        raise pytest.UsageError(f"a test worker's network namespace: ip link set lo up: {up.stderr.strip()}")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Tests that take fixed paths of the machine (`FIXED_PATHS`) run on one worker, one after
+    the other (`--dist loadgroup`)."""
+    for item in items:
+        if Path(str(item.fspath)).name in FIXED_PATHS:
+            item.add_marker(pytest.mark.xdist_group("fixed-paths"))
+
+
+# the README's tours; the demo; the shipped gripper configs' serial links (/tmp/orccadd-gripper,
+# /tmp/orccadd-left-hand, /tmp/orccadd-right-hand)
+FIXED_PATHS = ("test_readme.py", "test_demo.py", "test_pick_place.py", "test_handover.py")
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:

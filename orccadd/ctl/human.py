@@ -151,7 +151,8 @@ def _resource(res: dict[str, Any]) -> list[str]:
         rows.append(("device fault", f"{d.get('fault_message')} (code {d.get('fault_code')})"))
     if d.get("helper_pid"):
         rows.append(("helper pid", str(d["helper_pid"])))
-    rows += [(str(k), num(v)) for k, v in (d.get("details") or {}).items()]
+    # the live details, less what the description already said (a chain's port and baud rate)
+    rows += [(str(k), num(v)) for k, v in (d.get("details") or {}).items() if k not in res]
     return [head, *table(rows, "  ")]
 
 

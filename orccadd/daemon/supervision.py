@@ -136,7 +136,7 @@ class Supervisor:
     def check_reset(self) -> None:
         """`CommandError` if a reset cannot begin now (a run or the stop still under way)."""
         if self.mission.running:
-            raise CommandError("the mission is still running (its safe procedure): stop or abort it first")
+            raise CommandError(self._still_running())
         if not self.resource.state.status & Status.STOPPED:
             raise CommandError(
                 f"the safe stop of {self.resource.name} is still under way: wait until it is at rest"
@@ -146,6 +146,20 @@ class Supervisor:
                 f"a reset of {self.resource.name} is already under way ({self._resetting.where()}): "
                 "a new one is refused until it ends (if it never does: restart orccadd)"
             )
+
+
+    def _still_running(self) -> str:
+        """Why a reset waits for the mission, and what ends it: the operator inputs it may be
+        waiting for (a safe procedure that awaits an acknowledgement), `stop`, `abort`."""
+        loaded = self.mission.mission
+        ops = loaded.describe()["operator_inputs"] if loaded is not None else []
+        inputs = [str(i) for i in ops] if isinstance(ops, list) else []
+        send = " or ".join(f"`orccadctl send {i}`" for i in inputs)
+        ends = f"give it the input it waits for ({send}) or end it with" if send else "end it with"
+        return (
+            f"the mission is still running (its safe procedure, after the stop of {self.resource.name}): "
+            f"{ends} `orccadctl stop` (or `abort`), then reset"
+        )
 
 
 class _DeviceReset:

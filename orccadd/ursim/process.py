@@ -2,7 +2,7 @@
 
 Stock ur_rtde reaches a controller on fixed ports (30004, 30003, 29999), so two simulators on
 one machine would take each other's ports: `UrSimProcess` holds an exclusive file lock
-(`PORTS_LOCK`, in the temporary directory) for as long as its simulator runs, and a second one,
+(in the temporary directory, one per network namespace) for as long as its simulator runs, and a second one,
 in this process or any other, waits for it (up to `lock_timeout_s`). Pass `lock=False` with
 ports of your own (`--rtde-port` ...) to run beside it.
 
@@ -20,6 +20,7 @@ This module imports only the standard library (and `orccadd.simproc`, which does
 from __future__ import annotations
 
 import fcntl
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -27,14 +28,23 @@ from typing import IO
 
 from orccadd.simproc import SimulatorProcess
 
-PORTS_LOCK = Path(tempfile.gettempdir()) / "orccadd-ursim-ports.lock"
+
+def _ports_lock_path() -> Path:
+    """The lock file of UR's fixed ports in this network namespace (ports are a namespace's:
+    a test process in a namespace of its own, as each pytest worker is, has its own)."""
+    try:
+        netns = f"-{os.stat('/proc/thread-self/ns/net').st_ino}"
+    except OSError:
+        netns = ""
+    return Path(tempfile.gettempdir()) / f"orccadd-ursim-ports{netns}.lock"
 
 
 class PortsLock:
     """The machine-wide lock on UR's fixed ports (`flock`, released when closed or on exit)."""
 
     def __init__(self, timeout_s: float) -> None:
-        self._f: IO[bytes] | None = PORTS_LOCK.open("ab")
+        self.path = _ports_lock_path()
+        self._f: IO[bytes] | None = self.path.open("ab")
         deadline = time.monotonic() + timeout_s
         while True:
             try:
@@ -44,7 +54,7 @@ class PortsLock:
                 if time.monotonic() > deadline:
                     self.release()
                     raise TimeoutError(
-                        f"UR's ports stayed taken by another simulator for {timeout_s:g} s ({PORTS_LOCK})"
+                        f"UR's ports stayed taken by another simulator for {timeout_s:g} s ({self.path})"
                     ) from None
                 time.sleep(0.1)
 

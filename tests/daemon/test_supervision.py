@@ -170,3 +170,16 @@ def test_a_reset_that_hangs_is_named_with_its_step_and_line_then_refused_until_i
     res._reset_fault = lambda: None
     result: Any = answer(sup.begin_reset(lambda: None))
     assert result == {"reset": True} and res.cleared
+
+
+def test_a_reset_while_the_safe_procedure_runs_says_what_ends_it() -> None:
+    """After a protective stop the mission's safe procedure awaits the operator: the refusal
+    names the input it may wait for, and `stop`/`abort`, instead of only refusing."""
+    sup = supervisor(StandIn(lambda: None))
+    loaded = SimpleNamespace(describe=lambda: {"operator_inputs": ["Stop", "Go"]})
+    sup.mission = cast(MissionControl, SimpleNamespace(running=True, mission=loaded))
+    with pytest.raises(CommandError) as e:
+        sup.begin_reset(lambda: None)
+    words = str(e.value)
+    assert "safe procedure, after the stop of arm" in words
+    assert "`orccadctl send Stop` or `orccadctl send Go`" in words and "`orccadctl stop` (or `abort`)" in words
