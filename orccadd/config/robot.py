@@ -100,9 +100,10 @@ class DaemonConfig:
     task_dirs: tuple[str, ...] = field(default=("../tasks",))
     # a `load` compiles and verifies in a process of its own, stopped after this long or when it
     # needs this much more memory than it took to start (the mission refused, saying which;
-    # `orccadctl check` has no limit)
-    load_timeout_s: float = field(default=600.0, bounds=(1.0, LOAD_TIMEOUT_MAX_S))
-    load_memory_mb: int = field(default=2048, bounds=(256, 1 << 20))
+    # `orccadctl check` has no limit). One load at a time: these bound how long a load can keep
+    # the next one waiting (docs/mission-language.md: what missions of which size cost)
+    load_timeout_s: float = field(default=120.0, bounds=(1.0, LOAD_TIMEOUT_MAX_S))
+    load_memory_mb: int = field(default=1024, bounds=(256, 1 << 20))
     # full-rate CSV logs go here, created by the command daemon (never a path a client names);
     # "": `logs/` in the socket's directory
     log_dir: str = field(default="")
