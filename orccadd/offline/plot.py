@@ -207,7 +207,8 @@ def plot_csv(log: Path, out: Path, prefixes: list[str], fmt: str | None = None) 
     groups: dict[str, list[int]] = {}
     for i, name in enumerate(d.columns[1:], start=1):
         base = name.split(".", 1)[0]
-        if prefixes and base not in prefixes:
+        # `q` names every resource's q in a cell's log (`left/q`, `right/q`); `left/q` one's
+        if prefixes and base not in prefixes and base.rpartition("/")[2] not in prefixes:
             continue
         groups.setdefault(base, []).append(i)
     if not groups:

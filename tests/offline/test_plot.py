@@ -176,3 +176,11 @@ def test_a_cells_log_under_the_name_given_to_log_stop_plots_from_its_mcap(log: P
     assert "from " in info and "run.mcap" in info and (tmp_path / "x.png").read_bytes()[:8] == PNG_MAGIC
     with pytest.raises(FileNotFoundError, match=r"nothing.csv: no such file$"):
         plot_csv(cell / "nothing.csv", tmp_path / "x.png", [])
+
+
+def test_a_signal_name_selects_it_on_every_resource_of_a_cell(tmp_path: Path) -> None:
+    """`--signals q,cmd` on a cell's log (columns `left/q.j1`, `right/q.j1`) drew nothing."""
+    cell = tmp_path / "cell.csv"
+    cell.write_text("time_s,left/q.j1,right/q.j1,left/dq.j1,left/cmd.j1\r\n0.0,1,2,3,4\r\n0.002,1,2,3,4\r\n")
+    assert plot_csv(cell, tmp_path / "a.png", ["q", "cmd"]).split(": ", 1)[1].startswith("3 plots")
+    assert plot_csv(cell, tmp_path / "b.png", ["left/q"]).split(": ", 1)[1].startswith("1 plots")
