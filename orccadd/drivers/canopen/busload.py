@@ -69,8 +69,8 @@ class BusLoad:
             f"at {1 / self.period_s:g} Hz (no stuffing - worst-case stuffing)"
         )
 
-    def verdict(self) -> tuple[str, str]:
-        """("ok" | "warn" | "refuse", message)."""
+    def verdict(self, warn_load: float = WARN_LOAD) -> tuple[str, str]:
+        """("ok" | "warn" | "refuse", message); "warn" above `warn_load` (worst case)."""
         if self.load_worst > MAX_LOAD:
             p = self.shortest_period_s()
             hint = (
@@ -80,8 +80,11 @@ class BusLoad:
                 else "; even without cyclic traffic the bus is full"
             )
             return "refuse", f"{self.describe()}: above {MAX_LOAD:.0%}{hint}"
-        if self.load_worst > WARN_LOAD:
-            return "warn", f"{self.describe()}: above {WARN_LOAD:.0%}, little room for SDO and EMCY traffic"
+        if self.load_worst > warn_load:
+            return "warn", (
+                f"{self.describe()}: above {warn_load:.0%}, little room for SDO and EMCY traffic "
+                "(bus_load_warn in [resource.settings] accepts more)"
+            )
         return "ok", self.describe()
 
 

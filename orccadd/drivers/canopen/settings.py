@@ -111,6 +111,9 @@ class CanopenSettings:
     # period (nothing to wait for); slow ones (simulated, behind a userspace bus) may need it.
     # Judged by the frames' time stamps: SocketCAN, or a socketcand server on this host
     tpdo_wait_us: int = field(default=0, bounds=(0, 100_000))
+    # the worst-case bus load above which startup warns (above 90 % it refuses): an integrator
+    # who has chosen a fuller bus says so here, once, instead of reading the warning at every start
+    bus_load_warn: float = field(default=0.70, bounds=(0.1, 0.9))
     following_error_rad: float = field(default=0.1, bounds=(0.0, 10.0), open_lo=True)  # CSP, 0x6065
     following_error_timeout_ms: int = field(default=100, bounds=(0, 65535))  # 0x6066
     sdo_timeout_s: float = field(default=0.5, bounds=(0.01, 10.0))
@@ -214,7 +217,7 @@ def load_canopen_settings(raw: Any, cfg: RobotConfig, file: str) -> CanopenSetti
         )
     for bus in s.bus_list():
         load = bus_load(s.traffic(len(bus.axes)), cfg.control_period_s, bus.bitrate_bit_s)
-        verdict, message = load.verdict()
+        verdict, message = load.verdict(s.bus_load_warn)
         named = f"bus {bus.channel}: {message}"
         if verdict == "refuse":
             raise ConfigError(file, "control_period_s", f"(={cfg.control_period_s:g}): {named}")

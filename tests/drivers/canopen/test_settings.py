@@ -35,7 +35,12 @@ def test_six_axes_at_500_hz_are_accepted_with_a_bus_load_warning(capsys: pytest.
         "tcp_tune": True,  # TCP_NODELAY: a tick's frames are not held back by Nagle's algorithm
         "channel": "can0",
     }
-    assert "warning: bus can0: bus load" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "warning: bus can0: bus load" in err and "bus_load_warn in [resource.settings]" in err
+    load_canopen_settings({**raw(), "bus_load_warn": 0.85}, ur5e(), FILE)  # the integrator accepts it
+    assert "bus load" not in capsys.readouterr().err
+    with pytest.raises(ConfigError, match=r"bus_load_warn \(=0.95\) must be in \[0.1, 0.9\]"):
+        load_canopen_settings({**raw(), "bus_load_warn": 0.95}, ur5e(), FILE)
 
 
 def test_1_khz_is_refused_with_the_shortest_period_that_fits() -> None:
