@@ -147,7 +147,6 @@ class Supervisor:
                 "a new one is refused until it ends (if it never does: restart orccadd)"
             )
 
-
     def _still_running(self) -> str:
         """Why a reset waits for the mission, and what ends it: the operator inputs it may be
         waiting for (a safe procedure that awaits an acknowledgement), `stop`, `abort`."""

@@ -244,11 +244,13 @@ def test_a_resources_details_do_not_repeat_what_its_description_said() -> None:
     """Dynamixel's describe listed the port and the baud rate twice (description, then details)."""
     from orccadd.ctl.human import _resource
 
-    res = {"backend": "dynamixel", "clock": "loop", "modes": ["position"], "mode_switch_needs_disable": True,
-           "position": "measured", "velocity": "measured", "torque": "estimated", "brakes": False,
-           "stop_categories": [0, 2], "read_time_s": 0.001, "write_time_s": 0.0005, "fault_reset": True,
-           "fault_injection": [], "port": "/dev/ttyUSB0", "baud_rate": "4000000",
-           "diagnostics": {"lifecycle": "active", "mode": "position", "status": [],
-                           "details": {"port": "/dev/ttyUSB0", "baud_rate": 4000000, "reads": 12}}}  # fmt: skip
+    details = {"port": "/dev/ttyUSB0", "baud_rate": 4000000, "reads": 12}
+    res = {
+        "backend": "dynamixel", "clock": "loop", "modes": ["position"], "mode_switch_needs_disable": True,
+        "position": "measured", "velocity": "measured", "torque": "estimated", "brakes": False,
+        "stop_categories": [0, 2], "read_time_s": 0.001, "write_time_s": 0.0005, "fault_reset": True,
+        "fault_injection": [], "port": "/dev/ttyUSB0", "baud_rate": "4000000",
+        "diagnostics": {"lifecycle": "active", "mode": "position", "status": [], "details": details},
+    }  # fmt: skip
     text = "\n".join(_resource(res))
     assert text.count("/dev/ttyUSB0") == 1 and text.count("4000000") == 1 and "reads" in text, text

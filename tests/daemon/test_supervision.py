@@ -182,4 +182,5 @@ def test_a_reset_while_the_safe_procedure_runs_says_what_ends_it() -> None:
         sup.begin_reset(lambda: None)
     words = str(e.value)
     assert "safe procedure, after the stop of arm" in words
-    assert "`orccadctl send Stop` or `orccadctl send Go`" in words and "`orccadctl stop` (or `abort`)" in words
+    assert "`orccadctl send Stop` or `orccadctl send Go`" in words
+    assert "`orccadctl stop` (or `abort`)" in words
