@@ -70,8 +70,11 @@ def cell_table(name: str, port: int, connect: list[str], certs: Path, peers: lis
 
 
 @contextlib.contextmanager
-def daemons(names: list[str], certs: Path, cell: bool = True) -> Iterator[list[DaemonProcess]]:
-    """A daemon per name on sim-ur5e, each a peer of the cell (connected to those before it)."""
+def daemons(
+    names: list[str], certs: Path, cell: bool = True, cell_lines: str = ""
+) -> Iterator[list[DaemonProcess]]:
+    """A daemon per name on sim-ur5e, each a peer of the cell (connected to those before it);
+    `cell_lines` added to each one's `[cell]` table."""
     tmp = Path(tempfile.mkdtemp(prefix="orccadd-cell-bench-"))
     running: list[DaemonProcess] = []
     endpoints: list[str] = []
@@ -83,7 +86,7 @@ def daemons(names: list[str], certs: Path, cell: bool = True) -> Iterator[list[D
             text = config.read_text()
             if cell:
                 port = free_port()
-                text += cell_table(name, port, list(endpoints), certs, names)
+                text += cell_table(name, port, list(endpoints), certs, names) + cell_lines
                 endpoints.append(f"tls/127.0.0.1:{port}")
             config.write_text(text)
             running.append(DaemonProcess(config, d / "orccadd.sock", d / "orccadd.log", up_timeout_s=120.0))

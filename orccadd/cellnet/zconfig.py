@@ -6,7 +6,9 @@ The access control (Zenoh's, matching the peer certificate's common name) lets e
 subscribe to what this daemon publishes, query its `read` key and declare its liveliness token
 under its own name; the names in `control` alone put there (`orccadd/<cell>/<its name>/…`: their
 signals; a peer cannot speak for another, and a read-only one feeds no mission) and reach the
-`control` key. Everything else, and every peer not listed, is denied.
+`control` key. Everything else, and every peer not listed, is denied. With `ros2 = true` the
+rules name rmw_zenoh's `@ros2_lv/**` too: Zenoh's `**` does not match a chunk beginning with `@`,
+so the node's liveliness tokens would reach no peer (a read peer saw the JointStates, not the node).
 
 A daemon takes no Zenoh message longer than `DAEMON_RX_MESSAGE_MAX` (reassembled from a link's
 fragments): what it is sent is a request line (at most `MAX_LINE` bytes), a signal (at most 4 KiB)
@@ -28,6 +30,7 @@ from orccadd.config.cellnet import CellNetConfig
 from orccadd.wire.commands import MAX_LINE
 
 LOOPBACK_ANY_PORT = "127.0.0.1:0"
+ROS2_ADMIN_SPACE = "@ros2_lv"  # rmw_zenoh's liveliness tokens (`cellnet.ros2.ADMIN_SPACE`: numpy-free here)
 # Zenoh's `transport.link.rx.max_message_size` on a daemon (its default is 1 GiB: a peer's 200 MiB
 # put was held whole in memory before any callback saw it). A request line with Zenoh's headers
 # fits; a message beyond it is dropped on reassembly, the link kept (zenoh 1.10; not counted here).
@@ -88,8 +91,11 @@ def access_control(net: CellNetConfig) -> dict[str, Any]:
     """Zenoh's access control for a daemon: default deny; see the module's docstring."""
     cell, me = net.name, net.robot
     names = list(dict.fromkeys([*net.control, *net.read]))
+    # `**` matches no chunk that begins with '@' (a verbatim chunk, zenoh 1.x): rmw_zenoh's
+    # liveliness tokens under `@ros2_lv/…` are named on their own, or no peer would see them
+    everywhere = ["**", f"{ROS2_ADMIN_SPACE}/**"] if net.ros2 else ["**"]
     rules: list[dict[str, Any]] = [
-        _rule("to-peers", ["egress"], EVERY_MESSAGE, ["**"]),
+        _rule("to-peers", ["egress"], EVERY_MESSAGE, everywhere),
         _rule(
             "interest",
             ["ingress"],
@@ -100,7 +106,7 @@ def access_control(net: CellNetConfig) -> dict[str, Any]:
                 "declare_queryable",
                 "reply",
             ],
-            ["**"],
+            everywhere,
         ),
         _rule("read", ["ingress"], ["query"], [keys.robot_key(cell, me, keys.READ)]),
         _rule("control", ["ingress"], ["query"], [keys.robot_key(cell, me, keys.CONTROL)]),

@@ -65,7 +65,11 @@ ROLELESS_WAIT_S = 2.0
 RESERVED_MAX = 4
 RESERVED_WAIT_S = 2.0
 RT_MAX = 1 << 20
-CELL_TICK_S = 0.005  # the cell's publishing loop wakes at most this often
+LATE_MAX = 256  # requests given up on whose late replies are still recognised
+# the cell's publishing loop sleeps at least this long (no spinning); it wakes at each joint
+# state's own deadline: a floor of 5 ms here held joints_hz 500 to ~180 a second
+CELL_TICK_S = 0.0005
+CELL_CATCH_UP_S = 0.05  # joint states late by up to this are still sent (the newest state each)
 CELL_SWITCH_INTERVAL_S = 0.0005  # with a cell: Zenoh's threads get the GIL this soon
 CELL_STATUS_MIN_S = 0.1  # a status on an event: not more often (its timing figures cost ~1 ms)
 CELL_TRACE_S = 0.05  # ... and at least this often (the trace's events to the cell)
@@ -105,6 +109,11 @@ class RtLink:
         self.closed = False
         self.on_push: Callable[[dict[str, Any]], None] = lambda msg: None  # unasked: `{"push": …}`
         self.oneway_id = 0  # requests whose reply nobody awaits: negative ids, counting down
+        # a one-way request refused (the real-time process replies to those only then)
+        self.on_refused: Callable[[dict[str, Any]], None] = lambda reply: None
+        self.discarded: dict[str, int] = {}  # what the real-time process dropped, its link full
+        self.late: dict[int, tuple[str, float]] = {}  # requests given up on: (command, when)
+        self.late_replies = 0
 
     async def _read_replies(self) -> None:
         loop = asyncio.get_running_loop()
@@ -118,17 +127,49 @@ class RtLink:
                 except ValueError:
                     continue
                 if isinstance(reply, dict) and "push" in reply:
-                    self.on_push(reply)
+                    self._pushed(reply)
                     continue
                 rid = reply.get("id") if isinstance(reply, dict) else None
                 fut = self.waiting.pop(rid, None) if isinstance(rid, int) else None
                 if fut is not None and not fut.done():
                     fut.set_result(reply)
+                elif isinstance(rid, int) and rid < 0:
+                    self.on_refused(reply)
+                elif isinstance(rid, int) and rid in self.late:
+                    self._late(rid, reply)
         self.closed = True
         for fut in self.waiting.values():
             if not fut.done():
                 fut.set_result({"ok": False, "error": "the real-time process is gone"})
         self.waiting.clear()
+
+    def _pushed(self, msg: dict[str, Any]) -> None:
+        if msg.get("push") == "link_discarded" and isinstance(msg.get("counts"), dict):
+            self.discarded = {str(k): int(v) for k, v in msg["counts"].items()}
+            log.error(
+                "the real-time process's link to this daemon was full: it discarded %s",
+                ", ".join(f"{n} {k}" for k, n in sorted(self.discarded.items())),
+            )
+            return
+        self.on_push(msg)
+
+    def _late(self, rid: int, reply: dict[str, Any]) -> None:
+        """A reply that came after its request was answered `NOT confirmed`: said, with what
+        it says (the client was told the command may have been done)."""
+        cmd, since = self.late.pop(rid)
+        self.late_replies += 1
+        log.warning(
+            "the real-time process answered %s %.1f s after the wait ended (its client was told "
+            "NOT confirmed): %s",
+            cmd,
+            time.monotonic() - since,
+            "ok" if reply.get("ok") else f"error: {reply.get('error')}",
+        )
+
+    def report(self) -> dict[str, Any]:
+        """For `status`'s `rt_link`: messages the real-time process discarded (its link full),
+        by kind; replies that came after their wait ended."""
+        return {"discarded": dict(self.discarded), "late_replies": self.late_replies}
 
     async def call(
         self, cmd: str, args: dict[str, Any], timeout_s: float | None = RT_REPLY_S
@@ -149,7 +190,15 @@ class RtLink:
                 await loop.sock_sendall(self.sock, json.dumps({"id": rid, "cmd": cmd, "args": args}).encode())
             return await asyncio.wait_for(fut, timeout_s)
         except TimeoutError:
-            return {"ok": False, "error": f"the real-time process did not answer within {timeout_s:g} s"}
+            # not a failure: the command may have been done, and its reply come later (`_late`)
+            if len(self.late) >= LATE_MAX:
+                self.late.pop(next(iter(self.late)))
+            self.late[rid] = (cmd, time.monotonic())
+            return {
+                "ok": False,
+                "error": f"{cmd} NOT confirmed: the real-time process did not answer within "
+                f"{timeout_s:g} s; it may still have been done (`events` says)",
+            }
         except OSError as e:
             self.closed = True
             return {"ok": False, "error": f"link to the real-time process lost: {e}"}
@@ -307,6 +356,12 @@ class CommandDaemon:
             peer.close()
             return None, None
         self.rt.on_push = lambda msg: self._pushed(peer, msg)
+        self.rt.on_refused = lambda reply: peer.say(
+            "cell: inputs refused",
+            logging.WARNING,
+            "cell: an input from the cell refused by the real-time process: %s",
+            reply.get("error"),
+        )
         peer.deliver_now = self._deliver_now
         peer.mission_changed(self.desc.get("mission"))
         self.cell = peer
@@ -331,8 +386,9 @@ class CommandDaemon:
         return ""
 
     def _deliver_now(self, who: str, name: str, what: str) -> bool:
-        """From Zenoh's thread: a `cell_input` datagram on the link, its reply not awaited (the
-        real-time process serves it on arrival and traces it); False if it could not be sent."""
+        """From Zenoh's thread: a `cell_input` datagram on the link, one-way (a negative id: the
+        real-time process serves it on arrival, traces it, and replies only to refuse it,
+        `RtLink.on_refused`); False if it could not be sent."""
         taken = self._mission_input(who, name, what)
         if not taken:
             return True  # nothing to deliver: done
@@ -375,8 +431,8 @@ class CommandDaemon:
 
     async def _cell_pump(self, peer: CellPeer) -> None:
         """Publish to the cell: every trace event as it comes (and the status with it), the
-        status at `status_hz`, the joint states at `joints_hz`; never faster than this loop's
-        `CELL_TICK_S` granularity."""
+        status at `status_hz`, the joint states at `joints_hz` (each at its deadline, on a fixed
+        grid: the rate asked is the rate sent; `benchmarks/cell_joints.py`)."""
         assert self.net is not None
         trace = RingReader(self.tel.trace, self.tel.header, H.TRACE_HEAD, from_now=True)
         joints_s = 1.0 / self.net.joints_hz if self.net.joints_hz else float("inf")
@@ -406,7 +462,11 @@ class CommandDaemon:
                     status_at = now
                 if now >= next_joints:
                     peer.put(keys.JOINTS, views.joint_states(self.tel, self.desc, self.units()))
-                    next_joints = max(next_joints + joints_s, now)
+                    # on the deadlines' grid: one missed (the loop busy) is made up at once, up
+                    # to `CELL_CATCH_UP_S` behind; beyond, the grid starts again from now
+                    next_joints += joints_s
+                    if next_joints < now - CELL_CATCH_UP_S:
+                        next_joints = now + joints_s
             except asyncio.CancelledError:
                 raise
             except Exception as e:  # a publication lost must not end the others
@@ -615,6 +675,7 @@ class CommandDaemon:
     def _status(self, log_state: dict[str, Any] | None) -> dict[str, Any]:
         """`status`'s result; with a cell, its `cell` section (what was dropped, and why)."""
         out = views.status(self.tel, self.desc, log_state, self.units())
+        out["rt_link"] = self.rt.report()
         if self.cell is not None:
             out["cell"] = self.cell.report()
         return out

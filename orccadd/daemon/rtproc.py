@@ -68,6 +68,10 @@ RELEASE_S = 8.0  # how long shutdown waits for the resources' release (one that 
 URGENT_MAX_BYTES = 4096  # an abort or a stop is a short message; longer ones are not looked into
 RECEIVE_MAX = 256  # messages read per wake-up (the command daemon has fewer in flight)
 SERVE_BUDGET_PERIODS = 0.3  # other requests served per slack; the rest at the next one
+# messages to the command daemon waiting for room on the link (its kernel buffer full): beyond,
+# the oldest push goes first, then the oldest reply; each one discarded is counted by kind
+OUTBOX_MAX = 4096
+DISCARD_LOG_S = 10.0  # a discarded message said at most this often (with the counts so far)
 
 
 Request = tuple[Any, str, dict[str, Any]]  # (id, cmd, args), decoded and checked once
@@ -85,6 +89,12 @@ def decode(data: bytes) -> Request | dict[str, Any]:
 # served the moment they arrive: abort and stop, and a peer's signal, which enters the automaton
 # as a task's event does (one reaction, at this thread's priority, never a tick's work)
 ON_ARRIVAL = URGENT_COMMANDS | {"cell_input"}
+
+
+def one_way(rid: Any) -> bool:
+    """A request id the command daemon awaits no reply to (negative: a peer's signal sent
+    straight from its Zenoh thread)."""
+    return isinstance(rid, int) and not isinstance(rid, bool) and rid < 0
 
 
 def rt_socket_path(public: str) -> str:
@@ -121,6 +131,13 @@ class RealtimeProcess:
         self.inbox_since_ns = 0
         self.pending: list[tuple[Any, Pending]] = []  # (request id, reply to complete)
         self.urgent: UrgentSocket | None = None
+        # to the command daemon when its link has room again, in order (`_send`); discarded:
+        # by kind (`reply`, `one_way_error`, a push's name), told to it (`link_discarded`)
+        self.outbox: deque[bytes] = deque()
+        self.outbox_kinds: deque[str] = deque()
+        self.discarded: dict[str, int] = {}
+        self.discarded_told = 0  # the total the command daemon was last told of
+        self.discard_logged_s = 0.0
 
     # ---- startup --------------------------------------------------------------------------
     def start(self) -> None:
@@ -265,7 +282,7 @@ class RealtimeProcess:
                 for fd in fds - registered:
                     poller.register(fd, select.POLLIN)
                 registered = fds
-                busy = bool(self.inbox or self.pending)
+                busy = bool(self.inbox or self.pending or self.outbox)
                 ready = poller.poll(max(1, int(self.cfg.control_period_s * 1e3)) if busy else 100)
                 with self.machine.reactor.held():  # the control thread reacts to nothing meanwhile
                     self._work(ready, sig_r)
@@ -303,6 +320,7 @@ class RealtimeProcess:
                 self.urgent.on_readable(fd)
         self._serve_inbox()
         self._complete_pending()
+        self._flush()
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         self.stop_requested = signal.Signals(signum).name
@@ -340,6 +358,9 @@ class RealtimeProcess:
         self.machine.mission.cell_output = self._push_cell_output
         self.inbox.clear()  # requests of the old link: their client has gone
         self.pending.clear()
+        self.outbox.clear()  # ... and what was waiting to be sent on it
+        self.outbox_kinds.clear()
+        self.discarded_told = 0  # the new one is told the counts so far
         self.machine.note("command daemon attached")
 
     def _receive(self) -> None:
@@ -400,7 +421,9 @@ class RealtimeProcess:
         rid, reply = self._handle(req)
         if isinstance(reply, Pending):
             self.pending.append((rid, reply))
-        else:
+        elif not one_way(rid) or not reply.get("ok"):
+            # a one-way request (a peer's signal sent straight from Zenoh's thread, a negative
+            # id) waits for no reply: only a refusal goes back, for the command daemon to say
             self._send(reply)
 
     def _complete_pending(self) -> None:
@@ -432,11 +455,66 @@ class RealtimeProcess:
         """The instant emitted `name`, an output to the cell: the command daemon publishes it."""
         self._send({"push": "cell_output", "name": name, "mission": mission})
 
-    def _send(self, reply: dict[str, Any]) -> None:
-        # if the command daemon is not reading, it times out; the loop carries on
-        if self.conn is not None:
-            with contextlib.suppress(BlockingIOError, OSError):
-                self.conn.send(json.dumps(reply, default=str).encode())
+    def _send(self, msg: dict[str, Any]) -> None:
+        """A reply or a push to the command daemon, never blocking: after what waits for room
+        on the link (`outbox`), in order; one that cannot wait (`OUTBOX_MAX`) is discarded,
+        counted by kind and said (`_discard`)."""
+        if self.conn is None:
+            return
+        data = json.dumps(msg, default=str).encode()
+        kind = str(msg["push"]) if "push" in msg else "one_way_error" if one_way(msg.get("id")) else "reply"
+        if not self.outbox:
+            try:
+                self.conn.send(data)
+                return
+            except BlockingIOError:
+                pass
+            except OSError:  # the link is gone: `_receive` sees it
+                return
+        if len(self.outbox) >= OUTBOX_MAX:
+            self._discard_oldest()
+        self.outbox.append(data)
+        self.outbox_kinds.append(kind)
+
+    def _flush(self) -> None:
+        """What waits for room on the link, oldest first, while there is room; then, if messages
+        were discarded since the command daemon was last told, their counts (`link_discarded`)."""
+        conn = self.conn
+        if conn is None:
+            return
+        while self.outbox:
+            try:
+                conn.send(self.outbox[0])
+            except BlockingIOError:
+                return
+            except OSError:
+                return
+            self.outbox.popleft()
+            self.outbox_kinds.popleft()
+        total = sum(self.discarded.values())
+        if total != self.discarded_told:
+            with contextlib.suppress(OSError):
+                conn.send(json.dumps({"push": "link_discarded", "counts": self.discarded}).encode())
+                self.discarded_told = total
+
+    def _discard_oldest(self) -> None:
+        """Room for one more: the oldest push (its loss is counted by the command daemon too:
+        an output's in `cell.outputs.lost`), else the oldest reply (its request times out)."""
+        i = next((i for i, k in enumerate(self.outbox_kinds) if k not in ("reply", "one_way_error")), 0)
+        kind = self.outbox_kinds[i]
+        del self.outbox[i]
+        del self.outbox_kinds[i]
+        self.discarded[kind] = self.discarded.get(kind, 0) + 1
+        now = time.monotonic()
+        if now - self.discard_logged_s >= DISCARD_LOG_S:
+            self.discard_logged_s = now
+            log.error(
+                "the link to the command daemon is full (%d messages waiting): a %s discarded; "
+                "discarded so far: %s",
+                len(self.outbox),
+                kind,
+                ", ".join(f"{k} {n}" for k, n in sorted(self.discarded.items())),
+            )
 
     def _urgent(self, req: Request) -> dict[str, Any]:
         """An abort or a stop from the urgent socket (never a Pending: both act at once)."""
