@@ -4,7 +4,8 @@ The automaton thread never touches a task the control thread is ticking. It post
 
 - a switch request (a sequence number and the task), applied at the start of the next tick; the
   new task initialises from the measured state and continues the outgoing task's command
-  (`RobotTask.continue_from`), so the arm is never left without a fresh command;
+  (`RobotTask.continue_from`), so the arm is never left without a fresh command; a position
+  command in its position and velocity too (the new law starts from the command's motion);
 - parameter changes, through a single-producer/single-consumer mailbox: applied at the start of
   the next tick, in order, each acknowledged with that tick's number (its telemetry record);
 - a wish for slack: after the next tick ends, the control thread writes a byte to `slack_fd`,
@@ -19,6 +20,7 @@ import time
 from collections.abc import Callable
 from typing import Protocol
 
+from orccadd.modules.base import CommandMotion
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
 from orccadd.runtime.mailbox import Mailbox
@@ -81,6 +83,7 @@ class SwitchingLoop(ControlLoop):
         self.reactor: TickReactor | None = None  # reacts to a tick's events in that tick
         self.switches_in_tick = 0
         self._t_s = 0.0
+        self._motion = CommandMotion(resource.model.dof)  # the outgoing command's, at a switch
 
     # ---- the automaton thread's side -------------------------------------------------------
     @property
@@ -189,13 +192,18 @@ class SwitchingLoop(ControlLoop):
         # the outgoing task's command of the last tick (in the tick: `compute` has begun this one)
         wrote = old is not None and (old.wrote_before if in_tick else old.wrote)
         continues = not fresh and wrote and old is not None and old.signature.command is mode
+        # a position command's motion, read before `activate` (a restarted task clears its own)
+        moving = continues and old is not None and old.command_motion(self._motion)
+        # the resource's faults the arm is safe-stopped for, already raised: not raised again
+        reported = old.reported_t3 if old is not None and res.stopping_or_stopped else 0
         if old is not None and old is not new:
             old.deactivate()
         if mode is not res.mode:
             res.perform_mode_switch(mode)
         new.activate()
+        new.reported_t3 = reported
         if continues and old is not None:
-            new.continue_from(old.sent, self.blend_ticks)
+            new.continue_from(old.sent, self.blend_ticks, self._motion if moving else None)
         self.active = new
         self.switches += 1
 

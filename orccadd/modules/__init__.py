@@ -2,8 +2,8 @@
 
 from importlib.metadata import entry_points
 
-from orccadd.modules import control, filters, trajectory, ur, watchers  # noqa: F401 - register built-ins
-from orccadd.modules.base import MODULES, Module, ModuleContext, Parameter, Port, register
+from orccadd.modules import control, filters, hold, trajectory, ur, watchers  # noqa: F401 - register built-ins
+from orccadd.modules.base import MODULES, CommandMotion, Module, ModuleContext, Parameter, Port, register
 
 
 def module_class(type_name: str) -> type[Module] | None:
@@ -18,4 +18,13 @@ def module_class(type_name: str) -> type[Module] | None:
     return None
 
 
-__all__ = ["MODULES", "Module", "ModuleContext", "Parameter", "Port", "module_class", "register"]
+__all__ = [
+    "MODULES",
+    "CommandMotion",
+    "Module",
+    "ModuleContext",
+    "Parameter",
+    "Port",
+    "module_class",
+    "register",
+]

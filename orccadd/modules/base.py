@@ -44,6 +44,19 @@ class ModuleContext:
         return self.model.dof
 
 
+class CommandMotion:
+    """The position command a task continues at a switch (`Module.continued`): the outgoing
+    task's last command `q_rad` and its velocity and acceleration then, by finite differences of
+    the commands before it (rad, rad/s, rad/s^2). Preallocated by its owner, written in place."""
+
+    __slots__ = ("ddq_rad_s2", "dq_rad_s", "q_rad")
+
+    def __init__(self, dof: int) -> None:
+        self.q_rad: FloatArray = np.zeros(dof)
+        self.dq_rad_s: FloatArray = np.zeros(dof)
+        self.ddq_rad_s2: FloatArray = np.zeros(dof)
+
+
 class Port:
     """An input or output port. `value` is the numpy buffer (shared through wiring)."""
 
@@ -175,6 +188,10 @@ class Module(ABC):
         self.inputs: dict[str, Port] = {}
         self.outputs: dict[str, Port] = {}
         self.parameters: dict[str, Parameter] = {}
+        # when the task's law starts (`begin`): the position command it continues, or None (it
+        # starts from the measured state alone). Set by the task: a position task switched to
+        # while the outgoing one commanded, in the tick after; read in `start`
+        self.continued: CommandMotion | None = None
 
     # ---- declarations (constructor only) --------------------------------------------------
     def add_input(self, name: str, shape: tuple[int, ...], unit: str, dtype: type = np.float64) -> Port:

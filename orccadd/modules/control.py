@@ -174,32 +174,6 @@ class GravityCompensation(KernelModule):
         return gravity_only
 
 
-@register("hold_position")
-class HoldPosition(KernelModule):
-    """Setpoint source: the measured position when the task starts, zero velocity."""
-
-    def __init__(self, name: str, ctx: ModuleContext) -> None:
-        super().__init__(name, ctx)
-        n = ctx.dof
-        self.q_des = self.add_output("q_des", (n,), "rad")
-        self.dq_des = self.add_output("dq_des", (n,), "rad/s")
-        self.ddq_des = self.add_output("ddq_des", (n,), "rad/s^2")
-        self._outs: tuple[list[float], list[float], list[float]] = ([0.0] * n, [0.0] * n, [0.0] * n)
-
-    def start(self, state: JointState) -> None:
-        n = self.ctx.dof
-        self._outs = (state.q_rad.tolist(), [0.0] * n, [0.0] * n)
-        self.q_des.value[:] = state.q_rad
-        self.dq_des.value[:] = 0.0
-        self.ddq_des.value[:] = 0.0
-
-    def kernel(self) -> Kernel:
-        def hold(t_s: float) -> tuple[list[float], list[float], list[float]]:
-            return self._outs
-
-        return hold
-
-
 @register("measured_position")
 class MeasuredPosition(KernelModule):
     """Setpoint source for a task whose motion the device runs itself (a UR's force mode or

@@ -20,11 +20,12 @@ import numpy.typing as npt
 
 from orccadd.errors import ParameterError, did_you_mean
 from orccadd.fault import Fault, FaultKind
-from orccadd.modules.base import Module, Parameter
+from orccadd.modules.base import CommandMotion, Module, Parameter
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.torque_hold import TorqueHold
 from orccadd.task.compiled import CompiledTick, compile_schedule
 from orccadd.task.events import EventKind, EventQueue
+from orccadd.task.motion import CommandHistory, extrapolate
 from orccadd.types import T3_MASK, TASK_TIMEOUT, CommandMode, Phase, Status
 from orccadd.vec import max_of, min_of
 
@@ -171,6 +172,10 @@ class RobotTask:
         self.last_write_flags = 0
         self.fault_reason = ""
         self.fault: Fault | None = None  # what its last type 3 exception was about
+        # the resource's type 3 status flags (`T3_MASK`) already raised as a type 3 while the
+        # resource is safe-stopped for it: by this task, or by the one before it (the switch hands
+        # them over). A task does not raise them again: one stop, one type 3, until a reset
+        self.reported_t3 = 0
         self._pre_started = False
         self._tunable = {f"{m.name}.{p.name}": (m, p) for m in modules for p in m.parameters.values()}
         # bumpless transfer: the first command continues the previous task's last one
@@ -190,9 +195,15 @@ class RobotTask:
         # would clamp that step as a limit violation); 0.9 of it, per robot period
         position = signature.command is CommandMode.POSITION
         model, robot_period_s = resource.model, resource.config.control_period_s
+        self._robot_period_s = robot_period_s  # a switched-to task's first command: a tick later
         self._blend_step_rad: list[float] = (
             (model.v_max_rad_s * robot_period_s * 0.9).tolist() if position else []
         )
+        # position commands: the last ones sent, whose motion a task switched to continues (its
+        # modules start from it, `Module.continued`; the blend from where it goes on to)
+        self._history = CommandHistory(len(command), period_s) if position and full else None
+        self._motion = CommandMotion(len(command))  # the outgoing command's, from `continue_from`
+        self._continuing = False
         self._out: npt.NDArray[np.float64] | None = None  # compute's command, for commit
         # the schedule and the shell's events as one generated function (None: interpreted)
         self.compiled: Callable[[float], None] | None = None
@@ -215,14 +226,35 @@ class RobotTask:
         self._pre_started = False
         self._holding_previous = False
         self._blend_left = 0
+        self._continuing = False
+        self.reported_t3 = 0
+        if self._history is not None:
+            self._history.clear()
 
-    def continue_from(self, previous: npt.NDArray[np.float64], blend_ticks: int) -> None:
+    def command_motion(self, out: CommandMotion) -> bool:
+        """The motion of this task's position command (`CommandHistory.motion`) into `out`;
+        False for a task not commanding positions for every joint, or that sent none since it
+        was activated. Tick-safe."""
+        return self._history is not None and self._history.motion(out)
+
+    def continue_from(
+        self, previous: npt.NDArray[np.float64], blend_ticks: int, motion: CommandMotion | None = None
+    ) -> None:
         """Switching (seed §5.1): until the law starts, keep sending `previous` (the outgoing
         task's last command) — for a torque task, a hold (`TorqueHold`: the outgoing law's last
         torque is a stale feed-forward on a moving arm, and no watcher of this task runs before
         its law does); then blend the difference between it and this law's first command out
-        linearly over `blend_ticks`, so the command never jumps. Call after `activate`."""
+        linearly over `blend_ticks`, so the command never jumps. `motion`: the outgoing position
+        command's (`command_motion`), for a position task: its modules start from it
+        (`Module.continued`) and the blend from where it goes on to, so the command keeps its
+        velocity too. Call after `activate`."""
         self.sent[:] = previous
+        if motion is not None and self._history is not None:
+            m = self._motion
+            m.q_rad[:] = motion.q_rad
+            m.dq_rad_s[:] = motion.dq_rad_s
+            m.ddq_rad_s2[:] = motion.ddq_rad_s2
+            self._continuing = True
         self._holding_previous = True
         if self._torque_hold is not None:
             self._torque_hold.release()  # held where the arm is when the wait begins
@@ -368,8 +400,9 @@ class RobotTask:
         res = self.resource
         st = res.read(t_s) if read else res.state
         if st.status & T3_MASK:
-            self._resource_t3(t_s, st.status)
-            return
+            if st.status & T3_MASK & ~self.reported_t3 or not res.stopping_or_stopped:
+                self._resource_t3(t_s, st.status)
+            return  # (already stopped for it: a task before this one raised it)
         phase = self.phase
         if phase is Phase.PRE:
             if not self._pre_started:
@@ -380,8 +413,12 @@ class RobotTask:
                     if self._torque_hold is not None:
                         self._torque_hold.update(st, self.sent)
                     self._out = self.sent  # the outgoing command (a torque: a hold), until the law starts
+                    if self._continuing:  # the command stands still there now
+                        self._stand_still()
                 return
+            continued = self._motion if self._continuing else None
             for m in self.modules:
+                m.continued = continued
                 m.begin(st)
             self.phase = phase = Phase.RUN
             self.t_started_s = t_s
@@ -406,7 +443,11 @@ class RobotTask:
         if self._holding_previous:
             self._holding_previous = False
             if self._blend_ticks:
-                np.subtract(self.sent, cmd, out=self._offset)
+                if self._continuing:  # from where the outgoing command goes on to
+                    extrapolate(self._motion, self._robot_period_s, self._offset)
+                    self._offset -= cmd
+                else:
+                    np.subtract(self.sent, cmd, out=self._offset)
                 if self._blend_step_rad:  # long enough that no step outruns the joints (a switch)
                     need = max(
                         abs(o) / s for o, s in zip(self._offset.tolist(), self._blend_step_rad, strict=True)
@@ -419,10 +460,18 @@ class RobotTask:
             self._blend_left -= 1
         self._out = cmd
 
+    def _stand_still(self) -> None:
+        m = self._motion
+        m.q_rad[:] = self.sent
+        m.dq_rad_s[:] = 0.0
+        m.ddq_rad_s2[:] = 0.0
+
     def _send(self, t_s: float, cmd: npt.NDArray[np.float64]) -> None:
         flags = self.resource.write(t_s, cmd)
         if cmd is not self.sent:
             self.sent[:] = cmd
+        if self._history is not None:
+            self._history.record(cmd)
         self.wrote = True
         self.last_write_flags = flags
         if flags & T3_MASK:
@@ -459,6 +508,7 @@ class RobotTask:
             self.fault = self._fault_for(ev.name, "")
 
     def _resource_t3(self, t_s: float, flags: int) -> None:
+        self.reported_t3 |= flags & T3_MASK
         if flags & Status.FAULT:
             name = "ResourceFault"
         elif flags & Status.COMM_LOST:

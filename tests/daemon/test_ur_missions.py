@@ -158,7 +158,7 @@ def test_the_guarded_move_ends_on_its_contact_with_the_table(sim: UrSimProcess, 
     instants = run(daemon, sim, "ur_guarded")
     assert started(instants) == ["Home", "Approach"], instants
     assert "Approach.done" in inputs(instants) and "Approach.T2.NoContact" not in inputs(instants)
-    st = sim_status(sim)
+    st = sim.wait_for(at_rest, timeout_s=30)  # the Hold brakes within the limits, then holds
     assert abs(tcp_m(st["q_rad"])[2] - TABLE_Z_M) < 0.01, st  # held where it touched
     assert st["protective_stops"] == 0 and st["safety_mode"] == "NORMAL", st
 

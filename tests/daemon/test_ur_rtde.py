@@ -62,6 +62,19 @@ def t3_inputs(d: Daemon) -> list[str]:
     return [n.split(".", 1)[1] for n in names]
 
 
+def t3_trace(d: Daemon) -> list[str]:
+    """Every type 3 in the trace: the automaton's inputs and the events it does not see (the
+    Hold task's), full names."""
+    ev = d.call("events", last=200)["events"]
+    out: list[str] = []
+    for e in ev:  # type: ignore[union-attr]
+        if e["kind"] == "instant":
+            out += [i for i in e["inputs"] if ".T3." in i]
+        elif e["kind"] == "event" and ".T3." in e["event"]:
+            out.append(e["event"])
+    return out
+
+
 def start_mission_until_reach(d: Daemon) -> None:
     r = d.ctl("load", MISSION)
     assert r.returncode == 0, r.stderr
@@ -104,6 +117,8 @@ def test_protective_stop_mid_motion_safe_procedure_then_orccadctl_reset_and_a_ne
         assert "Cannot unlock protective stop" in r.stderr and time.monotonic() < deadline, r.stderr
         time.sleep(0.3)
     daemon.wait(lambda s: not s["faulted"] and not s.get("resource_status"))
+    # one stop, one type 3: not the Hold task's again on a controller still protective-stopped
+    assert [n.split(".", 1)[1] for n in t3_trace(daemon)] == ["T3.ResourceFault"], t3_trace(daemon)
     st = sim.status()
     assert st["safety_mode"] == "NORMAL" and st["runtime_state"] == "PLAYING", st
     run_to_success(daemon)
