@@ -117,7 +117,7 @@ def test_describe_says_robot_resource_joints_mission_and_tasks(session: dict[str
     )
     assert re.search(r"\n  shoulder_pan_joint +-6.283 +6.283 +3.142 ", idle.out)  # sim-ur5e's limits
     assert "\nmission: none loaded" in idle.out
-    assert re.search(r"\n  Hold +pd +kp, kd\n", idle.out)
+    assert re.search(r"\n  Hold +hold +limit_scale \(fixed\)\n +pd +kp, kd\n", idle.out), idle.out
     text = session["describe"].out
     assert "\nmission PickDemo (" in text and re.search(r"\n  main procedure +PickAndInspect\n", text)
     assert re.search(r"\n  operator inputs +Stop\n", text)

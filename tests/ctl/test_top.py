@@ -33,6 +33,7 @@ RUNNING: dict[str, Any] = {
     "result": "none", "faulted": False, "fault": None, "helper_pid": 1210, "ticks": 414, "overruns": 0,
     "switches": 2, "heartbeat_age_s": 0.0005, "timing": TIMING, "log": None, "active_task": "Home",
     "task_phase": "run", "resource_status": [], "joints": JOINTS,
+    "rt_link": {"discarded": {}, "late_replies": 0},
 }  # fmt: skip
 HOLDING = {**RUNNING, "state": "holding", "active_task": "Hold", "switches": 3}
 CAUSE = {
