@@ -57,6 +57,12 @@ def instants(d: Daemon) -> list[dict[str, Any]]:
     return [e for e in events if e["kind"] == "instant"]
 
 
+def at_rest(status: dict[str, Any], resource: str) -> bool:
+    """`resource`'s safe stop is over: it is at rest (`stopped` in its status flags)."""
+    unit = next(r for r in status["resources"] if r["name"] == resource)
+    return "stopped" in (unit.get("resource_status") or [])
+
+
 def resources(d: Daemon) -> dict[str, dict[str, Any]]:
     described = cast(dict[str, Any], d.call("describe"))
     return {r["name"]: r for r in described["resources"]}
@@ -98,7 +104,9 @@ def test_a_fault_on_a_moving_resource_enters_the_safe_procedure_and_holds_the_ot
     assert r["left"]["fault"] and r["left"]["fault"]["resource"] == "left", r["left"]
     assert r["right"]["fault"] is None and r["right"]["task"] == "Hold_right", r["right"]
     dual.call("send", input="Stop")  # its acknowledgement
-    dual.wait(lambda s: s["state"] != "running", timeout_s=30)
+    # the run ended, and the stopped arm at rest: what `reset` needs (it refused once, in a
+    # fresh-clone run: "the safe stop of left is still under way")
+    dual.wait(lambda s: s["state"] != "running" and at_rest(s, "left"), timeout_s=30)
     assert cast(dict[str, Any], dual.call("reset"))["reset"]
     assert all(x["fault"] is None for x in resources(dual).values())
 
@@ -120,7 +128,7 @@ def test_a_fault_on_a_held_resource_enters_the_safe_procedure_and_a_reset_names_
     assert r["left"]["fault"] is None and r["left"]["task"] == "Hold_left", r["left"]  # held, not stopped
     assert dual.call("status")["state"] == "running"  # the safe procedure awaits Stop
     dual.call("send", input="Stop")  # its acknowledgement
-    s = dual.wait(lambda s: s["state"] != "running", timeout_s=30)
+    s = dual.wait(lambda s: s["state"] != "running" and at_rest(s, "right"), timeout_s=30)
     assert s["result"] == "safe", s
     refused = dual.reply("start")
     assert not refused["ok"] and "resource right was safe-stopped" in refused["error"], refused
@@ -140,7 +148,7 @@ def test_one_arms_plant_killed_while_it_moves_stops_it_alone(slow: tuple[Daemon,
     assert r["left"]["fault"]["kind"] == "comm_lost" and r["left"]["fault"]["resource"] == "left", r["left"]
     assert r["right"]["fault"] is None and r["right"]["task"] == "Hold_right", r["right"]
     dual.call("send", input="Stop")
-    dual.wait(lambda s: s["state"] != "running", timeout_s=30)
+    dual.wait(lambda s: s["state"] != "running" and at_rest(s, "left"), timeout_s=30)
     assert cast(dict[str, Any], dual.call("reset", resource="left"))["reset"]  # a new plant
     assert resources(dual)["left"]["fault"] is None
 
