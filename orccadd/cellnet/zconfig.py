@@ -121,13 +121,7 @@ def access_control(net: CellNetConfig) -> dict[str, Any]:
         subjects.append({"id": f"peer:{n}", "cert_common_names": [n]})
         granted = ["to-peers", "interest", own, "read"] + (["control"] if n in net.control else [])
         policies.append({"id": f"role:{n}", "rules": granted, "subjects": [f"peer:{n}"]})
-    return {
-        "enabled": True,
-        "default_permission": "deny",
-        "rules": rules,
-        "subjects": subjects,
-        "policies": policies,
-    }
+    return _deny_by_default(rules, subjects, policies)
 
 
 def console_access_control(net: CellNetConfig) -> dict[str, Any]:
@@ -158,6 +152,13 @@ def console_access_control(net: CellNetConfig) -> dict[str, Any]:
         subjects.append({"id": f"daemon:{d}", "cert_common_names": [d]})
         policies.append({"id": f"trust:{d}", "rules": ["interest", own], "subjects": [f"daemon:{d}"]})
     policies.append({"id": "send", "rules": ["to-daemons"], "subjects": [s["id"] for s in subjects]})
+    return _deny_by_default(rules, subjects, policies)
+
+
+def _deny_by_default(
+    rules: list[dict[str, Any]], subjects: list[dict[str, Any]], policies: list[dict[str, Any]]
+) -> dict[str, Any]:
+    """Zenoh's access control table: what the rules allow to their subjects, nothing else."""
     return {
         "enabled": True,
         "default_permission": "deny",

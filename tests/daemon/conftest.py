@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 from typing import cast
@@ -12,11 +13,13 @@ from typing import cast
 import pytest
 
 from orccadd.config.cell import CellConfig
+from orccadd.config.robot import RobotConfig
 from orccadd.daemon.machine import Machine
 from orccadd.daemon.replies import Pending
 from orccadd.launch import DaemonProcess
 from orccadd.robot import create_resource, load_robot_config, with_backend
 from orccadd.runtime import WallClock
+from orccadd.runtime.clock import Clock
 from orccadd.types import CommandMode
 from orccadd.wire.schema import Layout
 from orccadd.wire.telemetry import TelemetryBlock
@@ -86,27 +89,33 @@ def daemon(tmp_path: Path) -> Iterator[Daemon]:
         d.stop()
 
 
-@pytest.fixture
-def machine(tmp_path: Path) -> Iterator[Machine]:
-    """The real-time process's machine on sim-ur5e in this process, without its threads: a
-    test ticks the loop (`loop.executor.run`) and plays the automaton thread itself. Missions
-    load from `tmp_path` too."""
-    cfg = with_backend(load_robot_config(ROBOT), "sim")
-    dirs = (*cfg.daemon.mission_dirs, str(tmp_path))
-    cfg = replace(cfg, daemon=replace(cfg.daemon, mission_dirs=dirs))
+@contextmanager
+def machine_on(cfg: RobotConfig, mode: CommandMode, clock: Clock) -> Iterator[Machine]:
+    """The real-time process's machine on `cfg`'s (simulated) resource in this process, without
+    its threads, the resource active in `mode`; released at the end."""
     res = create_resource(cfg)
     res.configure()
-    res.activate(CommandMode.TORQUE)
+    res.activate(mode)
     tel = TelemetryBlock.create(Layout(cfg.dof, 8000, 1000), cfg.control_period_s)
     r, w = os.pipe2(os.O_NONBLOCK)
-    m = Machine(CellConfig.of(cfg), [res], [WallClock()], [tel], w)
     try:
-        yield m
+        yield Machine(CellConfig.of(cfg), [res], [clock], [tel], w)
     finally:
         tel.close()
         res.shutdown()
         os.close(r)
         os.close(w)
+
+
+@pytest.fixture
+def machine(tmp_path: Path) -> Iterator[Machine]:
+    """The machine on sim-ur5e (`machine_on`): a test ticks the loop (`loop.executor.run`) and
+    plays the automaton thread itself. Missions load from `tmp_path` too."""
+    cfg = with_backend(load_robot_config(ROBOT), "sim")
+    dirs = (*cfg.daemon.mission_dirs, str(tmp_path))
+    cfg = replace(cfg, daemon=replace(cfg.daemon, mission_dirs=dirs))
+    with machine_on(cfg, CommandMode.TORQUE, WallClock()) as m:
+        yield m
 
 
 def load_in(machine: Machine, path: Path, timeout_s: float = 60.0) -> object:

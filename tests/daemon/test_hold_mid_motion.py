@@ -5,7 +5,6 @@ controller's limit: a protective stop). Simulated arm and simulated time: determ
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
@@ -14,14 +13,12 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from orccadd.config.cell import CellConfig
 from orccadd.daemon.machine import Machine
-from orccadd.robot import create_resource, load_robot_config, with_backend
+from orccadd.robot import load_robot_config, with_backend
 from orccadd.runtime.clock import SimClock
 from orccadd.types import CommandMode
-from orccadd.wire.schema import H, Layout, T, TickLayout
-from orccadd.wire.telemetry import TelemetryBlock
-from tests.daemon.conftest import ROBOT, ROOT, load_in
+from orccadd.wire.schema import H, T, TickLayout
+from tests.daemon.conftest import ROBOT, ROOT, load_in, machine_on
 
 MISSION = f"""mission Reach
 resource arm
@@ -52,19 +49,8 @@ def csp_machine(tmp_path: Path) -> Iterator[Machine]:
     cfg = with_backend(load_robot_config(ROBOT), "sim")
     hold = str(ROOT / "configs/tasks/hold_csp.toml")
     cfg = replace(cfg, daemon=replace(cfg.daemon, hold_task=hold, mission_dirs=(str(tmp_path),)))
-    res = create_resource(cfg)
-    res.configure()
-    res.activate(CommandMode.POSITION)
-    tel = TelemetryBlock.create(Layout(cfg.dof, 8000, 1000), cfg.control_period_s)
-    r, w = os.pipe2(os.O_NONBLOCK)
-    m = Machine(CellConfig.of(cfg), [res], [SimClock()], [tel], w)
-    try:
+    with machine_on(cfg, CommandMode.POSITION, SimClock()) as m:
         yield m
-    finally:
-        tel.close()
-        res.shutdown()
-        os.close(r)
-        os.close(w)
 
 
 def tick(machine: Machine, ticks: int = 1) -> None:
