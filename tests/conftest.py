@@ -38,6 +38,7 @@ def pytest_configure(config: pytest.Config) -> None:
         raise pytest.UsageError(f"a test worker's network namespace: ip link set lo up: {up.stderr.strip()}")
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the groups
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Tests that take fixed paths of the machine (`FIXED_PATHS`) run on one worker, one after
     the other (`--dist loadgroup`)."""

@@ -9,7 +9,7 @@ import pytest
 
 from orccadd.automaton import compile_file, verify
 from orccadd.automaton.promela import export_promela
-from orccadd.automaton.promela_spin import check_name, parse_pan, run_spin
+from orccadd.automaton.promela_spin import c_compiler, check_name, parse_pan, run_spin
 from orccadd.errors import OrccaddError
 from tests.automaton.conftest import KEEPSTABLE, NO_GUARD, UNHANDLED_T3
 
@@ -51,7 +51,7 @@ def test_the_failing_missions_do_fail_somewhere() -> None:
     assert verify(compile_file(UNHANDLED_T3)).failed("safety")
 
 
-@pytest.mark.skipif(shutil.which("spin") is None or shutil.which("gcc") is None, reason="needs spin and gcc")
+@pytest.mark.skipif(shutil.which("spin") is None or c_compiler() is None, reason="needs spin, a C compiler")
 def test_a_model_spin_cannot_parse_is_an_error() -> None:
     with pytest.raises(OrccaddError, match="spin -a model.pml failed"):
         run_spin("active proctype p() { x = 1 }")
