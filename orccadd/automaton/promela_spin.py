@@ -36,6 +36,7 @@ def c_compiler() -> str | None:
     """The first C compiler installed of `C_COMPILERS`."""
     return next(filter(None, map(shutil.which, C_COMPILERS)), None)
 
+
 _VIOLATED = re.compile(r"assertion violated ok_(\w+)")
 
 
