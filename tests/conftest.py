@@ -50,7 +50,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     """A worker of `--dist loadgroup` checks that its groups took effect: pytest-xdist carries a
     test's group in its node id, and where pytest does not take that id (pytest-dev/pytest-xdist
     #1386) the tests of a group would run on two workers at once, silently."""
-    if not config.getvalue("loadgroup"):
+    if not getattr(config.option, "loadgroup", False):
         return
     lost = [i.nodeid for i in items if i.get_closest_marker("xdist_group") and "@" not in i.nodeid]
     if lost:

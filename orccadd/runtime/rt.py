@@ -99,6 +99,18 @@ def enter_realtime(
             rep.cpus = frozenset(cpus)
         except (OSError, ValueError) as e:
             rep.warnings.append(f"CPU affinity {sorted(cpus)} refused ({e}): the thread may migrate")
+    # the memory locked and the garbage collected before the priority is raised: both take tens of
+    # milliseconds of CPU (mlockall of a process with Pinocchio: 63 ms on this project's VM), which
+    # at SCHED_FIFO would stall every lower real-time thread on that core, another resource's
+    # loop among them
+    if lock_memory:
+        _lock_memory(rep)
+    if freeze_gc:
+        if collect_gc:
+            gc.collect()
+        gc.freeze()
+        gc.disable()
+        rep.gc_frozen = True
     if priority > 0:
         try:
             # reset on fork: a process this thread starts (the command daemon, a plant) runs at
@@ -110,14 +122,6 @@ def enter_realtime(
                 f"SCHED_FIFO {priority} refused ({e.strerror or e}): the loop runs at normal "
                 "priority; run as root or grant LimitRTPRIO (systemd) / rtprio (limits.conf)"
             )
-    if lock_memory:
-        _lock_memory(rep)
-    if freeze_gc:
-        if collect_gc:
-            gc.collect()
-        gc.freeze()
-        gc.disable()
-        rep.gc_frozen = True
     return rep
 
 

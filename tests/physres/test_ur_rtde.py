@@ -134,9 +134,14 @@ def test_a_stalled_stream_is_comm_lost_after_stall_periods(sim: UrSimProcess, ar
     assert [n for n in arm.event_names() if ".T3." in n] == ["MoveJointsCSP.T3.CommLost"]
     stall = arm.resource.settings.stall_periods  # type: ignore[attr-defined]
     silent = re.search(r"no RTDE package for (\d+) periods", arm.resource.fault_message)
-    assert silent is not None and stall <= int(silent[1]) <= stall + 3, arm.resource.fault_message
     ticks = loop.ticks()
-    assert_safe_stop_in_time(ticks, status_shows(ticks, Status.COMM_LOST))
+    lost = status_shows(ticks, Status.COMM_LOST)
+    first = next(i for i in range(len(ticks.seq)) if lost(i))
+    # declared by the first tick whose silence reached stall_periods, however late that tick came
+    # (a loaded machine delays this test's loop: the count is of the controller's periods)
+    late = round((ticks.t_s[first] - ticks.t_s[first - 1]) / arm.config.control_period_s)
+    assert silent is not None and stall <= int(silent[1]) <= stall + late, arm.resource.fault_message
+    assert_safe_stop_in_time(ticks, lost)
 
 
 def test_a_dropped_connection_is_comm_lost_this_process_lives_on_and_reset_reconnects(
