@@ -322,12 +322,17 @@ def test_a_lowered_current_limit_caps_the_grip_whatever_goal_current_says(
         bus.torque_on((servo,))
         assert bus.ph.write4ByteTxRx(bus.port, servo, GOAL_POSITION, start + 400) == (COMM_SUCCESS, 0)
         currents: list[int] = []
+        late = 0  # replies past the SDK's timeout: the pseudo-terminal's kernel worker is time-shared
         deadline = time.monotonic() + 3.0
         while time.monotonic() < deadline:
             value, result, _ = bus.ph.read2ByteTxRx(bus.port, servo, present_current)
+            if result == COMM_RX_TIMEOUT:
+                late += 1
+                continue
             assert result == COMM_SUCCESS
             currents.append(value - 65536 if value >= 32768 else value)
             time.sleep(0.02)
+        assert len(currents) >= 20 and late <= len(currents) // 10, (late, len(currents))
         st = sim.status()
         assert 50 <= max(abs(c) for c in currents[-20:]) <= 63, (
             currents[-20:],
