@@ -10,6 +10,7 @@ from a task file): the `Report`, whose failures the caller refuses with their co
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -40,6 +41,7 @@ class TaskFiles:
     def __init__(self, confinement: Confinement | None = None) -> None:
         self.confinement = confinement
         self.specs: dict[str, TaskSpec] = {}
+        self.digests: dict[str, str] = {}  # the SHA-256 of each file read through `confinement`
 
     def spec(self, path: Path) -> TaskSpec:
         key = str(path)
@@ -51,6 +53,7 @@ class TaskFiles:
                     data, _ = self.confinement.read(path, MAX_TOML_BYTES)
                 except OrccaddError as e:
                     raise ConfigError(key, "", str(e).removeprefix(f"{key}: ")) from None
+                self.digests[key] = hashlib.sha256(data).hexdigest()
                 self.specs[key] = parse_task_text(data, key)
         return self.specs[key]
 

@@ -104,6 +104,12 @@ class DaemonConfig:
     # the next one waiting (docs/mission-language.md: what missions of which size cost)
     load_timeout_s: float = field(default=120.0, bounds=(1.0, LOAD_TIMEOUT_MAX_S))
     load_memory_mb: int = field(default=1024, bounds=(256, 1 << 20))
+    # a mission compiled and verified before (the same text, task files and orccadd) is loaded
+    # from this cache without compiling again (orccadd/daemon/compile_cache.py); the directory
+    # (relative to this file), "": missions/ in systemd's CacheDirectory, else in
+    # $XDG_CACHE_HOME/orccadd, else in ~/.cache/orccadd
+    compile_cache: bool = field(default=True)
+    compile_cache_dir: str = field(default="")
     # full-rate CSV logs go here, created by the command daemon (never a path a client names);
     # "": `logs/` in the socket's directory
     log_dir: str = field(default="")

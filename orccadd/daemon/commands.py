@@ -26,6 +26,7 @@ from orccadd.automaton import Automaton, Network, Report
 from orccadd.config.robot import RobotConfig
 from orccadd.config.shipped import is_bare_name, is_file
 from orccadd.confine import Confinement, ConfinementError
+from orccadd.daemon.compile_cache import default_dir
 from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.mission import prepare_mission
 from orccadd.daemon.procedure import MissionControl
@@ -137,7 +138,8 @@ class RtCommands:
         task_dirs = [str(cfg.resolve(d)) for d in (*cfg.daemon.task_dirs, *cfg.daemon.mission_dirs)]
         cmd = [
             sys.executable, "-m", "orccadd.daemon.compile_worker", "--fd", str(fd), "--name", path,
-            *(f"--task-dir={d}" for d in task_dirs), f"--memory-mb={cfg.daemon.load_memory_mb}", str(out),
+            *(f"--task-dir={d}" for d in task_dirs), f"--memory-mb={cfg.daemon.load_memory_mb}",
+            f"--cache-dir={self._cache_dir()}", str(out),
         ]  # fmt: skip
         timeout_s = cfg.daemon.load_timeout_s
         try:
@@ -162,6 +164,7 @@ class RtCommands:
         def poll() -> Result | None:
             if child.poll() is None:
                 return None
+            cached = Path(f"{out}.cached").exists()
             try:
                 result = pickle.loads(out.read_bytes()) if out.exists() else None
             except (pickle.UnpicklingError, AttributeError, ImportError, EOFError, TypeError) as e:
@@ -175,7 +178,8 @@ class RtCommands:
                 raise CommandError(result)
             if not isinstance(result, tuple):
                 raise CommandError(f"{path}: the compiler process failed (exit code {child.returncode})")
-            return self._install(path, *result)
+            automaton, report, specs = result
+            return self._install(path, automaton, report, specs, cached=cached)
 
         def expire() -> Result:
             child.kill()
@@ -187,6 +191,14 @@ class RtCommands:
             )
 
         return Pending(poll, time.monotonic_ns() + int(timeout_s * 1e9), expire)
+
+    def _cache_dir(self) -> str:
+        """The compile cache's directory ('' when off): `daemon.compile_cache_dir`, relative to
+        the config, or the user's cache (`compile_cache.default_dir`)."""
+        d = self.m.cfg.daemon
+        if not d.compile_cache:
+            return ""
+        return str(self.m.cfg.resolve(d.compile_cache_dir) if d.compile_cache_dir else default_dir())
 
     def _open_mission(self, path: str) -> tuple[int, str]:
         """A descriptor of the mission file `path` names and its real path, if it is a regular
@@ -204,7 +216,12 @@ class RtCommands:
             raise CommandError(str(e)) from None
 
     def _install(
-        self, path: str, automaton: Automaton | Network, report: Report, specs: dict[str, TaskSpec]
+        self,
+        path: str,
+        automaton: Automaton | Network,
+        report: Report,
+        specs: dict[str, TaskSpec],
+        cached: bool = False,
     ) -> Result:
         mc = self.m.mission
         mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
@@ -219,8 +236,9 @@ class RtCommands:
         # this process (no pause in a tick): free them here, outside any tick (~1 ms)
         gc.collect()
         self._trace(OperatorAction.LOAD)
-        self.m.note(f"loaded mission {loaded.name} ({loaded.automaton.n_states} states, all checks passed)")
-        return {"mission": loaded.describe(), "report": loaded.report.format()}
+        how = "all checks passed" + (", verified at an earlier load: compile cache" if cached else "")
+        self.m.note(f"loaded mission {loaded.name} ({loaded.automaton.n_states} states, {how})")
+        return {"mission": loaded.describe(), "report": loaded.report.format(), "cached": cached}
 
     @handles("start")
     def start(self, procedure: str) -> Result:
