@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import atexit
 import compileall
+import contextlib
 import ctypes
 import os
+import shutil
 import subprocess
-from collections.abc import Callable
+import tempfile
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -28,6 +32,10 @@ def pytest_configure(config: pytest.Config) -> None:
     them. Taken in the worker's main thread before any other starts: every thread and process
     the tests start inherits it. Where it cannot be had (not root), the workers share the host's
     loopback, and UR's port lock (`orccadd.ursim.process.PortsLock`) keeps them apart."""
+    # the daemons' compile cache (as systemd's CacheDirectory= says where): this run's own, so
+    # that no test depends on what earlier runs compiled; each worker's, like its network
+    os.environ["CACHE_DIRECTORY"] = tempfile.mkdtemp(prefix="orccadd-test-cache-")
+    atexit.register(shutil.rmtree, os.environ["CACHE_DIRECTORY"], True)
     if not os.environ.get("PYTEST_XDIST_WORKER") or os.environ.get("ORCCADD_TEST_SHARED_NET"):
         return
     libc = ctypes.CDLL(None, use_errno=True)
@@ -38,21 +46,84 @@ def pytest_configure(config: pytest.Config) -> None:
         raise pytest.UsageError(f"a test worker's network namespace: ip link set lo up: {up.stderr.strip()}")
 
 
-# Tests that take fixed paths of the machine run on one worker, one after the other (`--dist
-# loadgroup`): the README's tours, the demo, and the shipped gripper configs' serial links
-# (/tmp/orccadd-gripper, /tmp/orccadd-left-hand, /tmp/orccadd-right-hand). Each such module sets
-# `pytestmark` to it (a marker added in a collection hook comes too late for pytest-xdist).
-FIXED_PATHS = pytest.mark.xdist_group("fixed-paths")
+# Tests that run one at a time, on one pytest-xdist worker (`--dist loadgroup`), while the other
+# worker runs the rest: a device chain of three processes at 500 Hz (a UR controller simulator,
+# ur_rtde's link, orccadd's loop) needs most of a core, and two such chains on two cores starve
+# each other (docs/status.md, "The test suite"); and the tests on fixed paths of the machine (the
+# README's tours, the demo, the shipped gripper configs' serial links /tmp/orccadd-gripper,
+# /tmp/orccadd-left-hand, /tmp/orccadd-right-hand). By module, or by a module's parameter (the
+# backend a suite runs on): what is not here runs on either worker, beside one of these.
+ONE_AT_A_TIME = pytest.mark.xdist_group("one-at-a-time")
+ONE_AT_A_TIME_MODULES = (
+    "tests/test_readme.py",  # fixed paths; UR, Dynamixel, CANopen, cell tours
+    "tests/test_demo.py",  # fixed paths
+    "tests/daemon/test_pick_place.py",  # fixed paths; UR chain and a Dynamixel gripper
+    "tests/daemon/test_handover.py",  # fixed paths; two Dynamixel grippers
+    "tests/daemon/test_gripper.py",  # a Dynamixel gripper on a pseudo-terminal
+    "tests/daemon/test_ur_rtde.py",  # UR chains
+    "tests/daemon/test_ur_missions.py",
+    "tests/physres/test_ur_rtde.py",
+    "tests/ursim/test_stock_ur_rtde.py",
+    "tests/ursim/test_stock_faults.py",
+    "tests/ursim/test_stock_force_io.py",
+    "tests/ursim/test_stock_cb3.py",
+    "tests/daemon/test_dynamixel.py",  # Dynamixel chains on pseudo-terminals
+    "tests/physres/test_dynamixel.py",
+    "tests/dxlsim/test_sdk.py",
+    "tests/physres/test_sim_process.py",  # this process's loop against the plant's watchdog
+    "tests/physres/test_fault_matrix.py",
+)
+# in these modules, the tests on these backends
+ONE_AT_A_TIME_BACKENDS = {
+    "tests/physres/test_contract.py": ("ur_rtde", "dynamixel", "sim_process"),
+    "tests/daemon/test_same_mission.py": ("ur_rtde", "dynamixel"),
+}
+
+
+def one_at_a_time(nodeid: str) -> bool:
+    """Whether the test `nodeid` runs in the one-at-a-time group."""
+    module, _, rest = nodeid.partition("::")
+    if module in ONE_AT_A_TIME_MODULES:
+        return True
+    param = rest.partition("[")[2].rstrip("]")
+    return param in ONE_AT_A_TIME_BACKENDS.get(module, ())
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark the one-at-a-time tests, before pytest-xdist's worker reads the marks."""
+    for item in items:
+        if one_at_a_time(item.nodeid):
+            item.add_marker(ONE_AT_A_TIME)
+
+
+ONE_AT_A_TIME_NICE = -5  # the time-shared processes of the one-at-a-time test: ~10x the share
+OTHERS_NICE = 5  # of the other worker's (CFS weights 3121 and 335)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item: pytest.Item) -> Iterator[None]:
+    """On a pytest-xdist worker, the one-at-a-time test's time-shared processes (orccadctl, the
+    command daemon, the mission compiler, the test itself) come first: the other worker's tests
+    take the time they leave, and the one-at-a-time tests, the longest chain of the run, go as
+    fast as alone. Nice values are per thread, and what this thread starts inherits them."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        yield
+        return
+    nice = ONE_AT_A_TIME_NICE if item.get_closest_marker("xdist_group") else OTHERS_NICE
+    with contextlib.suppress(PermissionError):  # not root: a raise is refused, all run alike
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+    yield
 
 
 @pytest.hookimpl(trylast=True)
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+def pytest_collection_finish(session: pytest.Session) -> None:
     """A worker of `--dist loadgroup` checks that its groups took effect: pytest-xdist carries a
     test's group in its node id, and where pytest does not take that id (pytest-dev/pytest-xdist
     #1386) the tests of a group would run on two workers at once, silently."""
-    if not getattr(config.option, "loadgroup", False):
+    if not getattr(session.config.option, "loadgroup", False):
         return
-    lost = [i.nodeid for i in items if i.get_closest_marker("xdist_group") and "@" not in i.nodeid]
+    lost = [i.nodeid for i in session.items if i.get_closest_marker("xdist_group") and "@" not in i.nodeid]
     if lost:
         raise pytest.UsageError(f"pytest-xdist's groups do not take effect with this pytest: {lost[0]}")
 

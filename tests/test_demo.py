@@ -9,9 +9,7 @@ from pathlib import Path
 import pytest
 
 from orccadd import demo
-from tests.conftest import FIXED_PATHS, ROOT
-
-pytestmark = FIXED_PATHS
+from tests.conftest import ROOT
 
 
 def test_demo_runs_the_mission_and_writes_log_and_plot(

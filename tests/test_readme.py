@@ -17,9 +17,7 @@ import pytest
 
 from orccadd.ctl.client import Client, ClientError
 from orccadd.ursim.process import PortsLock
-from tests.conftest import FIXED_PATHS, ROOT
-
-pytestmark = FIXED_PATHS
+from tests.conftest import ROOT
 
 README = (ROOT / "README.md").read_text()
 # a terminal's view, a stream until Ctrl-C, and the shell's own job control

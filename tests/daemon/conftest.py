@@ -18,7 +18,7 @@ from orccadd.daemon.machine import Machine
 from orccadd.daemon.replies import Pending
 from orccadd.launch import DaemonProcess
 from orccadd.robot import create_resource, load_robot_config, with_backend
-from orccadd.runtime import WallClock
+from orccadd.runtime import SimClock
 from orccadd.runtime.clock import Clock
 from orccadd.types import CommandMode
 from orccadd.wire.schema import Layout
@@ -110,11 +110,12 @@ def machine_on(cfg: RobotConfig, mode: CommandMode, clock: Clock) -> Iterator[Ma
 @pytest.fixture
 def machine(tmp_path: Path) -> Iterator[Machine]:
     """The machine on sim-ur5e (`machine_on`): a test ticks the loop (`loop.executor.run`) and
-    plays the automaton thread itself. Missions load from `tmp_path` too."""
+    plays the automaton thread itself, in simulated time (`SimClock`: a tick is a period of the
+    arm's whatever the machine's load). Missions load from `tmp_path` too."""
     cfg = with_backend(load_robot_config(ROBOT), "sim")
     dirs = (*cfg.daemon.mission_dirs, str(tmp_path))
     cfg = replace(cfg, daemon=replace(cfg.daemon, mission_dirs=dirs))
-    with machine_on(cfg, CommandMode.TORQUE, WallClock()) as m:
+    with machine_on(cfg, CommandMode.TORQUE, SimClock()) as m:
         yield m
 
 

@@ -12,13 +12,12 @@ from typing import Any, cast
 import pytest
 
 from orccadd.dxlsim.process import DxlSimProcess
-from tests.conftest import FIXED_PATHS
 from tests.daemon.conftest import ROOT, Daemon, start_daemon_with
 
 CELL = ROOT / "configs/robots/dual-arm-grippers-sim.toml"
 MISSION = str(ROOT / "configs/missions/handover.mission")
 PART_AT_RAD = 0.9
-pytestmark = [pytest.mark.timeout(300, method="thread"), FIXED_PATHS]
+pytestmark = pytest.mark.timeout(300, method="thread")
 
 
 @pytest.fixture

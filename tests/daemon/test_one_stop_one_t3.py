@@ -4,6 +4,7 @@ a reset cleared the stop; a fault after the reset is a new type 3."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -24,12 +25,14 @@ def t3_events(machine: Machine) -> list[str]:
     return [e.name for e in infos if e.kind is EventKind.T3]
 
 
-def run_until(machine: Machine, what: str, done: Callable[[], bool], ticks: int = 5000) -> None:
-    for _ in range(ticks):
-        if done():
-            return
+def run_until(machine: Machine, what: str, done: Callable[[], bool], timeout_s: float = 30.0) -> None:
+    """Tick (simulated time) until `done`, the threads the machine waits for (a device's reset)
+    running between ticks; bounded in wall time."""
+    end = time.monotonic() + timeout_s
+    while not done():
+        assert time.monotonic() < end, f"not within {timeout_s:g} s: {what}"
         run(machine, 1, busy=False)
-    raise AssertionError(f"not within {ticks} ticks: {what}")
+        time.sleep(0.001)
 
 
 @pytest.mark.parametrize("busy", [False, True], ids=["switch-in-the-tick", "switch-a-tick-later"])

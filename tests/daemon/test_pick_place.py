@@ -15,13 +15,12 @@ import pytest
 
 from orccadd.dxlsim.process import DxlSimProcess
 from orccadd.ursim.process import UrSimProcess
-from tests.conftest import FIXED_PATHS
 from tests.daemon.conftest import ROOT, Daemon, start_daemon_with
 
 CELL = ROOT / "configs/robots/ur5e-gripper-sim.toml"
 MISSION = str(ROOT / "configs/missions/pick_place.mission")
 PART_AT_RAD = 0.9  # where the fingers meet the part (Close closes toward 1.4)
-pytestmark = [pytest.mark.timeout(300, method="thread"), FIXED_PATHS]
+pytestmark = pytest.mark.timeout(300, method="thread")
 
 
 @dataclass
