@@ -51,8 +51,10 @@ typecheck: setup
 	$(VENV)/bin/mypy
 
 # TEST_WORKERS=2: two pytest-xdist workers, each in a network namespace of its own where it may
-# (tests/conftest.py), tests on fixed paths of the machine on one of them (loadgroup). Not the
-# default: on two cores the suite's real-time runs then starve each other (docs/status.md).
+# (tests/conftest.py), the tests whose device chains need a core and those on fixed paths one at
+# a time on one of them (loadgroup). Not the default: on two cores the real-time chains of both
+# workers together pass 95 % of a CPU at SCHED_FIFO, and the kernel then stalls them for 50 ms
+# (docs/status.md, "The test suite").
 TEST_WORKERS ?= 0
 unit: setup
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup

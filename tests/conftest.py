@@ -48,8 +48,10 @@ def pytest_configure(config: pytest.Config) -> None:
 
 # Tests that run one at a time, on one pytest-xdist worker (`--dist loadgroup`), while the other
 # worker runs the rest: a device chain of three processes at 500 Hz (a UR controller simulator,
-# ur_rtde's link, orccadd's loop) needs most of a core, and two such chains on two cores starve
-# each other (docs/status.md, "The test suite"); and the tests on fixed paths of the machine (the
+# ur_rtde's link, orccadd's loop) needs most of a core, and so do several daemons' plants and
+# loops together. Two such at once keep both cores over 95 % at SCHED_FIFO, and the kernel (6.12
+# and later) then runs the time-shared tasks for 50 ms in one go, every real-time chain on that
+# core stalled meanwhile (docs/status.md, "The test suite"); and the tests on fixed paths (the
 # README's tours, the demo, the shipped gripper configs' serial links /tmp/orccadd-gripper,
 # /tmp/orccadd-left-hand, /tmp/orccadd-right-hand). By module, or by a module's parameter (the
 # backend a suite runs on): what is not here runs on either worker, beside one of these.
@@ -72,6 +74,16 @@ ONE_AT_A_TIME_MODULES = (
     "tests/dxlsim/test_sdk.py",
     "tests/physres/test_sim_process.py",  # this process's loop against the plant's watchdog
     "tests/physres/test_fault_matrix.py",
+    "tests/daemon/test_cell.py",  # two arms: two plants and two loops
+    "tests/cellnet/test_cell_missions.py",  # two or three daemons, each with its plant
+    "tests/cellnet/test_cmdd_threads.py",
+    "tests/cellnet/test_console.py",
+    "tests/cellnet/test_floods.py",
+    "tests/cellnet/test_hostile_peers.py",
+    "tests/cellnet/test_impostors.py",
+    "tests/cellnet/test_ros2_daemon.py",
+    "tests/cellnet/test_shipped_cell.py",
+    "tests/cellnet/test_tune_under_flood.py",
 )
 # in these modules, the tests on these backends
 ONE_AT_A_TIME_BACKENDS = {

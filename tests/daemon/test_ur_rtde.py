@@ -329,9 +329,13 @@ def test_the_pendants_speed_slider_slows_a_scaled_motion_through_the_daemon(
             assert time.monotonic() < deadline, d.status()
             time.sleep(0.05)  # Out at the slider's 100 %, to its end: the mission waits for Go
         sim.inject("speed_slider", fraction=0.5)
-        time.sleep(0.5)  # the controller's scaling follows its slider within a few cycles
-        details = d.call("describe")["resource"]["diagnostics"]["details"]  # type: ignore[index]
-        assert details["speed_slider"] == 0.5 and details["speed_scaling"] == 0.5, details
+        deadline = time.monotonic() + 10
+        while True:  # the controller's scaling follows its slider within a few cycles
+            details = d.call("describe")["resource"]["diagnostics"]["details"]  # type: ignore[index]
+            if details["speed_slider"] == 0.5 and details["speed_scaling"] == 0.5:
+                break
+            assert time.monotonic() < deadline, details
+            time.sleep(0.05)
         d.call("send", input="Go")
         s = d.wait(lambda s: s["state"] != "running" or s["faulted"], timeout_s=90)
         assert s["result"] == "success" and not s["faulted"], (s.get("fault"), sim.log_text()[-3000:])
