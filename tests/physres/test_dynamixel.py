@@ -523,7 +523,11 @@ def test_replies_a_little_late_are_dropped_whole_never_read_as_the_next_cycles(t
     reply_bytes = 8 + 6 * (10 + 4)  # the fast sync read's one status packet for six servos
     timeouts = int(d["timeouts"])  # a late reply already there when the read begins is on time
     assert timeouts >= 1 and d["timeouts_by_servo"] == f"1: {timeouts}, 2: 0, 3: 0, 4: 0, 5: 0, 6: 0", d
-    assert int(d["late_bytes_dropped"]) == timeouts * reply_bytes and int(d["crc_errors"]) == 0, d
+    # Dropped whole: a number of status packets, never a part of one. One per timeout whose reply
+    # came within the drop window: each injected one does; a reply the loaded machine itself made
+    # later than that window is cleared before the next request instead (the SDK's clearPort).
+    dropped, part = divmod(int(d["late_bytes_dropped"]), reply_bytes)
+    assert part == 0 and 1 <= dropped <= timeouts and int(d["crc_errors"]) == 0, d
 
 
 def test_mode_switches_hold_the_arm(rig: DxlRig, session: Session) -> None:
