@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from orccadd.config.robot import RobotConfig
+from orccadd.config.robot import RobotConfig, ToolConfig, WorkspaceConfig
 from orccadd.config.schema import format_range
 from orccadd.config.urdf import resolve_urdf
 from orccadd.errors import ConfigError
@@ -33,6 +33,11 @@ class RobotModel:
     j_max_rad_s3: FloatArray
     tau_max_nm: FloatArray
     home_rad: FloatArray
+    # the tool's frame, added to `model` at load (`[tool]`: a URDF frame and an offset), its
+    # limits, and the workspace it must stay in
+    tool_frame_id: int = 0
+    tool: ToolConfig = ToolConfig()
+    workspace: WorkspaceConfig = WorkspaceConfig()
 
     @property
     def dof(self) -> int:
@@ -117,6 +122,7 @@ class RobotModel:
         if cfg.model.armature_kg_m2:
             model.armature = np.array(cfg.model.armature_kg_m2, dtype=np.float64)
         model.gravity = pin.Motion(np.array([0.0, 0.0, -9.81, 0.0, 0.0, 0.0]))
+        tool_frame_id = _add_tool_frame(cfg, model, path.name)
         return RobotModel(
             model=model,
             joint_names=cfg.joint_names,
@@ -127,6 +133,9 @@ class RobotModel:
             j_max_rad_s3=arr([j.max_jerk_rad_s3 for j in cfg.joints]),
             tau_max_nm=arr([j.max_torque_nm for j in cfg.joints]),
             home_rad=arr([j.home_rad for j in cfg.joints]),
+            tool_frame_id=tool_frame_id,
+            tool=cfg.tool,
+            workspace=cfg.workspace,
         )
 
 
@@ -155,3 +164,38 @@ def _check_against_urdf(cfg: RobotConfig, model: pin.Model) -> None:
                     f"(={val!r}) must be in {format_range(low, high, open_lo, False)} "
                     f"(URDF limit of {j.name})",
                 )
+
+
+TOOL_FRAME = "orccadd_tool"
+
+
+def _add_tool_frame(cfg: RobotConfig, model: pin.Model, urdf_name: str) -> int:
+    """Add the tool's frame (`[tool]`) to `model`: its id. The URDF frame it is fixed to must
+    move with the configured joints (a frame of the base would make every Cartesian task a
+    no-op)."""
+    name = cfg.tool.frame
+    if name:
+        if not model.existFrame(name):
+            frames = ", ".join(f.name for f in model.frames if f.name != "universe")
+            raise ConfigError(
+                cfg.source, "tool.frame", f"(={name!r}) is not a frame of {urdf_name} (frames: {frames})"
+            )
+        parent_id = model.getFrameId(name)
+    else:  # the link the last joint moves
+        last = model.njoints - 1
+        bodies = [
+            i for i, f in enumerate(model.frames) if f.parentJoint == last and f.type == pin.FrameType.BODY
+        ]
+        parent_id = bodies[0]
+    parent = model.frames[parent_id]
+    if parent.parentJoint == 0:
+        raise ConfigError(
+            cfg.source, "tool.frame", f"(={name!r}) is fixed to the base: no joint moves it, so no task can"
+        )
+    offset = pin.SE3(
+        pin.rpy.rpyToMatrix(*cfg.tool.offset_rpy_rad), np.array(cfg.tool.offset_m, dtype=np.float64)
+    )
+    frame = pin.Frame(
+        TOOL_FRAME, parent.parentJoint, parent_id, parent.placement * offset, pin.FrameType.OP_FRAME
+    )
+    return int(model.addFrame(frame, False))

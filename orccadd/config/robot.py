@@ -77,6 +77,41 @@ class LimitsConfig:
 
 
 @dataclass(frozen=True)
+class ToolConfig:
+    """The tool the Cartesian tasks move (`[tool]`): a point fixed to a frame of the URDF.
+
+    `frame` is a frame (link or fixed joint) of the URDF; "" is the link the last configured
+    joint moves (the flange). `offset_m` and `offset_rpy_rad` place the tool's point and axes in
+    that frame (roll, pitch, yaw about its fixed x, y, z). The limits bound every Cartesian
+    motion of the tool (a task may go slower, never faster): by default 0.25 m/s, the reduced
+    speed of ISO 10218-1 for a robot beside people.
+    """
+
+    frame: str = field(default="")
+    offset_m: tuple[float, ...] = field(default=(0.0, 0.0, 0.0), bounds=(-2.0, 2.0))
+    offset_rpy_rad: tuple[float, ...] = field(default=(0.0, 0.0, 0.0), bounds=(-math.pi, math.pi))
+    max_linear_velocity_m_s: float = field(default=0.25, bounds=(0.0, 5.0), open_lo=True)
+    max_linear_acceleration_m_s2: float = field(default=1.0, bounds=(0.0, 50.0), open_lo=True)
+    max_linear_jerk_m_s3: float = field(default=10.0, bounds=(0.0, 5000.0), open_lo=True)
+    max_angular_velocity_rad_s: float = field(default=1.0, bounds=(0.0, 10.0), open_lo=True)
+    max_angular_acceleration_rad_s2: float = field(default=4.0, bounds=(0.0, 100.0), open_lo=True)
+    max_angular_jerk_rad_s3: float = field(default=40.0, bounds=(0.0, 10000.0), open_lo=True)
+
+
+@dataclass(frozen=True)
+class WorkspaceConfig:
+    """Where the tool's point must stay (`[workspace]`), in the base frame: inside the box
+    `box_min_m`..`box_max_m` and the sphere of `sphere_radius_m` about `sphere_center_m` (each
+    left out when not given). Leaving it is the type 3 exception `LimitViolation` on any task:
+    the arm stops as at a joint limit. Targets outside it are refused before anything moves."""
+
+    box_min_m: tuple[float, ...] = field(default=(), bounds=(-20.0, 20.0))
+    box_max_m: tuple[float, ...] = field(default=(), bounds=(-20.0, 20.0))
+    sphere_center_m: tuple[float, ...] = field(default=(), bounds=(-20.0, 20.0))
+    sphere_radius_m: float = field(default=0.0, bounds=(0.0, 20.0))
+
+
+@dataclass(frozen=True)
 class DaemonConfig:
     """How `orccadd` runs this robot: socket, access roles, priorities, fault policies.
 
@@ -160,6 +195,8 @@ class RobotConfig:
     safe_stop: SafeStopConfig = field(default=SafeStopConfig())
     limits: LimitsConfig = field(default=LimitsConfig())
     daemon: DaemonConfig = field(default=DaemonConfig())
+    tool: ToolConfig = field(default=ToolConfig())
+    workspace: WorkspaceConfig = field(default=WorkspaceConfig())
     cell: Any = field(default=None)  # `[cell]`: a `CellNetConfig` once loaded (None: no cell)
     source: str = ""  # the file it was loaded from (set by the loader)
     backend_settings: Any = None  # the backend's typed settings (set by the loader)
@@ -249,10 +286,43 @@ def _check_joints(cfg: RobotConfig, file: str) -> None:
             "model.armature_kg_m2",
             f"has {len(cfg.model.armature_kg_m2)} entries, must have one per joint ({cfg.dof}) or none",
         )
+    _check_tool(cfg, file)
     if len(cfg.model.locked_positions) not in (0, len(cfg.model.locked_joints)):
         raise ConfigError(
             file,
             "model.locked_positions",
             f"has {len(cfg.model.locked_positions)} entries, must have one per locked joint "
             f"({len(cfg.model.locked_joints)}) or none",
+        )
+
+
+def _check_tool(cfg: RobotConfig, file: str) -> None:
+    """Vectors of three, and a workspace whose box is a box and whose sphere has a centre."""
+    three = (
+        ("tool.offset_m", cfg.tool.offset_m, False),
+        ("tool.offset_rpy_rad", cfg.tool.offset_rpy_rad, False),
+        ("workspace.box_min_m", cfg.workspace.box_min_m, True),
+        ("workspace.box_max_m", cfg.workspace.box_max_m, True),
+        ("workspace.sphere_center_m", cfg.workspace.sphere_center_m, True),
+    )
+    for key, values, optional in three:
+        if len(values) != 3 and not (optional and not values):
+            allowed = "3 numbers (x, y, z)" + (" or none" if optional else "")
+            raise ConfigError(file, key, f"has {len(values)} entries, must have {allowed}")
+    w = cfg.workspace
+    if bool(w.box_min_m) != bool(w.box_max_m):
+        given, missing = ("box_min_m", "box_max_m") if w.box_min_m else ("box_max_m", "box_min_m")
+        raise ConfigError(
+            file, f"workspace.{missing}", f"is missing: a box needs both corners ({given} is given)"
+        )
+    for i, (lo, hi) in enumerate(zip(w.box_min_m, w.box_max_m, strict=True)):
+        if not lo < hi:
+            raise ConfigError(
+                file, "workspace.box_max_m", f"(={list(w.box_max_m)!r}) must exceed box_min_m at index {i}"
+            )
+    if bool(w.sphere_center_m) != (w.sphere_radius_m > 0.0):
+        raise ConfigError(
+            file,
+            "workspace.sphere_radius_m",
+            f"(={w.sphere_radius_m!r}): a sphere needs both sphere_center_m and a radius > 0",
         )

@@ -2,7 +2,17 @@
 
 from importlib.metadata import entry_points
 
-from orccadd.modules import control, filters, hold, trajectory, ur, watchers  # noqa: F401 - register built-ins
+from orccadd.modules import (  # noqa: F401 - register built-ins
+    cartesian,
+    cartesian_watchers,
+    control,
+    filters,
+    hold,
+    kinematic_control,
+    trajectory,
+    ur,
+    watchers,
+)
 from orccadd.modules.base import MODULES, CommandMotion, Module, ModuleContext, Parameter, Port, register
 
 

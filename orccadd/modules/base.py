@@ -86,8 +86,8 @@ class Parameter:
     """A declared parameter. `value` is a numpy array updated in place (never rebound)."""
 
     __slots__ = (
-        "bounds", "default", "given", "integer", "module", "name", "per_joint", "required", "shape",
-        "tunable", "unit", "value",
+        "bounds", "default", "element", "given", "integer", "module", "name", "per_joint", "required",
+        "shape", "tunable", "unit", "value",
     )  # fmt: skip
 
     def __init__(
@@ -102,6 +102,7 @@ class Parameter:
         integer: bool = False,
         required: bool = False,
         per_joint: bool = False,
+        element: str = "joint",
     ) -> None:
         self.module = module
         self.name = name
@@ -113,6 +114,7 @@ class Parameter:
         # one value per joint that one number must not give every joint (a position: `tune
         # Reach.traj.target_rad 0.1` would send all six there); gains take one number for all
         self.per_joint = per_joint
+        self.element = element  # what each of a per_joint vector's numbers is for (its errors say)
         self.value: FloatArray = np.zeros(shape)
         self.value[...] = self.check(default)
         self.default = self.value.copy()
@@ -132,8 +134,8 @@ class Parameter:
         if arr.shape != self.shape:
             if arr.shape == () and self.shape != () and self.per_joint:
                 n = self.shape[0]
-                why = "one number would send every joint to it"
-                raise self._error(f"(={value!r}) must be {n} numbers, one per joint: {why}")
+                why = f"one number would send every {self.element} to it"
+                raise self._error(f"(={value!r}) must be {n} numbers, one per {self.element}: {why}")
             if arr.shape == () and self.shape != ():
                 arr = np.full(self.shape, float(arr))
             else:
@@ -216,13 +218,15 @@ class Module(ABC):
         integer: bool = False,
         required: bool = False,
         per_joint: bool = False,
+        element: str = "joint",
     ) -> Parameter:
         """`required`: a task of a mission must set it (its task file or the mission's `set`);
         `default` is then only what a task built outside a mission (a test, a benchmark) starts
         from. A robot-specific gain or a goal, which no default fits. `per_joint`: a vector that a
-        single number must not set for every joint (a position); gains take one number for all."""
+        single number must not set for every joint (a position); gains take one number for all;
+        `element` names what each number is for in its errors ("axis" for a Cartesian vector)."""
         param = Parameter(
-            self.name, name, default, bounds, unit, tunable, shape, integer, required, per_joint
+            self.name, name, default, bounds, unit, tunable, shape, integer, required, per_joint, element
         )
         self.parameters[name] = param
         return param
@@ -242,6 +246,16 @@ class Module(ABC):
     def missing(self) -> list[str]:
         """Required parameters not set yet (see `add_parameter`)."""
         return [p.name for p in self.parameters.values() if p.required and not p.given]
+
+    def set_data(self, data: object) -> None:
+        """Give the module data that no fixed-shape parameter holds (a planner's trajectory:
+        `orccadd/modules/follow.py`), when its task is built; not for a tick. `ParameterError`
+        if it takes none, or not this."""
+        raise ParameterError(f"{self.name}: a {self.type_name} module takes no data", name="data")
+
+    def needs_data(self) -> bool:
+        """True while the module cannot run without data it has not been given (`set_data`)."""
+        return False
 
     def start(self, state: JointState) -> None:
         """Initialise from the measured state when the task starts (no jump in the command)."""

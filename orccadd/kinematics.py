@@ -1,0 +1,99 @@
+"""The tool's kinematics from the model: its pose, its frame Jacobian and the task error.
+
+Conventions, the same in every Cartesian module:
+- a pose is a position (m, base frame) and an orientation as a unit quaternion (x, y, z, w),
+  the order of Pinocchio's `coeffs()` and of ROS's geometry_msgs/Pose;
+- a twist or an error is six numbers, linear (m/s or m) then angular (rad/s or rad), on the
+  base frame's axes at the tool's point (Pinocchio's LOCAL_WORLD_ALIGNED);
+- the orientation error of R toward R_des is log3(R_des·Rᵀ): the rotation vector (axis times
+  angle, base axes) that turns R into R_des.
+
+`ToolKinematics` owns its Pinocchio workspace (one per module: the model/workspace split of
+orccadd/model.py) and preallocated arrays: the tick allocates no buffer of its own.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from orccadd.model import RobotModel
+
+FloatArray = npt.NDArray[np.float64]
+WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+class ToolKinematics:
+    """Forward kinematics and the Jacobian of the robot's tool frame (`[tool]` of the config)."""
+
+    def __init__(self, model: RobotModel) -> None:
+        self.model = model
+        self._m = model.model
+        self._d = model.new_data()
+        self.frame_id = model.tool_frame_id
+        self.q: FloatArray = np.zeros(model.dof)  # the configuration last computed
+        self.jacobian: FloatArray = np.zeros((6, model.dof))
+
+    def pose(self, q: FloatArray | list[float]) -> pin.SE3:
+        """The tool's placement in the base frame at `q` (the workspace's own SE3: copy to keep)."""
+        self.q[:] = q
+        pin.forwardKinematics(self._m, self._d, self.q)
+        return pin.updateFramePlacement(self._m, self._d, self.frame_id)
+
+    def pose_and_jacobian(self, q: FloatArray | list[float]) -> pin.SE3:
+        """The tool's placement at `q`, and its Jacobian into `self.jacobian` (6×n, linear then
+        angular rows, base axes at the tool's point)."""
+        self.q[:] = q
+        self.jacobian[:] = pin.computeFrameJacobian(self._m, self._d, self.q, self.frame_id, WORLD_ALIGNED)
+        return pin.updateFramePlacement(self._m, self._d, self.frame_id)
+
+
+def quaternion_of(rotation: FloatArray) -> list[float]:
+    """A rotation matrix as a unit quaternion (x, y, z, w), w >= 0."""
+    x, y, z, w = pin.Quaternion(rotation).coeffs().tolist()
+    return [-x, -y, -z, -w] if w < 0.0 else [x, y, z, w]
+
+
+def rotation_of(quaternion: FloatArray | list[float]) -> FloatArray:
+    """A quaternion (x, y, z, w), normalised, as a rotation matrix."""
+    q = pin.Quaternion(np.asarray(quaternion, dtype=np.float64))
+    q.normalize()
+    return np.asarray(q.toRotationMatrix())
+
+
+def pose_error(
+    position_m: FloatArray, rotation: FloatArray, position_des_m: FloatArray, rotation_des: FloatArray
+) -> FloatArray:
+    """The task error toward the desired pose: (p_des − p, log3(R_des·Rᵀ)), base axes."""
+    e = np.empty(6)
+    e[:3] = position_des_m - position_m
+    e[3:] = pin.log3(rotation_des @ rotation.T)
+    return e
+
+
+def angle_between(rotation_a: FloatArray, rotation_b: FloatArray) -> float:
+    """The angle (rad, in [0, π]) of the rotation that turns `rotation_a` into `rotation_b`."""
+    c = 0.5 * (float(np.trace(rotation_b @ rotation_a.T)) - 1.0)
+    return math.acos(max(-1.0, min(1.0, c)))
+
+
+def manipulability(jacobian: FloatArray) -> float:
+    """Yoshikawa's measure sqrt(det(J·Jᵀ)) (0 at a singularity; units mixed: a nearness
+    indicator compared with its own value at a reference pose, not a physical quantity)."""
+    d = float(np.linalg.det(jacobian @ jacobian.T))
+    return math.sqrt(d) if d > 0.0 else 0.0
+
+
+def damped_pseudo_inverse(jacobian: FloatArray, damping: float) -> FloatArray:
+    """J⁺ = Jᵀ(J·Jᵀ + damping²·I)⁻¹: the least-squares inverse, damped near singularities."""
+    jjt = jacobian @ jacobian.T
+    jjt[np.diag_indices_from(jjt)] += damping * damping
+    return np.asarray(jacobian.T @ np.linalg.inv(jjt))
+
+
+def smallest_singular_value(jacobian: FloatArray) -> float:
+    """σ_min of J (rows: six task directions)."""
+    return float(np.linalg.svd(jacobian, compute_uv=False)[-1])
