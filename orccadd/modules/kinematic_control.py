@@ -11,8 +11,10 @@ with J⁺ the damped least-squares inverse: no damping while J's smallest singul
 `singular_value_threshold`, then growing to `max_damping` at a singularity (Nakamura's and
 Chiaverini's variable damping), so that the joints never run away near one; `dq_centre` pulls the
 joints toward the middle of their ranges (gain `joint_centering_gain`), which the task does not
-feel. `dq` is scaled down (its direction kept) to the joints' velocity limits and its change to
-their acceleration limits, so the reference never asks the arm for more than it may do.
+feel. `dq` is scaled down (its direction kept) to `velocity_scale` of the joints' velocity limits
+(below the 0.95 at which `joint_limit_watch` fires by default) and its change to their
+acceleration limits, so the reference never asks the arm for more than it may do: near a
+singularity the tool then falls behind its line rather than a joint running away.
 
 The reference starts where the arm is (or at the position command a switched-to task continues)
 and feeds the joints: `q_des` as a position command (a UR's servoJ, CSP, Dynamixel), or `q_des`,
@@ -63,6 +65,9 @@ class ResolvedRate(KernelModule):
         self.centering = self.add_parameter(
             "joint_centering_gain", 0.0, bounds=(0.0, 10.0), unit="1/s", tunable=True
         )
+        self.velocity_scale = self.add_parameter(
+            "velocity_scale", 0.8, bounds=(0.01, 1.0), unit="1", tunable=True
+        )
         self._kin = ToolKinematics(m)
         self._dt = ctx.period_s
         self._q_ref = m.home_rad.copy()
@@ -112,7 +117,7 @@ class ResolvedRate(KernelModule):
     def _within_limits(self, dq: np.ndarray) -> np.ndarray:
         """`dq` scaled down to the velocity limits, its change from the last one to the
         acceleration limits (each in its direction)."""
-        over = float(np.max(np.abs(dq) / self._vmax))
+        over = float(np.max(np.abs(dq) / self._vmax)) / float(self.velocity_scale.value)
         if over > 1.0:
             dq = dq / over
         step = dq - self._dq_prev

@@ -88,6 +88,37 @@ BAD = [
         ),
         "resource.settings.initial_q_rad[2] (=5.0) must be in [-3.1415, 3.1415] (elbow_joint)",
     ),
+    (
+        ("[safe_stop]", '[tool]\nframe = "gripper_tip"\n\n[safe_stop]'),
+        "tool.frame (='gripper_tip') is not a frame of ur5e.urdf (frames: base_link, ",
+    ),
+    (
+        ("[safe_stop]", '[tool]\nframe = "base_link"\n\n[safe_stop]'),
+        "tool.frame (='base_link') is fixed to the base: no joint moves it, so no task can",
+    ),
+    (
+        ("[safe_stop]", "[tool]\noffset_m = [0.0, 0.1]\n\n[safe_stop]"),
+        "tool.offset_m has 2 entries, must have 3 numbers (x, y, z)",
+    ),
+    (
+        ("[safe_stop]", "[tool]\nmax_linear_velocity_m_s = 0.0\n\n[safe_stop]"),
+        "tool.max_linear_velocity_m_s (=0.0) must be in (0, 5]",
+    ),
+    (
+        ("[safe_stop]", "[workspace]\nbox_min_m = [-1.0, -1.0, 0.0]\n\n[safe_stop]"),
+        "workspace.box_max_m is missing: a box needs both corners (box_min_m is given)",
+    ),
+    (
+        (
+            "[safe_stop]",
+            "[workspace]\nbox_min_m = [-1.0, -1.0, 0.0]\nbox_max_m = [1.0, 1.0, 0.0]\n\n[safe_stop]",
+        ),
+        "workspace.box_max_m (=[1.0, 1.0, 0.0]) must exceed box_min_m at index 2",
+    ),
+    (
+        ("[safe_stop]", "[workspace]\nsphere_center_m = [0.0, 0.0, 0.3]\n\n[safe_stop]"),
+        "workspace.sphere_radius_m (=0.0): a sphere needs both sphere_center_m and a radius > 0",
+    ),
 ]
 
 
