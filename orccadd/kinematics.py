@@ -20,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
+from orccadd.config.robot import WorkspaceConfig
 from orccadd.model import RobotModel
 
 FloatArray = npt.NDArray[np.float64]
@@ -97,3 +98,49 @@ def damped_pseudo_inverse(jacobian: FloatArray, damping: float) -> FloatArray:
 def smallest_singular_value(jacobian: FloatArray) -> float:
     """σ_min of J (rows: six task directions)."""
     return float(np.linalg.svd(jacobian, compute_uv=False)[-1])
+
+
+class ToolWorkspace:
+    """The robot config's `[workspace]` on the tool's point: where a configuration puts it, and
+    whether that is inside (a box and/or a sphere, base frame), by a margin."""
+
+    def __init__(self, model: RobotModel) -> None:
+        self._kin = ToolKinematics(model)
+        self.config: WorkspaceConfig = model.workspace
+        w = self.config
+        self._lo = list(w.box_min_m)
+        self._hi = list(w.box_max_m)
+        self._centre = list(w.sphere_center_m)
+        self._r2 = w.sphere_radius_m**2
+        self.point_m: list[float] = [0.0, 0.0, 0.0]  # the tool's point last computed
+
+    @staticmethod
+    def of(model: RobotModel) -> ToolWorkspace | None:
+        """The guard of `model`'s workspace, or None when the config has none."""
+        return ToolWorkspace(model) if model.workspace.given else None
+
+    def excess_m(self, q: FloatArray | list[float]) -> float:
+        """How far outside the workspace the tool is at `q` (m; 0 inside; inf if not finite).
+        Tick-safe: one forward kinematics and a few operations on floats."""
+        self.point_m = p = self._kin.pose(q).translation.tolist()
+        if not all(map(math.isfinite, p)):
+            return math.inf
+        excess = 0.0
+        if self._lo:
+            out = [max(lo - v, v - hi, 0.0) for v, lo, hi in zip(p, self._lo, self._hi, strict=True)]
+            excess = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2)
+        if self._r2 > 0.0:
+            c = self._centre
+            d = math.sqrt((p[0] - c[0]) ** 2 + (p[1] - c[1]) ** 2 + (p[2] - c[2]) ** 2)
+            excess = max(excess, d - math.sqrt(self._r2))
+        return excess
+
+    def describe_outside(self) -> str:
+        """Where the tool was found, and the workspace it left (the words of the type 3)."""
+        x, y, z = self.point_m
+        w, parts = self.config, []
+        if w.box_min_m:
+            parts.append(f"box {list(w.box_min_m)}..{list(w.box_max_m)} m")
+        if w.sphere_radius_m > 0.0:
+            parts.append(f"sphere of {w.sphere_radius_m:g} m about {list(w.sphere_center_m)} m")
+        return f"tool at ({x:.4f}, {y:.4f}, {z:.4f}) m outside the workspace ({' and '.join(parts)})"

@@ -102,13 +102,22 @@ class ToolConfig:
 class WorkspaceConfig:
     """Where the tool's point must stay (`[workspace]`), in the base frame: inside the box
     `box_min_m`..`box_max_m` and the sphere of `sphere_radius_m` about `sphere_center_m` (each
-    left out when not given). Leaving it is the type 3 exception `LimitViolation` on any task:
-    the arm stops as at a joint limit. Targets outside it are refused before anything moves."""
+    left out when not given). Measured beyond it by more than `tolerance_m` is the type 3
+    exception `LimitViolation` on any task (the arm stops as beyond a joint's range, whose
+    `limits.position_tolerance_rad` this is the tool's counterpart of); a position command that
+    would take the tool out of it is not sent (the last one is held) and is a `LimitViolation`
+    too; a line's goal outside it is refused before the line starts."""
 
     box_min_m: tuple[float, ...] = field(default=(), bounds=(-20.0, 20.0))
     box_max_m: tuple[float, ...] = field(default=(), bounds=(-20.0, 20.0))
     sphere_center_m: tuple[float, ...] = field(default=(), bounds=(-20.0, 20.0))
     sphere_radius_m: float = field(default=0.0, bounds=(0.0, 20.0))
+    tolerance_m: float = field(default=0.01, bounds=(0.0, 0.5))
+
+    @property
+    def given(self) -> bool:
+        """Whether a box or a sphere is configured."""
+        return bool(self.box_min_m) or self.sphere_radius_m > 0.0
 
 
 @dataclass(frozen=True)

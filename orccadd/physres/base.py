@@ -24,6 +24,7 @@ import numpy as np
 from orccadd.config.robot import RobotConfig
 from orccadd.errors import LifecycleError, ResourceError
 from orccadd.fault import Fault, FaultKind
+from orccadd.kinematics import ToolWorkspace
 from orccadd.model import RobotModel
 from orccadd.physres.description import ResourceDescription
 from orccadd.physres.guard import VelocityGuard
@@ -92,6 +93,15 @@ class PhysicalResource(ABC):
         step_max = model.v_max_rad_s * config.control_period_s * config.limits.velocity_tolerance
         self._step_max: list[float] = step_max.tolist()
         self._stop_flags = 0
+        # the tool's workspace ([workspace]), if any: measured beyond it by more than its tolerance,
+        # or a position command taking the tool further out of it, is a LIMIT_VIOLATION
+        self._workspace = ToolWorkspace.of(model)
+        self._workspace_tolerance_m = config.workspace.tolerance_m
+        # how far out it may be measured: the tolerance, or where a reset found it plus the
+        # tolerance (the arm stopped outside may be brought back, not further out), lowered as
+        # it comes back in
+        self._workspace_allowed_m = self._workspace_tolerance_m
+        self._last_cmd_excess_m = 0.0  # how far out the last position command put the tool
         # torque commands that would carry a joint past max_velocity are cut before the device
         torque = CommandMode.TORQUE in self.supported_modes
         self._velocity_guard = VelocityGuard(model, config.control_period_s) if torque else None
@@ -151,7 +161,7 @@ class PhysicalResource(ABC):
         self._stop_flags = 0
         self._on_activate(mode)
         self.state.status = 0
-        self._last_pos_cmd[:] = self.state.q_rad
+        self._hold_position_command()
         self._transition("activate")
 
     def prepare_mode_switch(self, mode: CommandMode) -> None:
@@ -177,7 +187,7 @@ class PhysicalResource(ABC):
             raise LifecycleError(f"resource {self.name!r}: switch to {mode.name.lower()} mode not prepared")
         self._on_perform_mode_switch(mode)
         self.mode = mode
-        self._last_pos_cmd[:] = self.state.q_rad
+        self._hold_position_command()
 
     def switch_mode(self, mode: CommandMode) -> None:
         """Both phases at once, for a caller outside the tick."""
@@ -203,7 +213,7 @@ class PhysicalResource(ABC):
                 f"resource {self.name!r}: cannot clear the stop while faulted ({self.fault_message})"
             )
         self._on_clear_stop()  # the device first; commands stay ignored until it confirmed
-        self._last_pos_cmd[:] = self.state.q_rad
+        self._hold_position_command()
         self._stop_flags = 0
 
     # ---- optional interfaces (declared in the description; not for a tick) ------------------
@@ -262,6 +272,16 @@ class PhysicalResource(ABC):
         if outside(q_dq, self._limit_lo, self._limit_hi) or not all(map(isfinite, q_dq)):
             st.status |= LIMIT_VIOLATION
             self.fault = self._beyond(FaultKind.LIMIT, "measured", q_dq, self._limit_lo, self._limit_hi)
+        ws = self._workspace
+        if ws is not None:
+            excess = ws.excess_m(st.q_rad)
+            if excess > self._workspace_allowed_m:
+                st.status |= LIMIT_VIOLATION
+                self.fault = Fault(FaultKind.LIMIT, self.name, f"measured {ws.describe_outside()}")
+            elif excess + self._workspace_tolerance_m < self._workspace_allowed_m:  # coming back in
+                self._workspace_allowed_m = max(
+                    self._workspace_tolerance_m, excess + self._workspace_tolerance_m
+                )
         return st
 
     @property
@@ -339,11 +359,29 @@ class PhysicalResource(ABC):
                 self.fault = self._beyond(
                     FaultKind.LIMIT, "command clamped: commanded", wanted, *self._command_bounds(mode)
                 )
+        ws = self._workspace
+        if ws is not None and mode is CommandMode.POSITION:
+            excess = ws.excess_m(sent)
+            if excess > 0.0 and excess > self._last_cmd_excess_m + 1e-9:  # out, or further out
+                flags |= LIMIT_VIOLATION
+                self.fault = Fault(FaultKind.LIMIT, self.name, f"command not sent: {ws.describe_outside()}")
+                sent = self._last_pos_cmd.tolist()  # held: the tool goes no further out
+            else:
+                self._last_cmd_excess_m = excess
         cmd = self._cmd
         cmd[:] = sent
         if mode is CommandMode.POSITION:
             self._last_pos_cmd[:] = cmd
         return flags | self._write_command(t_s, mode, cmd)
+
+    def _hold_position_command(self) -> None:
+        """The next position command is checked from the measured position (a mode switch, an
+        enable, a reset): its step, and how far out of the workspace it may start; the measured
+        tool may be that far out, plus the tolerance, until it comes back in."""
+        self._last_pos_cmd[:] = self.state.q_rad
+        ws = self._workspace
+        self._last_cmd_excess_m = ws.excess_m(self.state.q_rad) if ws is not None else 0.0
+        self._workspace_allowed_m = self._workspace_tolerance_m + self._last_cmd_excess_m
 
     def _command_bounds(self, mode: CommandMode) -> tuple[list[float], list[float]]:
         """The bounds a command of `mode` was held to in this tick (position: the range and the
