@@ -96,6 +96,9 @@ class ToolConfig:
     max_angular_velocity_rad_s: float = field(default=1.0, bounds=(0.0, 10.0), open_lo=True)
     max_angular_acceleration_rad_s2: float = field(default=4.0, bounds=(0.0, 100.0), open_lo=True)
     max_angular_jerk_rad_s3: float = field(default=40.0, bounds=(0.0, 10000.0), open_lo=True)
+    # the most a force task may ask the tool to push with (its setpoints are refused above)
+    max_force_n: float = field(default=100.0, bounds=(0.0, 5000.0), open_lo=True)
+    max_torque_nm: float = field(default=10.0, bounds=(0.0, 500.0), open_lo=True)
 
 
 @dataclass(frozen=True)
