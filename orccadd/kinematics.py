@@ -95,6 +95,12 @@ def damped_pseudo_inverse(jacobian: FloatArray, damping: float) -> FloatArray:
     return np.asarray(jacobian.T @ np.linalg.inv(jjt))
 
 
+def clip_norm(v: FloatArray, limit: float) -> FloatArray:
+    """`v` scaled down to a norm of at most `limit` (its direction kept)."""
+    n = float(np.linalg.norm(v))
+    return v * (limit / n) if n > limit else v
+
+
 def smallest_singular_value(jacobian: FloatArray) -> float:
     """σ_min of J (rows: six task directions)."""
     return float(np.linalg.svd(jacobian, compute_uv=False)[-1])

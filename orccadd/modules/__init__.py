@@ -12,6 +12,7 @@ from orccadd.modules import (  # noqa: F401 - register built-ins
     kinematic_control,
     trajectory,
     ur,
+    visual,
     watchers,
 )
 from orccadd.modules.base import MODULES, CommandMotion, Module, ModuleContext, Parameter, Port, register

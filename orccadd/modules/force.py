@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from orccadd.kinematics import ToolKinematics, quaternion_of, rotation_of
+from orccadd.kinematics import ToolKinematics, clip_norm, quaternion_of, rotation_of
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
 from orccadd.modules.cartesian import TWIST_UNIT
 from orccadd.state import JointState
@@ -124,8 +124,8 @@ class HybridForce(_TaskFrameLaw):
             sel = self.axes.value > 0.5
             err = np.where(sel, self.setpoint.value - self._in_task(wrench), 0.0)
             v = -np.concatenate((float(self.gain.value) * err[:3], float(self.rgain.value) * err[3:]))
-            v[:3] = _clip_norm(v[:3], float(self.vmax.value))
-            v[3:] = _clip_norm(v[3:], float(self.wmax.value))
+            v[:3] = clip_norm(v[:3], float(self.vmax.value))
+            v[3:] = clip_norm(v[3:], float(self.wmax.value))
             self._offset += v * dt
             # the trajectory's pose and twist on the task frame, its selected axes replaced
             r0, rt = self._r0, self._r_task
@@ -183,7 +183,7 @@ class Admittance(_TaskFrameLaw):
             force = self._in_task(wrench) - self.setpoint.value
             # semi-implicit Euler: the new velocity first, from the spring at the old position
             self._v = (self._v + dt * (force - k * self._x) / m) / (1.0 + dt * d / m)
-            self._v[:3] = _clip_norm(self._v[:3], float(self.vmax.value))
+            self._v[:3] = clip_norm(self._v[:3], float(self.vmax.value))
             self._x = self._x + dt * self._v
             x_base = self._in_base(self._x)
             position = (np.asarray(p_des) + x_base[:3]).tolist()
@@ -235,8 +235,3 @@ class WrenchFromTorques(KernelModule):
             return (w.tolist(),)
 
         return estimate
-
-
-def _clip_norm(v: np.ndarray, limit: float) -> np.ndarray:
-    n = float(np.linalg.norm(v))
-    return v * (limit / n) if n > limit else v
