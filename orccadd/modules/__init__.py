@@ -10,6 +10,7 @@ from orccadd.modules import (  # noqa: F401 - register built-ins
     force,
     hold,
     kinematic_control,
+    operational_space,
     trajectory,
     ur,
     visual,
