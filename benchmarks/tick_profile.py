@@ -8,6 +8,9 @@ reaches one, so the profile covers motion and settling. Each module's `update` i
 which module eats the budget before putting a task on a robot:
 
     python benchmarks/tick_profile.py --robot sim-panda --task configs/tasks/move_joints.toml
+
+A task whose trajectory is a tool's straight line (`offset_m`: move_line*.toml) is re-armed back
+and forth along the base's x by --line-m instead of toward joint targets.
 """
 
 from __future__ import annotations
@@ -22,8 +25,10 @@ from harness import targets_for
 
 from orccadd.config.robot import RobotConfig
 from orccadd.config.shipped import robot_config_path
+from orccadd.modules import Module
 from orccadd.robot import load_robot_config, with_backend
 from orccadd.session import Session
+from orccadd.task import RobotTask
 from orccadd.types import Phase
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -39,14 +44,15 @@ def main() -> None:
     ap.add_argument("--robot", default="sim-ur5e", help="a robot config (file or shipped name)")
     ap.add_argument("--task", default=str(ROOT / "configs/tasks/move_joints.toml"))
     ap.add_argument("--ticks", type=int, default=20_000)
+    ap.add_argument("--line-m", type=float, default=0.1, help="a line task's stroke (m)")
     args = ap.parse_args()
 
     cfg = with_backend(load_robot_config(robot_config_path(args.robot)), "sim")
     s = Session.from_config(cfg)
     task = s.task(Path(args.task))
     m = s.resource.model
-    goals = targets_for(m.q_min_rad, m.q_max_rad, m.home_rad)
-    traj = next((mod for mod in task.modules if "target_rad" in mod.parameters), None)
+    goals = goals_for(task, m.q_min_rad, m.q_max_rad, m.home_rad, args.line_m)
+    traj = goal_module(task)
 
     n = args.ticks
     perf = time.perf_counter_ns
@@ -86,7 +92,7 @@ def main() -> None:
     res.read = read  # type: ignore[method-assign]
     res.write = write  # type: ignore[method-assign]
     if traj is not None:
-        traj.configure({"target_rad": goals[0]})
+        traj.configure({goal_key(traj): goals[0]})
     task.activate()
     period = cfg.control_period_s
     goal = 0
@@ -97,7 +103,7 @@ def main() -> None:
         tick_ns[i] = perf() - t0
         if task.phase is Phase.DONE and traj is not None:
             goal = (goal + 1) % len(goals)
-            task.tune(f"{traj.name}.target_rad", goals[goal])
+            traj.configure({goal_key(traj): goals[goal]})  # between two runs: any goal, tunable or not
             task.activate()
         elif task.phase not in (Phase.RUN, Phase.PRE, Phase.DONE):
             raise SystemExit(f"the task ended {task.phase.name} at tick {i}: {task.fault_reason}")
@@ -131,7 +137,7 @@ def law_times(
     task = s.task(task_file)
     if not compiled:
         task.compiled = None
-    traj = next((mod for mod in task.modules if "target_rad" in mod.parameters), None)
+    traj = goal_module(task)
     out = np.zeros(n, dtype=np.int64)
     perf, inner, k = time.perf_counter_ns, task.run_law, [0]
 
@@ -142,7 +148,7 @@ def law_times(
 
     task.run_law = run_law  # type: ignore[method-assign]
     if traj is not None:
-        traj.configure({"target_rad": goals[0]})
+        traj.configure({goal_key(traj): goals[0]})
     task.activate()
     goal = 0
     for i in range(n):
@@ -150,10 +156,32 @@ def law_times(
         task.tick(i * cfg.control_period_s)
         if task.phase is Phase.DONE and traj is not None:
             goal = (goal + 1) % len(goals)
-            task.tune(f"{traj.name}.target_rad", goals[goal])
+            traj.configure({goal_key(traj): goals[goal]})  # between two runs: any goal, tunable or not
             task.activate()
     s.close()
     return out[out > 0]
+
+
+GOAL_KEYS = ("target_rad", "offset_m")  # a joint trajectory's goal, a line's
+
+
+def goal_module(task: RobotTask) -> Module | None:
+    """The module whose goal re-arms the task: a joint trajectory or a line."""
+    return next((mod for mod in task.modules if any(k in mod.parameters for k in GOAL_KEYS)), None)
+
+
+def goal_key(module: Module) -> str:
+    return next(k for k in GOAL_KEYS if k in module.parameters)
+
+
+def goals_for(
+    task: RobotTask, q_min: np.ndarray, q_max: np.ndarray, home: np.ndarray, line_m: float
+) -> list[list[float]]:
+    """The goals the task is re-armed toward in turn: joint targets, or a line back and forth."""
+    traj = goal_module(task)
+    if traj is not None and goal_key(traj) == "offset_m":
+        return [[line_m, 0.0, 0.0], [-line_m, 0.0, 0.0]]
+    return targets_for(q_min, q_max, home)
 
 
 if __name__ == "__main__":

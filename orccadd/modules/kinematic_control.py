@@ -27,10 +27,8 @@ import numpy as np
 
 from orccadd.kinematics import (
     ToolKinematics,
-    damped_pseudo_inverse,
     pose_error,
     rotation_of,
-    smallest_singular_value,
 )
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
 from orccadd.modules.cartesian import TWIST_UNIT
@@ -98,18 +96,20 @@ class ResolvedRate(KernelModule):
             )
             v[:] = twist_des
             v[:] += float(self.gain.value) * e
-            sigma = smallest_singular_value(j)
+            u, sv, vt = np.linalg.svd(j, full_matrices=False)  # one SVD: the margin and the inverse
+            sigma = float(sv[-1])
             eps, lam_max = float(self.threshold.value), float(self.max_damping.value)
-            damping = lam_max * np.sqrt(1.0 - (sigma / eps) ** 2) if sigma < eps else 0.0
-            j_pinv = damped_pseudo_inverse(j, damping)
-            dq = j_pinv @ v
+            damping2 = lam_max * lam_max * (1.0 - (sigma / eps) ** 2) if sigma < eps else 0.0
+            gains = sv / (sv * sv + damping2)  # J⁺ = V·diag(σ/(σ² + λ²))·Uᵀ
+            dq = vt.T @ (gains * (u.T @ v))
             k0 = float(self.centering.value)
-            if k0 > 0.0:
-                dq += (self._eye - j_pinv @ j) @ (-k0 * (q_ref - self._mid) / self._range2)
+            if k0 > 0.0:  # (I − J⁺J)·g, J⁺J = V·diag(σ²/(σ² + λ²))·Vᵀ
+                g = -k0 * (q_ref - self._mid) / self._range2
+                dq += g - vt.T @ ((sv * gains) * (vt @ g))
             dq = self._within_limits(dq)
             ddq = (dq - self._dq_prev) / dt
             self._dq_prev = dq
-            self._q_ref = q_ref = np.clip(q_ref + dq * dt, self._qmin, self._qmax)
+            self._q_ref = q_ref = np.minimum(np.maximum(q_ref + dq * dt, self._qmin), self._qmax)
             return (q_ref.tolist(), dq.tolist(), ddq.tolist(), sigma)
 
         return resolved_rate
