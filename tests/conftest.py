@@ -89,6 +89,7 @@ ONE_AT_A_TIME_MODULES = (
 ONE_AT_A_TIME_BACKENDS = {
     "tests/physres/test_contract.py": ("ur_rtde", "dynamixel", "sim_process"),
     "tests/daemon/test_same_mission.py": ("ur_rtde", "dynamixel"),
+    "tests/daemon/test_line_demo.py": ("ur_rtde",),
 }
 
 

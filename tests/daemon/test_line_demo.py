@@ -1,6 +1,6 @@
-"""configs/missions/line_demo.mission through orccadd and orccadctl on the simulated arm: the
-tool goes out along a straight line 0.3 m and back along it, within a millimetre of the line
-throughout, read from the daemon's own full-rate log."""
+"""configs/missions/line_demo.mission through orccadd and orccadctl on the simulated arm and on
+the UR controller simulator (servoJ): the tool goes out along a straight line 0.3 m and back
+along it, within a millimetre of the line throughout, read from the daemon's own full-rate log."""
 
 from __future__ import annotations
 
@@ -8,11 +8,13 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from orccadd.kinematics import ToolKinematics
 from orccadd.model import RobotModel
 from orccadd.robot import load_robot_config
-from tests.daemon.conftest import ROOT, Daemon
+from tests.daemon.conftest import ROOT, Daemon, start_daemon_with
+from tests.daemon.test_same_mission import arm_config
 
 MISSION = str(ROOT / "configs/missions/line_demo.mission")
 
@@ -23,8 +25,17 @@ def instants(d: Daemon) -> list[tuple[float, tuple[str, ...]]]:
     return [(float(e["t_s"]), tuple(e["actions"])) for e in events if e["kind"] == "instant"]
 
 
-def test_line_demo_keeps_the_tool_within_a_millimetre_of_its_lines(daemon: Daemon, tmp_path: Path) -> None:
-    """The daemon runs on tmp_path/robot.toml (tests/daemon/conftest.py: sim-ur5e)."""
+@pytest.mark.parametrize("backend", ["sim", "ur_rtde"])
+def test_line_demo_keeps_the_tool_within_a_millimetre_of_its_lines(backend: str, tmp_path: Path) -> None:
+    with arm_config(backend, tmp_path) as config:
+        daemon = start_daemon_with(tmp_path, config)
+        try:
+            check_line_demo(daemon, config, tmp_path)
+        finally:
+            daemon.stop()
+
+
+def check_line_demo(daemon: Daemon, config: Path, tmp_path: Path) -> None:
     out = tmp_path / "line.csv"
     assert daemon.ctl("log", "start", "q", "--name", "line.csv").returncode == 0
     assert daemon.ctl("load", MISSION).returncode == 0
@@ -36,7 +47,7 @@ def test_line_demo_keeps_the_tool_within_a_millimetre_of_its_lines(daemon: Daemo
     starts = {a: t for t, acts in instants(daemon) for a in acts if a.startswith("start ")}
     rows = np.loadtxt(out, delimiter=",", comments="#", skiprows=_header_line(out) + 1)
     t_s, q = rows[:, 0] + float(stop["origin_t_s"]), rows[:, 1:7]
-    kin = ToolKinematics(RobotModel.from_config(load_robot_config(tmp_path / "robot.toml")))
+    kin = ToolKinematics(RobotModel.from_config(load_robot_config(config)))
     tool = np.array([kin.pose(qi).translation for qi in q])
     out_t, back_t = starts["start Out"], starts["start Back"]
     at_out = tool[np.searchsorted(t_s, out_t)]
