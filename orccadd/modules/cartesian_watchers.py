@@ -103,3 +103,62 @@ class ManipulabilityWatch(Watcher):
             return debounce(bool(np.isfinite(measure)) and measure < float(threshold))
 
         return singular
+
+
+@register("wrench_settled")
+class WrenchSettled(Watcher):
+    """Fires when a force law's error (`hybrid_force`'s `wrench_error`) stays within
+    `tolerance_n` (its force's magnitude) and `tolerance_nm` (its torque's): the setpoint is
+    held, e.g. a press's postcondition."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        self.add_input("wrench_error", (6,), "N|N.m")
+        self.tol = self.add_parameter("tolerance_n", 1.0, bounds=(1e-3, 1e4), unit="N", tunable=True)
+        self.ttol = self.add_parameter("tolerance_nm", 0.1, bounds=(1e-4, 1e3), unit="N.m", tunable=True)
+
+    def kernel(self) -> Kernel:
+        debounce, tol, ttol = self._debounce, self.tol.value, self.ttol.value
+
+        def settled(t_s: float, wrench_error: list[float]) -> tuple[bool]:
+            fx, fy, fz, tx, ty, tz = wrench_error
+            held = (
+                fx * fx + fy * fy + fz * fz <= float(tol) ** 2
+                and tx * tx + ty * ty + tz * tz <= float(ttol) ** 2
+            )
+            return debounce(held)
+
+        return settled
+
+
+@register("plane_crossed")
+class PlaneCrossed(Watcher):
+    """Fires when the tool's point is past a plane: (p − `point_m`)·`normal` < 0, the plane
+    through `point_m` with the normal `normal` (base frame; need not be unit). An insertion
+    deep enough, a tool below a height."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        self.add_input("position_m", (3,), "m")
+        self.point = self.add_parameter(
+            "point_m", [0.0, 0.0, 0.0], bounds=(-20.0, 20.0), unit="m", shape=(3,), required=True,
+            per_joint=True, element="axis", tunable=True,
+        )  # fmt: skip
+        self.normal = self.add_parameter(
+            "normal",
+            [0.0, 0.0, 1.0],
+            bounds=(-1.0, 1.0),
+            unit="1",
+            shape=(3,),
+            per_joint=True,
+            element="axis",
+        )
+
+    def kernel(self) -> Kernel:
+        debounce, point, normal = self._debounce, self.point.value, self.normal.value
+
+        def crossed(t_s: float, position_m: list[float]) -> tuple[bool]:
+            (px, py, pz), (ox, oy, oz), (nx, ny, nz) = position_m, point.tolist(), normal.tolist()
+            return debounce((px - ox) * nx + (py - oy) * ny + (pz - oz) * nz < 0.0)
+
+        return crossed
