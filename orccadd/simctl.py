@@ -27,8 +27,8 @@ RESERVED = ("inject", "device")
 
 # What each simulator's `inject` takes: (FAULT, its parameters as written in --help). The names
 # are each simulator's own FAULTS (tests/test_simctl.py compares them); docs/simulators.md and
-# the simulators' modules (orccadd.ursim.faults, orccadd.drivesim, orccadd.dxlsim.control) say
-# what each does.
+# the simulators' modules (orccadd.ursim.faults, orccadd.drivesim, orccadd.dxlsim.control,
+# orccadd.plantsim.control) say what each does.
 FAULTS: dict[str, tuple[str, tuple[tuple[str, str], ...]]] = {
     "ursim": (
         "a UR controller (python -m orccadd.ursim); no --device",
@@ -74,6 +74,22 @@ FAULTS: dict[str, tuple[str, tuple[tuple[str, str], ...]]] = {
             ("clear", ""),
         ),
     ),
+    "plantsim": (
+        "the simulated arm's plant (sim_process; address: the resource's `plant_control`); no --device",
+        (
+            (
+                "plane",
+                "point_m=[X,Y,Z] normal=[X,Y,Z] stiffness_n_m=K [damping_n_s_m=D] [friction=MU] "
+                "[viscous_friction_n_s_m=B]",
+            ),
+            (
+                "hole",
+                "center_m=[X,Y,Z] normal=[X,Y,Z] radius_m=R stiffness_n_m=K [depth_m=H] [damping_n_s_m=D] "
+                "[friction=MU] [viscous_friction_n_s_m=B]",
+            ),
+            ("clear_world", ""),
+        ),
+    ),
 }
 
 EXAMPLES = """\
@@ -84,6 +100,8 @@ examples:
   python -m orccadd.simctl 127.0.0.1:30100 inject digital_input index=0 value=true
   python -m orccadd.simctl 127.0.0.1:30200 inject overcurrent --device 3    (drivesim --control-port 30200)
   python -m orccadd.simctl /tmp/orccadd-gripper.control inject object --device 1 at_rad=0.9
+  python -m orccadd.simctl 127.0.0.1:30300 inject hole \
+      'center_m=[0.5,0,0.1]' 'normal=[0,0,1]' radius_m=0.01 stiffness_n_m=20000    (plantsim)
 """
 
 

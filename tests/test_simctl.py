@@ -159,6 +159,7 @@ def test_the_help_lists_each_simulators_own_faults() -> None:
     """The names --help lists are the ones each simulator's `inject` takes (its FAULTS)."""
     from orccadd.drivesim.simulator import FAULTS as DRIVE_FAULTS
     from orccadd.dxlsim.chain import FAULTS as DXL_FAULTS
+    from orccadd.plantsim.control import FAULTS as PLANT_FAULTS
     from orccadd.ursim.simulator import DIGITAL_INPUTS, WORLD
     from orccadd.ursim.simulator import FAULTS as UR_FAULTS
 
@@ -166,6 +167,7 @@ def test_the_help_lists_each_simulators_own_faults() -> None:
     assert sorted(listed["ursim"]) == sorted([*UR_FAULTS, *WORLD, *DIGITAL_INPUTS])
     assert sorted(listed["drivesim"]) == sorted(DRIVE_FAULTS)
     assert sorted(listed["dxlsim"]) == sorted(DXL_FAULTS)
+    assert sorted(listed["plantsim"]) == sorted(PLANT_FAULTS)
     out = subprocess.run(
         [sys.executable, "-m", "orccadd.simctl", "--help"],
         capture_output=True,

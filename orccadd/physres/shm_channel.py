@@ -1,10 +1,10 @@
 """A shared-memory channel between a controller and a plant process (same machine).
 
-Layout (one `SharedMemory` block): an int64 control area, the state (t, q, dq, tau) and the
-command vector. State and command are each written under a sequence lock (odd while writing),
-so a reader never sees a torn vector and neither side ever waits for the other. Lifecycle
-requests (activate, clear stop, …) go through a request/acknowledge counter pair; safe stop is
-a single store, so it can be asked from a tick.
+Layout (one `SharedMemory` block): an int64 control area, the state (t, q, dq, tau, and the
+tool's measured wrench: 6) and the command vector. State and command are each written under a
+sequence lock (odd while writing), so a reader never sees a torn vector and neither side ever
+waits for the other. Lifecycle requests (activate, clear stop, …) go through a
+request/acknowledge counter pair; safe stop is a single store, so it can be asked from a tick.
 """
 
 from __future__ import annotations
@@ -31,9 +31,11 @@ class Ctl:
     STATUS = 9  # the plant's Status flags
     FAULT_CODE = 10
     CMD_MODE = 11
+    CONTROL_PORT = 12  # the plant's control channel on 127.0.0.1 (0: none, or not yet open)
 
 
 CTL_SIZE = 16
+WRENCH_SIZE = 6
 
 
 class Request(IntEnum):
@@ -53,7 +55,8 @@ class PlantChannel:
 
     def __init__(self, dof: int, name: str | None = None, create: bool = False) -> None:
         self.dof = dof
-        n_f64 = 1 + 3 * dof + dof
+        self.state_size = 1 + 3 * dof + WRENCH_SIZE
+        n_f64 = self.state_size + dof
         size = CTL_SIZE * 8 + n_f64 * 8
         self.shm = shared_memory.SharedMemory(name=name, create=create, size=size if create else 0)
         if not create:
@@ -63,8 +66,8 @@ class PlantChannel:
         buf = self.shm.buf
         self.ctl: npt.NDArray[np.int64] = np.ndarray((CTL_SIZE,), dtype=np.int64, buffer=buf)
         f64: npt.NDArray[np.float64] = np.ndarray((n_f64,), dtype=np.float64, buffer=buf, offset=CTL_SIZE * 8)
-        self.state = f64[: 1 + 3 * dof]  # t, q, dq, tau
-        self.cmd = f64[1 + 3 * dof :]
+        self.state = f64[: self.state_size]  # t, q, dq, tau, wrench
+        self.cmd = f64[self.state_size :]
         if create:
             self.ctl[:] = 0
             f64[:] = 0.0
@@ -74,20 +77,23 @@ class PlantChannel:
         return self.shm.name
 
     # ---- state: the plant writes, the controller reads ------------------------------------
-    def publish_state(self, t_s: float, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, status: int) -> None:
+    def publish_state(
+        self, t_s: float, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, status: int, wrench: np.ndarray
+    ) -> None:
         ctl, st, n = self.ctl, self.state, self.dof
         ctl[Ctl.STATE_SEQ] += 1  # odd: writing
         st[0] = t_s
         st[1 : 1 + n] = q
         st[1 + n : 1 + 2 * n] = dq
-        st[1 + 2 * n :] = tau
+        st[1 + 2 * n : 1 + 3 * n] = tau
+        st[1 + 3 * n :] = wrench
         ctl[Ctl.STATUS] = status
         ctl[Ctl.STATE_SEQ] += 1
 
     def read_state(self, out: np.ndarray, tries: int = 3) -> int:
-        """Copy a consistent state into `out` (len 1 + 3·dof); returns the plant's status, or
-        -1 if no consistent snapshot came in `tries` (never spins: the writer may be a
-        lower-priority process preempted on this very CPU)."""
+        """Copy a consistent state into `out` (len `state_size`: 1 + 3·dof + 6); returns the
+        plant's status, or -1 if no consistent snapshot came in `tries` (never spins: the writer
+        may be a lower-priority process preempted on this very CPU)."""
         return self._snapshot(Ctl.STATE_SEQ, self.state, out, Ctl.STATUS, tries)[1]
 
     def _snapshot(

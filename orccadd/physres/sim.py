@@ -9,6 +9,8 @@ models what the controller would meet on a real arm:
 - torque saturation at max_torque_nm; in position and velocity modes, a joint servo (PD with
   gravity feed-forward, per-axis gains from the reflected inertia) like a drive's inner loop;
 - measurement noise and latency (whole periods), deterministic for a given seed;
+- a contact world (planes, holes: `contact`) acting on the tool point through its Jacobian, and
+  the tool's force/torque sensor (the `wrench` signal, not delayed): `sim_contact`;
 - safe stop by IEC 60204-1 category (0, 1, 2), and `inject_fault()` for fault tests.
 
 Time is the caller's: `read(t_s)` integrates the dynamics up to `t_s` with the last command
@@ -32,7 +34,9 @@ from orccadd.fault import Fault, FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.arm_dynamics import ArmDynamics
 from orccadd.physres.base import PhysicalResource
+from orccadd.physres.contact import ContactWorld
 from orccadd.physres.description import MEASURED, ResourceDescription
+from orccadd.physres.sim_contact import WRENCH, HoleSettings, PlaneSettings, ToolContact, shapes_from_settings
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Status
 from orccadd.vec import clamp
@@ -43,8 +47,9 @@ INJECTED_FAULT_CODE = 0x1000  # "generic error" in CiA 301's EMCY table
 
 
 def simulated_description(backend: str, config: RobotConfig) -> ResourceDescription:
-    """What the simulated arm can do: every mode, everything measured (simulated sensors),
-    brakes, every stop category; its plant computes inside or beside the control process."""
+    """What the simulated arm can do: every mode, everything measured (simulated sensors, the
+    tool's wrench too), brakes, every stop category; its plant computes inside or beside the
+    control process."""
     return ResourceDescription(
         backend=backend,
         joints=config.joint_names,
@@ -59,6 +64,7 @@ def simulated_description(backend: str, config: RobotConfig) -> ResourceDescript
         write_time_s=0.0,
         fault_reset=True,
         fault_injection=("device",),
+        signals=(WRENCH,),
     )
 
 
@@ -77,6 +83,12 @@ class SimSettings:
     seed: int = field(default=0, bounds=(0, 2**63 - 1))
     initial_q_rad: tuple[float, ...] = field(default=())
     servo_bandwidth_hz: float = field(default=20.0, bounds=(0.1, 500.0))
+    # the contact world (`contact`, `sim_contact`): the tool a sphere of this radius about its point
+    tool_radius_m: float = field(default=0.0, bounds=(0.0, 1.0))
+    world_planes: tuple[PlaneSettings, ...] = field(default=())
+    world_holes: tuple[HoleSettings, ...] = field(default=())
+    ft_noise_force_n: float = field(default=0.0, bounds=(0.0, 100.0))  # the sensor's noise (std)
+    ft_noise_torque_nm: float = field(default=0.0, bounds=(0.0, 10.0))
 
 
 S = TypeVar("S", bound=SimSettings)
@@ -113,6 +125,7 @@ def load_sim_settings(settings_cls: type[S], raw: Mapping[str, Any], cfg: RobotC
                 f"resource.settings.initial_q_rad[{i}]",
                 f"(={q!r}) must be in [{j.position_min_rad:g}, {j.position_max_rad:g}] ({j.name})",
             )
+    shapes_from_settings(s.world_planes, s.world_holes, file)  # ConfigError if a shape is wrong
     if not s.brake_torque_nm:
         s = replace(s, brake_torque_nm=tuple(2.0 * j.max_torque_nm for j in cfg.joints))
     return s
@@ -152,6 +165,12 @@ class SimulatedArm(PhysicalResource):
             viscous_nm_s_rad=vec(s.viscous_friction_nm_s_rad),
             coulomb_nm=vec(s.coulomb_friction_nm),
         )
+        world = ContactWorld(
+            shapes_from_settings(s.world_planes, s.world_holes, config.source), s.tool_radius_m
+        )
+        self.contact = ToolContact(model, world, s.ft_noise_force_n, s.ft_noise_torque_nm, s.seed)
+        self.arm.external = self.contact.torque
+        self._wrench = self.signals[WRENCH.name]
         self.q: FloatArray = self.arm.q  # the same arrays, moved in place by the core
         self.dq: FloatArray = self.arm.dq
         self.tau_applied: FloatArray = np.zeros(n)
@@ -226,6 +245,11 @@ class SimulatedArm(PhysicalResource):
         self.brakes_engaged = False
         self.torque_on = True
 
+    @property
+    def world(self) -> ContactWorld:
+        """What the tool touches (`contact.ContactWorld`; `sim_contact.change_world` changes it)."""
+        return self.contact.world
+
     # ---- fault injection (tests, demos) ---------------------------------------------------
     def _on_inject_fault(self, kind: str, message: str) -> None:
         """Make the next read report a device fault (like a drive's EMCY)."""
@@ -266,6 +290,7 @@ class SimulatedArm(PhysicalResource):
         if s.noise_tau_nm:
             self._rng.standard_normal(out=self._noise)
             state.tau_nm += s.noise_tau_nm * self._noise
+        self.contact.measure(self.q, self.dq, self._wrench)
         flags = self._fault
         if not self.torque_on:
             flags |= Status.TORQUE_OFF

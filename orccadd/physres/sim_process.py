@@ -27,8 +27,9 @@ from orccadd.fault import Fault, FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import ClockSource, ResourceDescription
-from orccadd.physres.shm_channel import Ctl, PlantChannel, Request
+from orccadd.physres.shm_channel import WRENCH_SIZE, Ctl, PlantChannel, Request
 from orccadd.physres.sim import INJECTED_FAULT_CODE, SimSettings, load_sim_settings, simulated_description
+from orccadd.physres.sim_contact import WRENCH
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Lifecycle, Status
 
@@ -55,6 +56,9 @@ class SimProcessSettings(SimSettings):
     plant_cpu: int = field(default=-1, bounds=(-1, 1023))  # -1: let the scheduler choose
     # the plant's own cycle paces the control loop, as a UR controller's RTDE stream does
     paced_by_plant: bool = field(default=False)
+    # the plant's control channel on 127.0.0.1 (its contact world: docs/simulators.md): this port,
+    # 0 any free one (shown as `plant_control` in the resource's details), -1 none
+    plant_control_port: int = field(default=0, bounds=(-1, 65535))
 
     def periods(self, periods: int, period_s: float) -> int:
         """A watchdog's count of periods: `periods`, or its default at `period_s` if 0."""
@@ -77,6 +81,13 @@ class SimProcessArm(PhysicalResource):
         return d
 
     @classmethod
+    def claims(cls, config: RobotConfig) -> tuple[str, ...]:
+        """A fixed port of the plant's control channel is one plant's."""
+        s: SimProcessSettings | None = config.backend_settings
+        port = s.plant_control_port if s is not None else 0
+        return (f"the plant control port 127.0.0.1:{port}",) if port > 0 else ()
+
+    @classmethod
     def load_settings(cls, raw: Any, cfg: RobotConfig, file: str) -> SimProcessSettings:
         """The `sim` checks, with this backend's settings class."""
         return load_sim_settings(SimProcessSettings, raw, cfg, file)
@@ -90,7 +101,8 @@ class SimProcessArm(PhysicalResource):
         self._heartbeat_periods = s.periods(s.heartbeat_timeout_periods, config.control_period_s)
         self.channel: PlantChannel | None = None
         self.process: Any = None
-        self._buf = np.zeros(1 + 3 * self.dof)
+        self._buf = np.zeros(1 + 3 * self.dof + WRENCH_SIZE)
+        self._wrench = self.signals[WRENCH.name]
         self._last_heartbeat = -1
         self._silent_reads = 0
         self._last_cmd: FloatArray = np.zeros(self.dof)
@@ -130,6 +142,8 @@ class SimProcessArm(PhysicalResource):
             str(s.periods(s.watchdog_periods, self.config.control_period_s)),
             "--priority",
             str(s.plant_priority),
+            "--control-port",
+            str(s.plant_control_port),
         ]
         pass_fds: tuple[int, ...] = ()
         if s.paced_by_plant:
@@ -246,9 +260,17 @@ class SimProcessArm(PhysicalResource):
         return {
             **super()._details(),
             "plant_channel": ch.name if ch is not None else "",
+            "plant_control": self.plant_control,
             "cycles_dropped": self.cycles_dropped,
             "plant_starts": self.plant_starts,
         }
+
+    @property
+    def plant_control(self) -> str:
+        """The plant's control channel (`python -m orccadd.simctl ADDRESS ...`), "" if none."""
+        ch = self.channel
+        port = int(ch.ctl[Ctl.CONTROL_PORT]) if ch is not None else 0
+        return f"127.0.0.1:{port}" if port else ""
 
     def plant_alive(self) -> bool:
         return self.process is not None and self.process.poll() is None
@@ -285,7 +307,9 @@ class SimProcessArm(PhysicalResource):
         status = ch.read_state(self._buf)
         if status < 0:  # the plant is mid-write: keep the previous measurement this tick
             return int(ch.ctl[Ctl.STATUS]) & int(Status.FAULT)
-        state.vector[:] = self._buf[1:]  # q, dq, tau
+        n3 = 1 + 3 * self.dof
+        state.vector[:] = self._buf[1:n3]  # q, dq, tau
+        self._wrench[:] = self._buf[n3:]
         state.fault_code = int(ch.ctl[Ctl.FAULT_CODE])
         hb = int(ch.ctl[Ctl.HEARTBEAT])
         if hb == self._last_heartbeat:

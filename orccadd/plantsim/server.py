@@ -4,6 +4,10 @@ talking to the controller through a `PlantChannel`, like a robot's own controlle
 It protects itself like a real arm: once commands stream (the first command after activation
 arms the watchdog), no fresh command for `watchdog_periods` periods (the controller stalled or
 died) → safe stop; the controller process gone → safe stop, then exit once at rest.
+
+Each step publishes the tool's wrench beside the joint state (the arm's contact world and F/T
+sensor: `orccadd.physres.sim_contact`); the world is changed through the plant's control
+channel (`control.PlantControl`, its port in the channel's `Ctl.CONTROL_PORT`).
 """
 
 from __future__ import annotations
@@ -17,6 +21,8 @@ from orccadd.config.robot import RobotConfig
 from orccadd.model import RobotModel
 from orccadd.physres.shm_channel import Ctl, PlantChannel, Request
 from orccadd.physres.sim import SimulatedArm
+from orccadd.physres.sim_contact import WRENCH
+from orccadd.plantsim.control import PlantControl
 from orccadd.runtime.clock import WallClock
 from orccadd.runtime.executor import PeriodicExecutor
 from orccadd.runtime.rt import enter_realtime
@@ -49,6 +55,7 @@ class PlantServer:
         self.cycle_fd = cycle_fd  # one byte per step: the controller's loop is paced by it
         self.period_s = cfg.control_period_s
         self.paused_s = 0.0
+        self.wrench = self.arm.signals[WRENCH.name]  # the tool's, as the arm's sensor measures it
 
     def _handle_request(self) -> None:
         ctl, arm = self.ch.ctl, self.arm
@@ -91,7 +98,7 @@ class PlantServer:
             self.paused_s += t_s - last - self.period_s
             arm.t_sim_s = t_s - self.period_s  # one period is integrated, the rest was a pause
         st = arm.read(t_s)
-        self.ch.publish_state(t_s, st.q_rad, st.dq_rad_s, st.tau_nm, st.status)
+        self.ch.publish_state(t_s, st.q_rad, st.dq_rad_s, st.tau_nm, st.status, self.wrench)
         ctl[Ctl.FAULT_CODE] = st.fault_code
         ctl[Ctl.HEARTBEAT] += 1
         if self.cycle_fd >= 0:
@@ -120,13 +127,25 @@ class PlantServer:
 
 
 def plant_main(
-    cfg: RobotConfig, shm_name: str, watchdog_periods: int, priority: int, cpu: int = -1, cycle_fd: int = -1
+    cfg: RobotConfig,
+    shm_name: str,
+    watchdog_periods: int,
+    priority: int,
+    cpu: int = -1,
+    cycle_fd: int = -1,
+    control_port: int = -1,
 ) -> None:
-    """Run the plant until shut down (or its controller is gone and the arm is at rest)."""
+    """Run the plant until shut down (or its controller is gone and the arm is at rest);
+    `control_port` >= 0: its control channel on 127.0.0.1 (0: any free port), -1: none."""
     channel = PlantChannel(cfg.dof, shm_name)
     if cycle_fd >= 0:
         os.set_blocking(cycle_fd, False)
     server = PlantServer(cfg, channel, watchdog_periods, cycle_fd)
+    # the control channel's threads start before the priority is raised: time-shared, they never
+    # delay a step by more than the interpreter's switch interval
+    control = PlantControl(server.arm, control_port) if control_port >= 0 else None
+    if control is not None:
+        channel.ctl[Ctl.CONTROL_PORT] = control.port
     # its memory locked too: a page fault in a step delays the arm's state by milliseconds, and the
     # controller counts a plant silent for `heartbeat_timeout_periods` as gone (CommLost)
     enter_realtime(priority, cpus={cpu} if cpu >= 0 else None)
@@ -134,6 +153,8 @@ def plant_main(
     try:
         ex.run(until=lambda: server.done)
     finally:
+        if control is not None:
+            control.close()
         channel.close()
 
 
@@ -153,6 +174,12 @@ def main() -> int:
     ap.add_argument("--priority", type=int, default=0)
     ap.add_argument("--cpu", type=int, default=-1)
     ap.add_argument("--cycle-fd", type=int, default=-1, help="write one byte per step to this fd")
+    ap.add_argument(
+        "--control-port",
+        type=int,
+        default=-1,
+        help="the control channel (plane, hole, clear_world, status) on 127.0.0.1: PORT, 0 any free, -1 none",
+    )
     args = ap.parse_args()
     try:
         setup_logging("orccadd.plantsim")
@@ -162,5 +189,11 @@ def main() -> int:
     if not isinstance(cfg, RobotConfig):
         logging.getLogger("orccadd.plantsim").error("stdin is not a RobotConfig")
         return 2
-    plant_main(cfg, args.shm, args.watchdog_periods, args.priority, args.cpu, args.cycle_fd)
+    try:
+        plant_main(
+            cfg, args.shm, args.watchdog_periods, args.priority, args.cpu, args.cycle_fd, args.control_port
+        )
+    except OSError as e:  # the control port taken
+        logging.getLogger("orccadd.plantsim").error("control port %d: %s", args.control_port, e.strerror)
+        return 1
     return 0

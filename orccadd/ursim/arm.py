@@ -24,6 +24,7 @@ import numpy as np
 import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
+from orccadd.errors import ConfigError
 from orccadd.model import RobotModel
 from orccadd.physres.sim import SimSettings, SimulatedArm, load_sim_settings
 from orccadd.state import FloatArray
@@ -85,6 +86,13 @@ class UrArm:
         raw = {"substep_s": min(0.001, period_s), **sim_settings}
         cfg = replace(cfg, control_period_s=period_s)
         settings = load_sim_settings(SimSettings, raw, cfg, settings_file or cfg.source)
+        if settings.world_planes or settings.world_holes:
+            key = "world_planes" if settings.world_planes else "world_holes"
+            raise ConfigError(
+                settings_file or cfg.source,
+                key,
+                "is the simulated arm's: the UR simulator's world is set through its control channel (wall)",
+            )
         cfg = replace(
             cfg,
             resource=replace(cfg.resource, backend="sim", settings=raw),

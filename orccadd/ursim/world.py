@@ -11,7 +11,9 @@ the TCP at `p` moving at `v`,
     depth d = (p0 − p)·n        (> 0: the TCP is inside the wall)
     F = n · max(0, k·d − c·(v·n))   while d > 0, else 0
 
-so the wall pushes the tool out along its normal and never pulls it in. The push is a wrench
+so the wall pushes the tool out along its normal and never pulls it in (the law and the
+parameters' checks are the simulated arm's, `orccadd.physres.contact`, whose planes and holes
+add friction and a tool radius). The push is a wrench
 the test applies to the TCP for a while (a hand on the tool, in freedrive tests).
 
 Set from the control channel (`faults.py`): `wall`, `wall_remove`, `push`.
@@ -19,15 +21,22 @@ Set from the control channel (`faults.py`): `wall`, `wall_remove`, `push`.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from orccadd.physres.contact import (
+    DEFAULT_DAMPING_N_S_M,
+    non_negative,
+    normal_force,
+    only,
+    unit_normal,
+    vector3,
+)
 from orccadd.state import FloatArray
 
-DEFAULT_WALL_DAMPING_N_S_M = 100.0
+DEFAULT_WALL_DAMPING_N_S_M = DEFAULT_DAMPING_N_S_M
 
 
 @dataclass(frozen=True)
@@ -49,53 +58,22 @@ class Push:
     until_s: float
 
 
-def _vector3(params: dict[str, Any], key: str, default: Any = None) -> tuple[float, float, float]:
-    raw = params.get(key, default)
-    if raw is None:
-        raise ValueError(f'"{key}" is required (3 numbers)')
-    if not isinstance(raw, list | tuple) or len(raw) != 3:
-        raise ValueError(f'"{key}" (={raw!r}) must be 3 numbers')
-    x, y, z = (float(v) for v in raw)
-    if not all(math.isfinite(v) for v in (x, y, z)):
-        raise ValueError(f'"{key}" (={raw!r}) must be finite')
-    return x, y, z
-
-
-def _positive(params: dict[str, Any], key: str, default: float | None, allow_zero: bool = False) -> float:
-    raw = params.get(key, default)
-    if raw is None:
-        raise ValueError(f'"{key}" is required')
-    v = float(raw)
-    if not math.isfinite(v) or v < 0.0 or (v == 0.0 and not allow_zero):
-        raise ValueError(f'"{key}" (={raw!r}) must be {">= 0" if allow_zero else "> 0"}')
-    return v
-
-
-def _only(params: dict[str, Any], allowed: tuple[str, ...], what: str) -> None:
-    unknown = sorted(set(params) - set(allowed))
-    if unknown:
-        raise ValueError(f"{what}: unknown parameter(s) {', '.join(unknown)} (allowed: {', '.join(allowed)})")
-
-
 def wall_from_params(params: dict[str, Any]) -> Wall:
     """A wall from the control channel's `{"inject": "wall", ...}` (`ValueError` if bad)."""
-    _only(params, ("point_m", "normal", "stiffness_n_m", "damping_n_s_m"), "wall")
-    point = _vector3(params, "point_m")
-    nx, ny, nz = _vector3(params, "normal")
-    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if norm < 1e-9:
-        raise ValueError('"normal" must not be zero')
-    stiffness = _positive(params, "stiffness_n_m", None)
-    damping = _positive(params, "damping_n_s_m", DEFAULT_WALL_DAMPING_N_S_M, allow_zero=True)
-    return Wall(point, (nx / norm, ny / norm, nz / norm), stiffness, damping)
+    only(params, ("point_m", "normal", "stiffness_n_m", "damping_n_s_m"), "wall")
+    point = vector3(params, "point_m")
+    normal = unit_normal(params)
+    stiffness = non_negative(params, "stiffness_n_m", None)
+    damping = non_negative(params, "damping_n_s_m", DEFAULT_WALL_DAMPING_N_S_M, allow_zero=True)
+    return Wall(point, normal, stiffness, damping)
 
 
 def push_from_params(params: dict[str, Any], now_s: float) -> Push:
     """A push from `{"inject": "push", "force_n": [...], "torque_nm": [...], "duration_s": T}`."""
-    _only(params, ("force_n", "torque_nm", "duration_s"), "push")
-    f = _vector3(params, "force_n", [0.0, 0.0, 0.0])
-    t = _vector3(params, "torque_nm", [0.0, 0.0, 0.0])
-    duration = _positive(params, "duration_s", None)
+    only(params, ("force_n", "torque_nm", "duration_s"), "push")
+    f = vector3(params, "force_n", [0.0, 0.0, 0.0])
+    t = vector3(params, "torque_nm", [0.0, 0.0, 0.0])
+    duration = non_negative(params, "duration_s", None)
     return Push((*f, *t), now_s + duration)
 
 
@@ -120,7 +98,7 @@ class World:
             depth = (w0 - p_m[0]) * n0 + (w1 - p_m[1]) * n1 + (w2 - p_m[2]) * n2
             if depth > 0.0:
                 speed_out = v_m_s[0] * n0 + v_m_s[1] * n1 + v_m_s[2] * n2
-                f = max(0.0, wall.stiffness_n_m * depth - wall.damping_n_s_m * speed_out)
+                f = normal_force(wall.stiffness_n_m, wall.damping_n_s_m, depth, speed_out)
                 out[0], out[1], out[2] = f * n0, f * n1, f * n2
                 touched = f > 0.0
         if push is not None:

@@ -167,3 +167,15 @@ def test_a_simulator_serves_the_one_resource_of_its_bus_or_the_one_named() -> No
         pick_resource(two, ("dynamixel",), "thumb")
     with pytest.raises(ConfigError, match="has no canopen402 resource"):
         pick_resource(two, ("canopen402",))
+
+
+def test_two_plants_on_one_fixed_control_port_are_refused(tmp_path: Path, robot_variant) -> None:  # type: ignore[no-untyped-def]
+    robot = robot_variant(
+        ('backend = "sim"', 'backend = "sim_process"'),
+        ("seed = 1\n", "seed = 1\nplant_control_port = 30300\n"),
+    )
+    path = write(tmp_path, 'name = "c"\n' + entry("a", str(robot)) + entry("b", str(robot)))
+    with pytest.raises(ConfigError, match=r"the plant control port 127.0.0.1:30300, which resources\[0\]"):
+        load_cell_config(path)
+    ok = entry("a", str(robot)) + entry("b", str(robot), "settings = { plant_control_port = 0 }")
+    assert load_cell_config(write(tmp_path, 'name = "c"\n' + ok)).names == ("a", "b")

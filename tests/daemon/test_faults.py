@@ -147,7 +147,7 @@ def test_realtime_process_killed_the_arm_stops(daemon: Daemon) -> None:
     ch = PlantChannel(6, name=str(shm))
     daemon.proc.kill()  # SIGKILL: no safe stop from the controller
     daemon.proc.wait()
-    buf = np.zeros(1 + 3 * 6)
+    buf = np.zeros(ch.state_size)
     end = time.monotonic() + 10
     stopped = False
     while time.monotonic() < end:

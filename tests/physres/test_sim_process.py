@@ -11,12 +11,14 @@ from collections.abc import Iterator
 
 import pytest
 
+from orccadd.kinematics import ToolKinematics
 from orccadd.physres.description import ClockSource
 from orccadd.physres.sim_process import SimProcessArm
 from orccadd.robot import load_robot_config, with_backend
 from orccadd.runtime import WallClock
 from orccadd.runtime.clock import DevicePacedClock
 from orccadd.session import Session
+from orccadd.simproc import control_request
 from orccadd.task.loop import resource_clock
 from orccadd.types import Phase, Status
 from tests.conftest import MOVE_TASK, ROOT, UR5E
@@ -36,6 +38,30 @@ def test_motion_through_the_process_link(session: Session) -> None:
     phase = loop.run_task(task, timeout_s=6.0)
     assert phase is Phase.DONE, (task.fault_reason, session.resource.fault_message)
     assert session.event_names() == ["MoveJoints.pre", "MoveJoints.done"]
+
+
+def test_the_plants_world_is_set_through_its_control_channel_and_felt_by_the_resource(
+    session: Session,
+) -> None:
+    """The plant's control channel (its address in the resource's details) places a plane the
+    tool is in: the resource reads the plant's sensor (`arm.wrench`) through the shared memory."""
+    res = session.resource
+    assert isinstance(res, SimProcessArm)
+    address = res.diagnostics().details["plant_control"]
+    assert isinstance(address, str) and address.startswith("127.0.0.1:")
+    z = ToolKinematics(res.model).pose(res.state.q_rad).translation[2]
+    plane = {"point_m": [0.0, 0.0, z + 0.005], "normal": [0.0, 0.0, 1.0], "stiffness_n_m": 5000.0}
+    assert control_request(address, {"inject": "plane", **plane}) == {"ok": True}
+    task = session.task(ROOT / "configs/tasks/hold.toml")
+    loop = session.loop(WallClock(), overrun_limit=10**6)
+    loop.active = task
+    task.activate()
+    loop.run_for(0.3)
+    fz = res.signals["wrench"][2]
+    assert 0.5 < fz < 5000.0 * 0.005 + 1.0, res.signals["wrench"]  # pushed up, the hold's PD yielding
+    assert control_request(address, {"inject": "clear_world"}) == {"ok": True}
+    loop.run_for(0.05)
+    assert res.signals["wrench"] == pytest.approx([0.0] * 6)
 
 
 def test_plant_killed_is_comm_lost_type_3(session: Session) -> None:
@@ -82,6 +108,7 @@ from orccadd.robot import load_robot_config, with_backend
 from orccadd.runtime import WallClock
 from orccadd.runtime.clock import DevicePacedClock
 from orccadd.session import Session
+from orccadd.simproc import control_request
 from orccadd.task.loop import resource_clock
 s = Session.from_config(with_backend(load_robot_config({str(UR5E)!r}), "sim_process"))
 task = s.task({str(MOVE_TASK)!r})

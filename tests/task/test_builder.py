@@ -115,7 +115,8 @@ BAD_WIRING = [
     (
         ('signal = "arm.dq"', 'signal = "traj.q_des"'),
         ConfigError,
-        "preconditions[0].signal (='traj.q_des') must be a measured signal (arm.q, arm.dq, arm.tau)",
+        "preconditions[0].signal (='traj.q_des') must be a measured signal "
+        "(arm.q, arm.dq, arm.tau, arm.wrench)",
     ),
     (  # the file's `resource` is the resource's name in its wires (the mission binds the task)
         ('resource = "arm"', 'resource = "vehicle"'),
@@ -216,8 +217,9 @@ def test_misplaced_wires_key_gets_a_hint(session, tmp_path) -> None:  # type: ig
 
 
 def test_a_resources_own_signals_are_outputs_of_its_node_and_others_refuse_them(session: Session) -> None:
-    """A UR measures the tool's wrench (`arm.wrench`, shared with the resource: no copy); a task
-    that wires it is refused on a resource without it, naming the outputs it has."""
+    """A UR measures the tool's wrench (`arm.wrench`, shared with the resource: no copy), and so
+    does the simulated arm; a task that wires it is refused on a resource without it (CANopen
+    drives), naming the outputs it has."""
     from orccadd.robot import create_resource, load_robot_config
     from tests.conftest import ROOT
 
@@ -228,8 +230,12 @@ def test_a_resources_own_signals_are_outputs_of_its_node_and_others_refuse_them(
     assert contact.inputs["wrench"].value is ur.signals["wrench"]
     signals = ur.description.as_dict()["signals"]
     assert isinstance(signals, list) and [s.split(" ")[0] for s in signals] == ["wrench", "speed_scaling"]
+    on_sim = build(session, guarded)  # the same wire on the simulated arm: its F/T sensor
+    sim_contact = next(m for m in on_sim.modules if m.name == "contact")
+    assert sim_contact.inputs["wrench"].value is session.resource.signals["wrench"]
+    drives = create_resource(load_robot_config(ROOT / "configs/robots/canopen-6axis.toml"))  # not opened
     with pytest.raises(WiringError, match=r"arm has no output 'wrench' \(outputs: q, dq, tau\)"):
-        build(session, guarded)
+        build_task(load_task_file(guarded), drives)
     scaled = build_task(load_task_file(ROOT / "configs/tasks/ur_move_joints.toml"), ur)
     traj = next(m for m in scaled.modules if m.name == "traj")
     assert traj.inputs["speed_scaling"].value is ur.signals["speed_scaling"]

@@ -104,3 +104,16 @@ def test_tool_contact_counts_the_cycles_since_the_contact_began() -> None:
     for _ in range(60):
         h.record(np.array([0.0, 0.0, THRESHOLD_N + 1.0]))
     assert h.steps_in_contact(down) == 50  # at most the history's length
+
+
+def test_the_simulated_arms_world_settings_are_refused_for_the_ur_simulators_arm() -> None:
+    """The UR simulator's world is its wall (control channel); the `sim` backend's planes in its
+    `--plant` settings would do nothing there, so they are refused, naming the key."""
+    from orccadd.config.robot import read_robot_config
+    from orccadd.errors import ConfigError
+    from orccadd.ursim.arm import UrArm
+    from tests.ursim.conftest import UR5E_RTDE
+
+    plane = {"point_m": [0, 0, 0.1], "normal": [0, 0, 1], "stiffness_n_m": 5000.0}
+    with pytest.raises(ConfigError, match=r"plant.toml: world_planes is the simulated arm's: .*\(wall\)"):
+        UrArm(read_robot_config(UR5E_RTDE), 0.002, {"world_planes": [plane]}, "plant.toml")
