@@ -8,7 +8,7 @@ import argparse
 import os
 import sys
 
-from orccadd.ctl import online
+from orccadd.ctl import motion, online
 from orccadd.ctl.completion import SHELLS
 from orccadd.errors import did_you_mean
 from orccadd.wire.version import version_text
@@ -50,6 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_offline(sub)
     online.add_parsers(sub)
+    motion.add_parsers(sub)
     from orccadd.ctl.cell import add_parser as add_cell
 
     add_cell(sub)
@@ -75,7 +76,7 @@ def _main(argv: list[str] | None) -> int:
     if unknown:
         print(f"{parser.prog}: error: {unknown}", file=sys.stderr)
         return 2
-    args = parser.parse_args(argv)
+    args = parser.parse_args(motion.joined_values(sys.argv[1:] if argv is None else argv))
     if args.command == "completion":
         from orccadd.ctl.completion import completion_script
 

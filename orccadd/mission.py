@@ -105,13 +105,16 @@ def build_mission_tasks(
     bindings: Bindings,
     registry: EventRegistry,
     task_spec: Callable[[Path], TaskSpec] = load_task_file,
+    data: Mapping[str, object] | None = None,
 ) -> tuple[tuple[RobotTask, ...], dict[int, int]]:
     """Every task of a compiled mission built for the robot's resource it runs on (`bindings`:
     by name, each with the event queue of its control loop; modules instantiated, ports bound,
     the mission's `set` lines applied), and event registry id → the automaton's input bit.
     `MissionError` at the task's or `set` line's place, `OrccaddError` otherwise. `task_spec`
-    gives a task file's spec (default: read it; the daemon: the specs its compiler read). Needs
-    no hardware: the resources are built, not configured. Not for a tick."""
+    gives a task file's spec (default: read it; the daemon: the specs its compiler read).
+    `data`: what modules take beyond their parameters (`Module.set_data`), by `TASK.MODULE`
+    (the daemon's: a trajectory `orccadctl follow` sent). Needs no hardware: the resources are
+    built, not configured. Not for a tick."""
     p = automaton.program
     text = p.text
     have = ", ".join(f"`{n}`" for n in bindings)
@@ -121,9 +124,13 @@ def build_mission_tasks(
             raise _err(
                 decl.loc, text, f"task {decl.name} runs on `{decl.resource}`, but this robot's {what} {have}"
             )
+    given = dict(data or {})
     tasks = tuple(
-        _build(decl, p.file, text, *bindings[decl.resource], registry, task_spec) for decl in p.ast.tasks
+        _build(decl, p.file, text, *bindings[decl.resource], registry, task_spec, given)
+        for decl in p.ast.tasks
     )
+    if given:
+        raise OrccaddError(f"{p.file}: data for {', '.join(sorted(given))}, which the mission does not have")
     bits: dict[int, int] = {}
     for i, name in enumerate(p.inputs):
         if p.input_kind[i] == "operator" and "." in name:  # a resource's input, `R.X`
@@ -176,6 +183,7 @@ def _build(
     queue: EventQueue,
     registry: EventRegistry,
     task_spec: Callable[[Path], TaskSpec],
+    data: dict[str, object],
 ) -> RobotTask:
     src = Path(decl.source)
     if not src.is_absolute():
@@ -193,6 +201,19 @@ def _build(
             module.configure({ps.param: value})
         except ParameterError as e:
             raise _err(ps.loc, text, f"task {decl.name}: {e}") from None
+    for m in task.modules:
+        key = f"{decl.name}.{m.name}"
+        try:
+            if key in data:
+                m.set_data(data.pop(key))
+        except ParameterError as e:
+            raise _err(decl.loc, text, f"task {decl.name}: {e}") from None
+        if m.needs_data():
+            raise _err(
+                decl.loc, text,
+                f"task {decl.name}: module {m.name} ({m.type_name}) plays data the daemon gives it "
+                "(a trajectory: `orccadctl follow`), which a mission file cannot",
+            )  # fmt: skip
     missing = [f"{m.name}.{name}" for m in task.modules for name in m.missing()]
     if missing:
         first = missing[0]

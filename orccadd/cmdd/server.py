@@ -643,7 +643,7 @@ class CommandDaemon:
         if spec.where == "rt":
             reply = await self.rt.call(cmd, args, spec.reply_s)
             reply["id"] = rid
-            if cmd == "load" and reply.get("ok"):
+            if spec.loads and reply.get("ok"):
                 await self.refresh()
             return reply
         if writer is None and (cmd == "monitor" or (cmd == "events" and args.get("follow"))):

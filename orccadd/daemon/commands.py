@@ -8,37 +8,20 @@ changed nothing.
 from __future__ import annotations
 
 import dataclasses
-import gc
-import os
-import pickle
-import shutil
-import subprocess
-import sys
-import tempfile
 import time
 from collections.abc import Callable, Sequence
-from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
-from orccadd.automaton import Automaton, Network, Report
-from orccadd.config.robot import RobotConfig
-from orccadd.config.shipped import is_bare_name, is_file
-from orccadd.confine import Confinement, ConfinementError
-from orccadd.daemon.compile_cache import default_dir
-from orccadd.daemon.loop import SwitchingLoop
-from orccadd.daemon.mission import prepare_mission
-from orccadd.daemon.procedure import MissionControl
-from orccadd.daemon.publisher import Publisher
+from orccadd.daemon import adhoc
+from orccadd.daemon.loader import Loader
 from orccadd.daemon.replies import CommandError, Pending, Result
-from orccadd.daemon.supervision import Supervisor
+from orccadd.daemon.view import Machine, UnitView
 from orccadd.errors import OrccaddError, ParameterError, did_you_mean
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.mailbox import MailboxFullError
 from orccadd.task import RobotTask
-from orccadd.task.events import EventQueue, EventRegistry
-from orccadd.task.spec import TaskSpec
 from orccadd.task.task import ParameterChange, split_index
 from orccadd.wire.commands import handles
 from orccadd.wire.schema import PROTOCOL_VERSION, MachineState, OperatorAction, Trace, TuneRecord
@@ -47,54 +30,16 @@ MAX_INJECTED_MS = 5000.0  # longest injected tick: a stall, not a hang
 TUNE_WAIT_S = 1.0  # a tune not applied within this (or 100 periods) is reported as such
 
 
-class UnitView(Protocol):
-    """What the handlers use of one resource's unit (`orccadd.daemon.machine.Unit`)."""
-
-    cfg: RobotConfig
-    resource: PhysicalResource
-    queue: EventQueue
-    loop: SwitchingLoop
-    supervisor: Supervisor
-
-    @property
-    def name(self) -> str: ...
-
-
-class Machine(Protocol):
-    """What the handlers use of the execution machine (`orccadd.daemon.machine.Machine`)."""
-
-    cfg: RobotConfig
-    resource: PhysicalResource
-    registry: EventRegistry
-    loop: SwitchingLoop
-    pub: Publisher
-    mission: MissionControl
-    allow_fault_injection: bool
-
-    @property
-    def units(self) -> Sequence[UnitView]: ...
-    def unit(self, name: str) -> UnitView: ...
-    def unit_of(self, task: RobotTask) -> UnitView: ...
-    def abort(self, why: str) -> None: ...
-    def now_s(self) -> float: ...
-    def note(self, msg: str) -> None: ...
-    def describe(self) -> dict[str, Any]: ...
-
-
 class RtCommands:
     """The `rt` side of the command table (see `Dispatcher`)."""
 
     def __init__(self, machine: Machine) -> None:
         self.m = machine
-        self._loading: subprocess.Popen[bytes] | None = None  # the compiler process of a load
+        self.loader = Loader(machine)
 
     def close(self) -> None:
-        """Stop a load's compiler process still running (the daemon is stopping): in a session of
-        its own, it would outlive the daemon otherwise."""
-        child = self._loading
-        if child is not None and child.poll() is None:
-            child.kill()
-            child.wait()
+        """Stop a load's compiler process still running (the daemon is stopping)."""
+        self.loader.close()
 
     def _trace_tune(
         self, t_s: float, task: RobotTask, name: str, change: ParameterChange, old: Any, tick: int
@@ -125,133 +70,52 @@ class RtCommands:
 
     @handles("load")
     def load(self, path: str) -> Result | Pending:
-        """Compile and verify in a child process (never in this one: see `compile_worker`),
-        then build the tasks here when it is done: a pending reply meanwhile."""
-        mc = self.m.mission
-        mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
-        if self._loading is not None:
-            raise CommandError("a mission is being loaded: wait for its answer")
-        fd, path = self._open_mission(path)
-        work = Path(tempfile.mkdtemp(prefix="orccadd-load-"))
-        out = work / "result.pickle"
-        cfg = self.m.cfg
-        task_dirs = [str(cfg.resolve(d)) for d in (*cfg.daemon.task_dirs, *cfg.daemon.mission_dirs)]
-        cmd = [
-            sys.executable, "-m", "orccadd.daemon.compile_worker", "--fd", str(fd), "--name", path,
-            *(f"--task-dir={d}" for d in task_dirs), f"--memory-mb={cfg.daemon.load_memory_mb}",
-            f"--cache-dir={self._cache_dir()}", str(out),
-        ]  # fmt: skip
-        timeout_s = cfg.daemon.load_timeout_s
-        try:
-            child = subprocess.Popen(
-                cmd,
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
-                start_new_session=True,
-                pass_fds=(fd,),
-            )
-        except OSError as e:
-            shutil.rmtree(work, ignore_errors=True)
-            raise CommandError(f"{path}: cannot start the compiler process: {e.strerror or e}") from None
-        finally:
-            os.close(fd)
-        self._loading = child
+        """Compile and verify in a child process (never in this one: see `Loader`), then build
+        the tasks here when it is done: a pending reply meanwhile."""
+        return self.loader.load(path)
 
-        def done() -> None:
-            self._loading = None
-            shutil.rmtree(work, ignore_errors=True)
+    @handles("move")
+    def move(self, joints_rad: list[float], resource: str, speed_scale: float) -> Result | Pending:
+        """`move`: checked here (`adhoc`), then loaded and started (`_run_adhoc`)."""
+        self.loader.check_free("move")
+        return self._run_adhoc(adhoc.move(self.m, joints_rad, resource, speed_scale))
 
-        def poll() -> Result | None:
-            if child.poll() is None:
-                return None
-            cached = Path(f"{out}.cached").exists()
-            try:
-                result = pickle.loads(out.read_bytes()) if out.exists() else None
-            except (pickle.UnpicklingError, AttributeError, ImportError, EOFError, TypeError) as e:
-                raise CommandError(
-                    f"{path}: the compiler process's answer cannot be read by this daemon "
-                    f"({type(e).__name__}: {e}): is orccadd's code on disk newer than this daemon? restart it"
-                ) from None
-            finally:
-                done()
-            if isinstance(result, str):
-                raise CommandError(result)
-            if not isinstance(result, tuple):
-                raise CommandError(f"{path}: the compiler process failed (exit code {child.returncode})")
-            automaton, report, specs = result
-            return self._install(path, automaton, report, specs, cached=cached)
+    @handles("jog")
+    def jog(self, joint: str, by_rad: float, resource: str, speed_scale: float) -> Result | Pending:
+        self.loader.check_free("jog")
+        return self._run_adhoc(adhoc.jog(self.m, joint, by_rad, resource, speed_scale))
 
-        def expire() -> Result:
-            child.kill()
-            child.wait()
-            done()
-            raise CommandError(
-                f"{path}: not compiled and verified within {timeout_s:g} s (daemon.load_timeout_s); "
-                "`orccadctl check` shows how far it gets"
-            )
+    @handles("follow")
+    def follow(self, csv: str, name: str, resource: str) -> Result | Pending:
+        self.loader.check_free("follow")
+        return self._run_adhoc(adhoc.follow(self.m, csv, name, resource))
 
-        return Pending(poll, time.monotonic_ns() + int(timeout_s * 1e9), expire)
+    def _run_adhoc(self, job: adhoc.AdHoc) -> Pending:
+        """Load the generated mission as a file's (same compiler, checks, refusals), then start
+        it; one reply with both, and what was generated."""
+        self._check_no_fault()
 
-    def _cache_dir(self) -> str:
-        """The compile cache's directory ('' when off): `daemon.compile_cache_dir`, relative to
-        the config, or the user's cache (`compile_cache.default_dir`)."""
-        d = self.m.cfg.daemon
-        if not d.compile_cache:
-            return ""
-        return str(self.m.cfg.resolve(d.compile_cache_dir) if d.compile_cache_dir else default_dir())
+        def then(loaded: Result) -> Result:
+            started = self.start("")
+            return {**started, **job.detail, "report": loaded["report"], "cached": loaded["cached"]}
 
-    def _open_mission(self, path: str) -> tuple[int, str]:
-        """A descriptor of the mission file `path` names and its real path, if it is a regular
-        file inside one of the configured mission directories (checked on the descriptor: no
-        link swapped in after the check, no FIFO); `CommandError` otherwise, saying where
-        missions may be, never what is elsewhere. The compiler reads that descriptor."""
-        cfg = self.m.cfg
-        dirs = [cfg.resolve(d) for d in cfg.daemon.mission_dirs]
-        conf = Confinement(dirs, "mission file", "daemon.mission_dirs")
-        if is_bare_name(path):  # `load demo`: the first <dir>/demo.mission of the mission directories
-            path = next((str(d / f"{path}.mission") for d in dirs if is_file(d / f"{path}.mission")), path)
-        try:
-            return conf.open(path)
-        except ConfinementError as e:
-            raise CommandError(str(e)) from None
-
-    def _install(
-        self,
-        path: str,
-        automaton: Automaton | Network,
-        report: Report,
-        specs: dict[str, TaskSpec],
-        cached: bool = False,
-    ) -> Result:
-        mc = self.m.mission
-        mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
-        try:
-            bindings = {u.name: (u.resource, u.queue) for u in self.m.units}
-            loaded = prepare_mission(path, automaton, report, bindings, self.m.registry, specs)
-        except OrccaddError as e:
-            raise CommandError(str(e)) from None
-        mc.install(loaded)
-        # the replaced mission's tasks hold reference cycles (modules and their ports, compiled
-        # ticks) and native state (Ruckig, Pinocchio data); the automatic collector is off in
-        # this process (no pause in a tick): free them here, outside any tick (~1 ms)
-        gc.collect()
-        self._trace(OperatorAction.LOAD)
-        how = "all checks passed" + (", verified at an earlier load: compile cache" if cached else "")
-        self.m.note(f"loaded mission {loaded.name} ({loaded.automaton.n_states} states, {how})")
-        return {"mission": loaded.describe(), "report": loaded.report.format(), "cached": cached}
+        return self.loader.load_text(job.text, job.name, job.data, then)
 
     @handles("start")
     def start(self, procedure: str) -> Result:
         mc = self.m.mission
         mc.need(MachineState.READY, what="start")
-        for u in self.m.units:
-            if u.supervisor.fault:
-                what = "the arm" if len(self.m.units) == 1 else f"resource {u.name}"
-                raise CommandError(f"{what} was safe-stopped ({u.supervisor.fault}): `reset` first")
+        self._check_no_fault()
         t = self._trace(OperatorAction.START)
         main = mc.start(t, procedure)
         assert mc.mission is not None
         return {"started": main, "mission": mc.mission.name, "run": mc.runs}
+
+    def _check_no_fault(self) -> None:
+        for u in self.m.units:
+            if u.supervisor.fault:
+                what = "the arm" if len(self.m.units) == 1 else f"resource {u.name}"
+                raise CommandError(f"{what} was safe-stopped ({u.supervisor.fault}): `reset` first")
 
     @handles("send")
     def send(self, input: str) -> Result:

@@ -7,6 +7,7 @@ set from the mission's `set` lines), so that switching at run time only flips a 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -115,13 +116,15 @@ def prepare_mission(
     bindings: Bindings,
     registry: EventRegistry,
     specs: dict[str, TaskSpec] | None = None,
+    data: Mapping[str, object] | None = None,
 ) -> LoadedMission:
     """Check a verified mission against this robot's resources and build its tasks
     (milliseconds). `bindings`: each resource by name with its control loop's event queue.
     `specs`: the task files as the compiler read them (path → spec), so the tasks built are the
-    ones it checked and no file is read again here; None: read them."""
+    ones it checked and no file is read again here; None: read them. `data`: what modules take
+    beyond their parameters, by `TASK.MODULE` (`build_mission_tasks`)."""
     if specs is None:
-        tasks, bits = build_mission_tasks(automaton, bindings, registry)
+        tasks, bits = build_mission_tasks(automaton, bindings, registry, data=data)
     else:
 
         def spec(p: Path) -> TaskSpec:
@@ -129,5 +132,5 @@ def prepare_mission(
                 raise OrccaddError(f"{p}: not among the task files the compiler read")
             return specs[str(p)]
 
-        tasks, bits = build_mission_tasks(automaton, bindings, registry, spec)
+        tasks, bits = build_mission_tasks(automaton, bindings, registry, spec, data)
     return LoadedMission(str(path), automaton, report, tasks, bits)

@@ -446,6 +446,7 @@ class RealtimeProcess:
             if result is None:
                 still.append((rid, p))
             else:
+                self.machine.publish()  # first: a `status` after this reply sees what it changed
                 self._send({"id": rid, "ok": True, "result": result})
         if len(still) != len(self.pending):
             self.machine.publish()  # a reply went out: the state it changed

@@ -64,6 +64,7 @@ LOAD_TIMEOUT_MAX_S = 3600.0  # `daemon.load_timeout_s`'s bound: a load's refusal
 LOAD_REPLY_S = LOAD_TIMEOUT_MAX_S + 30.0
 RESET_REPLY_S = 40.0  # a reset's device work: an unlock, a reconnection, a servo's reboot (≤ 32 s)
 CLIENT_MARGIN_S = 5.0
+SPEED_SCALE_HELP = "fraction of the joints' velocity, acceleration and jerk limits, 0.01 to 1"
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,7 @@ class CommandSpec:
     stream: bool = False  # replies with stream lines before the final reply
     urgent: bool = False  # served ahead of everything (the urgent socket, a kept place)
     reply_s: float = RT_REPLY_S  # the longest its reply may take (a stream's first line)
+    loads: bool = False  # done, it has loaded a mission: the command daemon reads `describe` again
 
     @property
     def client_wait_s(self) -> float:
@@ -148,6 +150,7 @@ COMMANDS: dict[str, CommandSpec] = {
                 ),
             ),
             reply_s=LOAD_REPLY_S,
+            loads=True,
         ),
         CommandSpec(
             "start",
@@ -155,6 +158,51 @@ COMMANDS: dict[str, CommandSpec] = {
             "rt",
             "run the loaded mission's main procedure",
             (Arg("procedure", (str,), "the main procedure's name (checked if given)", default=""),),
+        ),
+        CommandSpec(
+            "move",
+            C,
+            "rt",
+            "move to a joint target without a mission file: the daemon writes a mission of one task "
+            "(the shipped move_joints task of the resource's command mode), loads it as `load` does "
+            "(same compiler and checks) and starts it; a value outside its joint's range, or the "
+            "wrong count, is refused before anything moves",
+            (
+                Arg("joints_rad", (list,), "the target, one per joint (rad)", required=True, items=NUMBER),
+                Arg("resource", (str,), "the resource (default: the only one)", default=""),
+                Arg("speed_scale", NUMBER, SPEED_SCALE_HELP, default=0.5),
+            ),
+            reply_s=LOAD_REPLY_S,
+            loads=True,
+        ),
+        CommandSpec(
+            "jog",
+            C,
+            "rt",
+            "move one joint by an amount from where it is now, as `move` does",
+            (
+                Arg("joint", (str,), "the joint's name", required=True),
+                Arg("by_rad", NUMBER, "how far (rad; negative: the other way)", required=True),
+                Arg("resource", (str,), "the resource (default: the one with that joint)", default=""),
+                Arg("speed_scale", NUMBER, SPEED_SCALE_HELP, default=0.5),
+            ),
+            reply_s=LOAD_REPLY_S,
+            loads=True,
+        ),
+        CommandSpec(
+            "follow",
+            C,
+            "rt",
+            "follow a planner's joint trajectory (CSV `t_s,<joints>`), interpolated by a clamped cubic "
+            "spline: checked whole against the joints' position, velocity and acceleration limits and "
+            "the arm's position before anything moves, then run as `move` is",
+            (
+                Arg("csv", (str,), "the CSV's text (within the request's 64 KiB)", required=True),
+                Arg("name", (str,), "its file's name, for messages", default="trajectory.csv"),
+                Arg("resource", (str,), "the resource (default: the only one)", default=""),
+            ),
+            reply_s=LOAD_REPLY_S,
+            loads=True,
         ),
         CommandSpec("stop", C, "rt", "graceful: the mission's `Stop` operator input", urgent=True),
         CommandSpec("abort", C, "rt", "immediate safe stop; the mission ends `aborted`", urgent=True),

@@ -13,13 +13,14 @@ import signal
 import subprocess
 import sys
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import pytest
 
 from orccadd.cli import build_parser, orccadctl_main
 from orccadd.ctl import cell as ctl_cell
-from orccadd.ctl import foxglove, online
+from orccadd.ctl import foxglove, motion, online
 from orccadd.ctl.format import bounds, num
 from orccadd.offline import commands as offline
 from tests.ctl.test_streams import server  # noqa: F401  (the stand-in stream server)
@@ -195,6 +196,8 @@ ARGV = {
     "monitor": ["monitor"], "events": ["events", "--follow"], "top": ["top"],
     "log": ["log", "start"], "inject": ["inject", "resource"], "plot": ["plot", "x.csv", "-o", "x.png"],
     "foxglove": ["foxglove", "--port", "0"], "cell": ["cell", "status", "--cell", "x.toml"],
+    "move": ["move", "--joints", "0,0,0,0,0,0"], "jog": ["jog", "--joint", "elbow_joint", "--by", "0.1"],
+    "follow": ["follow", "x.csv"],
 }  # fmt: skip
 
 
@@ -202,12 +205,15 @@ def interrupt(*args: object, **kwargs: object) -> Any:
     raise KeyboardInterrupt
 
 
-def test_ctrl_c_ends_every_command_quietly_with_130(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_ctrl_c_ends_every_command_quietly_with_130(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     subcommands = set(sub.choices)
     assert subcommands - set(ARGV) == {"completion"}  # a new command gets its line here
     monkeypatch.setattr(online, "Client", interrupt)  # what every online command does first
     monkeypatch.setattr(foxglove, "Client", interrupt)
+    monkeypatch.setattr(motion, "Client", interrupt)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "x.csv").write_text("t_s,a\n0,0\n1,0.1\n")  # follow reads its file before connecting
     monkeypatch.setattr(ctl_cell, "open_console", interrupt)
     for name in ("cmd_check", "cmd_graph", "cmd_export", "cmd_modules", "cmd_plot"):
         monkeypatch.setattr(offline, name, interrupt)

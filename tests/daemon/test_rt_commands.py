@@ -71,7 +71,7 @@ def test_a_compiler_answer_this_daemon_cannot_read_is_refused_saying_why(
     """The compile child runs the code on disk; upgraded under a running daemon, its answer names
     a class this daemon's code lacks (seen in a soak: `Can't get attribute '_Shared'`): `load` is
     refused saying what to do, not answered with an internal error."""
-    from orccadd.daemon import commands
+    from orccadd.daemon import loader
 
     def newer_code(data: bytes) -> object:
         raise AttributeError("Can't get attribute '_Shared' on <module 'orccadd.automaton.kernel'>")
@@ -79,7 +79,7 @@ def test_a_compiler_answer_this_daemon_cannot_read_is_refused_saying_why(
     with machine.reactor.held():
         reply = machine.command("load", {"path": str(ROOT / "configs/missions/demo.mission")})
     assert isinstance(reply, Pending)
-    monkeypatch.setattr(commands.pickle, "loads", newer_code)
+    monkeypatch.setattr(loader.pickle, "loads", newer_code)
     deadline = time.monotonic() + 60
     with pytest.raises(CommandError, match="cannot be read by this daemon .*restart it"):
         while reply.poll() is None:

@@ -1,0 +1,50 @@
+"""What the real-time process's command handlers use of the execution machine and its units
+(`orccadd.daemon.machine`), as protocols: the handlers' modules need not import the machine."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, Protocol
+
+from orccadd.config.robot import RobotConfig
+from orccadd.daemon.loop import SwitchingLoop
+from orccadd.daemon.procedure import MissionControl
+from orccadd.daemon.publisher import Publisher
+from orccadd.daemon.supervision import Supervisor
+from orccadd.physres.base import PhysicalResource
+from orccadd.task import RobotTask
+from orccadd.task.events import EventQueue, EventRegistry
+
+
+class UnitView(Protocol):
+    """What the handlers use of one resource's unit (`orccadd.daemon.machine.Unit`)."""
+
+    cfg: RobotConfig
+    resource: PhysicalResource
+    queue: EventQueue
+    loop: SwitchingLoop
+    supervisor: Supervisor
+
+    @property
+    def name(self) -> str: ...
+
+
+class Machine(Protocol):
+    """What the handlers use of the execution machine (`orccadd.daemon.machine.Machine`)."""
+
+    cfg: RobotConfig
+    resource: PhysicalResource
+    registry: EventRegistry
+    loop: SwitchingLoop
+    pub: Publisher
+    mission: MissionControl
+    allow_fault_injection: bool
+
+    @property
+    def units(self) -> Sequence[UnitView]: ...
+    def unit(self, name: str) -> UnitView: ...
+    def unit_of(self, task: RobotTask) -> UnitView: ...
+    def abort(self, why: str) -> None: ...
+    def now_s(self) -> float: ...
+    def note(self, msg: str) -> None: ...
+    def describe(self) -> dict[str, Any]: ...
