@@ -17,6 +17,7 @@ from ruckig import InputParameter, OutputParameter, Result, Ruckig, Synchronizat
 from orccadd.kinematics import ToolKinematics, angle_between, manipulability, quaternion_of, rotation_of
 from orccadd.model import RobotModel
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
+from orccadd.modules.trajectory import ruckig_step
 from orccadd.state import JointState
 
 TWIST_UNIT = "m/s|rad/s"
@@ -182,7 +183,7 @@ class _Line(KernelModule):
         def line(t_s: float) -> Outputs:
             if self._done:
                 return self._outs
-            result = otg.update(inp, out)
+            result = ruckig_step(otg, inp, out)
             if result not in (working, finished):  # Ruckig refused: hold where the path is
                 return self._outs
             (s, phi), (ds, dphi) = out.new_position, out.new_velocity

@@ -5,6 +5,7 @@ from __future__ import annotations
 from ruckig import InputParameter, OutputParameter, Result, Ruckig
 
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
+from orccadd.modules.trajectory import ruckig_step
 from orccadd.state import JointState
 from orccadd.vec import clamped
 
@@ -89,10 +90,7 @@ class HoldPosition(KernelModule):
         def hold(t_s: float) -> Setpoints:
             if self._settled:
                 return self._outs
-            try:
-                result = otg.update(inp, out)
-            except ValueError:  # a code the binding's enum lacks (see ruckig_trajectory)
-                result = Result.Error
+            result = ruckig_step(otg, inp, out)
             self.last_result = result
             if result == finished:
                 self._settled = True

@@ -3,12 +3,32 @@
 from __future__ import annotations
 
 import numpy as np
-from ruckig import InputParameter, OutputParameter, Result, Ruckig
+from ruckig import InputParameter, OutputParameter, Result, Ruckig, RuckigError
 
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
 from orccadd.state import JointState
 
 Outputs = tuple[list[float], list[float], list[float], list[float], bool]  # the outputs, in order
+NUDGE = 1.0 - 1e-9  # the jerk limits' relative nudge when Ruckig fails at a profile's boundary
+
+
+def ruckig_step(otg: Ruckig, inp: InputParameter, out: OutputParameter) -> Result:
+    """One Ruckig update, as robust as Ruckig 0.19.4 allows (tick-safe: no allocation on the usual
+    path). It raises `RuckigError` ("error in step 1") for a motion exactly at the boundary between
+    two profile shapes, e.g. 0.1 rad at 5 rad/s² and 50 rad/s³ (d = 2a³/j²): what `orccadctl jog
+    --by 0.1` asked of a UR5e's wrist. The same motion with the jerk limits a billionth lower is off
+    the boundary: retried once so; a second failure, or a code the binding's enum lacks (-101,
+    duration too long: a `ValueError`), is `Result.Error` (the caller holds its last setpoint)."""
+    try:
+        return otg.update(inp, out)
+    except ValueError:
+        return Result.Error
+    except RuckigError:
+        inp.max_jerk = [j * NUDGE for j in inp.max_jerk]
+    try:
+        return otg.update(inp, out)
+    except (ValueError, RuckigError):
+        return Result.Error
 
 
 @register("ruckig_trajectory")
@@ -87,10 +107,7 @@ class RuckigTrajectory(KernelModule):
         def trajectory(t_s: float, q: list[float], dq: list[float]) -> Outputs:
             if self._settled:  # holds the target; Ruckig is not asked again until it changes
                 return self._outs
-            try:
-                result = otg.update(inp, out)
-            except ValueError:  # a code the binding's enum lacks (0.19.4: -101, duration too long)
-                result = Result.Error
+            result = ruckig_step(otg, inp, out)
             self.last_result = result
             goal = self._outs[3]
             if result in (working, finished):

@@ -58,3 +58,21 @@ def test_at_zero_it_holds_and_goes_on_from_there() -> None:
     assert np.all(held[:, :dof] == rows[99, :dof]) and not held[:, dof:].any()  # still, at rest
     plain = np.array(run(RuckigTrajectory("p", CTX)))
     assert len(rows) == len(plain) + 50 and np.allclose(rows[150:, :dof], plain[100:, :dof])
+
+
+def test_a_motion_at_a_profiles_boundary_is_planned_not_refused() -> None:
+    """0.1 rad of a UR5e wrist at half speed: 5 rad/s², 50 rad/s³, d = 2a³/j² exactly, where
+    Ruckig 0.19.4 raises "error in step 1" (`orccadctl jog --by 0.1` hit it: a type 3 LawError)."""
+    traj = RuckigTrajectory("t", CTX)
+    target = MODEL.home_rad.copy()
+    target[3] += 0.1
+    state = JointState(MODEL.dof)
+    state.q_rad[:] = MODEL.home_rad
+    traj.configure({"target_rad": target.tolist(), "speed_scale": 0.5})
+    traj.begin(state)
+    for k in range(1000):
+        traj.update(k * PERIOD_S)
+        assert traj.last_result.value >= 0, (k, traj.last_result)  # Working or Finished, never an error
+        if bool(traj.finished.value):
+            break
+    assert bool(traj.finished.value) and np.allclose(traj.q_des.value, target)
