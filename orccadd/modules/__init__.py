@@ -7,6 +7,7 @@ from orccadd.modules import (  # noqa: F401 - register built-ins
     cartesian_watchers,
     control,
     filters,
+    follow,
     force,
     hold,
     kinematic_control,

@@ -45,7 +45,7 @@ def interaction_matrix(s: np.ndarray, depth_m: float) -> np.ndarray:
 
 @register("image_servo")
 class ImageServo(KernelModule):
-    """IBVS on FEATURES point features (see the module's doc): `features` and `visible` in (from
+    """IBVS on four point features (FEATURES; see the module's doc): `features` and `visible` in (from
     a camera), the desired pose and twist out (to `resolved_rate`), and the feature error's norm
     (`feature_error`, for a watcher: converged below a threshold)."""
 
