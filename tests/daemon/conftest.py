@@ -10,6 +10,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import cast
 
+import numpy as np
 import pytest
 
 from orccadd.config.cell import CellConfig
@@ -136,3 +137,10 @@ def moving(s: dict[str, object], above_rad_s: float = 0.1) -> bool:
     """A status in which some joint moves faster than `above_rad_s`."""
     joints = cast(list[dict[str, float]], s["joints"])
     return max(abs(j["dq_rad_s"]) for j in joints) > above_rad_s
+
+
+def log_rows(csv: Path) -> np.ndarray:
+    """A full-rate log's rows (`orccadctl log stop -o`: comment lines, a header, the values)."""
+    lines = csv.read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    return np.loadtxt(lines[header + 1 :], delimiter=",", ndmin=2)

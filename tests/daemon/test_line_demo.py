@@ -13,7 +13,7 @@ import pytest
 from orccadd.kinematics import ToolKinematics
 from orccadd.model import RobotModel
 from orccadd.robot import load_robot_config
-from tests.daemon.conftest import ROOT, Daemon, start_daemon_with
+from tests.daemon.conftest import ROOT, Daemon, log_rows, start_daemon_with
 from tests.daemon.test_same_mission import arm_config
 
 MISSION = str(ROOT / "configs/missions/line_demo.mission")
@@ -45,7 +45,7 @@ def check_line_demo(daemon: Daemon, config: Path, tmp_path: Path) -> None:
     stop = json.loads(daemon.ctl("log", "stop", "-o", str(out), "--json").stdout)["result"]
     assert stop["lost"] == 0
     starts = {a: t for t, acts in instants(daemon) for a in acts if a.startswith("start ")}
-    rows = np.loadtxt(out, delimiter=",", comments="#", skiprows=_header_line(out) + 1)
+    rows = log_rows(out)
     t_s, q = rows[:, 0] + float(stop["origin_t_s"]), rows[:, 1:7]
     kin = ToolKinematics(RobotModel.from_config(load_robot_config(config)))
     tool = np.array([kin.pose(qi).translation for qi in q])
@@ -61,10 +61,3 @@ def check_line_demo(daemon: Daemon, config: Path, tmp_path: Path) -> None:
         assert off_line.max() < 1e-3, off_line.max()
         assert np.linalg.norm(seg[-1] - goal) < 2e-3  # each line's goal, from where it began
     assert np.linalg.norm(tool[-1] - at_out) < 2e-3  # back where it went out from
-
-
-def _header_line(csv: Path) -> int:
-    for i, line in enumerate(csv.read_text().splitlines()):
-        if not line.startswith("#"):
-            return i
-    raise AssertionError(f"{csv} has no header")
