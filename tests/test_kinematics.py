@@ -28,12 +28,13 @@ HOME = np.array([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
 
 
 def ur5e(tool: ToolConfig | None = None) -> RobotModel:
+    """sim-ur5e's model, with `tool` for its [tool] (None: the config's, the flange tool0)."""
     cfg = load_robot_config(UR5E)
-    return RobotModel.from_config(replace(cfg, tool=tool) if tool else cfg)
+    return RobotModel.from_config(replace(cfg, tool=tool) if tool is not None else cfg)
 
 
 def test_the_tool_is_the_configured_frame_and_offset() -> None:
-    plain = ToolKinematics(ur5e()).pose(HOME)  # no [tool]: the last joint's link
+    plain = ToolKinematics(ur5e(ToolConfig())).pose(HOME)  # no [tool]: the last joint's link
     model = ur5e()
     data = model.new_data()
     pin.framesForwardKinematics(model.model, data, HOME)
@@ -46,6 +47,11 @@ def test_the_tool_is_the_configured_frame_and_offset() -> None:
     assert np.allclose(tipped.translation, flange.translation + 0.1 * flange.rotation[:, 2], atol=1e-9)
     assert np.isclose(angle_between(flange.rotation, tipped.rotation), np.pi / 2)
     assert tipped.translation[2] < flange.translation[2] - 0.099  # the tool points down at home
+    shipped = ToolKinematics(model).pose(HOME)  # sim-ur5e's [tool]: the flange, 0.1 m below the link
+    assert (
+        np.allclose(shipped.translation, flange.translation)
+        and link.translation[2] - 0.0996 < shipped.translation[2] + 1e-3
+    )
 
 
 @pytest.mark.parametrize("config", [UR5E, PANDA])

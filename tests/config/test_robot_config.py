@@ -89,19 +89,19 @@ BAD = [
         "resource.settings.initial_q_rad[2] (=5.0) must be in [-3.1415, 3.1415] (elbow_joint)",
     ),
     (
-        ("[safe_stop]", '[tool]\nframe = "gripper_tip"\n\n[safe_stop]'),
+        ('frame = "tool0"', 'frame = "gripper_tip"'),
         "tool.frame (='gripper_tip') is not a frame of ur5e.urdf (frames: base_link, ",
     ),
     (
-        ("[safe_stop]", '[tool]\nframe = "base_link"\n\n[safe_stop]'),
+        ('frame = "tool0"', 'frame = "base_link"'),
         "tool.frame (='base_link') is fixed to the base: no joint moves it, so no task can",
     ),
     (
-        ("[safe_stop]", "[tool]\noffset_m = [0.0, 0.1]\n\n[safe_stop]"),
+        ('frame = "tool0"', 'frame = "tool0"\noffset_m = [0.0, 0.1]'),
         "tool.offset_m has 2 entries, must have 3 numbers (x, y, z)",
     ),
     (
-        ("[safe_stop]", "[tool]\nmax_linear_velocity_m_s = 0.0\n\n[safe_stop]"),
+        ('frame = "tool0"', 'frame = "tool0"\nmax_linear_velocity_m_s = 0.0'),
         "tool.max_linear_velocity_m_s (=0.0) must be in (0, 5]",
     ),
     (

@@ -20,8 +20,8 @@ from orccadd.types import CommandMode, Phase
 from tests.conftest import ROOT, UR5E
 
 TASKS = ROOT / "configs" / "tasks"
-HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]  # the tool at z = 0.5875 m, pointing down
-TABLE = "world_planes = [{ point_m = [0.0, 0.0, 0.55], normal = [0.0, 0.0, 1.0], stiffness_n_m = 5000.0 }]\n"
+HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]  # the tool at z = 0.4879 m, pointing down
+TABLE = "world_planes = [{ point_m = [0.0, 0.0, 0.45], normal = [0.0, 0.0, 1.0], stiffness_n_m = 5000.0 }]\n"
 MODES = {
     "torque": (CommandMode.TORQUE, "move_joints.toml", "press.toml"),
     "position": (CommandMode.POSITION, "move_joints_csp.toml", "press_csp.toml"),
@@ -61,7 +61,7 @@ def test_the_tool_presses_on_the_table_with_its_setpoint_and_holds_where_it_touc
         assert abs(fz - 10.0) < 1.0, fz
         end = kin.pose(s.resource.state.q_rad).translation
         assert np.linalg.norm(end[:2] - start[:2]) < 1e-3  # x and y held
-        assert abs(end[2] - (0.55 - fz / 5000.0)) < 1e-3  # in the table by the spring's give
+        assert abs(end[2] - (0.45 - fz / 5000.0)) < 1e-3  # in the table by the spring's give
 
 
 def test_with_nothing_under_the_tool_it_is_a_type_2_no_contact(tmp_path: Path) -> None:

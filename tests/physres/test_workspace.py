@@ -17,7 +17,7 @@ from tests.conftest import ROOT, UR5E
 
 TASKS = ROOT / "configs" / "tasks"
 HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
-# at HOME the tool is at (-0.49, -0.13, 0.59), at the sim's initial pose y = -0.32: a box whose +y side
+# at HOME the tool is at (-0.49, -0.13, 0.49), at the sim's initial pose y = -0.32: a box whose +y side
 # is 0.13 m from HOME
 BOX = "[workspace]\nbox_min_m = [-1.0, -0.5, 0.1]\nbox_max_m = [0.0, 0.0, 1.0]\ntolerance_m = 0.005\n"
 OUT_OF_BOX = [-0.4, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]  # the pan turns the tool to y = +0.069
@@ -77,18 +77,18 @@ def test_a_joint_move_taking_the_tool_out_of_the_workspace_is_stopped_at_its_edg
 
 def test_the_excess_is_the_distance_out_of_the_box_or_out_of_the_sphere(tmp_path: Path) -> None:
     config = boxed(tmp_path)
-    sphere = "sphere_center_m = [0.0, 0.0, 0.0]\nsphere_radius_m = 0.75\n"
+    sphere = "sphere_center_m = [0.0, 0.0, 0.0]\nsphere_radius_m = 0.65\n"
     config.write_text(config.read_text().replace("tolerance_m = 0.005\n", "tolerance_m = 0.005\n" + sphere))
     s = Session.open(config)
     try:
         ws = ToolWorkspace.of(s.resource.model)
         assert ws is not None
-        home = np.array([-0.4919, -0.1333, 0.5875])  # in the box, 0.778 m from the base
-        assert np.isclose(ws.excess_m(HOME), np.linalg.norm(home) - 0.75, atol=1e-3)
+        home = np.array([-0.4919, -0.1333, 0.4879])  # in the box, 0.706 m from the base
+        assert np.isclose(ws.excess_m(HOME), np.linalg.norm(home) - 0.65, atol=1e-3)
         assert np.isclose(ws.excess_m(OUT_OF_BOX), 0.0688, atol=1e-3)  # beyond the box's +y side
         assert ws.excess_m([np.nan] * 6) == np.inf
         assert (
-            "outside the workspace (box [-1.0, -0.5, 0.1]..[0.0, 0.0, 1.0] m and sphere of 0.75 m"
+            "outside the workspace (box [-1.0, -0.5, 0.1]..[0.0, 0.0, 1.0] m and sphere of 0.65 m"
             in ws.describe_outside()
         )
     finally:
