@@ -91,12 +91,13 @@ ONE_AT_A_TIME_BACKENDS = {
     "tests/daemon/test_same_mission.py": ("ur_rtde", "dynamixel"),
     "tests/daemon/test_line_demo.py": ("ur_rtde",),
 }
+ONE_AT_A_TIME_TESTS = ("tests/daemon/test_peg_in_hole.py::test_the_same_mission_on_the_ur_simulator",)
 
 
 def one_at_a_time(nodeid: str) -> bool:
     """Whether the test `nodeid` runs in the one-at-a-time group."""
     module, _, rest = nodeid.partition("::")
-    if module in ONE_AT_A_TIME_MODULES:
+    if module in ONE_AT_A_TIME_MODULES or nodeid in ONE_AT_A_TIME_TESTS:
         return True
     param = rest.partition("[")[2].rstrip("]")
     return param in ONE_AT_A_TIME_BACKENDS.get(module, ())

@@ -93,6 +93,10 @@ class UrArm:
                 key,
                 "is the simulated arm's: the UR simulator's world is set through its control channel (wall)",
             )
+        if settings.camera is not None:
+            raise ConfigError(
+                settings_file or cfg.source, "camera", "is the simulated arm's: the UR simulator has none"
+            )
         cfg = replace(
             cfg,
             resource=replace(cfg.resource, backend="sim", settings=raw),
@@ -254,7 +258,7 @@ class UrArm:
     def external_wrench(self, q: FloatArray, dq: FloatArray, out: FloatArray) -> bool:
         """The world's wrench on the TCP at (q, dq) into `out` (base frame, N and N·m about the
         TCP); False when nothing touches the tool."""
-        if self.world.wall is None and self.world.push is None:
+        if self.world.empty:
             out[:] = 0.0
             return False
         jac = self._tcp_jacobian(q, self._ext_data, self._ext_jac)

@@ -17,6 +17,12 @@ The world and the I/O (`simulator.UrSimulator.inject`; `world.World`):
         it into free space; the TCP inside it is pushed out (the arm's dynamics and the F/T
         sensor feel it). One wall at a time: a new one replaces the old.
     {"inject": "wall_remove"}
+    {"inject": "plane", "point_m": [...], "normal": [...], "stiffness_n_m": 5000}    (added; optional
+        "damping_n_s_m", "friction", "viscous_friction_n_s_m": the simulated arm's planes)
+    {"inject": "hole", "center_m": [...], "normal": [...], "radius_m": 0.01, "depth_m": 0.03,
+        "stiffness_n_m": 5000}   a plane with a pocket in it (docs/simulators.md: the contact world)
+    {"inject": "tool", "radius_m": 0.008}   the TCP a sphere of that radius (0: a point)
+    {"inject": "clear_world"}   every plane and hole, the wall and the push removed
     {"inject": "push", "force_n": [fx, fy, fz], "torque_nm": [tx, ty, tz], "duration_s": 0.5}
         a wrench on the TCP (base frame) for that long: a hand on the tool
     {"inject": "digital_input", "index": 3, "value": true}               standard DI 0-7 (bits 0-7)

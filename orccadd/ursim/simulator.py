@@ -53,7 +53,7 @@ FAULTS = (
     "drop_connection",
     "controller_restart",
 )
-WORLD = ("wall", "wall_remove", "push", "ft_noise", "speed_slider")
+WORLD = ("wall", "wall_remove", "push", "plane", "hole", "tool", "clear_world", "ft_noise", "speed_slider")
 # input name -> (first bit of actual_digital_input_bits, count)
 DIGITAL_INPUTS = {
     "digital_input": (0, 8),
@@ -160,6 +160,8 @@ class UrSimulator:
             ctl.world.wall = None
         elif what == "push":
             ctl.world.push = push_from_params(params, ctl.now_s())
+        elif what in ("plane", "hole", "tool", "clear_world"):
+            ctl.world.change(what, params)
         elif what == "ft_noise":
             unknown = set(params) - {"force_n", "torque_nm", "seed"}
             if unknown:

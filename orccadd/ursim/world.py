@@ -16,7 +16,9 @@ parameters' checks are the simulated arm's, `orccadd.physres.contact`, whose pla
 add friction and a tool radius). The push is a wrench
 the test applies to the TCP for a while (a hand on the tool, in freedrive tests).
 
-Set from the control channel (`faults.py`): `wall`, `wall_remove`, `push`.
+Set from the control channel (`faults.py`): `wall`, `wall_remove`, `push`; and the simulated
+arm's shapes, `plane`, `hole` (a pocket with a rounded rim: a peg-in-hole), `tool` (the TCP a
+sphere), `clear_world`.
 """
 
 from __future__ import annotations
@@ -28,9 +30,12 @@ import numpy as np
 
 from orccadd.physres.contact import (
     DEFAULT_DAMPING_N_S_M,
+    ContactWorld,
+    hole_from_params,
     non_negative,
     normal_force,
     only,
+    plane_from_params,
     unit_normal,
     vector3,
 )
@@ -78,20 +83,42 @@ def push_from_params(params: dict[str, Any], now_s: float) -> Push:
 
 
 class World:
-    """The wall and the push, read by the arm's dynamics (any thread holding the controller's
-    lock, or the cycle itself); replaced whole, never changed in place."""
+    """The wall, the push and the shapes (planes and holes, the simulated arm's:
+    `orccadd.physres.contact`, on a TCP sphere of `shapes.tool_radius_m`), read by the arm's
+    dynamics (any thread holding the controller's lock, or the cycle itself); replaced whole,
+    never changed in place."""
 
     def __init__(self) -> None:
         self.wall: Wall | None = None
         self.push: Push | None = None
+        self.shapes = ContactWorld()
         self.now_s = 0.0  # the controller's time, set by its cycle (the push's clock)
+
+    @property
+    def empty(self) -> bool:
+        """Nothing to touch and no push: the dynamics skip the TCP's Jacobian."""
+        return self.wall is None and self.push is None and not self.shapes.shapes
+
+    def change(self, what: str, params: dict[str, Any]) -> None:
+        """`plane` or `hole` added (`contact.plane_from_params`, `hole_from_params`), `tool` (the
+        TCP a sphere of `radius_m`), `clear_world` (every shape, the wall and the push gone)."""
+        if what == "plane":
+            self.shapes.add(plane_from_params(params))
+        elif what == "hole":
+            self.shapes.add(hole_from_params(params))
+        elif what == "tool":
+            only(params, ("radius_m",), "tool")
+            self.shapes.tool_radius_m = non_negative(params, "radius_m", None, allow_zero=True)
+        else:  # clear_world
+            only(params, (), "clear_world")
+            self.shapes.clear()
+            self.wall = self.push = None
 
     def wrench_at(self, p_m: FloatArray, v_m_s: FloatArray, out: FloatArray) -> bool:
         """The external wrench on the TCP at `p_m` moving at `v_m_s` (base frame) into `out`;
         False (and `out` zero) when there is none. Cheap when the world is empty."""
         wall, push = self.wall, self.push
-        out[:] = 0.0
-        touched = False
+        touched = self.shapes.wrench_at(p_m, v_m_s, out)  # zeroes `out` first
         if wall is not None:
             n0, n1, n2 = wall.normal
             w0, w1, w2 = wall.point_m
@@ -99,8 +126,10 @@ class World:
             if depth > 0.0:
                 speed_out = v_m_s[0] * n0 + v_m_s[1] * n1 + v_m_s[2] * n2
                 f = normal_force(wall.stiffness_n_m, wall.damping_n_s_m, depth, speed_out)
-                out[0], out[1], out[2] = f * n0, f * n1, f * n2
-                touched = f > 0.0
+                out[0] += f * n0
+                out[1] += f * n1
+                out[2] += f * n2
+                touched = touched or f > 0.0
         if push is not None:
             if self.now_s < push.until_s:
                 out += np.asarray(push.wrench)
@@ -122,4 +151,6 @@ class World:
                 "damping_n_s_m": wall.damping_n_s_m,
             },
             "push_active": self.push is not None and self.now_s < self.push.until_s,
+            "shapes": len(self.shapes.shapes),
+            "tool_radius_m": self.shapes.tool_radius_m,
         }

@@ -2,7 +2,8 @@
 its work cell (configs/robots/sim-ur5e-workcell.toml: a table with a hole): the peg comes down
 beside the axis, touches the rim, is inserted 2 cm by hybrid force control and retreats; with
 the hole gone (the plant's control channel: a plain table), the insertion is `Missed`, the peg
-is lifted clear and the safe procedure waits for the operator."""
+is lifted clear and the safe procedure waits for the operator. The same mission on the UR
+controller simulator, given the same hole."""
 
 from __future__ import annotations
 
@@ -15,10 +16,20 @@ from orccadd.kinematics import ToolKinematics
 from orccadd.model import RobotModel
 from orccadd.robot import load_robot_config
 from orccadd.simproc import control_request
+from orccadd.ursim.process import UrSimProcess
 from tests.daemon.conftest import ROOT, Daemon, log_rows, start_daemon_with
+from tests.daemon.test_same_mission import local_config
 
 MISSION = str(ROOT / "configs/missions/peg_in_hole.mission")
 WORKCELL = ROOT / "configs/robots/sim-ur5e-workcell.toml"
+UR = ROOT / "configs/robots/ur5e-rtde-sim.toml"
+HOLE = {
+    "center_m": [-0.4919, -0.2333, 0.4],
+    "normal": [0, 0, 1],
+    "radius_m": 0.01,
+    "depth_m": 0.03,
+    "stiffness_n_m": 5000.0,
+}
 
 
 def workcell(tmp: Path) -> Path:
@@ -76,3 +87,26 @@ def test_beside_the_hole_the_insertion_is_missed_and_the_peg_lifted_clear(tmp_pa
         assert not s["faulted"], s
     finally:
         d.stop()
+
+
+def test_the_same_mission_on_the_ur_simulator(tmp_path: Path) -> None:
+    """On the UR controller simulator (servoJ, its TCP the flange): its world given the same hole
+    and peg through its control channel; the same insertion."""
+    with UrSimProcess(UR, "--boot", "running", "--priority", "70") as ur:
+        ur.inject("tool", radius_m=0.008)
+        ur.inject("hole", **HOLE)
+        config = local_config(tmp_path, UR)
+        d = start_daemon_with(tmp_path, config)
+        try:
+            out = tmp_path / "peg.csv"
+            assert d.ctl("log", "start", "q", "--name", "peg.csv").returncode == 0
+            assert d.ctl("load", MISSION).returncode == 0
+            assert d.ctl("start").returncode == 0
+            s = d.wait(lambda s: s["state"] != "running", timeout_s=60)
+            assert s["result"] == "success" and not s["faulted"], (s, actions(d))
+            d.ctl("log", "stop", "-o", str(out), "--json")
+            kin = ToolKinematics(RobotModel.from_config(load_robot_config(config)))
+            tool = np.array([kin.pose(qi).translation for qi in log_rows(out)[:, 1:7]])
+            assert tool[:, 2].min() < 0.381
+        finally:
+            d.stop()

@@ -44,7 +44,12 @@ def test_a_push_acts_until_its_duration_ends() -> None:
     assert wrench(w, [0, 0, 0], [0, 0, 0]) == (True, pytest.approx([20, 0, 0, 0, 0, 1]))
     w.now_s = 10.6
     assert wrench(w, [0, 0, 0], [0, 0, 0])[0] is False
-    assert w.push is None and w.describe() == {"wall": None, "push_active": False}
+    assert w.push is None and w.describe() == {
+        "wall": None,
+        "push_active": False,
+        "shapes": 0,
+        "tool_radius_m": 0.0,
+    }
 
 
 @pytest.mark.parametrize(
@@ -107,8 +112,8 @@ def test_tool_contact_counts_the_cycles_since_the_contact_began() -> None:
 
 
 def test_the_simulated_arms_world_settings_are_refused_for_the_ur_simulators_arm() -> None:
-    """The UR simulator's world is its wall (control channel); the `sim` backend's planes in its
-    `--plant` settings would do nothing there, so they are refused, naming the key."""
+    """The UR simulator's world is its wall (control channel); the `sim` backend's planes (and
+    camera) in its `--plant` settings would do nothing there, so they are refused, naming the key."""
     from orccadd.config.robot import read_robot_config
     from orccadd.errors import ConfigError
     from orccadd.ursim.arm import UrArm
@@ -117,3 +122,31 @@ def test_the_simulated_arms_world_settings_are_refused_for_the_ur_simulators_arm
     plane = {"point_m": [0, 0, 0.1], "normal": [0, 0, 1], "stiffness_n_m": 5000.0}
     with pytest.raises(ConfigError, match=r"plant.toml: world_planes is the simulated arm's: .*\(wall\)"):
         UrArm(read_robot_config(UR5E_RTDE), 0.002, {"world_planes": [plane]}, "plant.toml")
+    with pytest.raises(
+        ConfigError, match=r"plant.toml: camera is the simulated arm's: the UR simulator has none"
+    ):
+        UrArm(read_robot_config(UR5E_RTDE), 0.002, {"camera": {}}, "plant.toml")
+
+
+def test_a_hole_takes_a_tcp_sphere_on_its_axis_and_holds_one_beside_it() -> None:
+    w = World()
+    w.change("tool", {"radius_m": 0.008})
+    hole = {
+        "center_m": [0.4, 0.0, 0.1],
+        "normal": [0, 0, 1],
+        "radius_m": 0.01,
+        "depth_m": 0.03,
+        "stiffness_n_m": 5000,
+    }
+    w.change("hole", hole)
+    assert not w.empty and w.describe()["shapes"] == 1 and w.describe()["tool_radius_m"] == 0.008
+    assert wrench(w, [0.4, 0.0, 0.09], [0, 0, 0])[0] is False  # on the axis, 1 cm in: 2 mm of play
+    touched, f = wrench(w, [0.43, 0.0, 0.106], [0, 0, 0])  # beside it, the sphere 2 mm into the top
+    assert touched and f == pytest.approx([0, 0, 10.0, 0, 0, 0])
+    w.wall = wall_from_params({"point_m": [0, 0, 0.2], "normal": [0, 0, -1], "stiffness_n_m": 1000})
+    _, f = wrench(w, [0.43, 0.0, 0.106], [0, 0, 0])  # the wall (above, facing down) not touched: the same
+    assert f == pytest.approx([0, 0, 10.0, 0, 0, 0])
+    w.change("clear_world", {})
+    assert w.empty and wrench(w, [0.43, 0.0, 0.106], [0, 0, 0])[0] is False
+    with pytest.raises(ValueError, match="radius_m"):
+        w.change("tool", {"radius_m": -1})
