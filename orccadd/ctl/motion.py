@@ -42,11 +42,17 @@ def add_parsers(sub: Any) -> None:
         p.add_argument("--resource", default="", metavar="NAME", help=COMMANDS[cmd].arg("resource").help)
 
     p = add("move")
-    p.add_argument(
+    target = p.add_mutually_exclusive_group(required=True)
+    target.add_argument(
         "--joints",
-        required=True,
         metavar="Q1,Q2,...",
         help="the target, one value per joint, in rad, comma-separated (`--joints=-0.5,...` works too)",
+    )
+    target.add_argument(
+        "--pose",
+        metavar="X,Y,Z[,ROLL,PITCH,YAW]",
+        help="the tool's target, along a straight line: x, y, z in m (base frame), then roll, pitch, "
+        "yaw in rad about the base's axes (left out: the tool keeps its orientation)",
     )
     resource(p, "move")
     p.add_argument(
@@ -65,13 +71,13 @@ def add_parsers(sub: Any) -> None:
 
 
 def joined_values(argv: list[str]) -> list[str]:
-    """`--joints -0.5,1` as `--joints=-0.5,1`: argparse takes a value that starts with `-` and
-    is not one number for an option."""
+    """`--joints -0.5,1` as `--joints=-0.5,1` (and `--pose`'s): argparse takes a value that starts
+    with `-` and is not one number for an option."""
     out: list[str] = []
     it = iter(argv)
     for word in it:
-        nxt = next(it, None) if word == "--joints" else None
-        out.append(f"--joints={nxt}" if nxt is not None else word)
+        nxt = next(it, None) if word in ("--joints", "--pose") else None
+        out.append(f"{word}={nxt}" if nxt is not None else word)
     return out
 
 
@@ -80,13 +86,13 @@ def request(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     cmd: str = a.online
     args: dict[str, Any] = {"resource": a.resource} if a.resource else {}
     if cmd == "move":
+        option, text = ("--pose", a.pose) if a.pose is not None else ("--joints", a.joints)
         try:
-            joints = [float(x) for x in a.joints.split(",")]
+            values = [float(x) for x in text.split(",")]
         except ValueError:
-            raise ClientError(
-                f"move: --joints {a.joints!r}: want numbers separated by commas (rad)"
-            ) from None
-        return cmd, {"joints_rad": joints, "speed_scale": a.speed_scale, **args}
+            raise ClientError(f"move: {option} {text!r}: want numbers separated by commas") from None
+        key = "pose" if option == "--pose" else "joints_rad"
+        return cmd, {key: values, "speed_scale": a.speed_scale, **args}
     if cmd == "jog":
         return cmd, {"joint": a.joint, "by_rad": a.by, "speed_scale": a.speed_scale, **args}
     path = Path(a.trajectory)
@@ -142,9 +148,13 @@ def wait_end(c: Connection) -> dict[str, Any]:
 
 
 def started_words(cmd: str, r: dict[str, Any]) -> str:
+    task = Path(str(r.get("task_file", ""))).name
+    if "pose" in r:  # move --pose: a position (m) and roll, pitch, yaw (rad)
+        x, y, z, roll, pitch, yaw = (f"{v:.4g}" for v in r["pose"])
+        goal = f"the tool to ({x}, {y}, {z}) m, rpy ({roll}, {pitch}, {yaw}) rad, along a straight line"
+        return f"{cmd}: started on {r.get('resource')} ({task}), {goal}"
     target = ", ".join(f"{q:.4g}" for q in r.get("target_rad", []))
     what = f"{r.get('points')} points, {r.get('duration_s', 0):g} s, to" if cmd == "follow" else "to"
-    task = Path(str(r.get("task_file", ""))).name
     return f"{cmd}: started on {r.get('resource')} ({r.get('mode')}: {task}), {what} [{target}] rad"
 
 

@@ -22,10 +22,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.replies import CommandError
 from orccadd.daemon.view import Machine, UnitView
+from orccadd.kinematics import ToolKinematics
+from orccadd.modules.cartesian import inside_workspace
 from orccadd.modules.follow import MAX_POINTS, JointTrajectory, Spline, first_excess
 from orccadd.types import CommandMode
 
@@ -36,7 +39,10 @@ TASK_FILES = {
     ("move", CommandMode.POSITION): "move_joints_csp.toml",
     ("follow", CommandMode.TORQUE): "follow_joints.toml",
     ("follow", CommandMode.POSITION): "follow_joints_csp.toml",
+    ("pose", CommandMode.TORQUE): "move_to_pose.toml",
+    ("pose", CommandMode.POSITION): "move_to_pose_csp.toml",
 }
+LINE_T2 = ("PathLost", "NearSingularity", "OutsideWorkspace")  # a line task's type 2 exceptions
 
 
 @dataclass(frozen=True)
@@ -109,17 +115,27 @@ def check_target(cfg: RobotConfig, target: Sequence[float], what: str) -> None:
             )
 
 
-def mission_text(kind: str, task: str, resource: str, source: Path, sets: Sequence[str]) -> str:
+def mission_text(
+    kind: str,
+    task: str,
+    resource: str,
+    source: Path,
+    sets: Sequence[str],
+    t2: Sequence[str] = ("TrackingLost",),
+) -> str:
     """A mission of one task: it runs until its postcondition (success), a graceful `Stop`
-    (success: held where it is), or its type 2 `TrackingLost` or a type 3 (the safe procedure,
-    which ends at once: result `safe`; a type 3 has safe-stopped the arm, `reset` clears it)."""
+    (success: held where it is), or one of its type 2 exceptions `t2` or a type 3 (the safe
+    procedure, which ends at once: result `safe`; a type 3 has safe-stopped the arm, `reset`
+    clears it)."""
     lines = "".join(f"  set {s}\n" for s in sets)
+    declared = "".join(f"  T2 {name}\n" for name in t2)
+    caught = " or ".join(f"{task}.{name}" for name in t2)
     return (
         f"-- written by orccadd for `orccadctl {kind}`\n"
         f"mission {task}\n\nresource {resource}\ninput Stop\n\n"
-        f'task {task} on {resource} from "{source}"\n{lines}  post\n  T2 TrackingLost\nend\n\n'
+        f'task {task} on {resource} from "{source}"\n{lines}  post\n{declared}end\n\n'
         f"main procedure {task}Once\n  handle\n    do\n      {task}\n    until Stop\n"
-        f"  on {task}.TrackingLost do\n    safe\n  on fatal do\n    safe\n  end\nend\n\n"
+        f"  on {caught} do\n    safe\n  on fatal do\n    safe\n  end\nend\n\n"
         "safe procedure Held\n  nothing\nend\n"
     )
 
@@ -129,6 +145,43 @@ def move(m: Machine, target: Sequence[float], resource: str, speed_scale: float)
     u = unit_for(m.units, resource)
     check_target(u.cfg, target, "move")
     return _move(m.cfg, u, list(target), speed_scale, "move")
+
+
+def move_pose(m: Machine, pose: Sequence[float], resource: str, speed_scale: float) -> AdHoc:
+    """`move --pose`: the tool along a straight line to `pose` (x, y, z in m, base frame; then
+    roll, pitch, yaw in rad about the base's axes, or none: the orientation the tool has now),
+    time-optimal within the tool's limits ([tool]) times `speed_scale`."""
+    u = unit_for(m.units, resource)
+    if len(pose) not in (3, 6):
+        raise CommandError(
+            f"move: pose has {len(pose)} values: want x, y, z (m) and, optionally, roll, pitch, yaw (rad)"
+        )
+    if not 0.01 <= speed_scale <= 1.0:
+        raise CommandError(f"move: speed_scale (={speed_scale:g}) must be in [0.01, 1]")
+    model = u.resource.model
+    position = [float(v) for v in pose[:3]]
+    if len(pose) == 6:
+        rpy = [float(v) for v in pose[3:]]
+        for name, v in zip(("roll", "pitch", "yaw"), rpy, strict=True):
+            if not -math.pi <= v <= math.pi:
+                raise CommandError(f"move: pose's {name} (={v:g} rad) must be in [-pi, pi]")
+    else:
+        now = ToolKinematics(model).pose(u.resource.state.q_rad).rotation
+        rpy = [float(v) for v in pin.rpy.matrixToRpy(now)]
+    if not inside_workspace(model, np.array(position)):
+        raise CommandError(
+            f"move: the pose's position ({', '.join(f'{v:g}' for v in position)}) m is outside the "
+            f"workspace ([workspace] in {u.cfg.source or 'the robot config'})"
+        )
+    source = task_file(m.cfg, "pose", mode_for(u))
+    sets = [
+        f"line.target_position_m = [{', '.join(map(repr, position))}]",
+        f"line.target_rpy_rad = [{', '.join(map(repr, rpy))}]",
+        f"line.speed_scale = {float(speed_scale)!r}",
+    ]
+    text = mission_text("move", "MoveTo", u.name, source, sets, LINE_T2)
+    detail = {"resource": u.name, "pose": [*position, *rpy], "task_file": str(source)}
+    return AdHoc("(orccadctl move --pose)", text, detail=detail)
 
 
 def jog(m: Machine, joint: str, by_rad: float, resource: str, speed_scale: float) -> AdHoc:

@@ -75,9 +75,16 @@ class RtCommands:
         return self.loader.load(path)
 
     @handles("move")
-    def move(self, joints_rad: list[float], resource: str, speed_scale: float) -> Result | Pending:
+    def move(
+        self, joints_rad: list[float] | None, pose: list[float] | None, resource: str, speed_scale: float
+    ) -> Result | Pending:
         """`move`: checked here (`adhoc`), then loaded and started (`_run_adhoc`)."""
         self.loader.check_free("move")
+        if (joints_rad is None) == (pose is None):
+            raise CommandError("move: give either joints_rad (a joint target) or pose (the tool's)")
+        if pose is not None:
+            return self._run_adhoc(adhoc.move_pose(self.m, pose, resource, speed_scale))
+        assert joints_rad is not None
         return self._run_adhoc(adhoc.move(self.m, joints_rad, resource, speed_scale))
 
     @handles("jog")

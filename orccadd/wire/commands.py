@@ -163,12 +163,20 @@ COMMANDS: dict[str, CommandSpec] = {
             "move",
             C,
             "rt",
-            "move to a joint target without a mission file: the daemon writes a mission of one task "
-            "(the shipped move_joints task of the resource's command mode), loads it as `load` does "
-            "(same compiler and checks) and starts it; a value outside its joint's range, or the "
-            "wrong count, is refused before anything moves",
+            "move to a joint target, or the tool along a straight line to a pose, without a mission "
+            "file: the daemon writes a mission of one task (the shipped move_joints or move_to_pose "
+            "task of the resource's command mode), loads it as `load` does (same compiler and checks) "
+            "and starts it; a value outside its joint's range, the wrong count, a pose outside the "
+            "workspace is refused before anything moves",
             (
-                Arg("joints_rad", (list,), "the target, one per joint (rad)", required=True, items=NUMBER),
+                Arg("joints_rad", (list,), "the target, one per joint (rad); or `pose`", items=NUMBER),
+                Arg(
+                    "pose",
+                    (list,),
+                    "the tool's target: x, y, z (m, base frame), then roll, pitch, yaw (rad, about the "
+                    "base's x, y, z; left out: the tool keeps its orientation); or `joints_rad`",
+                    items=NUMBER,
+                ),
                 Arg("resource", (str,), "the resource (default: the only one)", default=""),
                 Arg("speed_scale", NUMBER, SPEED_SCALE_HELP, default=0.5),
             ),

@@ -11,7 +11,15 @@ from typing import Any
 import numpy as np
 import pytest
 
-from orccadd.daemon.adhoc import check_target, check_trajectory, mission_text, mode_for, parse_csv, task_file
+from orccadd.daemon.adhoc import (
+    check_target,
+    check_trajectory,
+    mission_text,
+    mode_for,
+    move_pose,
+    parse_csv,
+    task_file,
+)
 from orccadd.daemon.replies import CommandError
 from orccadd.mission import check_mission, check_on_robot
 from orccadd.modules.follow import JointTrajectory
@@ -126,3 +134,37 @@ def test_the_mode_is_the_hold_tasks_else_torque_else_position() -> None:
         mode_for(stand_in({V}, V))
     assert task_file(CFG, "move", P).name == "move_joints_csp.toml"
     assert task_file(CFG, "follow", TQ) == ROOT / "configs/tasks/follow_joints.toml"
+
+
+def test_a_pose_outside_the_workspace_is_refused_before_anything_moves(tmp_path: Path) -> None:
+    boxed = tmp_path / "boxed.toml"
+    text = UR5E.read_text().replace('"../', f'"{UR5E.parent.parent}/')
+    text = text.replace("\n[daemon]\n", f'\n[daemon]\ntask_dirs = ["{ROOT}/configs/tasks"]\n', 1)
+    boxed.write_text(
+        text.replace(
+            "[safe_stop]",
+            "[workspace]\nbox_min_m = [-1.0, -1.0, 0.1]\nbox_max_m = [0.0, 1.0, 1.0]\n\n[safe_stop]",
+        )
+    )
+    cfg = load_robot_config(boxed)
+    res = create_resource(cfg)
+    unit = SimpleNamespace(
+        name="arm",
+        resource=res,
+        cfg=cfg,
+        loop=SimpleNamespace(hold=SimpleNamespace(signature=SimpleNamespace(command=CommandMode.TORQUE))),
+    )
+    machine = SimpleNamespace(units=[unit], cfg=cfg)
+    with pytest.raises(
+        CommandError,
+        match=r"move: the pose's position \(0.2, 0, 0.5\) m is outside the workspace "
+        r"\(\[workspace\] in .*boxed.toml\)",
+    ):
+        move_pose(machine, [0.2, 0.0, 0.5], "", 0.5)  # type: ignore[arg-type]
+    job = move_pose(machine, [-0.4, 0.1, 0.5, 3.14159, 0.0, 0.0], "", 0.5)  # type: ignore[arg-type]
+    assert "line.target_position_m = [-0.4, 0.1, 0.5]" in job.text and "T2 OutsideWorkspace" in job.text
+    path = tmp_path / "move.mission"
+    path.write_text(job.text)
+    automaton, report = check_mission(path)
+    assert report.ok, report.format()
+    assert check_on_robot(automaton, [create_resource(cfg)], "ur5e").ok

@@ -6,10 +6,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
+from orccadd.kinematics import ToolKinematics
+from orccadd.model import RobotModel
 from orccadd.modules.follow import JointTrajectory, Spline
+from orccadd.robot import load_robot_config
 from orccadd.types import Phase
 from orccadd.wire.schema import H, T, TickLayout
 from orccadd.wire.telemetry import RingReader, TelemetryBlock
@@ -150,3 +155,24 @@ def test_follow_tracks_the_interpolation_to_the_last_point_and_bad_trajectories_
     err = refused(daemon, "follow", csv=backwards, name="back.csv")
     assert "back.csv:4: t_s = 0.02 after 0.05: the times must increase strictly" in err, err
     assert daemon.call("ping")
+
+
+def test_move_to_a_pose_goes_along_a_straight_line_and_a_bad_pose_is_refused(
+    daemon: Daemon, tmp_path: Path
+) -> None:
+    kin = ToolKinematics(RobotModel.from_config(load_robot_config(tmp_path / "robot.toml")))
+    start = kin.pose(np.array(joints(daemon)[1]))
+    goal = start.translation + np.array([0.05, 0.05, -0.05])
+    err = refused(daemon, "move", pose=[0.1, 0.2])
+    assert "pose has 2 values: want x, y, z (m) and, optionally, roll, pitch, yaw (rad)" in err, err
+    err = refused(daemon, "move", pose=[*goal, 0.0, 4.0, 0.0])
+    assert "pose's pitch (=4 rad) must be in [-pi, pi]" in err, err
+    assert "either joints_rad" in refused(daemon, "move", pose=list(goal), joints_rad=[0.0] * 6)
+    p = daemon.ctl("move", "--pose", ",".join(f"{v:.6f}" for v in goal))  # the orientation kept
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "move: started on arm (move_to_pose.toml), the tool to (" in p.stdout and "arrived" in p.stdout, (
+        p.stdout
+    )
+    end = kin.pose(np.array(joints(daemon)[1]))
+    assert np.linalg.norm(end.translation - goal) < 1e-3
+    assert np.linalg.norm(pin.log3(end.rotation @ start.rotation.T)) < 0.01
