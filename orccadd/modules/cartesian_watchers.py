@@ -85,11 +85,11 @@ class PoseErrorWatch(Watcher):
         return pose_error
 
 
-@register("manipulability_watch")
-class ManipulabilityWatch(Watcher):
-    """Fires when a nearness-to-singularity measure (`tool_pose`'s `manipulability`, or
-    `resolved_rate`'s `smallest_singular_value`) falls below `threshold`: the arm is coming to a
-    configuration where the tool cannot move in some direction."""
+@register("below_watch")
+class BelowWatch(Watcher):
+    """Fires when a dimensionless scalar (`measure`) stays below `threshold` (and is finite) for
+    `ticks` ticks: `image_servo`'s `feature_error` converged (servo_visual.toml's
+    postcondition). A resource's one-number signal: `signal_below_watch`."""
 
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
@@ -99,10 +99,17 @@ class ManipulabilityWatch(Watcher):
     def kernel(self) -> Kernel:
         debounce, threshold = self._debounce, self.threshold.value
 
-        def singular(t_s: float, measure: float) -> tuple[bool]:
+        def below(t_s: float, measure: float) -> tuple[bool]:
             return debounce(bool(np.isfinite(measure)) and measure < float(threshold))
 
-        return singular
+        return below
+
+
+@register("manipulability_watch")
+class ManipulabilityWatch(BelowWatch):
+    """Fires when a nearness-to-singularity measure (`tool_pose`'s `manipulability`, or
+    `resolved_rate`'s `smallest_singular_value`) falls below `threshold`: the arm is coming to a
+    configuration where the tool cannot move in some direction."""
 
 
 @register("wrench_settled")

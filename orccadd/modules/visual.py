@@ -52,7 +52,7 @@ class ImageServo(KernelModule):
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
         self.add_input("features", (2 * FEATURES,), "1")
-        self.add_input("visible", (), "1")
+        self.add_input("visible", (1,), "1")  # a resource's one-number signal: arm.target_visible
         self.add_output("position_des_m", (3,), "m")
         self.add_output("orientation_des", (4,), "1")
         self.add_output("twist_des", (6,), TWIST_UNIT)
@@ -83,11 +83,11 @@ class ImageServo(KernelModule):
     def kernel(self) -> Kernel:
         dt = self._dt
 
-        def servo(t_s: float, features: list[float], visible: float) -> Outputs:
+        def servo(t_s: float, features: list[float], visible: list[float]) -> Outputs:
             s, s_star = np.asarray(features), self.goal.value
             e = s - s_star
             error = float(np.linalg.norm(e))
-            if visible < 1.0 or not np.isfinite(error):  # nothing to servo on: hold still
+            if visible[0] < 1.0 or not np.isfinite(error):  # nothing to servo on: hold still
                 return (self._p.tolist(), quaternion_of(self._r), [0.0] * 6, error)
             z = float(self.depth.value)
             lm = 0.5 * (interaction_matrix(s, z) + interaction_matrix(s_star, z))

@@ -6,6 +6,8 @@ or a synchronisation signal; the event is emitted on the rising edge.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
@@ -223,3 +225,26 @@ class ForceWatch(Watcher):
             return debounce(pushed or twisted)
 
         return over_force
+
+
+@register("signal_below_watch")
+class SignalBelowWatch(Watcher):
+    """Fires when a one-number signal (`value`, unit "1": a resource's `arm.target_visible`,
+    `arm.speed_scaling`) stays below `threshold` for `ticks` ticks in a row: a target lost
+    (`target_visible` below 0.5), a controller slowed. A value that is not finite does not fire."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        self.add_input("value", (1,), "1")
+        self.threshold = self.add_parameter(
+            "threshold", 0.5, bounds=(-1e9, 1e9), unit="1", required=True, tunable=True
+        )
+
+    def kernel(self) -> Kernel:
+        threshold, debounce = self.threshold.value, self._debounce
+
+        def below(t_s: float, value: list[float]) -> tuple[bool]:
+            v = value[0]
+            return debounce(math.isfinite(v) and v < float(threshold))
+
+        return below

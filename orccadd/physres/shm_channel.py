@@ -1,7 +1,8 @@
 """A shared-memory channel between a controller and a plant process (same machine).
 
-Layout (one `SharedMemory` block): an int64 control area, the state (t, q, dq, tau, and the
-tool's measured wrench: 6) and the command vector. State and command are each written under a
+Layout (one `SharedMemory` block): an int64 control area, the state (t, q, dq, tau, the tool's
+measured wrench: 6, the camera's features: 8 and target_visible: 1, zeros without a camera) and
+the command vector. State and command are each written under a
 sequence lock (odd while writing), so a reader never sees a torn vector and neither side ever
 waits for the other. Lifecycle requests (activate, clear stop, …) go through a
 request/acknowledge counter pair; safe stop is a single store, so it can be asked from a tick.
@@ -36,6 +37,8 @@ class Ctl:
 
 CTL_SIZE = 16
 WRENCH_SIZE = 6
+CAMERA_SIZE = 9  # `sim_camera`: the features (8), then target_visible (1)
+SIGNALS_SIZE = WRENCH_SIZE + CAMERA_SIZE  # the state's signals after t, q, dq, tau
 
 
 class Request(IntEnum):
@@ -55,7 +58,7 @@ class PlantChannel:
 
     def __init__(self, dof: int, name: str | None = None, create: bool = False) -> None:
         self.dof = dof
-        self.state_size = 1 + 3 * dof + WRENCH_SIZE
+        self.state_size = 1 + 3 * dof + SIGNALS_SIZE
         n_f64 = self.state_size + dof
         size = CTL_SIZE * 8 + n_f64 * 8
         self.shm = shared_memory.SharedMemory(name=name, create=create, size=size if create else 0)
@@ -66,7 +69,7 @@ class PlantChannel:
         buf = self.shm.buf
         self.ctl: npt.NDArray[np.int64] = np.ndarray((CTL_SIZE,), dtype=np.int64, buffer=buf)
         f64: npt.NDArray[np.float64] = np.ndarray((n_f64,), dtype=np.float64, buffer=buf, offset=CTL_SIZE * 8)
-        self.state = f64[: self.state_size]  # t, q, dq, tau, wrench
+        self.state = f64[: self.state_size]  # t, q, dq, tau, wrench, features, target_visible
         self.cmd = f64[self.state_size :]
         if create:
             self.ctl[:] = 0
@@ -78,20 +81,30 @@ class PlantChannel:
 
     # ---- state: the plant writes, the controller reads ------------------------------------
     def publish_state(
-        self, t_s: float, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, status: int, wrench: np.ndarray
+        self,
+        t_s: float,
+        q: np.ndarray,
+        dq: np.ndarray,
+        tau: np.ndarray,
+        status: int,
+        wrench: np.ndarray,
+        camera: np.ndarray | None = None,
     ) -> None:
+        """`camera`: the features then target_visible (`CAMERA_SIZE`); None: zeros (no camera)."""
         ctl, st, n = self.ctl, self.state, self.dof
+        n3 = 1 + 3 * n
         ctl[Ctl.STATE_SEQ] += 1  # odd: writing
         st[0] = t_s
         st[1 : 1 + n] = q
         st[1 + n : 1 + 2 * n] = dq
-        st[1 + 2 * n : 1 + 3 * n] = tau
-        st[1 + 3 * n :] = wrench
+        st[1 + 2 * n : n3] = tau
+        st[n3 : n3 + WRENCH_SIZE] = wrench
+        st[n3 + WRENCH_SIZE :] = 0.0 if camera is None else camera
         ctl[Ctl.STATUS] = status
         ctl[Ctl.STATE_SEQ] += 1
 
     def read_state(self, out: np.ndarray, tries: int = 3) -> int:
-        """Copy a consistent state into `out` (len `state_size`: 1 + 3·dof + 6); returns the
+        """Copy a consistent state into `out` (len `state_size`: 1 + 3·dof + 6 + 9); returns the
         plant's status, or -1 if no consistent snapshot came in `tries` (never spins: the writer
         may be a lower-priority process preempted on this very CPU)."""
         return self._snapshot(Ctl.STATE_SEQ, self.state, out, Ctl.STATUS, tries)[1]

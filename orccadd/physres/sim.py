@@ -10,7 +10,8 @@ models what the controller would meet on a real arm:
   gravity feed-forward, per-axis gains from the reflected inertia) like a drive's inner loop;
 - measurement noise and latency (whole periods), deterministic for a given seed;
 - a contact world (planes, holes: `contact`) acting on the tool point through its Jacobian, and
-  the tool's force/torque sensor (the `wrench` signal, not delayed): `sim_contact`;
+  the tool's force/torque sensor (the `wrench` signal, not delayed): `sim_contact`; a camera on
+  the tool seeing a target (`features`, `target_visible`): `sim_camera`;
 - safe stop by IEC 60204-1 category (0, 1, 2), and `inject_fault()` for fault tests.
 
 Time is the caller's: `read(t_s)` integrates the dynamics up to `t_s` with the last command
@@ -36,6 +37,7 @@ from orccadd.physres.arm_dynamics import ArmDynamics
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.contact import ContactWorld
 from orccadd.physres.description import MEASURED, ResourceDescription
+from orccadd.physres.sim_camera import CameraSettings, SimCamera, camera_signals, check_camera
 from orccadd.physres.sim_contact import WRENCH, HoleSettings, PlaneSettings, ToolContact, shapes_from_settings
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Status
@@ -64,7 +66,7 @@ def simulated_description(backend: str, config: RobotConfig) -> ResourceDescript
         write_time_s=0.0,
         fault_reset=True,
         fault_injection=("device",),
-        signals=(WRENCH,),
+        signals=(WRENCH, *camera_signals(config)),
     )
 
 
@@ -89,6 +91,7 @@ class SimSettings:
     world_holes: tuple[HoleSettings, ...] = field(default=())
     ft_noise_force_n: float = field(default=0.0, bounds=(0.0, 100.0))  # the sensor's noise (std)
     ft_noise_torque_nm: float = field(default=0.0, bounds=(0.0, 10.0))
+    camera: CameraSettings | None = field(default=None)  # `[resource.settings.camera]`: sim_camera
 
 
 S = TypeVar("S", bound=SimSettings)
@@ -126,6 +129,7 @@ def load_sim_settings(settings_cls: type[S], raw: Mapping[str, Any], cfg: RobotC
                 f"(={q!r}) must be in [{j.position_min_rad:g}, {j.position_max_rad:g}] ({j.name})",
             )
     shapes_from_settings(s.world_planes, s.world_holes, file)  # ConfigError if a shape is wrong
+    check_camera(s.camera, file)
     if not s.brake_torque_nm:
         s = replace(s, brake_torque_nm=tuple(2.0 * j.max_torque_nm for j in cfg.joints))
     return s
@@ -171,6 +175,7 @@ class SimulatedArm(PhysicalResource):
         self.contact = ToolContact(model, world, s.ft_noise_force_n, s.ft_noise_torque_nm, s.seed)
         self.arm.external = self.contact.torque
         self._wrench = self.signals[WRENCH.name]
+        self.camera = SimCamera.of(model, s, s.seed, self.signals)  # None: no camera
         self.q: FloatArray = self.arm.q  # the same arrays, moved in place by the core
         self.dq: FloatArray = self.arm.dq
         self.tau_applied: FloatArray = np.zeros(n)
@@ -291,6 +296,8 @@ class SimulatedArm(PhysicalResource):
             self._rng.standard_normal(out=self._noise)
             state.tau_nm += s.noise_tau_nm * self._noise
         self.contact.measure(self.q, self.dq, self._wrench)
+        if self.camera is not None:
+            self.camera.measure(self.q)
         flags = self._fault
         if not self.torque_on:
             flags |= Status.TORQUE_OFF

@@ -27,8 +27,9 @@ from orccadd.fault import Fault, FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
 from orccadd.physres.description import ClockSource, ResourceDescription
-from orccadd.physres.shm_channel import WRENCH_SIZE, Ctl, PlantChannel, Request
+from orccadd.physres.shm_channel import SIGNALS_SIZE, WRENCH_SIZE, Ctl, PlantChannel, Request
 from orccadd.physres.sim import INJECTED_FAULT_CODE, SimSettings, load_sim_settings, simulated_description
+from orccadd.physres.sim_camera import FEATURES, TARGET_VISIBLE
 from orccadd.physres.sim_contact import WRENCH
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Lifecycle, Status
@@ -101,8 +102,10 @@ class SimProcessArm(PhysicalResource):
         self._heartbeat_periods = s.periods(s.heartbeat_timeout_periods, config.control_period_s)
         self.channel: PlantChannel | None = None
         self.process: Any = None
-        self._buf = np.zeros(1 + 3 * self.dof + WRENCH_SIZE)
+        self._buf = np.zeros(1 + 3 * self.dof + SIGNALS_SIZE)
         self._wrench = self.signals[WRENCH.name]
+        self._features = self.signals.get(FEATURES.name)  # None: the arm has no camera
+        self._visible = self.signals.get(TARGET_VISIBLE.name)
         self._last_heartbeat = -1
         self._silent_reads = 0
         self._last_cmd: FloatArray = np.zeros(self.dof)
@@ -309,7 +312,10 @@ class SimProcessArm(PhysicalResource):
             return int(ch.ctl[Ctl.STATUS]) & int(Status.FAULT)
         n3 = 1 + 3 * self.dof
         state.vector[:] = self._buf[1:n3]  # q, dq, tau
-        self._wrench[:] = self._buf[n3:]
+        self._wrench[:] = self._buf[n3 : n3 + WRENCH_SIZE]
+        if self._features is not None and self._visible is not None:  # the camera's
+            self._features[:] = self._buf[n3 + WRENCH_SIZE : -1]
+            self._visible[0] = self._buf[-1]
         state.fault_code = int(ch.ctl[Ctl.FAULT_CODE])
         hb = int(ch.ctl[Ctl.HEARTBEAT])
         if hb == self._last_heartbeat:

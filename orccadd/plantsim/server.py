@@ -6,8 +6,10 @@ arms the watchdog), no fresh command for `watchdog_periods` periods (the control
 died) → safe stop; the controller process gone → safe stop, then exit once at rest.
 
 Each step publishes the tool's wrench beside the joint state (the arm's contact world and F/T
-sensor: `orccadd.physres.sim_contact`); the world is changed through the plant's control
-channel (`control.PlantControl`, its port in the channel's `Ctl.CONTROL_PORT`).
+sensor: `orccadd.physres.sim_contact`), and what its camera sees if it has one (`features`,
+`target_visible`: `orccadd.physres.sim_camera`); the world and the camera's target and occluder
+are changed through the plant's control channel (`control.PlantControl`, its port in the
+channel's `Ctl.CONTROL_PORT`).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 
 from orccadd.config.robot import RobotConfig
 from orccadd.model import RobotModel
-from orccadd.physres.shm_channel import Ctl, PlantChannel, Request
+from orccadd.physres.shm_channel import CAMERA_SIZE, Ctl, PlantChannel, Request
 from orccadd.physres.sim import SimulatedArm
 from orccadd.physres.sim_contact import WRENCH
 from orccadd.plantsim.control import PlantControl
@@ -56,6 +58,7 @@ class PlantServer:
         self.period_s = cfg.control_period_s
         self.paused_s = 0.0
         self.wrench = self.arm.signals[WRENCH.name]  # the tool's, as the arm's sensor measures it
+        self.camera = np.zeros(CAMERA_SIZE) if self.arm.camera is not None else None  # features, visible
 
     def _handle_request(self) -> None:
         ctl, arm = self.ch.ctl, self.arm
@@ -98,7 +101,11 @@ class PlantServer:
             self.paused_s += t_s - last - self.period_s
             arm.t_sim_s = t_s - self.period_s  # one period is integrated, the rest was a pause
         st = arm.read(t_s)
-        self.ch.publish_state(t_s, st.q_rad, st.dq_rad_s, st.tau_nm, st.status, self.wrench)
+        camera = self.camera
+        if camera is not None and arm.camera is not None:
+            camera[:-1] = arm.camera.features
+            camera[-1] = arm.camera.visible[0]
+        self.ch.publish_state(t_s, st.q_rad, st.dq_rad_s, st.tau_nm, st.status, self.wrench, camera)
         ctl[Ctl.FAULT_CODE] = st.fault_code
         ctl[Ctl.HEARTBEAT] += 1
         if self.cycle_fd >= 0:
@@ -178,7 +185,8 @@ def main() -> int:
         "--control-port",
         type=int,
         default=-1,
-        help="the control channel (plane, hole, clear_world, status) on 127.0.0.1: PORT, 0 any free, -1 none",
+        help="the control channel (plane, hole, clear_world, occlude, unocclude, target, status) on "
+        "127.0.0.1: PORT, 0 any free, -1 none",
     )
     args = ap.parse_args()
     try:

@@ -11,6 +11,7 @@ from orccadd.modules.watchers import (
     GraspMissedWatch,
     GraspWatch,
     JointLimitWatch,
+    SignalBelowWatch,
     TargetReached,
     TimeoutWatch,
     TrackingErrorWatch,
@@ -133,3 +134,16 @@ def test_force_watch_fires_on_the_force_magnitude_and_optionally_the_torque() ->
     w = ForceWatch("f", CTX)
     w.configure({"force_n": 100.0, "torque_nm": 2.5})
     assert first_fired(w, feed) == 0  # the torque alone
+
+
+def test_signal_below_fires_after_its_ticks_below_the_threshold_and_not_on_nan() -> None:
+    w = SignalBelowWatch("w", CTX)
+    w.configure({"threshold": 0.5, "ticks": 3})
+    seen = [1.0, 0.0, 0.0, 1.0, float("nan"), 0.0, 0.0, 0.4, 0.0]  # a blink, a NaN, then lost
+
+    def feed(k: int) -> None:
+        w.inputs["value"].value[0] = seen[k] if k < len(seen) else 1.0
+
+    assert first_fired(w, feed) == 7  # k = 5, 6, 7 in a row
+    w.configure({"threshold": -1.0, "ticks": 1})  # any threshold, any sign
+    assert first_fired(w, lambda k: w.inputs["value"].value.__setitem__(0, -2.0 if k == 4 else 0.0)) == 4

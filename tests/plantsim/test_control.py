@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from orccadd.kinematics import ToolKinematics
-from orccadd.physres.shm_channel import PlantChannel
+from orccadd.physres.shm_channel import WRENCH_SIZE, PlantChannel
 from orccadd.plantsim.control import PlantControl
 from orccadd.plantsim.server import PlantServer
 from orccadd.robot import load_robot_config
@@ -31,7 +31,8 @@ class Plant:
             self.server.step(self.t)
 
     def published_wrench(self) -> np.ndarray:
-        return self.ch.state[1 + 3 * self.ch.dof :].copy()
+        n3 = 1 + 3 * self.ch.dof
+        return self.ch.state[n3 : n3 + WRENCH_SIZE].copy()
 
 
 @pytest.fixture
@@ -94,7 +95,7 @@ def test_a_hole_is_added_beside_a_plane(plant: Plant) -> None:
         ),
         (["hole", "center_m=[0,0,0]", "normal=[0,0,1]", "stiffness_n_m=5"], 'hole: "radius_m" is required'),
         (["clear_world", "all=true"], "clear_world: unknown parameter(s) all"),
-        (["meteor"], "unknown fault 'meteor' (faults: plane, hole, clear_world)"),
+        (["meteor"], "unknown fault 'meteor' (faults: plane, hole, clear_world, occlude, unocclude, target)"),
         (["plane", "--device", "1"], 'the plant is one arm: no "device"'),
     ],
 )
