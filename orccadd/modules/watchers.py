@@ -248,3 +248,26 @@ class SignalBelowWatch(Watcher):
             return debounce(math.isfinite(v) and v < float(threshold))
 
         return below
+
+
+@register("signal_above_watch")
+class SignalAboveWatch(Watcher):
+    """Fires when a one-number signal (`value`, unit "1") stays at or above `threshold` for
+    `ticks` ticks in a row: a target seen again (`arm.target_visible` at 1). The counterpart of
+    `signal_below_watch`; a value that is not finite does not fire."""
+
+    def __init__(self, name: str, ctx: ModuleContext) -> None:
+        super().__init__(name, ctx)
+        self.add_input("value", (1,), "1")
+        self.threshold = self.add_parameter(
+            "threshold", 0.5, bounds=(-1e9, 1e9), unit="1", required=True, tunable=True
+        )
+
+    def kernel(self) -> Kernel:
+        threshold, debounce = self.threshold.value, self._debounce
+
+        def above(t_s: float, value: list[float]) -> tuple[bool]:
+            v = value[0]
+            return debounce(math.isfinite(v) and v >= float(threshold))
+
+        return above

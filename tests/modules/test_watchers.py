@@ -11,6 +11,7 @@ from orccadd.modules.watchers import (
     GraspMissedWatch,
     GraspWatch,
     JointLimitWatch,
+    SignalAboveWatch,
     SignalBelowWatch,
     TargetReached,
     TimeoutWatch,
@@ -147,3 +148,14 @@ def test_signal_below_fires_after_its_ticks_below_the_threshold_and_not_on_nan()
     assert first_fired(w, feed) == 7  # k = 5, 6, 7 in a row
     w.configure({"threshold": -1.0, "ticks": 1})  # any threshold, any sign
     assert first_fired(w, lambda k: w.inputs["value"].value.__setitem__(0, -2.0 if k == 4 else 0.0)) == 4
+
+
+def test_signal_above_fires_after_its_ticks_at_or_above_the_threshold_and_not_on_nan() -> None:
+    w = SignalAboveWatch("w", CTX)
+    w.configure({"threshold": 0.5, "ticks": 3})
+    seen = [0.0, 1.0, 1.0, 0.0, float("nan"), 1.0, 0.5, 1.0]  # a glimpse, a NaN, then seen
+
+    def feed(k: int) -> None:
+        w.inputs["value"].value[0] = seen[k] if k < len(seen) else 0.0
+
+    assert first_fired(w, feed) == 7  # k = 5, 6, 7 in a row (0.5 counts: at or above)
