@@ -115,7 +115,7 @@ def _modules(params: dict[str, list[dict[str, Any]]]) -> list[tuple[str, ...]]:
 RESOURCE_SHOWN = {
     "backend", "modes", "mode_switch_needs_disable", "position", "velocity", "torque", "brakes",
     "stop_categories", "read_time_s", "write_time_s", "clock", "device_period_s", "fault_reset",
-    "fault_injection", "diagnostics", "protocol_version", "signals", "inputs", "outputs",
+    "fault_injection", "diagnostics", "protocol_version", "signals", "inputs", "outputs", "tool",
 }  # fmt: skip
 
 
@@ -138,6 +138,7 @@ def _resource(res: dict[str, Any]) -> list[str]:
         ("fault injection", ", ".join(res["fault_injection"]) or "none"),
     ]
     rows += [("signal", str(g)) for g in res.get("signals") or []]
+    rows += _tool(res.get("tool"))
     if res.get("inputs") or res.get("outputs"):
         rows.append(
             (
@@ -154,6 +155,28 @@ def _resource(res: dict[str, Any]) -> list[str]:
     # the live details, less what the description already said (a chain's port and baud rate)
     rows += [(str(k), num(v)) for k, v in (d.get("details") or {}).items() if k not in res]
     return [head, *table(rows, "  ")]
+
+
+def _tool(t: dict[str, Any] | None) -> list[tuple[str, str]]:
+    """The tool the Cartesian tasks move, its limits and workspace, where its wrench comes from."""
+    if not t:
+        return []
+    at = f"{t['urdf_frame']}" + (f" + {num(t['offset_m'])} m" if any(t["offset_m"]) else "")
+    if any(t["offset_rpy_rad"]):
+        at += f", turned rpy {num(t['offset_rpy_rad'])} rad"
+    limits = (
+        f"{num(t['max_linear_velocity_m_s'])} m/s, {num(t['max_linear_acceleration_m_s2'])} m/s^2; "
+        f"{num(t['max_angular_velocity_rad_s'])} rad/s; "
+        f"{num(t['max_force_n'])} N, {num(t['max_torque_nm'])} N.m"
+    )
+    w = t.get("workspace")
+    parts = []
+    if w and w["box_min_m"]:
+        parts.append(f"box {num(w['box_min_m'])}..{num(w['box_max_m'])} m")
+    if w and w["sphere_radius_m"]:
+        parts.append(f"sphere of {num(w['sphere_radius_m'])} m about {num(w['sphere_center_m'])} m")
+    space = " and ".join(parts) + f" (± {num(w['tolerance_m'])} m)" if w else "none configured"
+    return [("tool", at), ("tool limits", limits), ("workspace", space), ("wrench", str(t["wrench"]))]
 
 
 def _load(r: dict[str, Any], _: dict[str, Any]) -> str:

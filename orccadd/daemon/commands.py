@@ -305,6 +305,28 @@ class RtCommands:
 def describe_resource(res: PhysicalResource) -> dict[str, Any]:
     return {
         **res.description.as_dict(),
+        "tool": describe_tool(res),
         "diagnostics": dataclasses.asdict(res.diagnostics()),
         "protocol_version": PROTOCOL_VERSION,
+    }
+
+
+def describe_tool(res: PhysicalResource) -> dict[str, Any]:
+    """The tool the Cartesian tasks move ([tool]), its workspace, and where its wrench comes from:
+    the resource's sensor (its `wrench` signal) or, without one, an estimate a task makes from the
+    joint torques (`wrench_from_torques`)."""
+    model = res.model
+    frame = model.model.frames[model.tool_frame_id]
+    urdf_frame = model.model.frames[frame.parentFrame].name
+    sensor = next((g for g in res.description.signals if g.name == "wrench"), None)
+    wrench = (
+        f"measured: arm.wrench ({sensor.what})"
+        if sensor is not None
+        else "not measured by this resource: a task estimates it from the joint torques (wrench_from_torques)"
+    )
+    return {
+        **dataclasses.asdict(model.tool),
+        "urdf_frame": urdf_frame,
+        "workspace": dataclasses.asdict(model.workspace) if model.workspace.given else None,
+        "wrench": wrench,
     }

@@ -9,11 +9,13 @@ commands come from `resolved_rate` (orccadd/modules/kinematic_control.py).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 from ruckig import InputParameter, OutputParameter, Result, Ruckig, Synchronization
 
+from orccadd.errors import ParameterError
 from orccadd.kinematics import ToolKinematics, angle_between, manipulability, quaternion_of, rotation_of
 from orccadd.model import RobotModel
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
@@ -244,6 +246,15 @@ class LineToPose(_Line):
 
     def _goal(self, p0: np.ndarray, r0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self.target.value.copy(), _rpy(self.target_rpy.value)
+
+    def configure(self, values: dict[str, Any]) -> None:
+        """The target checked against the workspace as it is set: a mission whose goal is out of
+        it is refused at `load` (a line by an offset can only be checked when it starts)."""
+        super().configure(values)
+        if "target_position_m" in values and not inside_workspace(self.ctx.model, self.target.value):
+            where = ", ".join(f"{v:g}" for v in self.target.value.tolist())
+            detail = f"(=[{where}]) is outside the workspace ([workspace] of the robot config)"
+            raise ParameterError(f"{self.target.path} {detail}", name=self.target.name, detail=detail)
 
 
 @register("line_by_offset")

@@ -209,3 +209,22 @@ def test_a_held_pose_stays_put(arm: Arm) -> None:
     assert arm.run(task, timeout_s=1.0) is Phase.RUN  # no postcondition: it holds until switched
     drift = np.linalg.norm(np.array(arm.path) - start.translation, axis=1)
     assert drift.max() < 1e-4, drift.max()
+
+
+def test_an_absolute_goal_outside_the_workspace_is_refused_when_it_is_set(tmp_path: Path) -> None:
+    """As a mission's `set` line sets it at `load`: refused there, before anything runs."""
+    box = "[workspace]\nbox_min_m = [-1.0, -0.5, 0.1]\nbox_max_m = [0.0, 0.5, 1.0]\n\n[safe_stop]"
+    config = tmp_path / "boxed.toml"
+    config.write_text(UR5E.read_text().replace('"../', f'"{UR5E.parent.parent}/').replace("[safe_stop]", box))
+    s = Session.open(config)
+    try:
+        file = tmp_path / "to_pose.toml"
+        file.write_text((TASKS / "move_line.toml").read_text().replace('"line_by_offset"', '"line_to_pose"'))
+        line = module(s.task(file), "line")
+        line.configure({"target_position_m": [-0.4, 0.0, 0.5]})  # inside
+        with pytest.raises(
+            ParameterError, match=r"line.target_position_m \(=\[0.2, 0, 0.5\]\) is outside the workspace"
+        ):
+            line.configure({"target_position_m": [0.2, 0.0, 0.5]})
+    finally:
+        s.close()
