@@ -35,6 +35,7 @@ def tours() -> dict[str, str]:
 def test_the_readme_has_a_tour_per_bus() -> None:
     assert list(tours()) == [
         "The simulated arm",
+        "The tool in task space",
         "A UR arm over RTDE",
         "A Dynamixel chain",
         "CANopen CiA 402 drives",
