@@ -36,6 +36,9 @@ def pytest_configure(config: pytest.Config) -> None:
     # that no test depends on what earlier runs compiled; each worker's, like its network
     os.environ["CACHE_DIRECTORY"] = tempfile.mkdtemp(prefix="orccadd-test-cache-")
     atexit.register(shutil.rmtree, os.environ["CACHE_DIRECTORY"], True)
+    # and their deployments (StateDirectory=): this run's own too
+    os.environ["STATE_DIRECTORY"] = tempfile.mkdtemp(prefix="orccadd-test-state-")
+    atexit.register(shutil.rmtree, os.environ["STATE_DIRECTORY"], True)
     if not os.environ.get("PYTEST_XDIST_WORKER") or os.environ.get("ORCCADD_TEST_SHARED_NET"):
         return
     libc = ctypes.CDLL(None, use_errno=True)

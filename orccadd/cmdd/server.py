@@ -640,6 +640,8 @@ class CommandDaemon:
         if role is None or (spec.role is Role.CONTROL and role is not Role.CONTROL):
             need = "the control role" if spec.role is Role.CONTROL else "the read-only role"
             return error_reply(rid, f"not authorised: {who} lacks {need} for {cmd!r}")
+        if cmd == "deploy":  # who deploys is the peer this daemon knows, never what it says
+            args = {**args, "by": who}
         if spec.where == "rt":
             reply = await self.rt.call(cmd, args, spec.reply_s)
             reply["id"] = rid

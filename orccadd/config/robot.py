@@ -157,6 +157,11 @@ class DaemonConfig:
     # $XDG_CACHE_HOME/orccadd, else in ~/.cache/orccadd
     compile_cache: bool = field(default=True)
     compile_cache_dir: str = field(default="")
+    # missions deployed from a workstation (`orccadctl deploy`: orccadd/daemon/deploy.py), checked
+    # as `load` checks, stored by content here (relative to this file; "": deployments/ in
+    # systemd's StateDirectory, else in $XDG_STATE_HOME/orccadd), the newest so many kept
+    deploy_dir: str = field(default="")
+    deployments_kept: int = field(default=100, bounds=(1, 100000))
     # full-rate CSV logs go here, created by the command daemon (never a path a client names);
     # "": `logs/` in the socket's directory
     log_dir: str = field(default="")

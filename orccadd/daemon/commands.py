@@ -74,6 +74,17 @@ class RtCommands:
         the tasks here when it is done: a pending reply meanwhile."""
         return self.loader.load(path)
 
+    @handles("deploy")
+    def deploy(
+        self, name: str, mission: str, task_files: list[str], task_texts: list[str], by: str
+    ) -> Result | Pending:
+        """Checked as `load` checks a file, then stored by content (`deploy.py`)."""
+        if len(task_files) != len(task_texts):
+            raise CommandError(
+                f"deploy: {len(task_files)} task file names for {len(task_texts)} texts: one text each"
+            )
+        return self.loader.deploy(name, mission, dict(zip(task_files, task_texts, strict=True)), by)
+
     @handles("move")
     def move(
         self, joints_rad: list[float] | None, pose: list[float] | None, resource: str, speed_scale: float

@@ -9,6 +9,7 @@ compiler, the same checks and the same refusals. One load at a time.
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import os
 import pickle
@@ -23,11 +24,14 @@ from pathlib import Path
 from orccadd.automaton import Automaton, Network, Report
 from orccadd.config.shipped import is_bare_name, is_file
 from orccadd.confine import Confinement, ConfinementError
+from orccadd.daemon import deploy
 from orccadd.daemon.compile_cache import default_dir
 from orccadd.daemon.mission import prepare_mission
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.view import Machine
 from orccadd.errors import OrccaddError
+from orccadd.mission import check_on_robot
+from orccadd.robot import create_resource
 from orccadd.task.spec import TaskSpec
 from orccadd.wire.schema import MachineState, OperatorAction, Trace
 
@@ -54,10 +58,60 @@ class Loader:
             raise CommandError("a mission is being loaded: wait for its answer")
 
     def load(self, path: str) -> Pending:
-        """`load`: the mission file `path` names, in one of `daemon.mission_dirs`."""
+        """`load`: the mission file `path` names, in one of `daemon.mission_dirs`, or a deployed
+        one by its name or hash (`deploy`)."""
         self.check_free()
+        deployed = self._deployed(path)
+        if deployed is not None:
+            where, record = deployed
+            fd = os.open(where / f"{record.name}.mission", os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW)
+            mission = str(where / f"{record.name}.mission")
+
+            def installed(c: Compiled, cached: bool) -> Result:
+                return {**self.install(mission, c, cached, deployment=record.hash), "deployment": record.hash}
+
+            return self._compile(fd, mission, installed, (str(where),))
         fd, path = self._open_mission(path)
         return self._compile(fd, path, lambda c, cached: self.install(path, c, cached))
+
+    def _deployed(self, ref: str) -> tuple[Path, deploy.Record] | None:
+        """The deployment `ref` names, if it names no file of the mission directories."""
+        if not deploy.NAME_RE.match(ref):
+            return None
+        dirs = [self.m.cfg.resolve(d) for d in self.m.cfg.daemon.mission_dirs]
+        if any(is_file(d / f"{ref}.mission") for d in dirs):
+            return None  # a shipped or installed mission of that name comes first
+        return deploy.find(deploy.deploy_dir(self.m.cfg), ref)
+
+    def deploy(self, name: str, mission: str, files: dict[str, str], by: str) -> Result | Pending:
+        """`deploy`: checked as `load` checks a file, then stored (`orccadd/daemon/deploy.py`)."""
+        self.check_free("deploy a mission")
+        root = deploy.deploy_dir(self.m.cfg)
+        staged = deploy.stage(root, name, mission, files)
+        if isinstance(staged, Path):
+            return {**_deployed(deploy.read_record(staged)), "stored": False}
+        try:
+            fd = os.open(staged.mission, os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW)
+        except OSError as e:
+            deploy.discard(staged)
+            raise CommandError(f"deploy: {e.strerror or e}") from None
+        keep = self.m.cfg.daemon.deployments_kept
+
+        def verified(c: Compiled, cached: bool) -> Result:
+            # load's last check, on this robot: every task builds (its parameters, its joints),
+            # on resources made from the config (built, not opened: the live ones are untouched)
+            fresh = [create_resource(u.cfg) for u in self.m.units]
+            built = check_on_robot(c[0], fresh, self.m.cfg.name)
+            if not built.ok:
+                raise CommandError("\n".join(x for x in (built.summary, built.explanation) if x))
+            record = deploy.commit(root, staged, by, keep)
+            self.m.note(f"deployed mission {name} ({record.hash[:12]}, by {record.by}): all checks passed")
+            return {**_deployed(record), "stored": True, "report": c[1].format()}
+
+        def refused() -> None:
+            deploy.discard(staged)
+
+        return self._compile(fd, str(staged.mission), verified, (str(staged.path),), on_fail=refused)
 
     def load_text(
         self,
@@ -79,13 +133,22 @@ class Loader:
             raise
         return self._compile(fd, name, lambda c, cached: then(self.install(name, c, cached, data)))
 
-    def _compile(self, fd: int, path: str, done: Callable[[Compiled, bool], Result]) -> Pending:
+    def _compile(
+        self,
+        fd: int,
+        path: str,
+        done: Callable[[Compiled, bool], Result],
+        extra_dirs: tuple[str, ...] = (),
+        on_fail: Callable[[], None] = lambda: None,
+    ) -> Pending:
         """Start the compiler process on `fd` (closed here); a pending reply, `done(answer,
-        cached)` once it has answered."""
+        cached)` once it has answered. `extra_dirs`: where else its task files may be (a
+        deployment's own); `on_fail()` when it refuses or fails."""
         work = Path(tempfile.mkdtemp(prefix="orccadd-load-"))
         out = work / "result.pickle"
         cfg = self.m.cfg
-        task_dirs = [str(cfg.resolve(d)) for d in (*cfg.daemon.task_dirs, *cfg.daemon.mission_dirs)]
+        configured = (*cfg.daemon.task_dirs, *cfg.daemon.mission_dirs)
+        task_dirs = [*extra_dirs, *(str(cfg.resolve(d)) for d in configured)]
         cmd = [
             sys.executable, "-m", "orccadd.daemon.compile_worker", "--fd", str(fd), "--name", path,
             *(f"--task-dir={d}" for d in task_dirs), f"--memory-mb={cfg.daemon.load_memory_mb}",
@@ -102,6 +165,7 @@ class Loader:
             )
         except OSError as e:
             shutil.rmtree(work, ignore_errors=True)
+            on_fail()
             raise CommandError(f"{path}: cannot start the compiler process: {e.strerror or e}") from None
         finally:
             os.close(fd)
@@ -114,6 +178,13 @@ class Loader:
         def poll() -> Result | None:
             if child.poll() is None:
                 return None
+            try:
+                return answered()
+            except CommandError:
+                on_fail()
+                raise
+
+        def answered() -> Result:
             cached = Path(f"{out}.cached").exists()
             try:
                 result = pickle.loads(out.read_bytes()) if out.exists() else None
@@ -134,6 +205,7 @@ class Loader:
             child.kill()
             child.wait()
             finished()
+            on_fail()
             raise CommandError(
                 f"{path}: not compiled and verified within {timeout_s:g} s (daemon.load_timeout_s); "
                 "`orccadctl check` shows how far it gets"
@@ -165,7 +237,12 @@ class Loader:
             raise CommandError(str(e)) from None
 
     def install(
-        self, path: str, compiled: Compiled, cached: bool = False, data: Mapping[str, object] | None = None
+        self,
+        path: str,
+        compiled: Compiled,
+        cached: bool = False,
+        data: Mapping[str, object] | None = None,
+        deployment: str = "",
     ) -> Result:
         """Build the verified mission's tasks on this robot and make it the loaded one."""
         automaton, report, specs = compiled
@@ -176,6 +253,8 @@ class Loader:
             loaded = prepare_mission(path, automaton, report, bindings, self.m.registry, specs, data)
         except OrccaddError as e:
             raise CommandError(str(e)) from None
+        if deployment:
+            loaded = dataclasses.replace(loaded, deployment=deployment)
         mc.install(loaded)
         # the replaced mission's tasks hold reference cycles (modules and their ports, compiled
         # ticks) and native state (Ruckig, Pinocchio data); the automatic collector is off in
@@ -185,3 +264,8 @@ class Loader:
         how = "all checks passed" + (", verified at an earlier load: compile cache" if cached else "")
         self.m.note(f"loaded mission {loaded.name} ({loaded.automaton.n_states} states, {how})")
         return {"mission": loaded.describe(), "report": loaded.report.format(), "cached": cached}
+
+
+def _deployed(record: deploy.Record) -> Result:
+    """A deployment's reply: its hash, name, who deployed it and when."""
+    return {"deployed": record.hash, "name": record.name, "by": record.by, "at_utc": record.at_utc}

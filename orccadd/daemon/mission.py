@@ -41,6 +41,7 @@ class LoadedMission:
     report: Report
     tasks: tuple[RobotTask, ...]  # index i ↔ automaton.program.tasks[i]
     event_bits: dict[int, int]  # event registry id → the automaton's input bit
+    deployment: str = ""  # the content hash of a deployed mission (orccadd/daemon/deploy.py)
 
     @property
     def name(self) -> str:
@@ -63,6 +64,7 @@ class LoadedMission:
         return {
             "name": p.name,
             "file": self.file,
+            "deployment": self.deployment,
             "main_procedure": procs[0] if procs else "",
             "tasks": [t.name for t in p.tasks],
             "task_resources": [t.resource.name for t in self.tasks],  # the resource each runs on

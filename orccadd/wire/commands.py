@@ -145,12 +145,39 @@ COMMANDS: dict[str, CommandSpec] = {
                 Arg(
                     "path",
                     (str,),
-                    "the mission file (absolute), in one of daemon.mission_dirs",
+                    "the mission file (absolute), in one of daemon.mission_dirs; or a deployed "
+                    "mission's name or hash (`deploy`)",
                     required=True,
                 ),
             ),
             reply_s=LOAD_REPLY_S,
             loads=True,
+        ),
+        CommandSpec(
+            "deploy",
+            C,
+            "rt",
+            "store a mission sent from a workstation with every task file it names: checked as `load` "
+            "checks a file (refused with the counterexamples, nothing stored), then kept by content "
+            "hash in the daemon's deployments directory; `load NAME` or `load HASH` loads it",
+            (
+                Arg("name", (str,), "the mission's name (its file's stem)", required=True),
+                Arg("mission", (str,), "the mission's text", required=True),
+                Arg(
+                    "task_files",
+                    (list,),
+                    'the task files as the mission names them (`from "..."`)',
+                    default=[],
+                ),
+                Arg("task_texts", (list,), "their texts, in the same order", default=[]),
+                Arg(
+                    "by",
+                    (str,),
+                    "who deploys: the command daemon's name of the client (a client's own is replaced)",
+                    default="",
+                ),
+            ),
+            reply_s=LOAD_REPLY_S,
         ),
         CommandSpec(
             "start",
