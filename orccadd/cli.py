@@ -8,7 +8,7 @@ import argparse
 import os
 import sys
 
-from orccadd.ctl import deploy, motion, online
+from orccadd.ctl import deploy, fetch, motion, online
 from orccadd.ctl.completion import SHELLS
 from orccadd.errors import did_you_mean
 from orccadd.wire.version import version_text
@@ -52,6 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     online.add_parsers(sub)
     motion.add_parsers(sub)
     deploy.add_parser(sub)
+    fetch.add_parsers(sub)
     from orccadd.ctl.cell import add_parser as add_cell
 
     add_cell(sub)

@@ -129,7 +129,13 @@ class TelemetryLog:
         try:
             for s, origin in zip(sources, origins, strict=True):
                 file = csv_name(name, s.resource)
-                meta = {"robot": desc().get("robot"), "period_s": s.tel.period_s}
+                mission = desc().get("mission") or {}  # the loaded one when the log starts
+                meta = {
+                    "robot": desc().get("robot"),
+                    "period_s": s.tel.period_s,
+                    "mission": mission.get("name", ""),
+                    "mission_deployment": mission.get("deployment", ""),
+                }
                 if s.resource:
                     meta["resource"] = s.resource
                 fh = logs.create(file)

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from orccadd.cellnet import keys
-from orccadd.cmdd import views
+from orccadd.cmdd import logfetch, views
 from orccadd.cmdd.cellpeer import CellPeer
 from orccadd.cmdd.csvlog import LogDir
 from orccadd.cmdd.logsession import LogSource, TelemetryLog
@@ -795,6 +795,21 @@ class CommandDaemon:
         except OSError as e:
             self._end_log(self.recording.abandon(e))
         return self.last_log or {}
+
+    @handles("logs")
+    async def do_logs(self, writer: asyncio.StreamWriter, rid: Any) -> dict[str, Any]:
+        logs = await asyncio.to_thread(logfetch.list_logs, self.log_dir, self._writing())
+        return {"directory": str(self.log_dir), "logs": logs}
+
+    @handles("fetch")
+    async def do_fetch(
+        self, writer: asyncio.StreamWriter, rid: Any, name: str, offset: int, length: int
+    ) -> dict[str, Any]:
+        return await logfetch.read_chunk(self.log_dir, name, offset, length, self._writing())
+
+    def _writing(self) -> str:
+        """The CSV being written ("" when not logging)."""
+        return self.recording.path.name if self.recording is not None else ""
 
     def _end_log(self, summary: dict[str, Any]) -> None:
         if "error" in summary:

@@ -312,6 +312,26 @@ COMMANDS: dict[str, CommandSpec] = {
             ),
         ),
         CommandSpec(
+            "logs",
+            R,
+            "cmdd",
+            "the daemon's logs (its log directory): each CSV with its MCAP parts, size, start, and the "
+            "mission and result its events show; `fetch` copies one to the console",
+        ),
+        CommandSpec(
+            "fetch",
+            R,
+            "cmdd",
+            "a chunk of one of the daemon's log files (a log's CSV or an MCAP part), base64, with the "
+            "file's size; the chunk that reaches its end carries its sha256 (orccadctl fetch reads them "
+            "in turn and checks the whole)",
+            (
+                Arg("name", (str,), "the file, as `logs` names it", required=True),
+                Arg("offset", (int,), "where the chunk starts (bytes)", default=0),
+                Arg("length", (int,), "how many bytes, at most 32768", default=32768),
+            ),
+        ),
+        CommandSpec(
             "inject",
             C,
             "rt",

@@ -21,6 +21,7 @@ import pytest
 from orccadd.cli import build_parser, orccadctl_main
 from orccadd.ctl import cell as ctl_cell
 from orccadd.ctl import deploy as ctl_deploy
+from orccadd.ctl import fetch as ctl_fetch
 from orccadd.ctl import foxglove, motion, online
 from orccadd.ctl.format import bounds, num
 from orccadd.offline import commands as offline
@@ -198,7 +199,8 @@ ARGV = {
     "log": ["log", "start"], "inject": ["inject", "resource"], "plot": ["plot", "x.csv", "-o", "x.png"],
     "foxglove": ["foxglove", "--port", "0"], "cell": ["cell", "status", "--cell", "x.toml"],
     "move": ["move", "--joints", "0,0,0,0,0,0"], "jog": ["jog", "--joint", "elbow_joint", "--by", "0.1"],
-    "follow": ["follow", "x.csv"], "deploy": ["deploy", "x.mission"],
+    "follow": ["follow", "x.csv"], "deploy": ["deploy", "x.mission"], "logs": ["logs"],
+    "fetch": ["fetch", "x.csv", "-o", "out"],
 }  # fmt: skip
 
 
@@ -214,6 +216,7 @@ def test_ctrl_c_ends_every_command_quietly_with_130(monkeypatch: pytest.MonkeyPa
     monkeypatch.setattr(foxglove, "Client", interrupt)
     monkeypatch.setattr(motion, "Client", interrupt)
     monkeypatch.setattr(ctl_deploy, "Client", interrupt)
+    monkeypatch.setattr(ctl_fetch, "Client", interrupt)
     monkeypatch.chdir(tmp_path)
     (tmp_path / "x.csv").write_text("t_s,a\n0,0\n1,0.1\n")  # follow reads its file before connecting
     (tmp_path / "x.mission").write_text("mission X\n")  # and deploy its mission
