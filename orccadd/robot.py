@@ -84,6 +84,20 @@ def with_backend(cfg: RobotConfig, backend: str, **settings: Any) -> RobotConfig
     return _checked(replace(cfg, backend_settings=cls.load_settings(raw, cfg, cfg.source)), cls, False)
 
 
+SIMULATED = ("sim", "sim_process")
+
+
+def simulated(cfg: RobotConfig) -> RobotConfig:
+    """The same robot on the simulated arm (`orccadd --simulate`): its model, joints, limits,
+    period, tool and daemon settings unchanged, its bus's settings dropped (nothing is opened),
+    the arm starting at its home position. A simulated resource is returned as it is."""
+    if cfg.resource.backend in SIMULATED:
+        return cfg
+    home = [j.home_rad for j in cfg.joints]
+    bare = replace(cfg, resource=replace(cfg.resource, settings={}))
+    return with_backend(bare, "sim", initial_q_rad=home)
+
+
 def create_resource(cfg: RobotConfig, model: RobotModel | None = None) -> PhysicalResource:
     """Build (not configure) the resource a checked robot config names."""
     cls = backend_class(cfg.resource.backend, cfg.source)

@@ -42,7 +42,7 @@ from orccadd.daemon.urgent import UrgentSocket
 from orccadd.errors import OrccaddError, ResourceError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.physres.base import PhysicalResource
-from orccadd.robot import create_resource, load_cell_config, with_backend
+from orccadd.robot import create_resource, load_cell_config, simulated, with_backend
 from orccadd.runtime import enter_realtime, leave_realtime
 from orccadd.runtime.rt import RealtimeReport, lock_memory_early
 from orccadd.runtime.threads import ThreadGroup
@@ -662,6 +662,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-command-daemon", action="store_true", help="do not spawn the command daemon")
     ap.add_argument("--allow-fault-injection", action="store_true", help="accept `orccadctl inject`")
     ap.add_argument("--in-process-sim", action="store_true", help="simulate the arm inside this process")
+    ap.add_argument(
+        "--simulate",
+        action="store_true",
+        help="every resource of the config on the simulated arm (its model, limits, period; no bus "
+        "opened): the mission that will run on the robot, run first on a workstation",
+    )
     ap.add_argument("--spin-us", type=float, default=0.0, help="wake early and spin (µs)")
     args = ap.parse_args(argv)
     if args.list_configs:
@@ -678,6 +684,9 @@ def main(argv: list[str] | None = None) -> int:
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     try:
         cell = load_cell_config(robot_config_path(args.config))
+        if args.simulate:
+            cell = cell.with_resources(tuple(simulated(c) for c in cell.resources))
+            log.info("--simulate: every resource on the simulated arm (%s)", ", ".join(cell.names))
         if not args.in_process_sim:
             # a simulated arm lives in its own process, like a real arm outside the controller
             cell = cell.with_resources(
