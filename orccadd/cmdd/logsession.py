@@ -7,6 +7,7 @@ one died carries it on (`resume`): the CSV from its last complete row, the MCAP 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import logging
 import os
 from collections.abc import Callable
@@ -16,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from orccadd import __version__
 from orccadd.cmdd.csvlog import CsvLog, LogDir
 from orccadd.cmdd.logfeed import Decoder, LogFeed, LogOrigin
 from orccadd.cmdd.mcaplog import McapLog, McapStream, Urdf, seal
@@ -250,6 +252,7 @@ class TelemetryLog:
             "period_s": self.feed.tel.period_s,
             "signals": ",".join(label for st in self.streams for label in st.csv.sel.labels),
             "urdf": str(self.urdf.path) if self.urdf.text else f"none: {self.urdf.missing}",
+            **run_record(desc()),
         }
         if len(self.streams) > 1:
             info["resources"] = ",".join(st.resource for st in self.streams)
@@ -393,3 +396,23 @@ class TelemetryLog:
                 "(longer than the telemetry ring keeps); a `gap` event marks where the rows resume"
             )
         return out
+
+
+def run_record(desc: dict[str, Any]) -> dict[str, str]:
+    """What identifies the run a log records (its MCAP's `orccadd.log` metadata, for `compare`):
+    the mission loaded when it starts and its deployment hash (orccadd/daemon/deploy.py), the
+    robot config and its file's sha256, the orccadd version."""
+    mission = desc.get("mission") or {}
+    config = str(desc.get("config") or "")
+    try:
+        config_sha = hashlib.sha256(Path(config).read_bytes()).hexdigest() if config else ""
+    except OSError as e:
+        config_sha = f"unreadable: {e.strerror or e}"
+    return {
+        "mission": str(mission.get("name", "")),
+        "mission_file": str(mission.get("file", "")),
+        "mission_deployment": str(mission.get("deployment", "")),
+        "config": config,
+        "config_sha256": config_sha,
+        "orccadd_version": __version__,
+    }

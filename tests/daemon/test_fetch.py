@@ -8,6 +8,9 @@ import hashlib
 import json
 from pathlib import Path
 
+from mcap.reader import make_reader
+
+from orccadd import __version__
 from tests.daemon.conftest import Daemon
 
 
@@ -36,6 +39,10 @@ def test_a_logged_run_is_listed_and_fetched_whole(daemon: Daemon, tmp_path: Path
     src = Path(stop["file"]).parent
     for name in ("run1.csv", "run1.mcap"):
         assert sha(out / name) == sha(src / name) and "checked" in p.stdout
+    with (out / "run1.mcap").open("rb") as f:  # the run's record, as Foxglove's reader sees it
+        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}["orccadd.log"]
+    assert (meta["mission"], meta["orccadd_version"]) == ("PositionDemo", __version__), meta
+    assert meta["config_sha256"] == sha(Path(meta["config"])) and meta["mission_deployment"] == ""
     assert daemon.ctl("fetch", "run1.csv", "-o", str(out)).returncode == 2  # exists: --force
     assert daemon.ctl("fetch", "run1.csv", "-o", str(out), "--force").returncode == 0
 
