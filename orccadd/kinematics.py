@@ -75,6 +75,46 @@ def pose_error(
     return e
 
 
+def rotation_error(q: list[float], q_des: list[float]) -> list[float]:
+    """log3(R_des·Rᵀ) from the two unit quaternions (x, y, z, w), on plain floats: the rotation
+    vector (base axes) that turns q into q_des, as `pose_error` computes it from matrices, at a
+    fraction of the cost (no array, no Pinocchio object). Inputs are normalised here."""
+    x1, y1, z1, w1 = _unit(q_des)
+    x2, y2, z2, w2 = _unit(q)
+    x2, y2, z2 = -x2, -y2, -z2  # q's conjugate: q_des ⊗ q*
+    x = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+    y = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+    z = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+    w = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+    if w < 0.0:  # the shorter way round
+        x, y, z, w = -x, -y, -z, -w
+    s = math.sqrt(x * x + y * y + z * z)
+    k = 2.0 * math.atan2(s, w) / s if s > 1e-12 else 2.0
+    return [k * x, k * y, k * z]
+
+
+def task_error(pose: pin.SE3, position_des_m: list[float], orientation_des: list[float]) -> list[float]:
+    """`pose_error` toward a desired pose given as floats (a module's inputs): six floats."""
+    px, py, pz = pose.translation.tolist()
+    dx, dy, dz = position_des_m
+    return [dx - px, dy - py, dz - pz, *rotation_error(quaternion_of(pose.rotation), orientation_des)]
+
+
+def rotate_back(q: list[float], v: list[float]) -> list[float]:
+    """Rᵀ·v for the unit quaternion q (x, y, z, w) of R, on plain floats."""
+    x, y, z, w = _unit(q)
+    x, y, z = -x, -y, -z  # the conjugate rotates back
+    vx, vy, vz = v
+    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
+    return [vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx]
+
+
+def _unit(q: list[float]) -> tuple[float, float, float, float]:
+    x, y, z, w = q
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    return (x / n, y / n, z / n, w / n) if n > 0.0 else (0.0, 0.0, 0.0, 1.0)
+
+
 def angle_between(rotation_a: FloatArray, rotation_b: FloatArray) -> float:
     """The angle (rad, in [0, π]) of the rotation that turns `rotation_a` into `rotation_b`."""
     c = 0.5 * (float(np.trace(rotation_b @ rotation_a.T)) - 1.0)

@@ -17,6 +17,8 @@ from orccadd.kinematics import (
     manipulability,
     pose_error,
     quaternion_of,
+    rotate_back,
+    rotation_error,
     rotation_of,
     smallest_singular_value,
 )
@@ -107,3 +109,15 @@ def test_damped_least_squares_is_the_pseudo_inverse_away_from_singularities_and_
     damping = 0.05
     # at most 1/(2·damping) rad/s per unit of task velocity, whichever the direction
     assert np.linalg.norm(damped_pseudo_inverse(singular, damping), 2) <= 1.0 / (2.0 * damping) + 1e-9
+
+
+def test_the_error_on_quaternions_is_the_log_map_of_the_matrices() -> None:
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        r, r_des = pin.exp3(rng.normal(size=3) * 2.0), pin.exp3(rng.normal(size=3) * 2.0)
+        q, q_des = quaternion_of(r), quaternion_of(r_des)
+        scaled = [2.0 * v for v in q]  # not unit: normalised first
+        assert np.allclose(rotation_error(scaled, q_des), pin.log3(r_des @ r.T), atol=1e-9)
+        v = rng.normal(size=3)
+        assert np.allclose(rotate_back(q, v.tolist()), r.T @ v, atol=1e-12)
+    assert rotation_error([0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0]) == [0.0, 0.0, 0.0]

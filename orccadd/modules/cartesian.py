@@ -16,7 +16,14 @@ import pinocchio as pin
 from ruckig import InputParameter, OutputParameter, Result, Ruckig, Synchronization
 
 from orccadd.errors import ParameterError
-from orccadd.kinematics import ToolKinematics, angle_between, manipulability, quaternion_of, rotation_of
+from orccadd.kinematics import (
+    ToolKinematics,
+    angle_between,
+    manipulability,
+    quaternion_of,
+    rotate_back,
+    rotation_error,
+)
 from orccadd.model import RobotModel
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
 from orccadd.modules.trajectory import ruckig_step
@@ -83,12 +90,11 @@ class PoseError(KernelModule):
         def error(
             t_s: float, p: list[float], o: list[float], p_des: list[float], o_des: list[float]
         ) -> tuple[list[float], list[float], float, float]:
-            r, r_des = rotation_of(o), rotation_of(o_des)
-            e_lin = np.subtract(p_des, p)
-            e_rot = pin.log3(r_des @ r.T)
-            tool = np.concatenate((r.T @ e_lin, r.T @ e_rot))
-            dist, angle = float(np.linalg.norm(e_lin)), float(np.linalg.norm(e_rot))
-            return (e_lin.tolist() + e_rot.tolist(), tool.tolist(), dist, angle)
+            e_lin = [a - b for a, b in zip(p_des, p, strict=True)]
+            e_rot = rotation_error(o, o_des)  # log3(R_des·Rᵀ), on floats (kinematics.py)
+            tool = rotate_back(o, e_lin) + rotate_back(o, e_rot)
+            dist, angle = math.sqrt(sum(v * v for v in e_lin)), math.sqrt(sum(v * v for v in e_rot))
+            return (e_lin + e_rot, tool, dist, angle)
 
         return error
 

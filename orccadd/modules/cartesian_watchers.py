@@ -7,9 +7,11 @@ exception, as for the joint-space watchers (orccadd/modules/watchers.py).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from orccadd.kinematics import angle_between, rotation_of
+from orccadd.kinematics import rotation_error
 from orccadd.modules.base import Kernel, ModuleContext, register
 from orccadd.modules.cartesian import TWIST_UNIT
 from orccadd.modules.watchers import Watcher
@@ -54,7 +56,7 @@ class PoseReached(Watcher):
                 vx * vx + vy * vy + vz * vz < float(vtol) ** 2
                 and wx * wx + wy * wy + wz * wz < float(wtol) ** 2
             )
-            turned = near and still and angle_between(rotation_of(o), rotation_of(o_goal)) < float(rtol)
+            turned = near and still and math.hypot(*rotation_error(o, o_goal)) < float(rtol)
             return debounce(turned)
 
         return reached

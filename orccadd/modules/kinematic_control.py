@@ -27,8 +27,7 @@ import numpy as np
 
 from orccadd.kinematics import (
     ToolKinematics,
-    pose_error,
-    rotation_of,
+    task_error,
 )
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
 from orccadd.modules.cartesian import TWIST_UNIT
@@ -91,9 +90,7 @@ class ResolvedRate(KernelModule):
             q_ref = self._q_ref
             pose = kin.pose_and_jacobian(q_ref)
             j = kin.jacobian
-            e = pose_error(
-                pose.translation, pose.rotation, np.asarray(position_des_m), rotation_of(orientation_des)
-            )
+            e = np.array(task_error(pose, position_des_m, orientation_des))
             v[:] = twist_des
             v[:] += float(self.gain.value) * e
             u, sv, vt = np.linalg.svd(j, full_matrices=False)  # one SVD: the margin and the inverse

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from orccadd.kinematics import WORLD_ALIGNED, ToolKinematics, pose_error, rotation_of
+from orccadd.kinematics import WORLD_ALIGNED, ToolKinematics, task_error
 from orccadd.modules.base import Kernel, KernelModule, ModuleContext, register
 from orccadd.modules.cartesian import TWIST_UNIT
 from orccadd.state import JointState
@@ -87,9 +87,7 @@ class OperationalSpace(KernelModule):
             v_des = np.asarray(twist_des)
             acc_des = np.zeros(6) if self._twist_prev is None else (v_des - self._twist_prev) / dt
             self._twist_prev = v_des
-            e = pose_error(
-                pose.translation, pose.rotation, np.asarray(position_des_m), rotation_of(orientation_des)
-            )
+            e = np.array(task_error(pose, position_des_m, orientation_des))
             de = v_des - j @ dqa
             a = acc_des + float(self.kd.value) * de + float(self.kp.value) * e - drift
             ki = float(self.ki.value)
