@@ -1,5 +1,5 @@
 """Commands that need no daemon: check a mission, draw it, export it for spin, the module
-catalogue, plot a log."""
+catalogue, plot a log, compare two runs (`compare_cli`)."""
 
 from __future__ import annotations
 
@@ -88,6 +88,9 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--signals", default="", help="comma-separated column prefixes (default: all)")
     p.add_argument("--format", choices=("png", "svg"), help="default: the output's suffix, else png")
     p.set_defaults(func=cmd_plot)
+    from orccadd.offline.compare_cli import add_parser as add_compare
+
+    add_compare(sub)
 
 
 def cmd_plot(a: argparse.Namespace) -> int:
