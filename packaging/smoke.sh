@@ -38,6 +38,8 @@ for mission in "$share"/missions/*.mission; do
         if grep -q '^input .*arm\.' "$mission"; then robot=ur5e-rtde-sim; fi
         # and one whose tasks need the UR controller (force mode, freedrive, its sensor, its slider)
         if grep -Eq 'from "\.\./tasks/(ur_|approach_until_contact)' "$mission"; then robot=ur5e-rtde-sim; fi
+        # a camera's features (visual servoing) are the work cell's simulated arm's
+        if grep -Eq 'from "\.\./tasks/(keepstable_cam|servo_visual)' "$mission"; then robot=sim-ur5e-workcell; fi
         "$bin/orccadctl" check "$mission" --config "$robot" >/dev/null  # every task built on it
         echo "checked $(basename "$mission") (and its tasks on $robot)"
     else  # the seed's KEEPSTABLE (an underwater vehicle): no task files for an arm
