@@ -50,6 +50,11 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("mission", help="a mission file, or a shipped mission's name (demo, pick_place, ...)")
     p = add("start")
     p.add_argument("procedure", nargs="?", default="", help=table_help("start", "procedure"))
+    p.add_argument(
+        "--wait",
+        action="store_true",
+        help="wait for the run's end and say how it ended: exit 0 on success, 1 otherwise (for scripts)",
+    )
     add("stop")
     add("abort")
     add("hold")
@@ -184,7 +189,10 @@ def run_online(a: argparse.Namespace) -> int:
             if isinstance(online, int):
                 return online
             r, context = online
-        return _report(a, r, context, args)
+        code = _report(a, r, context, args)
+        if a.online == "start" and getattr(a, "wait", False) and code == EXIT_OK and r.get("ok"):
+            return _wait_end(a)
+        return code
     except (ClientError, CellError, ConfigError) as e:
         _error(a, str(e))
     except BrokenPipeError:
@@ -197,6 +205,20 @@ def run_online(a: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
     return EXIT_ERROR
+
+
+def _wait_end(a: argparse.Namespace) -> int:
+    """`start --wait`: the run's end, in words (or JSON): 0 on success, 1 otherwise. Ctrl-C
+    stops the waiting, not the run (`orccadctl stop` does that)."""
+    from orccadd.ctl.motion import wait_end
+
+    robot = getattr(a, "robot", None)
+    with RemoteClient(a, robot) if robot else Client(a.socket, timeout_s=client_wait_s("status")) as c:
+        end = wait_end(c)
+    fault = end.get("fault") or {}
+    why = f": {fault.get('event') or fault.get('kind')}: {fault.get('text')}" if fault else ""
+    print(json.dumps({"end": end}, indent=1) if a.json else f"the run ended: {end.get('result')}{why}")
+    return EXIT_OK if end.get("result") == "success" else 1
 
 
 def _error(a: argparse.Namespace, message: str) -> None:

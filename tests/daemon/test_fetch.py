@@ -23,9 +23,9 @@ def test_a_logged_run_is_listed_and_fetched_whole(daemon: Daemon, tmp_path: Path
     assert daemon.ctl("log", "start", "q", "tau", "--name", "run1.csv").returncode == 0
     refused = daemon.reply("fetch", name="run1.csv")
     assert not refused["ok"] and "run1.csv is being written: `orccadctl log stop` first" in refused["error"]
-    assert daemon.ctl("start").returncode == 0
-    s = daemon.wait(lambda s: s["state"] != "running", timeout_s=60)
-    assert s["result"] == "success"
+    p = daemon.ctl("start", "--wait")  # returns at the run's end
+    assert p.returncode == 0 and p.stdout.strip().endswith("the run ended: success"), p.stdout
+    assert daemon.status()["result"] == "success"
     stop = json.loads(daemon.ctl("log", "stop", "--json").stdout)["result"]
     listed = json.loads(daemon.ctl("logs", "--json").stdout)
     log = next(lg for lg in listed["logs"] if lg["name"] == "run1.csv")
