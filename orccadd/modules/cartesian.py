@@ -263,63 +263,36 @@ class LineToPose(_Line):
             raise ParameterError(f"{self.target.path} {detail}", name=self.target.name, detail=detail)
 
 
-@register("line_by_offset")
-class LineByOffset(_Line):
-    """A straight line by `offset_m` from where the tool starts, on the base's axes, turning it
-    by `rotation_rpy_rad` about the base's axes."""
+class _LineByOffset(_Line):
+    """Base of the relative lines: `offset_m` and `rotation_rpy_rad` from where the tool starts;
+    `_goal` says on whose axes."""
 
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
-        self.offset = self.add_parameter(
-            "offset_m",
-            [0.0, 0.0, 0.0],
-            bounds=(-5.0, 5.0),
-            unit="m",
-            shape=(3,),
-            required=True,
-            per_joint=True,
-            element="axis",
-        )
-        self.rotation = self.add_parameter(
-            "rotation_rpy_rad",
-            [0.0, 0.0, 0.0],
-            bounds=(-math.pi, math.pi),
-            unit="rad",
-            shape=(3,),
-            per_joint=True,
-            element="axis",
-        )
+        for key, unit, lo, hi, required in (
+            ("offset_m", "m", -5.0, 5.0, True),
+            ("rotation_rpy_rad", "rad", -math.pi, math.pi, False),
+        ):
+            self.add_parameter(
+                key, [0.0] * 3, bounds=(lo, hi), unit=unit, shape=(3,), required=required,
+                per_joint=True, element="axis",
+            )  # fmt: skip
+        self.offset, self.rotation = self.parameters["offset_m"], self.parameters["rotation_rpy_rad"]
+
+
+@register("line_by_offset")
+class LineByOffset(_LineByOffset):
+    """A straight line by `offset_m` from where the tool starts, on the base's axes, turning it
+    by `rotation_rpy_rad` about the base's axes."""
 
     def _goal(self, p0: np.ndarray, r0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return p0 + self.offset.value, _rpy(self.rotation.value) @ r0
 
 
 @register("line_by_tool_offset")
-class LineByToolOffset(_Line):
+class LineByToolOffset(_LineByOffset):
     """A straight line by `offset_m` on the tool's own axes (an approach along its z), turning it
     by `rotation_rpy_rad` about its own axes."""
-
-    def __init__(self, name: str, ctx: ModuleContext) -> None:
-        super().__init__(name, ctx)
-        self.offset = self.add_parameter(
-            "offset_m",
-            [0.0, 0.0, 0.0],
-            bounds=(-5.0, 5.0),
-            unit="m",
-            shape=(3,),
-            required=True,
-            per_joint=True,
-            element="axis",
-        )
-        self.rotation = self.add_parameter(
-            "rotation_rpy_rad",
-            [0.0, 0.0, 0.0],
-            bounds=(-math.pi, math.pi),
-            unit="rad",
-            shape=(3,),
-            per_joint=True,
-            element="axis",
-        )
 
     def _goal(self, p0: np.ndarray, r0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return p0 + r0 @ self.offset.value, r0 @ _rpy(self.rotation.value)

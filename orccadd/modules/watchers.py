@@ -7,6 +7,7 @@ or a synchronisation signal; the event is emitted on the rising edge.
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numpy as np
 
@@ -227,11 +228,12 @@ class ForceWatch(Watcher):
         return over_force
 
 
-@register("signal_below_watch")
-class SignalBelowWatch(Watcher):
-    """Fires when a one-number signal (`value`, unit "1": a resource's `arm.target_visible`,
-    `arm.speed_scaling`) stays below `threshold` for `ticks` ticks in a row: a target lost
-    (`target_visible` below 0.5), a controller slowed. A value that is not finite does not fire."""
+class _SignalWatch(Watcher):
+    """Base of the one-number signal watchers (`value`, unit "1": a resource's
+    `arm.target_visible`, `arm.speed_scaling`): fires after `ticks` ticks in a row on the side of
+    `threshold` that `BELOW` says; a value that is not finite does not fire."""
+
+    BELOW: ClassVar[bool] = True
 
     def __init__(self, name: str, ctx: ModuleContext) -> None:
         super().__init__(name, ctx)
@@ -241,33 +243,24 @@ class SignalBelowWatch(Watcher):
         )
 
     def kernel(self) -> Kernel:
-        threshold, debounce = self.threshold.value, self._debounce
+        threshold, debounce, below = self.threshold.value, self._debounce, self.BELOW
 
-        def below(t_s: float, value: list[float]) -> tuple[bool]:
+        def crossed(t_s: float, value: list[float]) -> tuple[bool]:
             v = value[0]
-            return debounce(math.isfinite(v) and v < float(threshold))
+            return debounce(math.isfinite(v) and (v < float(threshold)) == below)
 
-        return below
+        return crossed
+
+
+@register("signal_below_watch")
+class SignalBelowWatch(_SignalWatch):
+    """Fires when a one-number signal stays below `threshold` for `ticks` ticks in a row: a
+    target lost (`target_visible` below 0.5), a controller slowed."""
 
 
 @register("signal_above_watch")
-class SignalAboveWatch(Watcher):
-    """Fires when a one-number signal (`value`, unit "1") stays at or above `threshold` for
-    `ticks` ticks in a row: a target seen again (`arm.target_visible` at 1). The counterpart of
-    `signal_below_watch`; a value that is not finite does not fire."""
+class SignalAboveWatch(_SignalWatch):
+    """Fires when a one-number signal stays at or above `threshold` for `ticks` ticks in a row: a
+    target seen again (`arm.target_visible` at 1)."""
 
-    def __init__(self, name: str, ctx: ModuleContext) -> None:
-        super().__init__(name, ctx)
-        self.add_input("value", (1,), "1")
-        self.threshold = self.add_parameter(
-            "threshold", 0.5, bounds=(-1e9, 1e9), unit="1", required=True, tunable=True
-        )
-
-    def kernel(self) -> Kernel:
-        threshold, debounce = self.threshold.value, self._debounce
-
-        def above(t_s: float, value: list[float]) -> tuple[bool]:
-            v = value[0]
-            return debounce(math.isfinite(v) and v >= float(threshold))
-
-        return above
+    BELOW = False
