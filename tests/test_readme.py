@@ -20,14 +20,16 @@ from orccadd.ursim.process import PortsLock
 from tests.conftest import ROOT
 
 README = (ROOT / "README.md").read_text()
+MORE_TOURS = (ROOT / "docs" / "tours.md").read_text()
 # a terminal's view, a stream until Ctrl-C, and the shell's own job control
 INTERACTIVE = ("orccadctl top", "--follow", "kill %")
 READY_WORDS = ("ready", "listening on")
 
 
 def tours() -> dict[str, str]:
-    """Each tour's shell block, by its bold title's first words."""
-    tour = README.split("## A five-minute tour", 1)[1].split("\n## ", 1)[0]
+    """Each tour's shell block, by its bold title's first words: the README's, then
+    docs/tours.md's."""
+    tour = README.split("## A five-minute tour", 1)[1].split("\n## ", 1)[0] + MORE_TOURS
     found = re.findall(r"\*\*([^*]+)\*\*.*?```sh\n(.*?)```", tour, re.S)
     return {title.split(",")[0].split(" (")[0]: block for title, block in found}
 
