@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import json
 import logging
 import os
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -118,8 +120,11 @@ class TelemetryLog:
         decode: Decoder,
         urdf_path: Path | None,
         extra_state: dict[str, Any],
+        records: dict[str, dict[str, str]] | None = None,
     ) -> TelemetryLog:
-        """A new log from the next tick; `ValueError` if its files cannot be created."""
+        """A new log from the next tick; `ValueError` if its files cannot be created. `records`:
+        metadata records of every MCAP part beyond the run record (the parameters at start)."""
+        records = records or {}
         origins = [LogOrigin.now(s.tel) for s in sources]
         for s, origin in zip(sources, origins, strict=True):
             if origin.tick == 0:
@@ -167,6 +172,7 @@ class TelemetryLog:
             "trace_start": trace_start,
             "mcap": [part_name(name, 1)],
         }
+        state["records"] = {**run_records(desc()), **records}
         rec = TelemetryLog(logs, streams, state, Urdf.read(urdf_path), resumed=False)
         try:
             rec._open_mcap(os.fdopen(mcap_fd, "wb"), 1, desc, 0.0)
@@ -259,7 +265,8 @@ class TelemetryLog:
             info["periods_s"] = ",".join(repr(st.feed.tel.period_s) for st in self.streams)
         path = self.logs.path / parts[-1]
         try:
-            self.mcap = McapLog(fh, path, self._mcap_streams(), info, self.urdf, desc, from_s)
+            records = self.state.get("records") or {}
+            self.mcap = McapLog(fh, path, self._mcap_streams(), info, self.urdf, desc, from_s, records)
         except Exception:
             with contextlib.suppress(OSError):
                 fh.close()
@@ -415,4 +422,50 @@ def run_record(desc: dict[str, Any]) -> dict[str, str]:
         "config": config,
         "config_sha256": config_sha,
         "orccadd_version": __version__,
+        "tasks": json.dumps(desc.get("tasks") or []),  # by telemetry id (the `task` signal)
     }
+
+
+MISSION_RECORD = "orccadd.mission"
+PARAMETERS_RECORD = "orccadd.parameters"  # by task: its parameters as the log starts (JSON)
+MISSION_FILE_MAX_BYTES = 1 << 20
+MISSION_FILES_MAX = 64
+FROM_RE = re.compile(r'\bfrom\s+"([^"\n]*)"')  # a task's file in a mission (as the compiler reads it)
+
+
+def run_records(desc: dict[str, Any]) -> dict[str, dict[str, str]]:
+    """The metadata records every part of a log carries beyond the run record: the loaded
+    mission's text and its task files' (`orccadd.mission`: `name`, `file`, `mission`, and
+    `task:<ref>` per file as the mission names it), read when the log starts, so that
+    `orccadctl replay` builds the very tasks that ran; a file that cannot be read is named in
+    `unreadable` instead."""
+    mission = desc.get("mission") or {}
+    path = str(mission.get("file") or "")
+    if not path:
+        return {}
+    rec = {"name": str(mission.get("name", "")), "file": path}
+    unreadable: list[str] = []
+
+    def read(p: Path, what: str) -> str | None:
+        try:
+            with p.open("rb") as fh:
+                data = fh.read(MISSION_FILE_MAX_BYTES + 1)
+            if len(data) > MISSION_FILE_MAX_BYTES:
+                unreadable.append(f"{what}: larger than {MISSION_FILE_MAX_BYTES} bytes")
+                return None
+            return data.decode("utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            unreadable.append(f"{what}: {getattr(e, 'strerror', None) or e}")
+            return None
+
+    text = read(Path(path), path)
+    if text is not None:
+        rec["mission"] = text
+        for ref in list(dict.fromkeys(FROM_RE.findall(text)))[:MISSION_FILES_MAX]:
+            f = Path(ref) if Path(ref).is_absolute() else Path(path).parent / ref
+            body = read(f, ref)
+            if body is not None:
+                rec[f"task:{ref}"] = body
+    if unreadable:
+        rec["unreadable"] = "; ".join(unreadable)
+    return {MISSION_RECORD: rec}

@@ -130,8 +130,10 @@ class McapLog:
         urdf: Urdf,
         desc: Callable[[], dict[str, Any]],
         from_time_s: float = 0.0,
+        records: dict[str, dict[str, str]] | None = None,
     ) -> None:
-        """A new part; `info` goes into its `orccadd.log` metadata; `from_time_s`: where it starts."""
+        """A new part; `info` goes into its `orccadd.log` metadata, `records` into metadata records
+        of their own (the mission's files, the parameters at start); `from_time_s`: where it starts."""
         self.fh = fh
         self.path = path
         self.origin = streams[0].origin
@@ -139,6 +141,8 @@ class McapLog:
         w = self.writer = Writer(fh, use_chunking=False)
         w.start(profile="", library=LIBRARY)
         w.add_metadata("orccadd.log", {k: str(v) for k, v in info.items()})
+        for name, record in (records or {}).items():
+            w.add_metadata(name, {k: str(v) for k, v in record.items()})
         self.sources = [_Source(s, self._register_groups(s.selection)) for s in streams]
         self.joint_states = w.register_channel(
             "/joint_states",

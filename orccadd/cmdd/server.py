@@ -29,7 +29,7 @@ from orccadd.cellnet import keys
 from orccadd.cmdd import logfetch, views
 from orccadd.cmdd.cellpeer import CellPeer
 from orccadd.cmdd.csvlog import LogDir
-from orccadd.cmdd.logsession import LogSource, TelemetryLog
+from orccadd.cmdd.logsession import PARAMETERS_RECORD, LogSource, TelemetryLog
 from orccadd.cmdd.urdf import urdf_path
 from orccadd.config.cell import read_cell_config
 from orccadd.config.cellnet import CellNetConfig
@@ -37,6 +37,7 @@ from orccadd.config.robot import DaemonConfig
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.wire.commands import (
     COMMANDS,
+    LOG_SIGNALS,
     MAX_LINE,
     RT_REPLY_S,
     URGENT_COMMANDS,
@@ -779,11 +780,12 @@ class CommandDaemon:
             if self.recording is not None:
                 raise ValueError(f"log: already logging to {self.recording.path} (log stop first)")
             await self.refresh()
-            sources = self._sources([str(s) for s in signals or ["q", "dq", "tau", "cmd"]])
+            sources = self._sources([str(s) for s in signals or LOG_SIGNALS])
             name = name or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv"
             extra = {"rt_pid": int(self.tel.header[H.PID])}
+            records = {PARAMETERS_RECORD: await self._parameters()}
             rec = TelemetryLog.start(
-                self.logs, sources, name, lambda: self.desc, self.decode_trace, self.urdf, extra
+                self.logs, sources, name, lambda: self.desc, self.decode_trace, self.urdf, extra, records
             )
             self.recording = rec
             self.logs.save_state(rec.state)
@@ -795,6 +797,18 @@ class CommandDaemon:
         except OSError as e:
             self._end_log(self.recording.abandon(e))
         return self.last_log or {}
+
+    async def _parameters(self) -> dict[str, str]:
+        """Every task's parameters as the log starts (`PARAMETERS_RECORD`): by task, a JSON object
+        of `MODULE.PARAM` → value; `error` if the real-time process did not answer."""
+        reply = await self.rt.call("params", {"task": ""})
+        if not reply.get("ok"):
+            return {"error": str(reply.get("error", "no reply"))}
+        by_task = reply["result"].get("params", {})
+        return {
+            task: json.dumps({p["name"]: p["value"] for p in params}, separators=(",", ":"))
+            for task, params in by_task.items()
+        }
 
     @handles("logs")
     async def do_logs(self, writer: asyncio.StreamWriter, rid: Any) -> dict[str, Any]:

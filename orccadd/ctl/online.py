@@ -19,7 +19,7 @@ from orccadd.ctl.format import error_line, format_trace
 from orccadd.ctl.format import format_status as format_status  # the demo prints it
 from orccadd.ctl.human import context_requests, format_reply
 from orccadd.errors import ConfigError
-from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, client_wait_s
+from orccadd.wire.commands import COMMANDS, LOG_SIGNALS, URGENT_COMMANDS, client_wait_s
 from orccadd.wire.socketdir import urgent_socket_path
 
 EXIT_OK, EXIT_REFUSED, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -88,7 +88,8 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--count", type=int, default=0, help="refreshes before exiting (0: until Ctrl-C)")
     p = add("log")
     p.add_argument("action", choices=COMMANDS["log"].arg("action").choices, help=table_help("log", "action"))
-    p.add_argument("signals", nargs="*", help="start: " + SIGNALS_HELP + " (default: q dq tau cmd)")
+    default = " ".join(LOG_SIGNALS)
+    p.add_argument("signals", nargs="*", help="start: " + SIGNALS_HELP + f" (default: {default})")
     p.add_argument("--name", default="", help="start: the log's file name in the daemon's log directory")
     p.add_argument(
         "-o",
@@ -135,7 +136,7 @@ def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
                     "log start: -o is for `log stop -o FILE` (the copy is made there, with the rights "
                     "of whoever stops the log); name the daemon's file with --name"
                 )
-            args["signals"] = a.signals or ["q", "dq", "tau", "cmd"]
+            args["signals"] = a.signals or list(LOG_SIGNALS)
             if a.name:  # the daemon writes into its own log directory; `log stop -o` copies it
                 args["name"] = a.name
         elif a.output and getattr(a, "robot", None):

@@ -91,6 +91,9 @@ def add_parsers(sub: Any) -> None:
     from orccadd.offline.compare_cli import add_parser as add_compare
 
     add_compare(sub)
+    from orccadd.offline.replay_cli import add_parser as add_replay
+
+    add_replay(sub)
 
 
 def cmd_plot(a: argparse.Namespace) -> int:

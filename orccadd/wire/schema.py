@@ -72,8 +72,12 @@ def tune_words(tune: Mapping[str, Any]) -> str:
     """A decoded tune record in words: `Reach.ct.kp[2]: 500 → 600 (tick 48213)`; a vector the
     record had to cut says how long it was."""
 
+    def num(x: float) -> str:  # short, and exact: `orccadctl replay` applies it as logged
+        short = f"{x:g}"
+        return short if float(short) == x else repr(x)
+
     def values(v: list[float]) -> str:
-        return f"{v[0]:g}" if len(v) == 1 else "[" + ", ".join(f"{x:g}" for x in v) + "]"
+        return num(v[0]) if len(v) == 1 else "[" + ", ".join(num(x) for x in v) + "]"
 
     cut = f" (first {len(tune['new'])} of {tune['n']})" if tune["n"] > len(tune["new"]) else ""
     return f"{tune['path']}: {values(tune['old'])} → {values(tune['new'])}{cut} (tick {tune['tick']})"

@@ -33,7 +33,7 @@ def test_the_bash_script_names_every_subcommand_and_bash_accepts_it(
         'COMP_WORDS=(orccadctl log ""); COMP_CWORD=2; _shtab_orccadctl; echo "${COMPREPLY[*]}"'
     )
     out = subprocess.run([bash, "-c", ask], input=script, capture_output=True, text=True, timeout=30)
-    assert out.stdout.splitlines() == ["resume reset", "start stop"], out.stderr
+    assert out.stdout.splitlines() == ["replay resume reset", "start stop"], out.stderr
 
 
 def test_the_zsh_script_is_a_compdef_with_the_subcommands() -> None:

@@ -25,7 +25,7 @@ from orccadd.ctl import fetch as ctl_fetch
 from orccadd.ctl import foxglove, motion, online
 from orccadd.ctl.format import bounds, num
 from orccadd.offline import commands as offline
-from orccadd.offline import compare_cli
+from orccadd.offline import compare_cli, replayrun
 from tests.ctl.test_streams import server  # noqa: F401  (the stand-in stream server)
 from tests.ctl.test_top import EVENTS, RUNNING
 from tests.daemon.conftest import ROOT, start_daemon
@@ -202,6 +202,7 @@ ARGV = {
     "move": ["move", "--joints", "0,0,0,0,0,0"], "jog": ["jog", "--joint", "elbow_joint", "--by", "0.1"],
     "follow": ["follow", "x.csv"], "deploy": ["deploy", "x.mission"], "logs": ["logs"],
     "fetch": ["fetch", "x.csv", "-o", "out"], "compare": ["compare", "a.mcap", "b.mcap"],
+    "replay": ["replay", "a.mcap"],
 }  # fmt: skip
 
 
@@ -219,6 +220,7 @@ def test_ctrl_c_ends_every_command_quietly_with_130(monkeypatch: pytest.MonkeyPa
     monkeypatch.setattr(ctl_deploy, "Client", interrupt)
     monkeypatch.setattr(ctl_fetch, "Client", interrupt)
     monkeypatch.setattr(compare_cli, "cmd_compare", interrupt)
+    monkeypatch.setattr(replayrun, "read_run", interrupt)  # replay's first step: reading the run
     monkeypatch.chdir(tmp_path)
     (tmp_path / "x.csv").write_text("t_s,a\n0,0\n1,0.1\n")  # follow reads its file before connecting
     (tmp_path / "x.mission").write_text("mission X\n")  # and deploy its mission

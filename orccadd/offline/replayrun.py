@@ -1,0 +1,166 @@
+"""A logged run as `orccadctl replay` reads it: every tick's record (by its sequence number, from
+the MCAP's messages), the run record, the mission's files and the parameters at start, and the
+tunes applied during the run.
+
+A replay needs the signals `log start` records by default (`orccadd.wire.commands.LOG_SIGNALS`):
+a log of fewer is refused naming what it lacks. Every refusal is a `ReplayError` naming the file.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from orccadd.errors import OrccaddError
+from orccadd.offline.logread import is_mcap
+
+NEEDED = ("t_s", "task", "wrote", "mode", "status", "q", "dq", "tau", "cmd")
+SCALARS = ("t_s", "task", "phase", "wrote", "mode", "status")
+VECTORS = ("q", "dq", "tau", "cmd")
+NUMBER = r"-?(?:\d+\.?\d*(?:e[-+]?\d+)?|inf|nan)"
+_TUNE = re.compile(
+    r"^tune \(operator\) (?P<path>\S+): (?P<old>.+?) → (?P<new>.+?)"
+    r"(?: \(first (?P<k>\d+) of (?P<n>\d+)\))? \(tick (?P<tick>\d+)\)$"
+)
+
+
+class ReplayError(OrccaddError):
+    """A log or a request `replay` cannot take: the message names the file and why."""
+
+
+@dataclass(frozen=True)
+class Tune:
+    """A tune as the run's log records it: applied at the start of tick `tick`."""
+
+    tick: int
+    path: str  # TASK.MODULE.PARAM or TASK.MODULE.PARAM[i]
+    value: list[float]
+    cut: bool  # the log kept only the first values of a longer vector
+
+    @property
+    def task(self) -> str:
+        return self.path.split(".", 1)[0]
+
+
+@dataclass
+class RecordedRun:
+    """The ticks of a run (rows in tick order, `seq` their sequence numbers) and what it ran."""
+
+    path: Path
+    meta: dict[str, str]
+    joints: list[str]
+    seq: np.ndarray  # int64, one per row
+    scalars: dict[str, np.ndarray]  # t_s, task, phase, wrote, mode, status: one value per row
+    vectors: dict[str, np.ndarray]  # q, dq, tau, cmd: rows × joints
+    tasks: list[str]  # telemetry task id -> name
+    mission: dict[str, str]  # the `orccadd.mission` record
+    parameters: dict[str, dict[str, Any]]  # task -> MODULE.PARAM -> value, as the log started
+    tunes: list[Tune] = field(default_factory=list)
+    events: list[tuple[int, str]] = field(default_factory=list)  # (tick, message) of the trace
+
+    @property
+    def rows(self) -> int:
+        return len(self.seq)
+
+    def task_at(self, row: int) -> str:
+        tid = int(self.scalars["task"][row])
+        return self.tasks[tid] if 0 <= tid < len(self.tasks) else f"#{tid}"
+
+
+def read_run(path: Path) -> RecordedRun:
+    """The run logged in the MCAP at `path`; `ReplayError` for anything that cannot be replayed."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    try:
+        if not is_mcap(path):
+            raise ReplayError(f"{path}: not an MCAP file (replay reads a log's .mcap)")
+        fh = path.open("rb")
+    except OSError as e:
+        raise ReplayError(f"{path}: cannot be read ({e.strerror or e})") from None
+    rows: dict[int, dict[str, Any]] = {}
+    fields: dict[str, list[str]] = {}
+    metadata: dict[str, dict[str, str]] = {}
+    raw_events: list[tuple[int, str]] = []  # (log time ns, message)
+    seq_ns: dict[int, int] = {}  # a tick's sequence number -> its log time
+    try:
+        with fh:
+            reader = make_reader(fh)
+            for m in reader.iter_metadata():
+                metadata[m.name] = dict(m.metadata)
+            for _, channel, message in reader.iter_messages():
+                if channel.topic == "/events":
+                    raw_events.append((message.log_time, str(json.loads(message.data).get("message", ""))))
+                    continue
+                signal = channel.metadata.get("signal")
+                if signal is None:
+                    continue
+                if "/" in signal:
+                    raise ReplayError(
+                        f"{path}: a cell's log (signal {signal}): replay takes a one-resource robot's run"
+                    )
+                body = json.loads(message.data)
+                body.pop("time_s", None)
+                row = rows.setdefault(message.sequence, {})
+                seq_ns[message.sequence] = message.log_time
+                if signal in VECTORS:
+                    names = fields.setdefault(signal, [k for k in body if k not in ("mode", "unit")])
+                    row[signal] = [_num(body.get(k)) for k in names]
+                elif signal in SCALARS:
+                    row[signal] = _num(body.get("value"))
+    except (McapError, OSError, ValueError, KeyError, AttributeError, struct.error, EOFError) as e:
+        why = str(e) or type(e).__name__
+        why = f"truncated or corrupted (the mcap reader: {why})"
+        raise ReplayError(f"{path}: not a readable MCAP log: {why}") from None
+    missing = [s for s in NEEDED if s not in fields and s not in {k for r in rows.values() for k in r}]
+    if missing:
+        raise ReplayError(
+            f"{path}: the log lacks {', '.join(missing)}: a run is replayed from a log started with "
+            "`orccadctl log start` and no signal names (it records all a replay needs)"
+        )
+    joints = fields["q"]
+    complete = sorted(s for s, r in rows.items() if all(k in r for k in NEEDED))
+    if not complete:
+        raise ReplayError(f"{path}: no tick with every signal a replay needs")
+    seq = np.array(complete, dtype=np.int64)
+    scalars = {k: np.array([rows[s].get(k, np.nan) for s in complete]) for k in SCALARS}
+    vectors = {k: np.array([rows[s][k] for s in complete]) for k in VECTORS}
+    meta = metadata.get("orccadd.log", {})
+    try:
+        tasks = [str(t) for t in json.loads(meta.get("tasks", "[]"))]
+        parameters = {
+            t: json.loads(v) for t, v in metadata.get("orccadd.parameters", {}).items() if t != "error"
+        }
+    except ValueError as e:
+        raise ReplayError(f"{path}: its run record cannot be read ({e})") from None
+    if not tasks:
+        raise ReplayError(f"{path}: its run record names no tasks (a log older than replay)")
+    mission = metadata.get("orccadd.mission", {})
+    if "mission" not in mission:
+        why = mission.get("unreadable") or "the log does not carry the mission's files"
+        raise ReplayError(f"{path}: the mission that ran cannot be read from the log ({why})")
+    run = RecordedRun(path, meta, joints, seq, scalars, vectors, tasks, mission, parameters)
+    by_time = sorted(seq_ns.items(), key=lambda st: st[1])
+    ticks = np.array([s for s, _ in by_time], dtype=np.int64)
+    times = np.array([t for _, t in by_time], dtype=np.int64)
+    for ns, text in raw_events:
+        at = int(np.searchsorted(times, ns, side="right")) - 1  # the latest tick at or before it
+        run.events.append((int(ticks[max(at, 0)]) if len(ticks) else 0, text))
+        t = _TUNE.match(text)
+        if t:
+            run.tunes.append(Tune(int(t["tick"]), t["path"], _values(t["new"]), t["k"] is not None))
+    return run
+
+
+def _num(v: Any) -> float:
+    return float("nan") if v is None else float(v)
+
+
+def _values(text: str) -> list[float]:
+    return [float(x) for x in text.strip("[]").split(",")]
