@@ -173,10 +173,16 @@ def _scan(fd: int) -> tuple[int, int, int]:
     return lines, comments, last_seq
 
 
-def header_lines(origin: LogOrigin, labels: list[str], meta: dict[str, Any]) -> list[str]:
-    """The comment lines of a new log (without their line ends)."""
+def header_lines(
+    origin: LogOrigin, labels: list[str], meta: dict[str, Any], own: dict[str, str] | None = None
+) -> list[str]:
+    """The comment lines of a new log (without their line ends); `own`: the units of the
+    resource's own signals (a wrench's `N|N.m`)."""
     info = {"start_utc": origin.start_utc, "origin_t_s": origin.t_s, "origin_tick": origin.tick, **meta}
-    units: dict[str, Any] = {"time_s": "s"} | {label.partition(".")[0]: unit(label) for label in labels}
+    own = own or {}
+    units: dict[str, Any] = {"time_s": "s"} | {
+        label.partition(".")[0]: own.get(base_signal(label)) or unit(label) for label in labels
+    }
     for group in units:
         if base_signal(group) == "cmd":  # the command's unit is its mode's: see the mode events
             units[group] = {mode.name.lower(): u for mode, u in MODE_UNITS.items()}
@@ -215,7 +221,7 @@ class CsvLog:
         self.rows = rows
         if meta is not None:
             buf = io.StringIO()
-            for line in header_lines(origin, selection.labels, meta):
+            for line in header_lines(origin, selection.labels, meta, selection.units):
                 buf.write(line + "\n")
             csv.writer(buf, lineterminator="\n").writerow(["time_s", *selection.labels])
             self._emit(buf.getvalue())

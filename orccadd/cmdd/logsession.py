@@ -120,11 +120,8 @@ class TelemetryLog:
         decode: Decoder,
         urdf_path: Path | None,
         extra_state: dict[str, Any],
-        records: dict[str, dict[str, str]] | None = None,
     ) -> TelemetryLog:
-        """A new log from the next tick; `ValueError` if its files cannot be created. `records`:
-        metadata records of every MCAP part beyond the run record (the parameters at start)."""
-        records = records or {}
+        """A new log from the next tick; `ValueError` if its files cannot be created."""
         origins = [LogOrigin.now(s.tel) for s in sources]
         for s, origin in zip(sources, origins, strict=True):
             if origin.tick == 0:
@@ -165,6 +162,7 @@ class TelemetryLog:
                     "resource": st.resource,
                     "csv": st.csv.path.name,
                     "signals": st.csv.sel.labels,
+                    "tick_signals": st.csv.sel.signals,
                     "origin": st.feed.origin.to_state(),
                 }
                 for st in streams
@@ -172,7 +170,7 @@ class TelemetryLog:
             "trace_start": trace_start,
             "mcap": [part_name(name, 1)],
         }
-        state["records"] = {**run_records(desc()), **records}
+        state["missions"] = []  # `add_mission`'s records, written again into each new part
         rec = TelemetryLog(logs, streams, state, Urdf.read(urdf_path), resumed=False)
         try:
             rec._open_mcap(os.fdopen(mcap_fd, "wb"), 1, desc, 0.0)
@@ -202,7 +200,8 @@ class TelemetryLog:
             for k, entry in enumerate(state["streams"]):
                 resource = str(entry["resource"])
                 tel, joints = blocks[resource]
-                sel = SignalSelection([str(s) for s in entry["signals"]], joints, resource)
+                own = entry.get("tick_signals", [])
+                sel = SignalSelection([str(s) for s in entry["signals"]], joints, resource, own)
                 origin = LogOrigin.from_state(entry["origin"])
                 fh, tail = logs.reopen(str(entry["csv"]))
                 last = tail.last_time_s
@@ -265,7 +264,7 @@ class TelemetryLog:
             info["periods_s"] = ",".join(repr(st.feed.tel.period_s) for st in self.streams)
         path = self.logs.path / parts[-1]
         try:
-            records = self.state.get("records") or {}
+            records = [(MISSION_RECORD, r) for r in self.state.get("missions") or []]
             self.mcap = McapLog(fh, path, self._mcap_streams(), info, self.urdf, desc, from_s, records)
         except Exception:
             with contextlib.suppress(OSError):
@@ -286,6 +285,19 @@ class TelemetryLog:
             )
             for st, js in zip(self.streams, names, strict=True)
         ]
+
+    @property
+    def mission_generation(self) -> int:
+        """The generation of the last mission `add_mission` recorded (-1: none)."""
+        missions = self.state.get("missions") or []
+        return int(missions[-1]["generation"]) if missions else -1
+
+    def add_mission(self, record: dict[str, str]) -> None:
+        """A mission loaded (or loaded when the log started): its record (`mission_record`) into
+        the MCAP's metadata, and into every part after this one."""
+        self.state.setdefault("missions", []).append(record)
+        if self.mcap is not None:
+            self.mcap.add_metadata(MISSION_RECORD, record)
 
     # ---- running ----------------------------------------------------------------------------
     def pump(self) -> None:
@@ -422,28 +434,34 @@ def run_record(desc: dict[str, Any]) -> dict[str, str]:
         "config": config,
         "config_sha256": config_sha,
         "orccadd_version": __version__,
-        "tasks": json.dumps(desc.get("tasks") or []),  # by telemetry id (the `task` signal)
     }
 
 
-MISSION_RECORD = "orccadd.mission"
-PARAMETERS_RECORD = "orccadd.parameters"  # by task: its parameters as the log starts (JSON)
+MISSION_RECORD = "orccadd.mission"  # a metadata record per mission a log saw loaded
 MISSION_FILE_MAX_BYTES = 1 << 20
 MISSION_FILES_MAX = 64
 FROM_RE = re.compile(r'\bfrom\s+"([^"\n]*)"')  # a task's file in a mission (as the compiler reads it)
 
 
-def run_records(desc: dict[str, Any]) -> dict[str, dict[str, str]]:
-    """The metadata records every part of a log carries beyond the run record: the loaded
-    mission's text and its task files' (`orccadd.mission`: `name`, `file`, `mission`, and
-    `task:<ref>` per file as the mission names it), read when the log starts, so that
-    `orccadctl replay` builds the very tasks that ran; a file that cannot be read is named in
-    `unreadable` instead."""
+def mission_record(
+    desc: dict[str, Any], parameters: dict[str, dict[str, Any]], from_tick: int
+) -> dict[str, str]:
+    """What `orccadctl replay` needs of the mission loaded (`desc`): its name, file and
+    generation, the tick from which the telemetry's task ids are its (`from_tick`) and those
+    tasks by id (`tasks`), its text and every task file's (`mission`, `task:<ref>` per file as it
+    names them; a file that cannot be read in `unreadable`), and every task's parameters at that
+    moment (`parameters`: JSON, by task, `MODULE.PARAM` → value)."""
     mission = desc.get("mission") or {}
     path = str(mission.get("file") or "")
-    if not path:
-        return {}
-    rec = {"name": str(mission.get("name", "")), "file": path}
+    rec = {
+        "name": str(mission.get("name", "")),
+        "file": path,
+        "deployment": str(mission.get("deployment", "")),
+        "generation": str(desc.get("generation", -1)),
+        "from_tick": str(from_tick),
+        "tasks": json.dumps(desc.get("tasks") or []),
+        "parameters": json.dumps(parameters, separators=(",", ":")),
+    }
     unreadable: list[str] = []
 
     def read(p: Path, what: str) -> str | None:
@@ -458,7 +476,7 @@ def run_records(desc: dict[str, Any]) -> dict[str, dict[str, str]]:
             unreadable.append(f"{what}: {getattr(e, 'strerror', None) or e}")
             return None
 
-    text = read(Path(path), path)
+    text = read(Path(path), path) if path else None
     if text is not None:
         rec["mission"] = text
         for ref in list(dict.fromkeys(FROM_RE.findall(text)))[:MISSION_FILES_MAX]:
@@ -468,4 +486,4 @@ def run_records(desc: dict[str, Any]) -> dict[str, dict[str, str]]:
                 rec[f"task:{ref}"] = body
     if unreadable:
         rec["unreadable"] = "; ".join(unreadable)
-    return {MISSION_RECORD: rec}
+    return rec

@@ -130,7 +130,7 @@ class McapLog:
         urdf: Urdf,
         desc: Callable[[], dict[str, Any]],
         from_time_s: float = 0.0,
-        records: dict[str, dict[str, str]] | None = None,
+        records: list[tuple[str, dict[str, str]]] | None = None,
     ) -> None:
         """A new part; `info` goes into its `orccadd.log` metadata, `records` into metadata records
         of their own (the mission's files, the parameters at start); `from_time_s`: where it starts."""
@@ -141,7 +141,7 @@ class McapLog:
         w = self.writer = Writer(fh, use_chunking=False)
         w.start(profile="", library=LIBRARY)
         w.add_metadata("orccadd.log", {k: str(v) for k, v in info.items()})
-        for name, record in (records or {}).items():
+        for name, record in records or []:
             w.add_metadata(name, {k: str(v) for k, v in record.items()})
         self.sources = [_Source(s, self._register_groups(s.selection)) for s in streams]
         self.joint_states = w.register_channel(
@@ -177,8 +177,8 @@ class McapLog:
             cols.append(col)
         groups = []
         for name, (fields, cols) in by_name.items():
-            u = unit(name)
             signal = base_signal(name)
+            u = sel.units.get(signal) or unit(name)
             schema = w.register_schema(f"orccadd.{signal}", "jsonschema", sch.group_schema(signal, fields, u))
             ch = w.register_channel(f"/{name}", "json", schema, {"signal": name, "unit": u})
             groups.append(_Group(ch, signal, fields, cols))
@@ -246,6 +246,11 @@ class McapLog:
         if e.fault is not None:
             cause = {"timestamp": sch.stamp(ns), **e.fault}
             self.writer.add_message(self.faults, ns, json.dumps(cause).encode(), ns, max(e.seq, 0))
+
+    def add_metadata(self, name: str, record: dict[str, str]) -> None:
+        """A metadata record, now (`OSError` if the file cannot take it)."""
+        self.writer.add_metadata(name, record)
+        self._end_chunk()
 
     def _end_chunk(self) -> None:
         """What the writer has finished (whole chunks) to the file."""

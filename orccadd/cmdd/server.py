@@ -29,7 +29,7 @@ from orccadd.cellnet import keys
 from orccadd.cmdd import logfetch, views
 from orccadd.cmdd.cellpeer import CellPeer
 from orccadd.cmdd.csvlog import LogDir
-from orccadd.cmdd.logsession import PARAMETERS_RECORD, LogSource, TelemetryLog
+from orccadd.cmdd.logsession import LogSource, TelemetryLog, mission_record
 from orccadd.cmdd.urdf import urdf_path
 from orccadd.config.cell import read_cell_config
 from orccadd.config.cellnet import CellNetConfig
@@ -279,8 +279,12 @@ class CommandDaemon:
         resource has."""
         units = self.units()
         if not units:
-            return [LogSource("", self.tel, views.SignalSelection(names, self.desc.get("joints", [])))]
-        sels = views.cell_selections(names, [(str(r["name"]), list(r["joints"])) for r, _ in units])
+            own = (self.desc.get("resource") or {}).get("tick_signals", [])
+            return [
+                LogSource("", self.tel, views.SignalSelection(names, self.desc.get("joints", []), "", own))
+            ]
+        signals = {str(r["name"]): (r.get("description") or {}).get("tick_signals", []) for r, _ in units}
+        sels = views.cell_selections(names, [(str(r["name"]), list(r["joints"])) for r, _ in units], signals)
         return [LogSource(str(r["name"]), tel, sels[r["name"]]) for r, tel in units if r["name"] in sels]
 
     def decode_trace(self, rec: Any) -> dict[str, Any]:
@@ -487,6 +491,8 @@ class CommandDaemon:
             await asyncio.sleep(0.05)
             if self.recording is not None:
                 await self.refresh()  # the names of a new mission's events
+            if self.recording is not None:
+                await self._record_mission(self.recording)  # a mission loaded meanwhile
             if self.recording is not None:
                 try:
                     self.recording.pump()
@@ -780,14 +786,14 @@ class CommandDaemon:
             if self.recording is not None:
                 raise ValueError(f"log: already logging to {self.recording.path} (log stop first)")
             await self.refresh()
-            sources = self._sources([str(s) for s in signals or LOG_SIGNALS])
+            sources = self._sources([str(s) for s in signals or self._log_signals()])
             name = name or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv"
             extra = {"rt_pid": int(self.tel.header[H.PID])}
-            records = {PARAMETERS_RECORD: await self._parameters()}
             rec = TelemetryLog.start(
-                self.logs, sources, name, lambda: self.desc, self.decode_trace, self.urdf, extra, records
+                self.logs, sources, name, lambda: self.desc, self.decode_trace, self.urdf, extra
             )
             self.recording = rec
+            await self._record_mission(rec)
             self.logs.save_state(rec.state)
             return rec.describe()
         if self.recording is None:
@@ -798,17 +804,29 @@ class CommandDaemon:
             self._end_log(self.recording.abandon(e))
         return self.last_log or {}
 
-    async def _parameters(self) -> dict[str, str]:
-        """Every task's parameters as the log starts (`PARAMETERS_RECORD`): by task, a JSON object
-        of `MODULE.PARAM` → value; `error` if the real-time process did not answer."""
+    def _log_signals(self) -> list[str]:
+        """What a log records when no signal is named: `LOG_SIGNALS`, and a one-resource robot's
+        own signals (a UR's wrench, a camera's features: what a task may read besides q, dq, tau)."""
+        if self.units():
+            return list(LOG_SIGNALS)
+        own = (self.desc.get("resource") or {}).get("tick_signals", [])
+        return [*LOG_SIGNALS, *(str(g["name"]) for g in own)]
+
+    async def _record_mission(self, rec: TelemetryLog) -> None:
+        """The loaded mission into the log (`mission_record`), if it is not the one recorded last:
+        at the log's start, and after each load while it runs."""
+        gen = int(self.desc.get("generation", -1))
+        if not self.desc.get("mission") or gen == rec.mission_generation:
+            return
+        from_tick = int(self.tel.header[H.TICK_HEAD]) + 1
         reply = await self.rt.call("params", {"task": ""})
-        if not reply.get("ok"):
-            return {"error": str(reply.get("error", "no reply"))}
-        by_task = reply["result"].get("params", {})
-        return {
-            task: json.dumps({p["name"]: p["value"] for p in params}, separators=(",", ":"))
-            for task, params in by_task.items()
-        }
+        params = reply["result"].get("params", {}) if reply.get("ok") else {}
+        values = {task: {p["name"]: p["value"] for p in ps} for task, ps in params.items()}
+        try:
+            rec.add_mission(mission_record(self.desc, values, from_tick))
+            self.logs.save_state(rec.state)
+        except (OSError, SocketPathError) as e:
+            log.error("log %s: the mission's record not written: %s", rec.path, e)
 
     @handles("logs")
     async def do_logs(self, writer: asyncio.StreamWriter, rid: Any) -> dict[str, Any]:

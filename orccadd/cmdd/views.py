@@ -38,9 +38,23 @@ class SignalSelection:
     In a cell, one resource's (`resource`): its labels are named by it (`left/q.elbow_joint`),
     and a name may be so too."""
 
-    def __init__(self, names: list[str], joints: list[str], resource: str = "") -> None:
+    def __init__(
+        self,
+        names: list[str],
+        joints: list[str],
+        resource: str = "",
+        signals: Sequence[Mapping[str, Any]] = (),
+    ) -> None:
+        """`signals`: the resource's own (`describe`'s `tick_signals`: name, size, unit), after
+        the joint vectors in each tick's record: `wrench` (all its values, `wrench.0` ...) or
+        `wrench.2` (one)."""
         n = len(joints)
         self.joints = joints
+        self.signals = [
+            {"name": str(g["name"]), "size": int(g["size"]), "unit": str(g["unit"])} for g in signals
+        ]
+        self.units = {str(g["name"]): str(g["unit"]) for g in self.signals}  # the signals' own units
+        layout = TickLayout(n, [(str(g["name"]), int(g["size"])) for g in signals])
         prefix = f"{resource}/" if resource else ""
         cols: list[int] = []
         labels: list[str] = []
@@ -51,12 +65,21 @@ class SignalSelection:
                 cols.append(TICK_FIELDS.index(base))
                 labels.append(prefix + base)
                 continue
+            if base in layout.signals:
+                where = layout.signals[base]
+                size = where.stop - where.start
+                if idx and not (idx.isascii() and idx.isdigit() and int(idx) < size):
+                    raise ValueError(f"signal {raw!r}: {base} has {size} values (0..{size - 1})")
+                for k in [int(idx)] if idx else range(size):
+                    cols.append(where.start + k)
+                    labels.append(f"{prefix}{base}.{k}" if size > 1 else prefix + base)
+                continue
             if base not in TICK_VECTORS:
-                allowed = ", ".join([*TICK_FIELDS[1:], *TICK_VECTORS])
+                allowed = ", ".join([*TICK_FIELDS[1:], *TICK_VECTORS, *layout.signals])
                 raise ValueError(
                     f"unknown signal {raw!r} (signals: {allowed}; a joint: q.0 or q.<joint name>)"
                 )
-            start = TickLayout(n).vector(base).start
+            start = layout.vector(base).start
             if not idx:
                 picked = list(range(n))
             elif idx.isascii() and idx.isdigit() and int(idx) < n:  # not `q.٣`: ASCII digits only
@@ -83,10 +106,16 @@ class SignalSelection:
         return [float(rec[c]) for c in self.cols]
 
 
-def cell_selections(names: list[str], resources: list[tuple[str, list[str]]]) -> dict[str, SignalSelection]:
+def cell_selections(
+    names: list[str],
+    resources: list[tuple[str, list[str]]],
+    signals: Mapping[str, Sequence[Mapping[str, Any]]] | None = None,
+) -> dict[str, SignalSelection]:
     """A cell's signals, by resource (name, joints), for those any name picks from: `left/q` is
     resource left's only; an unnamed one is every resource's that has it (`q` all of them,
-    `q.finger` the one with that joint). `ValueError` naming what matches nothing."""
+    `q.finger` the one with that joint). `signals`: each resource's own (`tick_signals`), which
+    a name picks from through its resource (`left/wrench`). `ValueError` naming what matches
+    nothing."""
     known = [r for r, _ in resources]
     picks: dict[str, list[str]] = {r: [] for r in known}
     for raw in names or ["q"]:
@@ -107,7 +136,8 @@ def cell_selections(names: list[str], resources: list[tuple[str, list[str]]]) ->
         for r in having:
             picks[r].append(raw)
     joints_of = dict(resources)
-    return {r: SignalSelection(p, joints_of[r], r) for r, p in picks.items() if p}
+    own = signals or {}
+    return {r: SignalSelection(p, joints_of[r], r, own.get(r, ())) for r, p in picks.items() if p}
 
 
 LATEST_BACK = 8  # records looked back for a consistent one

@@ -88,7 +88,7 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--count", type=int, default=0, help="refreshes before exiting (0: until Ctrl-C)")
     p = add("log")
     p.add_argument("action", choices=COMMANDS["log"].arg("action").choices, help=table_help("log", "action"))
-    default = " ".join(LOG_SIGNALS)
+    default = " ".join(LOG_SIGNALS) + " and the resource's own signals (a wrench)"
     p.add_argument("signals", nargs="*", help="start: " + SIGNALS_HELP + f" (default: {default})")
     p.add_argument("--name", default="", help="start: the log's file name in the daemon's log directory")
     p.add_argument(
@@ -136,7 +136,8 @@ def _args(a: argparse.Namespace) -> tuple[str, dict[str, Any]]:
                     "log start: -o is for `log stop -o FILE` (the copy is made there, with the rights "
                     "of whoever stops the log); name the daemon's file with --name"
                 )
-            args["signals"] = a.signals or list(LOG_SIGNALS)
+            if a.signals:  # else the daemon's default: LOG_SIGNALS and the resource's own signals
+                args["signals"] = a.signals
             if a.name:  # the daemon writes into its own log directory; `log stop -o` copies it
                 args["name"] = a.name
         elif a.output and getattr(a, "robot", None):

@@ -22,6 +22,7 @@ from typing import Protocol
 
 from orccadd.modules.base import CommandMotion
 from orccadd.physres.base import PhysicalResource
+from orccadd.physres.description import tick_signals
 from orccadd.runtime.clock import Clock
 from orccadd.runtime.mailbox import Mailbox
 from orccadd.task.events import EventQueue
@@ -64,7 +65,16 @@ class SwitchingLoop(ControlLoop):
         self.hold = hold
         self.queue = queue
         self.tel = telemetry
-        self.layout = TickLayout(telemetry.dof)
+        self.layout = TickLayout(telemetry.dof, tick_signals(resource.description.signals))
+        if self.layout.width != telemetry.ticks.shape[1]:
+            raise ValueError(
+                f"telemetry block of {telemetry.ticks.shape[1]} values a tick for a record of "
+                f"{self.layout.width} (its Layout's extra: the resource's signals)"
+            )
+        # the resource's own signals, copied into each tick's record after the joint vectors
+        self._signals = tuple(
+            (self.layout.signals[g.name], resource.signals[g.name]) for g in resource.description.signals
+        )
         self.wake_fd = wake_fd
         self.blend_ticks = blend_ticks
         self.tunes: Mailbox[ParameterChange] = Mailbox(64)
@@ -225,6 +235,8 @@ class SwitchingLoop(ControlLoop):
         rec[at.dq] = st.dq_rad_s
         rec[at.tau] = st.tau_nm
         rec[at.cmd] = self.resource.last_command
+        for where, value in self._signals:
+            rec[where] = value
         hdr = tel.header
         hdr[H.TICKS] = stats.ticks
         hdr[H.OVERRUNS] = stats.overruns

@@ -41,6 +41,7 @@ from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.urgent import UrgentSocket
 from orccadd.errors import OrccaddError, ResourceError
 from orccadd.logsetup import LogSetupError, setup_logging
+from orccadd.physres import backend_class
 from orccadd.physres.base import PhysicalResource
 from orccadd.robot import create_resource, load_cell_config, simulated, with_backend
 from orccadd.runtime import enter_realtime, leave_realtime
@@ -150,7 +151,8 @@ class RealtimeProcess:
         for i, c in enumerate(self.cell.resources):
             ticks = int(TICK_RING_S / c.control_period_s)
             # the first carries the trace too (the automaton's, of every resource)
-            layout = Layout(c.dof, ticks, 8192 if i == 0 else 16)
+            signals = backend_class(c.resource.backend, c.source).describe(c).signals
+            layout = Layout(c.dof, ticks, 8192 if i == 0 else 16, sum(g.size for g in signals))
             self.tels.append(TelemetryBlock.create(layout, c.control_period_s))
         self.tel = self.tels[0]
         self._open_socket()

@@ -31,13 +31,12 @@ from orccadd.model import RobotModel
 from orccadd.modules.base import CommandMotion
 from orccadd.offline.replayrun import RecordedRun, ReplayError, Tune
 from orccadd.physres import PhysicalResource, backend_class
-from orccadd.physres.base import Lifecycle
 from orccadd.physres.description import ResourceDescription
 from orccadd.robot import load_robot_config
 from orccadd.state import FloatArray, JointState
 from orccadd.task import EventQueue, EventRegistry, RobotTask
 from orccadd.task.motion import CommandHistory
-from orccadd.types import CommandMode, Phase, Status
+from orccadd.types import CommandMode, Lifecycle, Phase, Status
 
 # the status flags the resource itself sets (stops, limits): recomputed by the replay, not read
 OWN_FLAGS = int(Status.STOPPING | Status.STOPPED | Status.TORQUE_OFF | Status.LIMIT_VIOLATION)
@@ -59,11 +58,15 @@ class RecordedResource(PhysicalResource):
         self._row: FloatArray = np.zeros(3 * self.dof)
         self._status = 0
 
-    def play(self, q: FloatArray, dq: FloatArray, tau: FloatArray, status: int) -> None:
-        """What the next `read` measures."""
+    def play(
+        self, q: FloatArray, dq: FloatArray, tau: FloatArray, status: int, signals: dict[str, FloatArray]
+    ) -> None:
+        """What the next `read` measures (`signals`: the resource's own, by name)."""
         n = self.dof
         self._row[:n], self._row[n : 2 * n], self._row[2 * n :] = q, dq, tau
         self._status = status & ~OWN_FLAGS
+        for name, value in signals.items():
+            self.signals[name][:] = value
 
     def continue_position(self, command: FloatArray) -> None:
         """The position command the run had sent last (the next one's step is checked from it)."""
@@ -302,7 +305,16 @@ class _Player:
         self.overridden = {p for p, _ in sets}
         self.period_s = built.config.control_period_s
         self.blend_ticks = int(round(built.config.daemon.switch_blend_s / self.period_s))
-        self.names = built.registry.names()
+        # the resource's own signals the log has (a wrench, a camera's features); those it lacks
+        # read as zeros, and a task that reads them diverges
+        own = built.resource.signals
+        self.signals = {k: v for k, v in run.signals.items() if k in own and v.shape[1] == own[k].size}
+        missing = [k for k in own if k not in self.signals]
+        if missing:
+            notes.append(f"the log lacks the resource's {', '.join(missing)}: replayed as zeros")
+
+    def _signals_at(self, row: int) -> dict[str, FloatArray]:
+        return {name: values[row] for name, values in self.signals.items()}
 
     def _tunes_until(self, tick: int) -> None:
         while self.next_tune < len(self.tunes) and self.tunes[self.next_tune].tick <= tick:
@@ -339,7 +351,7 @@ class _Player:
         t_first = float(sc["t_s"][a])
         for r in range(a, b):
             self._tunes_until(int(seq[r]))
-            res.play(vec["q"][r], vec["dq"][r], vec["tau"][r], int(sc["status"][r]))
+            res.play(vec["q"][r], vec["dq"][r], vec["tau"][r], int(sc["status"][r]), self._signals_at(r))
             t_s = float(sc["t_s"][r])
             task.compute(t_s)
             task.commit(t_s)
@@ -380,7 +392,7 @@ class _Player:
         contiguous = prev >= 0 and run.seq[prev] == run.seq[a] - 1
         # the state the switch sees: this tick's (the automaton switches within the tick that
         # raised the event, after the outgoing task has read the resource)
-        res.play(vec["q"][a], vec["dq"][a], vec["tau"][a], int(sc["status"][a]))
+        res.play(vec["q"][a], vec["dq"][a], vec["tau"][a], int(sc["status"][a]), self._signals_at(a))
         res.read(float(sc["t_s"][a]))
         if res.lifecycle is not Lifecycle.ACTIVE:
             res.activate(mode)

@@ -20,9 +20,12 @@ import numpy as np
 from orccadd.errors import OrccaddError
 from orccadd.offline.logread import is_mcap
 
+MISSION_RECORD = "orccadd.mission"  # orccadd/cmdd/logsession.py writes one per mission loaded
+
 NEEDED = ("t_s", "task", "wrote", "mode", "status", "q", "dq", "tau", "cmd")
 SCALARS = ("t_s", "task", "phase", "wrote", "mode", "status")
 VECTORS = ("q", "dq", "tau", "cmd")
+OTHER_FIELDS = ("seq", "wake_us", "compute_us")  # tick fields a replay does not read
 NUMBER = r"-?(?:\d+\.?\d*(?:e[-+]?\d+)?|inf|nan)"
 _TUNE = re.compile(
     r"^tune \(operator\) (?P<path>\S+): (?P<old>.+?) → (?P<new>.+?)"
@@ -61,6 +64,7 @@ class RecordedRun:
     tasks: list[str]  # telemetry task id -> name
     mission: dict[str, str]  # the `orccadd.mission` record
     parameters: dict[str, dict[str, Any]]  # task -> MODULE.PARAM -> value, as the log started
+    signals: dict[str, np.ndarray]  # the resource's own (a wrench): rows × its size
     tunes: list[Tune] = field(default_factory=list)
     events: list[tuple[int, str]] = field(default_factory=list)  # (tick, message) of the trace
 
@@ -87,13 +91,17 @@ def read_run(path: Path) -> RecordedRun:
     rows: dict[int, dict[str, Any]] = {}
     fields: dict[str, list[str]] = {}
     metadata: dict[str, dict[str, str]] = {}
+    missions: list[dict[str, str]] = []  # a record per mission loaded while the log ran
     raw_events: list[tuple[int, str]] = []  # (log time ns, message)
     seq_ns: dict[int, int] = {}  # a tick's sequence number -> its log time
     try:
         with fh:
             reader = make_reader(fh)
             for m in reader.iter_metadata():
-                metadata[m.name] = dict(m.metadata)
+                if m.name == MISSION_RECORD:
+                    missions.append(dict(m.metadata))
+                else:
+                    metadata[m.name] = dict(m.metadata)
             for _, channel, message in reader.iter_messages():
                 if channel.topic == "/events":
                     raw_events.append((message.log_time, str(json.loads(message.data).get("message", ""))))
@@ -114,38 +122,45 @@ def read_run(path: Path) -> RecordedRun:
                     row[signal] = [_num(body.get(k)) for k in names]
                 elif signal in SCALARS:
                     row[signal] = _num(body.get("value"))
+                elif signal not in OTHER_FIELDS:  # the resource's own: `wrench` (0..5), `speed_scaling`
+                    names = fields.setdefault(signal, [k for k in body if k == "value" or k.isdigit()])
+                    row[signal] = [_num(body.get(k)) for k in names]
     except (McapError, OSError, ValueError, KeyError, AttributeError, struct.error, EOFError) as e:
         why = str(e) or type(e).__name__
         why = f"truncated or corrupted (the mcap reader: {why})"
         raise ReplayError(f"{path}: not a readable MCAP log: {why}") from None
-    missing = [s for s in NEEDED if s not in fields and s not in {k for r in rows.values() for k in r}]
+    seen = {k for r in rows.values() for k in r}
+    missing = [s for s in NEEDED if s not in seen]
     if missing:
         raise ReplayError(
             f"{path}: the log lacks {', '.join(missing)}: a run is replayed from a log started with "
             "`orccadctl log start` and no signal names (it records all a replay needs)"
         )
+    mission = _last_mission(path, missions)
+    from_tick = int(mission.get("from_tick", 0))
     joints = fields["q"]
-    complete = sorted(s for s, r in rows.items() if all(k in r for k in NEEDED))
+    complete = sorted(s for s, r in rows.items() if s >= from_tick and all(k in r for k in NEEDED))
     if not complete:
-        raise ReplayError(f"{path}: no tick with every signal a replay needs")
+        raise ReplayError(
+            f"{path}: no tick with every signal a replay needs after mission {mission['name']} was loaded"
+        )
     seq = np.array(complete, dtype=np.int64)
     scalars = {k: np.array([rows[s].get(k, np.nan) for s in complete]) for k in SCALARS}
     vectors = {k: np.array([rows[s][k] for s in complete]) for k in VECTORS}
-    meta = metadata.get("orccadd.log", {})
+    own = [k for k in fields if k not in VECTORS]
+    signals = {
+        k: np.array([rows[s].get(k, [np.nan] * len(fields[k])) for s in complete], dtype=float).reshape(
+            len(complete), -1
+        )
+        for k in own
+    }
     try:
-        tasks = [str(t) for t in json.loads(meta.get("tasks", "[]"))]
-        parameters = {
-            t: json.loads(v) for t, v in metadata.get("orccadd.parameters", {}).items() if t != "error"
-        }
-    except ValueError as e:
-        raise ReplayError(f"{path}: its run record cannot be read ({e})") from None
-    if not tasks:
-        raise ReplayError(f"{path}: its run record names no tasks (a log older than replay)")
-    mission = metadata.get("orccadd.mission", {})
-    if "mission" not in mission:
-        why = mission.get("unreadable") or "the log does not carry the mission's files"
-        raise ReplayError(f"{path}: the mission that ran cannot be read from the log ({why})")
-    run = RecordedRun(path, meta, joints, seq, scalars, vectors, tasks, mission, parameters)
+        tasks = [str(t) for t in json.loads(mission.get("tasks", "[]"))]
+        parameters = {str(t): dict(v) for t, v in json.loads(mission.get("parameters", "{}")).items()}
+    except (ValueError, TypeError, AttributeError) as e:
+        raise ReplayError(f"{path}: the record of mission {mission['name']} cannot be read ({e})") from None
+    meta = metadata.get("orccadd.log", {})
+    run = RecordedRun(path, meta, joints, seq, scalars, vectors, tasks, mission, parameters, signals)
     by_time = sorted(seq_ns.items(), key=lambda st: st[1])
     ticks = np.array([s for s, _ in by_time], dtype=np.int64)
     times = np.array([t for _, t in by_time], dtype=np.int64)
@@ -156,6 +171,19 @@ def read_run(path: Path) -> RecordedRun:
         if t:
             run.tunes.append(Tune(int(t["tick"]), t["path"], _values(t["new"]), t["k"] is not None))
     return run
+
+
+def _last_mission(path: Path, missions: list[dict[str, str]]) -> dict[str, str]:
+    """The record of the last mission loaded while the log ran (replay takes its runs)."""
+    if not missions:
+        raise ReplayError(
+            f"{path}: the log carries no mission (none was loaded while it ran, or an older log)"
+        )
+    m = missions[-1]
+    if "mission" not in m:
+        why = m.get("unreadable") or "its file was not read"
+        raise ReplayError(f"{path}: mission {m.get('name', '?')} cannot be read from the log ({why})")
+    return m
 
 
 def _num(v: Any) -> float:

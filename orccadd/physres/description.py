@@ -53,6 +53,11 @@ class Signal:
         return f"{self.name} [{self.size}, {self.unit}]: {self.what}"
 
 
+def tick_signals(signals: tuple[Signal, ...]) -> tuple[tuple[str, int], ...]:
+    """The signals as the telemetry's tick record carries them (`orccadd.wire.schema.TickLayout`)."""
+    return tuple((s.name, s.size) for s in signals)
+
+
 class ClockSource(Enum):
     LOOP = "loop"  # our executor's absolute deadlines release each tick
     DEVICE = "device"  # the device's own cycle (a packet stream) releases each tick
@@ -105,6 +110,8 @@ class ResourceDescription:
             "fault_reset": self.fault_reset,
             "fault_injection": list(self.fault_injection),
             "signals": [s.describe() for s in self.signals],
+            # where they lie in each tick's telemetry record, after the joint vectors
+            "tick_signals": [{"name": s.name, "size": s.size, "unit": s.unit} for s in self.signals],
             "commands": [s.describe() for s in self.commands],
             "inputs": list(self.inputs),
             "outputs": list(self.outputs),

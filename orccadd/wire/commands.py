@@ -32,6 +32,7 @@ MAX_LINE = 65536
 # need (the tick's time, task, phase, whether it wrote and in which mode, the resource's status;
 # the measured state and the command sent), at full rate
 LOG_SIGNALS = ("t_s", "task", "phase", "wrote", "mode", "status", "q", "dq", "tau", "cmd")
+DEFAULT_LOG = " ".join(LOG_SIGNALS) + " and the resource's own signals"
 MAX_INT = 2**53  # integers a JSON peer can represent exactly; beyond: refused
 MAX_ID_CHARS = 256  # a request id is echoed in the reply: a short one
 NUMBER = (int, float)
@@ -311,7 +312,7 @@ COMMANDS: dict[str, CommandSpec] = {
             "a CSV per resource (`files`, `resources`: `<name>.<resource>.csv`) and one MCAP",
             (
                 Arg("action", (str,), "start or stop", required=True, choices=("start", "stop")),
-                Arg("signals", (list,), f"signal names (default: {' '.join(LOG_SIGNALS)})", default=None),
+                Arg("signals", (list,), f"signal names (default: {DEFAULT_LOG})", default=None),
                 Arg("name", (str,), "start: the file's name in the daemon's log directory", default=""),
             ),
         ),

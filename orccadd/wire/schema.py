@@ -11,14 +11,14 @@ both take every index and enum from here. Values are float64 throughout (one num
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
 
 from orccadd.types import CommandMode, Phase, Status
 
-PROTOCOL_VERSION = 7  # bumped when a request, reply, record layout or enum changes meaning
+PROTOCOL_VERSION = 8  # bumped when a request, reply, record layout or enum changes meaning
 
 MAGIC = 0x0CCADD02
 HEADER_LEN = 16
@@ -188,27 +188,41 @@ class TuneRecord:
         return TuneRecord(task, param, element, tick, values[:k], values[k:], n)
 
 
-def tick_width(dof: int) -> int:
-    """The scalar fields, then q, dq, tau and the command sent, one value per joint each."""
-    return len(T) + len(TICK_VECTORS) * dof
+def tick_width(dof: int, extra: int = 0) -> int:
+    """The scalar fields, then q, dq, tau and the command sent, one value per joint each, then
+    `extra` values: the resource's own signals (`TickLayout.signals`)."""
+    return len(T) + len(TICK_VECTORS) * dof + extra
 
 
 class TickLayout:
-    """Where each joint vector of a tick record lies, for `dof` joints: the only place that
-    computes an offset into the record (slices of a record, or of an array of records on its
-    last axis: `recs[..., layout.cmd]`)."""
+    """Where each joint vector of a tick record lies, for `dof` joints, and after them the
+    resource's own signals (`signals`: name and size, in its description's order: a UR's wrench,
+    a camera's features): the only place that computes an offset into the record (slices of a
+    record, or of an array of records on its last axis: `recs[..., layout.cmd]`)."""
 
-    __slots__ = ("cmd", "dof", "dq", "q", "tau", "width")
+    __slots__ = ("cmd", "dof", "dq", "q", "signals", "tau", "width")
 
-    def __init__(self, dof: int) -> None:
+    def __init__(self, dof: int, signals: Sequence[tuple[str, int]] = ()) -> None:
         self.dof = dof
-        self.width = tick_width(dof)
+        self.signals: dict[str, slice] = {}
         self.q, self.dq, self.tau, self.cmd = (self.vector(name) for name in TICK_VECTORS)
+        start = tick_width(dof)
+        for name, size in signals:
+            if name in TICK_FIELDS or name in TICK_VECTORS or name in self.signals:
+                raise ValueError(f"a resource's signal {name!r} takes the name of a tick field")
+            self.signals[name] = slice(start, start + size)
+            start += size
+        self.width = start
 
     def vector(self, name: str) -> slice:
-        """`q`, `dq`, `tau` or `cmd` (ValueError for another name)."""
-        start = len(T) + TICK_VECTORS.index(name) * self.dof
-        return slice(start, start + self.dof)
+        """`q`, `dq`, `tau`, `cmd` or one of `signals` (ValueError for another name)."""
+        if name in TICK_VECTORS:
+            start = len(T) + TICK_VECTORS.index(name) * self.dof
+            return slice(start, start + self.dof)
+        sl = self.signals.get(name)
+        if sl is None:
+            raise ValueError(f"{name!r} is not in the tick record")
+        return sl
 
     def column(self, name: str, joint: int) -> int:
         """The column of one joint's value of vector `name`."""
@@ -219,15 +233,20 @@ class TickLayout:
 
 @dataclass(frozen=True)
 class Layout:
-    """Sizes of one telemetry block."""
+    """Sizes of one telemetry block (`extra`: the values of the resource's signals per tick)."""
 
     dof: int
     tick_len: int
     trace_len: int
+    extra: int = 0
+
+    @property
+    def tick_width(self) -> int:
+        return tick_width(self.dof, self.extra)
 
     @property
     def size_bytes(self) -> int:
-        n = HEADER_LEN + STATUS_LEN + self.tick_len * tick_width(self.dof) + self.trace_len * TRACE_WIDTH
+        n = HEADER_LEN + STATUS_LEN + self.tick_len * self.tick_width + self.trace_len * TRACE_WIDTH
         return 8 * n
 
 

@@ -39,7 +39,7 @@ class TelemetryBlock:
         o = HEADER_LEN
         self.status = buf[o : o + STATUS_LEN]
         o += STATUS_LEN
-        tw = tick_width(self.dof)
+        tw = int(self.header[H.TICK_WIDTH]) or tick_width(self.dof)
         self.ticks = buf[o : o + self.tick_len * tw].reshape(self.tick_len, tw)
         o += self.tick_len * tw
         self.trace = buf[o : o + self.trace_len * TRACE_WIDTH].reshape(self.trace_len, TRACE_WIDTH)
@@ -52,7 +52,7 @@ class TelemetryBlock:
         hdr = buf[:HEADER_LEN]
         hdr[H.DOF] = layout.dof
         hdr[H.TICK_LEN] = layout.tick_len
-        hdr[H.TICK_WIDTH] = tick_width(layout.dof)
+        hdr[H.TICK_WIDTH] = layout.tick_width
         hdr[H.TRACE_LEN] = layout.trace_len
         hdr[H.TRACE_WIDTH] = TRACE_WIDTH
         hdr[H.PID] = os.getpid()

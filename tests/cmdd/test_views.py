@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from orccadd.cmdd.views import SignalSelection
+from orccadd.wire.schema import TickLayout
 
 JOINTS = [
     "shoulder_pan_joint",
@@ -28,3 +29,18 @@ def test_a_signal_named_many_times_is_sampled_once() -> None:
 def test_a_joint_index_is_ascii_digits_within_the_arm(name: str) -> None:
     with pytest.raises(ValueError, match="no joint"):
         SignalSelection([name], JOINTS)
+
+
+OWN = [{"name": "wrench", "size": 6, "unit": "N|N.m"}, {"name": "speed_scaling", "size": 1, "unit": "1"}]
+
+
+def test_the_resources_own_signals_are_selected_by_name_and_index() -> None:
+    sel = SignalSelection(["wrench", "speed_scaling", "wrench.2"], JOINTS, "", OWN)
+    assert sel.labels == [*(f"wrench.{k}" for k in range(6)), "speed_scaling"]
+    first = TickLayout(6).width  # after the joint vectors
+    assert sel.cols == list(range(first, first + 7))
+    assert sel.units == {"wrench": "N|N.m", "speed_scaling": "1"}
+    with pytest.raises(ValueError, match=r"wrench has 6 values \(0..5\)"):
+        SignalSelection(["wrench.6"], JOINTS, "", OWN)
+    with pytest.raises(ValueError, match="unknown signal 'wrench'"):
+        SignalSelection(["wrench"], JOINTS)  # a resource without one

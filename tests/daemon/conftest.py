@@ -97,7 +97,8 @@ def machine_on(cfg: RobotConfig, mode: CommandMode, clock: Clock) -> Iterator[Ma
     res = create_resource(cfg)
     res.configure()
     res.activate(mode)
-    tel = TelemetryBlock.create(Layout(cfg.dof, 8000, 1000), cfg.control_period_s)
+    extra = sum(g.size for g in res.description.signals)  # the resource's signals in each tick
+    tel = TelemetryBlock.create(Layout(cfg.dof, 8000, 1000, extra), cfg.control_period_s)
     r, w = os.pipe2(os.O_NONBLOCK)
     try:
         yield Machine(CellConfig.of(cfg), [res], [clock], [tel], w)

@@ -51,7 +51,7 @@ def test_the_peg_goes_in_and_comes_out(tmp_path: Path) -> None:
     d = start_daemon_with(tmp_path, config)
     try:
         out = tmp_path / "peg.csv"
-        assert d.ctl("log", "start", "q", "--name", "peg.csv").returncode == 0
+        assert d.ctl("log", "start", "--name", "peg.csv").returncode == 0  # all a replay needs
         assert d.ctl("load", MISSION).returncode == 0
         assert d.ctl("start").returncode == 0
         s = d.wait(lambda s: s["state"] != "running", timeout_s=60)
@@ -59,12 +59,20 @@ def test_the_peg_goes_in_and_comes_out(tmp_path: Path) -> None:
         done = [a for a in actions(d) if a.endswith(".done")]
         assert done == ["Home.done", "Above.done", "Touch.done", "Insert.done", "Retreat.done"], done
         stop = json.loads(d.ctl("log", "stop", "-o", str(out), "--json").stdout)["result"]
-        q = log_rows(out)[:, 1:7]
+        header = next(x for x in out.read_text().splitlines() if not x.startswith("#")).split(",")
+        assert [c for c in header if c.startswith("wrench.")] == [f"wrench.{k}" for k in range(6)]
+        q = log_rows(out)[:, [i for i, c in enumerate(header) if c.startswith("q.")]]
         kin = ToolKinematics(RobotModel.from_config(load_robot_config(config)))
         tool = np.array([kin.pose(qi).translation for qi in q])
         deepest = tool[tool[:, 2].argmin()]
         assert deepest[2] < 0.381 and stop["lost"] == 0  # 2 cm into the hole, whose mouth is at 0.4
         assert np.linalg.norm(deepest[:2] - [-0.4919, -0.2333]) < 0.0025  # within its 2 mm of play
+        # the force-controlled tasks read the sensor's wrench: logged, it replays bit for bit
+        r = d.ctl("replay", "--json", str(out.with_suffix(".mcap")))
+        rep = json.loads(r.stdout)
+        assert r.returncode == 0 and rep["identical"], r.stdout + r.stderr
+        assert [t["task"] for t in rep["tasks"]] == ["Home", "Above", "Touch", "Insert", "Retreat"]
+        assert not rep["notes"], rep["notes"]  # the wrench in the log, nothing replayed as zeros
     finally:
         d.stop()
 
@@ -99,7 +107,7 @@ def test_the_same_mission_on_the_ur_simulator(tmp_path: Path) -> None:
         d = start_daemon_with(tmp_path, config)
         try:
             out = tmp_path / "peg.csv"
-            assert d.ctl("log", "start", "q", "--name", "peg.csv").returncode == 0
+            assert d.ctl("log", "start", "--name", "peg.csv").returncode == 0  # all a replay needs
             assert d.ctl("load", MISSION).returncode == 0
             assert d.ctl("start").returncode == 0
             s = d.wait(lambda s: s["state"] != "running", timeout_s=60)

@@ -18,3 +18,15 @@ def test_the_tick_layout_names_every_column_once() -> None:
     assert rec[at.dq].tolist() == [len(T) + 3.0, len(T) + 4.0, len(T) + 5.0]
     with pytest.raises(IndexError):
         at.column("q", 3)
+
+
+def test_the_resources_own_signals_follow_the_joint_vectors() -> None:
+    plain, at = TickLayout(3), TickLayout(3, [("wrench", 6), ("speed_scaling", 1)])
+    assert (at.q, at.dq, at.tau, at.cmd) == (plain.q, plain.dq, plain.tau, plain.cmd)  # unmoved
+    assert at.vector("wrench") == slice(plain.width, plain.width + 6)
+    assert at.vector("speed_scaling") == slice(plain.width + 6, plain.width + 7)
+    assert at.width == plain.width + 7
+    with pytest.raises(ValueError, match="not in the tick record"):
+        at.vector("features")
+    with pytest.raises(ValueError, match="takes the name of a tick field"):
+        TickLayout(3, [("q", 2)])
