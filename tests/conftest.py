@@ -81,6 +81,7 @@ ONE_AT_A_TIME_MODULES = (
     "tests/cellnet/test_cell_missions.py",  # two or three daemons, each with its plant
     "tests/cellnet/test_cmdd_threads.py",
     "tests/cellnet/test_console.py",
+    "tests/cellnet/test_hil_cell.py",
     "tests/cellnet/test_floods.py",
     "tests/cellnet/test_hostile_peers.py",
     "tests/cellnet/test_impostors.py",
