@@ -32,8 +32,8 @@ def compare_text(rep: dict[str, Any]) -> str:
     timing = "not judged" if tol["timing_us"] is None else f"p99 ±{tol['timing_us']:g} us"
     lines.append(
         f"tolerances: duration ±max({tol['duration_s']:g} s, {tol['duration_pct']:g} %), tracking error "
-        f"±{tol['tracking_rad']:g} rad (RMS and max), command {tol['cmd_rad']:g} rad / {tol['cmd_nm']:g} N.m "
-        f"(p95 of |B - A|), torque {tau}, timing {timing}"
+        f"±{tol['tracking_rad']:g} rad (RMS and p95), position {tol['q_rad']:g} rad, command "
+        f"{tol['cmd_rad']:g} rad / {tol['cmd_nm']:g} N.m (p95 of |B - A|), torque {tau}, timing {timing}"
     )
     if not diffs:
         lines.append("verdict: the same within the tolerances")
@@ -64,7 +64,7 @@ def _task(t: dict[str, Any]) -> list[str]:
         f"task {t['task']}: {d['a']:.3f} s in A, {d['b']:.3f} s in B ({d['diff']:+.3f} s){stopped}; {mode}"
     ]
     tra, trb = t["tracking"]["a"], t["tracking"]["b"]
-    cmd, tau = t["cmd_diff"], t["tau_diff"]
+    cmd, tau, qd = t["cmd_diff"], t["tau_diff"], t["q_diff"]
     unit = {"position": "rad", "torque": "N.m", "velocity": "rad/s"}.get(t["mode"][0], "?")
     joints = list(dict.fromkeys([*tra.get("rms_rad", {}), *cmd.get("rms", {}), *tau.get("rms", {})]))
     notes = []
@@ -72,7 +72,7 @@ def _task(t: dict[str, Any]) -> list[str]:
         notes.append(f"tracking error: {tra.get('unavailable') or trb.get('unavailable')}")
     else:
         notes.append(f"tracking error: {tra['signals']}, rad")
-    for name, dd in (("command", cmd), ("torque (tau)", tau)):
+    for name, dd in (("position (q)", qd), ("command", cmd), ("torque (tau)", tau)):
         if "unavailable" in dd:
             notes.append(f"{name} difference: {dd['unavailable']}")
         else:
@@ -80,11 +80,13 @@ def _task(t: dict[str, Any]) -> list[str]:
     out.extend(f"  {n}" for n in notes)
     if joints:
         head = f"  {'joint':<20s} {'tracking RMS A / B':>19s} {'tracking max A / B':>19s}"
-        out.append(f"{head} {'cmd B-A RMS/p95/max':>22s} {'tau B-A RMS/p95/max':>22s}")
-        out.append(f"  {'':<20s} {'rad':>19s} {'rad':>19s} {unit:>22s} {'N.m':>22s}")
+        out.append(
+            f"{head} {'q B-A RMS/p95/max':>22s} {'cmd B-A RMS/p95/max':>22s} {'tau B-A RMS/p95/max':>22s}"
+        )
+        out.append(f"  {'':<20s} {'rad':>19s} {'rad':>19s} {'rad':>22s} {unit:>22s} {'N.m':>22s}")
         for j in joints:
             track = f"{_two(tra, trb, 'rms_rad', j):>19s} {_two(tra, trb, 'max_rad', j):>19s}"
-            out.append(f"  {j:<20s} {track} {_three(cmd, j):>22s} {_three(tau, j):>22s}")
+            out.append(f"  {j:<20s} {track} {_three(qd, j):>22s} {_three(cmd, j):>22s} {_three(tau, j):>22s}")
     for side in ("a", "b"):
         tm = t["timing"][side]
         if tm:

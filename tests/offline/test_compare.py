@@ -134,12 +134,12 @@ def test_a_tuned_speed_is_reported_with_the_task_that_differs(
     rep = json.loads(out)
     assert code == 1 and rep["verdict"] == "different"
     kinds = {(d["kind"], d["task"]) for d in rep["differences"]}
-    assert ("duration", "Reach") in kinds and ("cmd", "Reach") in kinds
+    assert ("duration", "Reach") in kinds and ("cmd", "Reach") in kinds and ("q", "Reach") in kinds
     assert not any(d["task"] in ("Home", "Back") for d in rep["differences"])  # the others alike
     reach = rep["tasks"][1]
     assert reach["duration_s"]["b"] < reach["duration_s"]["a"] - 0.1  # faster at 0.6 than 0.4
     # wide enough tolerances: the same
-    wide = ["--tol-duration-s", "1", "--tol-cmd-rad", "1"]
+    wide = ["--tol-duration-s", "1", "--tol-cmd-rad", "1", "--tol-q-rad", "1"]
     assert compare(capsys, str(runs.same_a), str(runs.tuned), *wide)[0] == 0
 
 
