@@ -97,7 +97,7 @@ def read_mcap(log: Path) -> CsvLogData:
             reader = make_reader(fh)
             for m in reader.iter_metadata():
                 metadata[m.name] = dict(m.metadata)
-            for _, channel, message in reader.iter_messages():
+            for _, channel, message in reader.iter_messages(log_time_order=False):
                 body = json.loads(message.data)
                 if channel.topic == "/events":
                     kind = str(body.get("name", "")).removeprefix("orccadd.")

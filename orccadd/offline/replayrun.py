@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import re
 import struct
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -88,12 +89,15 @@ def read_run(path: Path) -> RecordedRun:
         fh = path.open("rb")
     except OSError as e:
         raise ReplayError(f"{path}: cannot be read ({e.strerror or e})") from None
-    rows: dict[int, dict[str, Any]] = {}
+    # per signal: its fields, and the ticks' sequence numbers and values as they come (compact
+    # arrays: a 10-minute run at 500 Hz is 3 million messages)
     fields: dict[str, list[str]] = {}
+    seqs: dict[str, array[int]] = {}
+    values: dict[str, array[float]] = {}
     metadata: dict[str, dict[str, str]] = {}
     missions: list[dict[str, str]] = []  # a record per mission loaded while the log ran
     raw_events: list[tuple[int, str]] = []  # (log time ns, message)
-    seq_ns: dict[int, int] = {}  # a tick's sequence number -> its log time
+    tick_ns = array("q")  # (sequence number, log time) of each `t_s` message: the ticks' times
     try:
         with fh:
             reader = make_reader(fh)
@@ -102,35 +106,36 @@ def read_run(path: Path) -> RecordedRun:
                     missions.append(dict(m.metadata))
                 else:
                     metadata[m.name] = dict(m.metadata)
-            for _, channel, message in reader.iter_messages():
+            for _, channel, message in reader.iter_messages(log_time_order=False):  # as written
                 if channel.topic == "/events":
                     raw_events.append((message.log_time, str(json.loads(message.data).get("message", ""))))
                     continue
                 signal = channel.metadata.get("signal")
-                if signal is None:
+                if signal is None or signal in OTHER_FIELDS:
                     continue
                 if "/" in signal:
                     raise ReplayError(
                         f"{path}: a cell's log (signal {signal}): replay takes a one-resource robot's run"
                     )
                 body = json.loads(message.data)
-                body.pop("time_s", None)
-                row = rows.setdefault(message.sequence, {})
-                seq_ns[message.sequence] = message.log_time
-                if signal in VECTORS:
-                    names = fields.setdefault(signal, [k for k in body if k not in ("mode", "unit")])
-                    row[signal] = [_num(body.get(k)) for k in names]
-                elif signal in SCALARS:
-                    row[signal] = _num(body.get("value"))
-                elif signal not in OTHER_FIELDS:  # the resource's own: `wrench` (0..5), `speed_scaling`
-                    names = fields.setdefault(signal, [k for k in body if k == "value" or k.isdigit()])
-                    row[signal] = [_num(body.get(k)) for k in names]
+                names = fields.get(signal)
+                if names is None:
+                    if signal in SCALARS:
+                        names = ["value"]
+                    elif signal in VECTORS:
+                        names = [k for k in body if k not in ("time_s", "mode", "unit")]
+                    else:  # the resource's own: `wrench` (0..5), `speed_scaling`
+                        names = [k for k in body if k == "value" or k.isdigit()]
+                    fields[signal], seqs[signal], values[signal] = names, array("q"), array("d")
+                seqs[signal].append(message.sequence)
+                values[signal].extend([_num(body.get(k)) for k in names])
+                if signal == "t_s":
+                    tick_ns.extend((message.sequence, message.log_time))
     except (McapError, OSError, ValueError, KeyError, AttributeError, struct.error, EOFError) as e:
         why = str(e) or type(e).__name__
         why = f"truncated or corrupted (the mcap reader: {why})"
         raise ReplayError(f"{path}: not a readable MCAP log: {why}") from None
-    seen = {k for r in rows.values() for k in r}
-    missing = [s for s in NEEDED if s not in seen]
+    missing = [s for s in NEEDED if s not in fields]
     if missing:
         raise ReplayError(
             f"{path}: the log lacks {', '.join(missing)}: a run is replayed from a log started with "
@@ -139,21 +144,29 @@ def read_run(path: Path) -> RecordedRun:
     mission = _last_mission(path, missions)
     from_tick = int(mission.get("from_tick", 0))
     joints = fields["q"]
-    complete = sorted(s for s, r in rows.items() if s >= from_tick and all(k in r for k in NEEDED))
-    if not complete:
+    seq = np.unique(np.frombuffer(seqs["t_s"], dtype=np.int64))
+    for k in NEEDED:  # the ticks every needed signal has
+        seq = np.intersect1d(seq, np.frombuffer(seqs[k], dtype=np.int64), assume_unique=False)
+    seq = seq[seq >= from_tick]
+    if not seq.size:
         raise ReplayError(
             f"{path}: no tick with every signal a replay needs after mission {mission['name']} was loaded"
         )
-    seq = np.array(complete, dtype=np.int64)
-    scalars = {k: np.array([rows[s].get(k, np.nan) for s in complete]) for k in SCALARS}
-    vectors = {k: np.array([rows[s][k] for s in complete]) for k in VECTORS}
-    own = [k for k in fields if k not in VECTORS]
-    signals = {
-        k: np.array([rows[s].get(k, [np.nan] * len(fields[k])) for s in complete], dtype=float).reshape(
-            len(complete), -1
-        )
-        for k in own
-    }
+
+    def column(signal: str) -> np.ndarray:
+        """The signal's values at the ticks `seq` (rows × its fields; NaN where it has none)."""
+        have = np.frombuffer(seqs[signal], dtype=np.int64)
+        vals = np.frombuffer(values[signal], dtype=np.float64).reshape(len(have), len(fields[signal]))
+        order = np.argsort(have, kind="stable")
+        have, vals = have[order], vals[order]
+        at = np.clip(np.searchsorted(have, seq), 0, len(have) - 1)
+        out = vals[at].copy()
+        out[have[at] != seq] = np.nan
+        return out
+
+    scalars = {k: column(k)[:, 0] if k in fields else np.full(seq.size, np.nan) for k in SCALARS}
+    vectors = {k: column(k) for k in VECTORS}
+    signals = {k: column(k) for k in fields if k not in VECTORS and k not in SCALARS}
     try:
         tasks = [str(t) for t in json.loads(mission.get("tasks", "[]"))]
         parameters = {str(t): dict(v) for t, v in json.loads(mission.get("parameters", "{}")).items()}
@@ -161,9 +174,9 @@ def read_run(path: Path) -> RecordedRun:
         raise ReplayError(f"{path}: the record of mission {mission['name']} cannot be read ({e})") from None
     meta = metadata.get("orccadd.log", {})
     run = RecordedRun(path, meta, joints, seq, scalars, vectors, tasks, mission, parameters, signals)
-    by_time = sorted(seq_ns.items(), key=lambda st: st[1])
-    ticks = np.array([s for s, _ in by_time], dtype=np.int64)
-    times = np.array([t for _, t in by_time], dtype=np.int64)
+    pairs = np.frombuffer(tick_ns, dtype=np.int64).reshape(-1, 2)
+    pairs = pairs[np.argsort(pairs[:, 1], kind="stable")]
+    ticks, times = pairs[:, 0], pairs[:, 1]
     for ns, text in raw_events:
         at = int(np.searchsorted(times, ns, side="right")) - 1  # the latest tick at or before it
         run.events.append((int(ticks[max(at, 0)]) if len(ticks) else 0, text))

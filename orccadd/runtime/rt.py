@@ -21,6 +21,11 @@ import os
 import struct
 from dataclasses import dataclass, field
 
+# `ORCCADD_SCHED_FIFO=off` in the environment: every orccadd process (a daemon's loops and
+# automaton, a simulated device, a bus hub) runs time-shared, locked memory and the rest as
+# configured. For a machine where orccadd must not take the CPUs from everything else: a CI
+# runner checking missions on the simulated arm, a shared workstation. Not for a robot.
+FIFO_ENV = "ORCCADD_SCHED_FIFO"
 MCL_CURRENT = 1
 MCL_FUTURE = 2
 CPU_DMA_LATENCY = "/dev/cpu_dma_latency"
@@ -47,6 +52,11 @@ class RealtimeReport:
             f"{fifo}, memory {'locked' if self.memory_locked else 'not locked'}, "
             f"gc {'frozen' if self.gc_frozen else 'running'}, CPU wake-up latency request {qos}"
         )
+
+
+def fifo_priority(priority: int) -> int:
+    """`priority`, or 0 (time-shared) where the environment turns SCHED_FIFO off (`FIFO_ENV`)."""
+    return 0 if os.environ.get(FIFO_ENV, "").strip().lower() in ("off", "0", "no", "false") else priority
 
 
 def lock_memory_early() -> list[str]:
@@ -111,7 +121,9 @@ def enter_realtime(
         gc.freeze()
         gc.disable()
         rep.gc_frozen = True
-    if priority > 0:
+    if priority > 0 and not fifo_priority(priority):
+        rep.warnings.append(f"SCHED_FIFO {priority} not asked for ({FIFO_ENV}=off): the loop is time-shared")
+    elif priority > 0:
         try:
             # reset on fork: a process this thread starts (the command daemon, a plant) runs at
             # normal priority unless it asks for more, never above the loop by inheritance
@@ -135,7 +147,7 @@ def realtime_device_process(priority: int, cpu: int | None = None) -> list[str]:
     processor; later threads inherit it). Returns the warnings; nothing is changed where the
     system refuses."""
     warnings = [] if cpu is None else _pin(_thread_ids(), cpu)
-    if priority <= 0:
+    if fifo_priority(priority) <= 0:
         return warnings
     rep = RealtimeReport(warnings=warnings)
     _lock_memory(rep)
@@ -157,7 +169,7 @@ class ThreadsStartedHere:
     a time-shared receive thread starves and the loop sees its stream stall."""
 
     def __init__(self, priority: int) -> None:
-        self.priority = priority
+        self.priority = fifo_priority(priority)
         self.warnings: list[str] = []
         self._before: set[int] = set()
 

@@ -33,6 +33,7 @@ import time
 from dataclasses import dataclass, field
 
 from orccadd.logsetup import LogSetupError, setup_logging
+from orccadd.runtime.rt import fifo_priority
 
 log = logging.getLogger("orccadd.vcan")
 
@@ -217,7 +218,7 @@ def main(argv: list[str] | None = None) -> int:
         setup_logging("orccadd.vcan")
     except LogSetupError as e:
         ap.exit(2, f"{ap.prog}: error: {e}\n")
-    if args.priority:
+    if fifo_priority(args.priority):
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.priority))
         except OSError as e:

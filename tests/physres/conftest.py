@@ -12,6 +12,8 @@ from typing import Any
 
 import pytest
 
+from orccadd.runtime.rt import fifo_priority
+
 LOOP_PRIORITY = 50
 
 
@@ -22,7 +24,7 @@ def loop_at_realtime_priority(request: pytest.FixtureRequest) -> Iterator[None]:
     # its own priority. A module may opt out (`LOOP_AT_REALTIME = False`): the Dynamixel SDK
     # polls its port in a busy loop, which at real-time priority keeps the kernel's tty worker
     # (time-shared) from delivering the answer it waits for.
-    if not getattr(request.module, "LOOP_AT_REALTIME", True):
+    if not getattr(request.module, "LOOP_AT_REALTIME", True) or not fifo_priority(LOOP_PRIORITY):
         yield
         return
     try:

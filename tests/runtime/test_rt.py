@@ -111,3 +111,27 @@ def test_threads_a_library_starts_in_the_block_run_at_its_priority_those_before_
     # a busy process, they starved and the loop saw the controller's stream stall for 56 ms)
     r = subprocess.run([sys.executable, "-c", LIBRARY_THREADS], capture_output=True, text=True, timeout=60)
     assert r.stdout.split("\n")[:2] == ["True True True", "[]"], r.stdout + r.stderr
+
+
+FIFO_OFF = """
+import os, threading
+from orccadd.runtime.rt import ThreadsStartedHere, enter_realtime, realtime_device_process
+rep = enter_realtime(6, lock_memory=False, freeze_gc=False, cpu_dma_latency_us=None)
+device = realtime_device_process(5)
+go = threading.Event()
+with ThreadsStartedHere(4) as started:
+    t1 = threading.Thread(target=go.wait)
+    t1.start()
+print(rep.sched_fifo_priority, os.sched_getscheduler(0) == os.SCHED_OTHER, device == [])
+print(os.sched_getscheduler(t1.native_id) == os.SCHED_OTHER, started.warnings == [])
+print(rep.warnings)
+go.set(); t1.join()
+"""
+
+
+def test_the_environment_may_turn_sched_fifo_off_for_every_process() -> None:
+    env = {**os.environ, "ORCCADD_SCHED_FIFO": "off"}
+    r = subprocess.run([sys.executable, "-c", FIFO_OFF], capture_output=True, text=True, timeout=60, env=env)
+    lines = r.stdout.splitlines()
+    assert lines[:2] == ["None True True", "True True"], r.stdout + r.stderr
+    assert "SCHED_FIFO 6 not asked for (ORCCADD_SCHED_FIFO=off)" in lines[2], r.stdout
