@@ -10,7 +10,8 @@
 - **log cost**: the command daemon's CPU time per second of log and the MCAP's bytes per second,
   for the default selection (runs A and B) and, in a run of `--cost-s`, for `q dq tau cmd` alone.
 
-Usage: `python benchmarks/replay.py [--minutes 10] [--cost-s 60]` (root, for SCHED_FIFO).
+Usage: `python benchmarks/replay.py [--minutes 10] [--cost-s 60] [--reuse]` (root, for SCHED_FIFO;
+`--reuse`: replay and compare the runs a run before recorded).
 """
 
 from __future__ import annotations
@@ -123,22 +124,25 @@ def main() -> int:
     ap.add_argument("--minutes", type=float, default=10.0, help="each long run's length")
     ap.add_argument("--cost-s", type=float, default=60.0, help="the run logged with q dq tau cmd alone")
     ap.add_argument("--out", default="/tmp/orccadd-replay-bench", help="where the runs' MCAPs go")
+    ap.add_argument("--reuse", action="store_true", help="replay and compare the runs already in --out")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    print(f"recording two runs of {a.minutes:g} min (sim-ur5e, 500 Hz, {MISSION.name}), default log")
-    run_a = record(out / "a.mcap", a.minutes * 60, None)
-    run_b = record(out / "b.mcap", a.minutes * 60, None)
-    print(f"recording {a.cost_s:g} s logged with {' '.join(FOUR)} alone")
-    four = record(out / "four.mcap", a.cost_s, FOUR)
-    print("\nlog cost (the command daemon's CPU share; the MCAP's growth):")
-    for name, lg in (("default (A)", run_a), ("default (B)", run_b), ("q dq tau cmd", four)):
-        print(f"  {name:<13} {100 * lg.cpu_share:5.1f} % of a core  {lg.bytes_per_s / 1e6:6.2f} MB/s")
-    ratio = run_a.cpu_share / four.cpu_share if four.cpu_share else float("nan")
-    size = run_a.bytes_per_s / four.bytes_per_s
-    print(f"  default / four vectors: CPU x{ratio:.2f}, size x{size:.2f}")
-    mb = run_a.mcap.stat().st_size / 1e6
-    took, mem, code, text = timed(["replay", "--json", str(run_a.mcap)])
+    mcap_a, mcap_b = out / "a.mcap", out / "b.mcap"
+    if not (a.reuse and mcap_a.is_file() and mcap_b.is_file()):
+        print(f"recording two runs of {a.minutes:g} min (sim-ur5e, 500 Hz, {MISSION.name}), default log")
+        run_a = record(mcap_a, a.minutes * 60, None)
+        run_b = record(mcap_b, a.minutes * 60, None)
+        print(f"recording {a.cost_s:g} s logged with {' '.join(FOUR)} alone")
+        four = record(out / "four.mcap", a.cost_s, FOUR)
+        print("\nlog cost (the command daemon's CPU share; the MCAP's growth):")
+        for name, lg in (("default (A)", run_a), ("default (B)", run_b), ("q dq tau cmd", four)):
+            print(f"  {name:<13} {100 * lg.cpu_share:5.1f} % of a core  {lg.bytes_per_s / 1e6:6.2f} MB/s")
+        ratio = run_a.cpu_share / four.cpu_share if four.cpu_share else float("nan")
+        size = run_a.bytes_per_s / four.bytes_per_s
+        print(f"  default / four vectors: CPU x{ratio:.2f}, size x{size:.2f}")
+    mb = mcap_a.stat().st_size / 1e6
+    took, mem, code, text = timed(["replay", "--json", str(mcap_a)])
     rep = json.loads(text.splitlines()[0]) if text.startswith("{") else {}
     run_s = float(rep.get("run_s", 0.0))
     print(f"\nreplay of A ({mb:.0f} MB, {run_s:.0f} s of task windows): exit {code}, {took:.1f} s wall")
@@ -146,7 +150,7 @@ def main() -> int:
     law_s = max(float(rep.get("elapsed_s", 0.0)), 1e-9)
     print(f"  {law_s:.1f} s, {run_s / law_s:.0f}x real time")
     print(f"  peak memory {mem:.0f} MiB; identical: {rep.get('identical')}")
-    took, mem, code, _ = timed(["compare", str(run_a.mcap), str(run_b.mcap)])
+    took, mem, code, _ = timed(["compare", str(mcap_a), str(mcap_b)])
     print(f"\ncompare A B: exit {code}, {took:.1f} s wall, peak memory {mem:.0f} MiB")
     return 0
 
