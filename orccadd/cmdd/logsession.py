@@ -341,11 +341,13 @@ class TelemetryLog:
     def lost(self) -> int:
         return sum(st.feed.lost for st in self.streams)
 
-    def close(self, reason: str = "log stop") -> dict[str, Any]:
+    def close(self, reason: str = "log stop", result: str = "") -> dict[str, Any]:
+        """The end: `reason` why, `result` the last run's as the log ends (`MissionResult`)."""
         self.pump()
         summary = self.describe()
         if self.mcap is not None:
-            self.mcap.close({"rows": self.rows, "lost": self.lost, "ended": reason})
+            end = {"rows": self.rows, "lost": self.lost, "ended": reason, "result": result}
+            self.mcap.close(end)
         for st in self.streams:
             st.csv.close()
         return summary

@@ -243,6 +243,8 @@ class McapLog:
             "line": max(e.seq, 0),
         }
         self.writer.add_message(self.events, ns, json.dumps(msg).encode(), ns, max(e.seq, 0))
+        if e.kind == "command" and e.name == "tune":  # and in the run record's metadata
+            self.writer.add_metadata("orccadd.tune", {"time_s": f"{e.time_s:.6f}", "tune": e.detail})
         if e.fault is not None:
             cause = {"timestamp": sch.stamp(ns), **e.fault}
             self.writer.add_message(self.faults, ns, json.dumps(cause).encode(), ns, max(e.seq, 0))

@@ -51,7 +51,7 @@ from orccadd.wire.commands import (
     with_defaults,
 )
 from orccadd.wire.roles import Roles, peer_credentials
-from orccadd.wire.schema import PROTOCOL_VERSION, H, S
+from orccadd.wire.schema import PROTOCOL_VERSION, H, MissionResult, S
 from orccadd.wire.socketdir import SocketPathError, prepare_socket_dir, urgent_socket_path
 from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 
@@ -799,7 +799,8 @@ class CommandDaemon:
         if self.recording is None:
             raise ValueError("log: not logging")
         try:
-            self._end_log(self.recording.close())
+            result = MissionResult(int(read_status(self.tel)[S.RESULT])).name.lower()
+            self._end_log(self.recording.close(result=result))
         except OSError as e:
             self._end_log(self.recording.abandon(e))
         return self.last_log or {}

@@ -135,3 +135,19 @@ def test_logs_that_cannot_be_replayed_are_refused_in_words(
     assert code == 2 and "not an MCAP file" in err
     code, _, err = replay(capsys, str(tmp_path / "none.mcap"))
     assert code == 2 and "cannot be read" in err
+
+
+def test_the_run_record_has_the_mission_its_parameters_every_tune_and_the_result(runs: Runs) -> None:
+    from mcap.reader import make_reader
+
+    with runs.tuned.open("rb") as fh:
+        records = [(m.name, dict(m.metadata)) for m in make_reader(fh).iter_metadata()]
+    names = [n for n, _ in records]
+    assert names[0] == "orccadd.log" and "orccadd.mission" in names and names[-1] == "orccadd.log.end"
+    mission = next(r for n, r in records if n == "orccadd.mission")
+    assert mission["name"] == "PositionDemo" and "task Reach on arm" in mission["mission"]
+    assert json.loads(mission["tasks"]) == ["Hold", "Home", "Reach", "Back"]
+    assert json.loads(mission["parameters"])["Reach"]["traj.speed_scale"] == 0.4  # as loaded
+    tunes = [r for n, r in records if n == "orccadd.tune"]
+    assert len(tunes) == 1 and tunes[0]["tune"].startswith("(operator) Reach.traj.speed_scale: 0.4 → 0.6")
+    assert dict(records)["orccadd.log.end"]["result"] == "success"
