@@ -17,6 +17,7 @@ from orccadd.cli import orccadctl_main
 from orccadd.offline.logread import CsvLogData
 from orccadd.offline.runs import RunError, _instants, _windows, same_mission
 from tests.daemon.conftest import ROOT, Daemon, start_daemon
+from tests.offline.runs import logged_run
 
 MISSION = str(ROOT / "configs/missions/demo_position.mission")
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -56,22 +57,11 @@ class Runs:
     other: Path  # another mission (OneTask)
 
 
+SIGNALS = ("q", "tau", "cmd", "wake_us", "compute_us")  # what compare reads, as a user would log
+
+
 def _run(d: Daemon, mission: str, out: Path | None, tune: tuple[str, str] | None = None) -> Path:
-    """One run of `mission` to its end, logged to `out` (its MCAP returned) unless None."""
-    assert d.ctl("load", mission).returncode == 0
-    if out is not None:
-        r = d.ctl("log", "start", "q", "tau", "cmd", "wake_us", "compute_us", "--name", out.name)
-        assert r.returncode == 0, r.stderr
-    if tune is not None:
-        assert d.ctl("tune", *tune).returncode == 0
-    assert d.ctl("start").returncode == 0
-    s = d.wait(lambda s: s["state"] != "running", timeout_s=60)
-    assert s["result"] == "success", s
-    if out is None:
-        return Path()
-    r = d.ctl("log", "stop", "-o", str(out))
-    assert r.returncode == 0, r.stderr
-    return out.with_suffix(".mcap")
+    return logged_run(d, mission, out, *SIGNALS, tune=tune)
 
 
 @pytest.fixture(scope="module")

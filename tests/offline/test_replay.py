@@ -14,6 +14,7 @@ import pytest
 
 from orccadd.cli import orccadctl_main
 from tests.daemon.conftest import ROOT, Daemon, start_daemon
+from tests.offline.runs import logged_run
 
 MISSION = str(ROOT / "configs/missions/demo_position.mission")
 
@@ -26,17 +27,7 @@ class Runs:
 
 
 def _run(d: Daemon, out: Path, *signals: str, tune: tuple[str, str] | None = None) -> Path:
-    assert d.ctl("load", MISSION).returncode == 0
-    r = d.ctl("log", "start", *signals, "--name", out.name)
-    assert r.returncode == 0, r.stderr
-    if tune is not None:
-        assert d.ctl("tune", *tune).returncode == 0
-    assert d.ctl("start").returncode == 0
-    s = d.wait(lambda s: s["state"] != "running", timeout_s=60)
-    assert s["result"] == "success", s
-    r = d.ctl("log", "stop", "-o", str(out))
-    assert r.returncode == 0, r.stderr
-    return out.with_suffix(".mcap")
+    return logged_run(d, MISSION, out, *signals, tune=tune)
 
 
 @pytest.fixture(scope="module")
