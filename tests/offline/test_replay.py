@@ -142,3 +142,45 @@ def test_the_run_record_has_the_mission_its_parameters_every_tune_and_the_result
     tunes = [r for n, r in records if n == "orccadd.tune"]
     assert len(tunes) == 1 and tunes[0]["tune"].startswith("(operator) Reach.traj.speed_scale: 0.4 → 0.6")
     assert dict(records)["orccadd.log.end"]["result"] == "success"
+
+
+def _rewritten(src: Path, out: Path, drop: str = "", prefix: str = "") -> Path:
+    """`src` copied with the metadata records named `drop` left out, and every signal's name
+    given the resource prefix `prefix` (as a cell's log names them: `left/q`)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with src.open("rb") as fh, out.open("wb") as dst:
+        w = Writer(dst)
+        w.start()
+        r = make_reader(fh)
+        for m in r.iter_metadata():
+            if m.name != drop:
+                w.add_metadata(m.name, m.metadata)
+        ids: dict[int, int] = {}
+        for schema, ch, msg in r.iter_messages(log_time_order=False):
+            if schema is None:
+                continue
+            if ch.id not in ids:
+                meta = dict(ch.metadata)
+                if prefix and "signal" in meta:
+                    meta["signal"] = prefix + meta["signal"]
+                sid = w.register_schema(schema.name, schema.encoding, schema.data)
+                ids[ch.id] = w.register_channel(ch.topic, ch.message_encoding, sid, meta)
+            w.add_message(ids[ch.id], msg.log_time, msg.data, msg.publish_time, msg.sequence)
+        w.finish()  # type: ignore[no-untyped-call]
+    return out
+
+
+def test_a_log_without_its_mission_or_of_a_cell_is_refused_in_words(
+    runs: Runs, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    # the copy itself replays: what the two others lack is all that differs
+    same = _rewritten(runs.plain, tmp_path / "same.mcap")
+    assert replay(capsys, str(same))[0] == 0
+    bare = _rewritten(runs.plain, tmp_path / "bare.mcap", drop="orccadd.mission")
+    code, _, err = replay(capsys, str(bare))
+    assert code == 2 and "the log carries no mission" in err, err
+    cell = _rewritten(runs.plain, tmp_path / "cell.mcap", prefix="left/")
+    code, _, err = replay(capsys, str(cell))
+    assert code == 2 and "a cell's log (signal left/" in err and "one-resource robot's run" in err, err
