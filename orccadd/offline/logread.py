@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import json
 import struct
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -83,7 +84,10 @@ def read_mcap(log: Path) -> CsvLogData:
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
-    columns: dict[str, dict[float, float]] = {}
+    # per column its (time_s, value) pairs as they come, compact: a 10-minute log is 3 million
+    # messages, which a dict per column keyed by time held in 2.6 GB
+    times_of: dict[str, array[float]] = {}
+    values_of: dict[str, array[float]] = {}
     units: dict[str, Any] = {"time_s": "s"}
     events: list[tuple[int, str, str, str]] = []  # (log time ns, kind, name, message)
     metadata: dict[str, dict[str, str]] = {}
@@ -115,16 +119,23 @@ def read_mcap(log: Path) -> CsvLogData:
                 for field_name, v in body.items():
                     if field_name != "time_s" and (isinstance(v, float | int) or v is None):
                         col = signal if field_name == "value" else f"{signal}.{field_name}"
-                        columns.setdefault(col, {})[t] = float("nan") if v is None else float(v)
+                        if col not in times_of:
+                            times_of[col], values_of[col] = array("d"), array("d")
+                        times_of[col].append(t)
+                        values_of[col].append(float("nan") if v is None else float(v))
     except (McapError, OSError, ValueError, KeyError, AttributeError, struct.error, EOFError) as e:
         why = str(e) or type(e).__name__
         why = f"truncated or corrupted (the mcap reader: {why})"
         raise ValueError(f"{log}: not a readable MCAP log: {why}") from None
-    if not columns or offset_ns is None:
+    if not times_of or offset_ns is None:
         raise ValueError(f"{log}: an MCAP file without an orccadd log's signals")
-    times = sorted({t for c in columns.values() for t in c})
-    names = list(columns)
-    data = np.array([[t, *(columns[c].get(t, np.nan) for c in names)] for t in times])
+    names = list(times_of)
+    at = {c: np.frombuffer(times_of[c], dtype=np.float64) for c in names}
+    times = np.unique(np.concatenate(list(at.values())))
+    data = np.full((times.size, 1 + len(names)), np.nan)
+    data[:, 0] = times
+    for k, c in enumerate(names):  # a time given twice: the later value, as a dict kept it
+        data[np.searchsorted(times, at[c]), k + 1] = np.frombuffer(values_of[c], dtype=np.float64)
     for group in units:  # the command's unit is its mode's, as in the CSV (a cell's `left/cmd` too)
         if group.rpartition("/")[2] == "cmd":
             units[group] = {"position": "rad", "velocity": "rad/s", "torque": "N.m"}
