@@ -32,7 +32,7 @@ from orccadd.modules.base import CommandMotion
 from orccadd.offline.replayrun import RecordedRun, ReplayError, Tune
 from orccadd.physres import PhysicalResource, backend_class
 from orccadd.physres.description import ResourceDescription
-from orccadd.robot import load_robot_config
+from orccadd.robot import load_cell_config
 from orccadd.state import FloatArray, JointState
 from orccadd.task import EventQueue, EventRegistry, RobotTask
 from orccadd.task.motion import CommandHistory
@@ -214,7 +214,13 @@ def _config_path(run: RecordedRun, given: Path | None, notes: list[str]) -> Path
 
 def _build(run: RecordedRun, config_path: Path, mission: Path | None, notes: list[str]) -> _Built:
     try:
-        cfg = load_robot_config(config_path)
+        cfgs = load_cell_config(config_path).resources  # a robot config, or a cell's of one resource
+        if len(cfgs) != 1:
+            names = ", ".join(c.resource.name for c in cfgs)
+            raise ReplayError(
+                f"{config_path}: a cell of {len(cfgs)} resources ({names}): replay takes one's run"
+            )
+        cfg = cfgs[0]
         res = RecordedResource(cfg, RobotModel.from_config(cfg))
     except OrccaddError as e:
         raise ReplayError(f"--config {config_path}: {e}") from None
