@@ -67,7 +67,6 @@ class RecordedRun:
     parameters: dict[str, dict[str, Any]]  # task -> MODULE.PARAM -> value, as the log started
     signals: dict[str, np.ndarray]  # the resource's own (a wrench): rows × its size
     tunes: list[Tune] = field(default_factory=list)
-    events: list[tuple[int, str]] = field(default_factory=list)  # (tick, message) of the trace
 
     @property
     def rows(self) -> int:
@@ -96,8 +95,7 @@ def read_run(path: Path) -> RecordedRun:
     values: dict[str, array[float]] = {}
     metadata: dict[str, dict[str, str]] = {}
     missions: list[dict[str, str]] = []  # a record per mission loaded while the log ran
-    raw_events: list[tuple[int, str]] = []  # (log time ns, message)
-    tick_ns = array("q")  # (sequence number, log time) of each `t_s` message: the ticks' times
+    raw_events: list[str] = []  # the trace's messages (the tunes among them)
     try:
         with fh:
             reader = make_reader(fh)
@@ -108,7 +106,7 @@ def read_run(path: Path) -> RecordedRun:
                     metadata[m.name] = dict(m.metadata)
             for _, channel, message in reader.iter_messages(log_time_order=False):  # as written
                 if channel.topic == "/events":
-                    raw_events.append((message.log_time, str(json.loads(message.data).get("message", ""))))
+                    raw_events.append(str(json.loads(message.data).get("message", "")))
                     continue
                 signal = channel.metadata.get("signal")
                 if signal is None or signal in OTHER_FIELDS:
@@ -129,8 +127,6 @@ def read_run(path: Path) -> RecordedRun:
                     fields[signal], seqs[signal], values[signal] = names, array("q"), array("d")
                 seqs[signal].append(message.sequence)
                 values[signal].extend([_num(body.get(k)) for k in names])
-                if signal == "t_s":
-                    tick_ns.extend((message.sequence, message.log_time))
     except (McapError, OSError, ValueError, KeyError, AttributeError, struct.error, EOFError) as e:
         why = str(e) or type(e).__name__
         why = f"truncated or corrupted (the mcap reader: {why})"
@@ -174,12 +170,7 @@ def read_run(path: Path) -> RecordedRun:
         raise ReplayError(f"{path}: the record of mission {mission['name']} cannot be read ({e})") from None
     meta = metadata.get("orccadd.log", {})
     run = RecordedRun(path, meta, joints, seq, scalars, vectors, tasks, mission, parameters, signals)
-    pairs = np.frombuffer(tick_ns, dtype=np.int64).reshape(-1, 2)
-    pairs = pairs[np.argsort(pairs[:, 1], kind="stable")]
-    ticks, times = pairs[:, 0], pairs[:, 1]
-    for ns, text in raw_events:
-        at = int(np.searchsorted(times, ns, side="right")) - 1  # the latest tick at or before it
-        run.events.append((int(ticks[max(at, 0)]) if len(ticks) else 0, text))
+    for text in raw_events:
         t = _TUNE.match(text)
         if t:
             run.tunes.append(Tune(int(t["tick"]), t["path"], _values(t["new"]), t["k"] is not None))
