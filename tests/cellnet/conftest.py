@@ -4,9 +4,11 @@ loopback TLS endpoint with a certificate of a test authority made per session.""
 from __future__ import annotations
 
 import socket
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -16,6 +18,29 @@ from tests.daemon.conftest import Daemon, robot_config, start_daemon_with
 pytest.importorskip("zenoh")
 
 PEERS = ("arm-a", "arm-b", "arm-c", "console", "viewer", "stranger")
+
+
+def connected(session: Any, timeout_s: float = 30.0) -> Any:
+    """`session` once it has a peer (a put before goes nowhere: a test of what a peer's message
+    does would pass without it), bounded; the session."""
+    deadline = time.monotonic() + timeout_s
+    while not list(session.info.peers_zid()):
+        assert time.monotonic() < deadline, f"the session found no peer within {timeout_s} s"
+        time.sleep(0.02)
+    return session
+
+
+def until_matched(session: Any, key: str, timeout_s: float = 30.0) -> None:
+    """Return once `session` knows a subscriber on `key`: Zenoh sends a put only to the
+    subscribers it knows of, and a peer's declarations come after the connection."""
+    publisher = session.declare_publisher(key)
+    try:
+        deadline = time.monotonic() + timeout_s
+        while not publisher.matching_status.matching:
+            assert time.monotonic() < deadline, f"no subscriber on {key} within {timeout_s} s"
+            time.sleep(0.02)
+    finally:
+        publisher.undeclare()
 
 
 @pytest.fixture(scope="session")

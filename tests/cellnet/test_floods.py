@@ -19,7 +19,7 @@ import pytest
 from orccadd.cellnet.console import CellConsole, read_console_config
 from orccadd.cellnet.zconfig import DAEMON_RX_MESSAGE_MAX
 from orccadd.cmdd.cellguard import SIGNAL_MAX
-from tests.cellnet.conftest import Member, console_file, start_member
+from tests.cellnet.conftest import Member, console_file, start_member, until_matched
 from tests.cellnet.test_hostile_peers import peer_session
 
 zenoh = pytest.importorskip("zenoh")
@@ -191,8 +191,8 @@ def test_a_read_only_peers_signal_feeds_no_mission(arm_a: Member, certs: Path) -
     viewer = peer_session(certs, "viewer", arm_a.endpoint)
     token = viewer.liveliness().declare_token("orccadd/test/viewer/alive")  # a read peer's token: allowed
     try:
-        time.sleep(0.3)
         run(arm_a, "from_viewer", FROM_VIEWER)
+        until_matched(viewer, "orccadd/test/viewer/signal/Ping")  # else the puts would go nowhere
         for n in range(1, 6):
             viewer.put("orccadd/test/viewer/signal/Ping", ping(n))
         # a request after the puts, on the same link: answered once they have been dealt with

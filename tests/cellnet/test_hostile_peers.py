@@ -13,7 +13,7 @@ import pytest
 
 from orccadd.cellnet.zconfig import to_json5, zenoh_config
 from orccadd.config.cellnet import load_cellnet
-from tests.cellnet.conftest import Member, start_member
+from tests.cellnet.conftest import Member, connected, start_member, until_matched
 
 zenoh = pytest.importorskip("zenoh")
 
@@ -34,9 +34,7 @@ def peer_session(certs: Path, name: str, endpoint: str) -> zenoh.Session:
     raw = {"name": "test", "robot": name, "connect": [endpoint], "ca": str(certs / "ca.pem"),
            "certificate": str(certs / f"{name}.pem"), "private_key": str(certs / f"{name}.key")}  # fmt: skip
     net = load_cellnet(raw, "<test>", name)
-    s = zenoh.open(zenoh.Config.from_json5(to_json5(zenoh_config(net, daemon=False))))
-    time.sleep(0.5)  # connected
-    return s
+    return connected(zenoh.open(zenoh.Config.from_json5(to_json5(zenoh_config(net, daemon=False)))))
 
 
 PART_FROM_CONSOLE = """
@@ -68,6 +66,7 @@ def test_malformed_payloads_are_dropped_with_a_log_line(arm_a: Member, certs: Pa
     arm_a.daemon.call("load", path=str(mission))
     s = peer_session(certs, "console", arm_a.endpoint)
     try:
+        until_matched(s, "orccadd/test/console/signal/PartPlaced")
         for raw in GARBAGE:
             s.put("orccadd/test/console/signal/PartPlaced", raw)
         replies = []
@@ -75,7 +74,6 @@ def test_malformed_payloads_are_dropped_with_a_log_line(arm_a: Member, certs: Pa
             for raw in GARBAGE:
                 for r in s.get(key, payload=raw, timeout=5.0):
                     replies.append(json.loads(r.ok.payload.to_bytes()))
-        time.sleep(0.5)
     finally:
         s.close()
     assert len(replies) == 2 * len(GARBAGE)
@@ -90,10 +88,19 @@ def test_malformed_payloads_are_dropped_with_a_log_line(arm_a: Member, certs: Pa
 
 
 def test_a_peer_cannot_speak_under_another_name(arm_a: Member, certs: Path) -> None:
+    mission = arm_a.dir / "takes_part.mission"
+    mission.write_text(PART_FROM_CONSOLE)
+    arm_a.daemon.call("load", path=str(mission))
     s = peer_session(certs, "console", arm_a.endpoint)
     try:
+        until_matched(s, "orccadd/test/console/signal/PartPlaced")  # arm-a hears the console now
         s.put("orccadd/test/arm-b/signal/PartPlaced", b"{")  # denied by arm-a's access control
-        time.sleep(0.5)
+        s.put("orccadd/test/console/signal/PartPlaced", b"{")  # the console's own: taken (and dropped)
+        line = "a malformed signal on orccadd/test/console/signal/PartPlaced dropped"
+        deadline = time.monotonic() + 10  # on the same link after the other: in the log after it
+        while line not in arm_a.daemon.log_text():
+            assert time.monotonic() < deadline, arm_a.daemon.log_text()[-2000:]
+            time.sleep(0.05)
     finally:
         s.close()
     assert "arm-b/signal" not in arm_a.daemon.log_text()

@@ -258,8 +258,7 @@ def test_a_digital_input_moves_the_mission_and_its_emits_set_the_tools_output(
         r = d.ctl("load", str(ROOT / "configs/missions/part_io.mission"))
         assert r.returncode == 0, r.stderr
         d.call("start")
-        time.sleep(0.5)
-        s = d.status()
+        s = d.wait(lambda s: s["state"] != "ready", timeout_s=10)
         assert s["state"] == "running" and s["active_task"].startswith("Hold"), s  # waiting for the part
         r = d.ctl("send", "arm.part_present")
         assert r.returncode != 0 and "comes from the device" in r.stderr, r.stderr

@@ -41,9 +41,12 @@ def test_orccadctl_abort_goes_through_the_urgent_socket_while_clients_keep_the_d
     daemon.call("start")
     daemon.wait(lambda s: s["active_task"] == "Reach")
     stop = threading.Event()
+    answered = threading.Semaphore(0)  # one release per busy client, at its first answer
 
     def busy() -> None:
         with Client(daemon.socket) as c:
+            c.reply("params")
+            answered.release()
             while not stop.is_set():
                 c.reply("params")
 
@@ -51,7 +54,8 @@ def test_orccadctl_abort_goes_through_the_urgent_socket_while_clients_keep_the_d
     for t in threads:
         t.start()
     try:
-        time.sleep(0.3)
+        for _ in threads:  # every client connected and asking before the abort
+            assert answered.acquire(timeout=30), "a busy client got no answer"
         r = daemon.ctl("abort")
     finally:
         stop.set()
