@@ -20,6 +20,7 @@ import signal
 import socket
 import stat
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -110,6 +111,7 @@ class RtLink:
         self.closed = False
         self.on_push: Callable[[dict[str, Any]], None] = lambda msg: None  # unasked: `{"push": …}`
         self.oneway_id = 0  # requests whose reply nobody awaits: negative ids, counting down
+        self._oneway_lock = threading.Lock()  # `send_oneway` is called from other threads
         # a one-way request refused (the real-time process replies to those only then)
         self.on_refused: Callable[[dict[str, Any]], None] = lambda reply: None
         self.discarded: dict[str, int] = {}  # what the real-time process dropped, its link full
@@ -171,6 +173,22 @@ class RtLink:
         """For `status`'s `rt_link`: messages the real-time process discarded (its link full),
         by kind; replies that came after their wait ended."""
         return {"discarded": dict(self.discarded), "late_replies": self.late_replies}
+
+    def send_oneway(self, cmd: str, args: dict[str, Any]) -> bool:
+        """From any thread (a peer's signal from Zenoh's): `cmd` as a one-way request, a
+        negative id the real-time process replies to only to refuse it (`on_refused`). Sent
+        whole at once (one datagram) or not at all: False if the link's buffer is full or the
+        link is gone."""
+        if self.closed:
+            return False
+        with self._oneway_lock:  # each id once, on the link in the order of the ids
+            rid = self.oneway_id - 1
+            try:
+                self.sock.send(json.dumps({"id": rid, "cmd": cmd, "args": args}).encode())
+            except OSError:  # the buffer full (EAGAIN), or the link gone: the caller's queue then
+                return False
+            self.oneway_id = rid
+        return True
 
     async def call(
         self, cmd: str, args: dict[str, Any], timeout_s: float | None = RT_REPLY_S
@@ -397,15 +415,7 @@ class CommandDaemon:
         taken = self._mission_input(who, name, what)
         if not taken:
             return True  # nothing to deliver: done
-        if self.rt.closed:
-            return False
-        self.rt.oneway_id -= 1
-        msg = {"id": self.rt.oneway_id, "cmd": "cell_input", "args": {"input": taken, "peer": who}}
-        try:
-            self.rt.sock.send(json.dumps(msg).encode())
-            return True
-        except OSError:  # the link's buffer full, or gone: the queue's way
-            return False
+        return self.rt.send_oneway("cell_input", {"input": taken, "peer": who})
 
     async def _cell_arrivals(self, peer: CellPeer) -> None:
         """Peers' signals and losses to the real-time process, one at a time in arrival order,
