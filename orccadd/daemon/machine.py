@@ -27,6 +27,7 @@ from orccadd.config.robot import RobotConfig
 from orccadd.daemon.commands import RtCommands, describe_resource
 from orccadd.daemon.inline import InlineReactor
 from orccadd.daemon.loop import SwitchingLoop
+from orccadd.daemon.outputs import OutputWorker
 from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError, Pending, Result
@@ -34,6 +35,7 @@ from orccadd.daemon.supervision import FaultHistory, Supervisor
 from orccadd.fault import Fault, FaultKind, StopCause
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
+from orccadd.runtime.threads import ThreadGroup
 from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
 from orccadd.task.events import EventKind
 from orccadd.wire.commands import COMMANDS, Dispatcher, with_defaults
@@ -113,6 +115,8 @@ class Machine:
         self.allow_fault_injection = allow_fault_injection
         self.notes: list[str] = []  # recent notable happenings (bounded), for `describe`
         self.mission = MissionControl(loops, self.pub, self.note, self.abort)
+        self.output_threads = ThreadGroup("outputs")  # each resource's output actions
+        self.mission.outputs = {res.name: OutputWorker(res, self.output_threads) for res in resources}
         self.reactor = InlineReactor(self.mission, self.registry)
         self.units = tuple(
             Unit(
@@ -139,6 +143,13 @@ class Machine:
         self.rt_commands = RtCommands(self)
         self.commands = Dispatcher(self.rt_commands, "rt")
         self.publish()
+
+    def close_outputs(self, timeout_s: float) -> list[str]:
+        """The output threads end once what was queued is done, waited for `timeout_s` in all;
+        the names of those still running (a device call that hangs), logged."""
+        for w in self.mission.outputs.values():
+            w.close()
+        return self.output_threads.join(timeout_s)
 
     def unit(self, name: str) -> Unit:
         """The resource `name`'s unit; `CommandError` naming those there are."""

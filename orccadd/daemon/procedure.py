@@ -15,9 +15,9 @@ from typing import Any, NamedTuple
 from orccadd.automaton import Automaton
 from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.mission import LoadedMission, MissionRunner
+from orccadd.daemon.outputs import OutputWorker
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError
-from orccadd.errors import OrccaddError
 from orccadd.physres.base import PhysicalResource
 from orccadd.task import RobotTask
 from orccadd.wire.schema import MachineState, MissionResult, Trace
@@ -77,6 +77,8 @@ class MissionControl:
         # an output to the cell the instant emitted: (its name, the mission's) to the command
         # daemon at once (the real-time process sets it; the trace says it too, later)
         self.cell_output: Callable[[str, str], None] = lambda name, mission: None
+        # per resource's name: the thread that performs its output actions (`emit R.Y`)
+        self.outputs: dict[str, OutputWorker] = {}
 
     @property
     def running(self) -> bool:
@@ -270,18 +272,20 @@ class MissionControl:
         return out
 
     def _outputs(self, a: Automaton, actions: int) -> None:
-        """The resources' output actions the instant emits (`emit R.Y`), in declaration order.
-        One the device refuses is said, and the run goes on (the mission cannot see it)."""
+        """The resources' output actions the instant emits (`emit R.Y`), in declaration order,
+        each queued to its resource's output thread (this thread never waits on a device; one
+        that fails is a fault of its resource, `OutputWorker`)."""
         cell = a.program.cell_outputs
         for k, name in enumerate(a.program.internals):
             if cell and name in cell and actions >> (a.emit_base + k) & 1:
                 self.cell_output(name, a.program.name)
             if "." in name and actions >> (a.emit_base + k) & 1:
                 r, y = name.split(".", 1)
-                try:
-                    self.loops[self._by_resource[r]].resource.set_output(y)
-                except (OrccaddError, KeyError) as e:
-                    self.note(f"output {name} not performed: {e}", WARNING)
+                worker = self.outputs.get(r)
+                if worker is None:  # the compiler checks the names: never, but said if so
+                    self.note(f"output {name} not performed: no output thread for {r!r}", WARNING)
+                else:
+                    worker.request(y)
 
     def _apply(self, actions: int, request: bool = True) -> None:
         mission, runner = self.mission, self.runner

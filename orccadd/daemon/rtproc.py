@@ -564,6 +564,8 @@ class RealtimeProcess:
             for u in self.machine.units:
                 u.loop.executor.stop()
             self.threads.join(JOIN_S)
+        if hasattr(self, "machine"):
+            self.machine.close_outputs(JOIN_S)
         if self.cmdd is not None:
             self.cmdd.terminate()
             self.cmdd.wait()
@@ -601,6 +603,7 @@ class RealtimeProcess:
         self.threads.join(JOIN_S)
         for u in m.units:
             u.supervisor.threads.join(JOIN_S)  # a reset under way: its device work
+        m.close_outputs(JOIN_S)  # an output action under way: its device call
         m.mission.state = MachineState.IDLE
         m.publish()
         for u in m.units:

@@ -180,6 +180,7 @@ class _DeviceReset:
 
     def _run(self, res: PhysicalResource, loop: SwitchingLoop, wait_s: float) -> None:
         try:
+            res.clear_output_fault()  # an output action that failed: the reset's to forget
             if res.description.fault_reset:
                 self.step = "the device's fault reset (reset_fault)"
                 res.reset_fault()

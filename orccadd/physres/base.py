@@ -93,6 +93,7 @@ class PhysicalResource(ABC):
         step_max = model.v_max_rad_s * config.control_period_s * config.limits.velocity_tolerance
         self._step_max: list[float] = step_max.tolist()
         self._stop_flags = 0
+        self._output_fault = ""  # an output action that failed (`output_failed`), until a reset
         # the tool's workspace ([workspace]), if any: measured beyond it by more than its tolerance,
         # or a position command taking the tool further out of it, is a LIMIT_VIOLATION
         self._workspace = ToolWorkspace.of(model)
@@ -234,6 +235,16 @@ class PhysicalResource(ABC):
         cleared). Not for a tick; `ResourceError` if it cannot."""
         raise ResourceError(f"resource {self.name!r} ({self.description.backend}) has no output {name!r}")
 
+    def output_failed(self, name: str, why: str) -> None:
+        """The output action `name` failed (its unit's output thread says so): a fault of this
+        resource from its next read on (FAULT: its task's ResourceFault), until a reset clears
+        it (`clear_output_fault`)."""
+        self._output_fault = f"output {name} not performed: {why}"
+
+    def clear_output_fault(self) -> None:
+        """A reset: an output action's failure is forgotten (the device's own faults are not)."""
+        self._output_fault = ""
+
     def inject_fault(self, kind: str, message: str) -> None:
         """Make the device report a fault of `kind` (tests, commissioning). `ResourceError` if the
         backend does not declare that kind."""
@@ -268,6 +279,9 @@ class PhysicalResource(ABC):
         self._read_at_ns = monotonic_ns()
         st.status = self._read_into(t_s, st) | self._stop_flags
         st.t_s = t_s
+        if self._output_fault:
+            st.status |= Status.FAULT
+            self._set_fault(FaultKind.DEVICE, self._output_fault)
         q_dq = st.q_dq.tolist()
         if outside(q_dq, self._limit_lo, self._limit_hi) or not all(map(isfinite, q_dq)):
             st.status |= LIMIT_VIOLATION

@@ -100,9 +100,11 @@ def machine_on(cfg: RobotConfig, mode: CommandMode, clock: Clock) -> Iterator[Ma
     extra = sum(g.size for g in res.description.signals)  # the resource's signals in each tick
     tel = TelemetryBlock.create(Layout(cfg.dof, 8000, 1000, extra), cfg.control_period_s)
     r, w = os.pipe2(os.O_NONBLOCK)
+    m = Machine(CellConfig.of(cfg), [res], [clock], [tel], w)
     try:
-        yield Machine(CellConfig.of(cfg), [res], [clock], [tel], w)
+        yield m
     finally:
+        m.close_outputs(5.0)
         tel.close()
         res.shutdown()
         os.close(r)

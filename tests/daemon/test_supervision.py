@@ -44,6 +44,9 @@ class StandIn:
     def stopping_or_stopped(self) -> bool:
         return not self.cleared
 
+    def clear_output_fault(self) -> None:
+        pass
+
     def reset_fault(self) -> None:
         self._reset_fault()
 

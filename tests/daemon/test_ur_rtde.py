@@ -265,10 +265,11 @@ def test_a_digital_input_moves_the_mission_and_its_emits_set_the_tools_output(
         assert not sim.status()["digital_output_bits"] & TOOL_OUT_0
         sim.inject("digital_input", index=0, value=True)
         d.wait(lambda s: s["active_task"] == "Carry", timeout_s=10)
-        assert sim.status()["digital_output_bits"] & TOOL_OUT_0  # closed before the carry
+        # the outputs go on the arm's output thread, in order, as the automaton emits them
+        sim.wait_for(lambda st: bool(st["digital_output_bits"] & TOOL_OUT_0))  # closed as the carry starts
         s = d.wait(lambda s: s["state"] != "running", timeout_s=60)
         assert s["result"] == "success", s
-        assert not sim.status()["digital_output_bits"] & TOOL_OUT_0  # opened after it
+        sim.wait_for(lambda st: not st["digital_output_bits"] & TOOL_OUT_0)  # opened after the carry
         events = d.call("events", last=40)["events"]  # type: ignore[index]
         instants = [e for e in events if e["kind"] == "instant"]
         assert any("arm.part_present" in e["inputs"] for e in instants), instants
