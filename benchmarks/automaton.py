@@ -30,7 +30,7 @@ from orccadd.automaton import (
     verify,
     verify_network,
 )
-from orccadd.automaton.views import minimize, project
+from orccadd.automaton.checks.views import minimize, project
 from orccadd.errors import MissionError
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -16,10 +16,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from orccadd.automaton import Automaton, Network, Report, compile_file, compile_text, verify, verify_network
-from orccadd.automaton import ast as A
-from orccadd.automaton.compiler import DEFAULT_MAX_STATES, Progress
-from orccadd.automaton.program import Program
-from orccadd.automaton.verify import CheckResult
+from orccadd.automaton.checks.verify import CheckResult
+from orccadd.automaton.compiler.explicit import DEFAULT_MAX_STATES, Progress
+from orccadd.automaton.language import ast as A
+from orccadd.automaton.language.program import Program
 from orccadd.config.robot import MAX_TOML_BYTES
 from orccadd.confine import Confinement
 from orccadd.errors import ConfigError, MissionError, OrccaddError, ParameterError, did_you_mean
@@ -70,7 +70,7 @@ def check_mission(
 ) -> tuple[Automaton | Network, Report]:
     """The compiled mission and its verification report; `MissionError` if it does not compile.
     A mission whose main procedure runs a large `par` of independent branches compiles as a
-    network (`orccadd.automaton.network`), checked on its products (`verify_network`).
+    network (`orccadd.automaton.compiler.network`), checked on its products (`verify_network`).
     `text`: the mission's content, already read from `path` (the daemon reads it by descriptor);
     `task_files`: how its task files are read (default: any file, by path)."""
     files = task_files or TaskFiles()

@@ -5,8 +5,18 @@
 The automaton that passed `verify` is exactly what the execution machine steps (`Runner`).
 
 With `allow_network=True`, a mission whose main procedure runs a `par` of independent branches
-that would multiply out compiles to a `Network` instead (network.py: an automaton per branch and
-one for the context), checked by `verify_network` and stepped by `NetworkRunner`.
+that would multiply out compiles to a `Network` instead (an automaton per branch and one for the
+context), checked by `verify_network` and stepped by `NetworkRunner`.
+
+One subpackage per stage, each importing only those before it:
+
+    language/   grammar and parser, syntax tree, semantic checks and expansion, the kernel
+    compiler/   kernel terms -> explicit automaton (constructive causality) or network
+    checks/     properties with counterexamples, coverage, the interpreter (the second route), views
+    promela/    the spin models that cross-check the checks
+    runtime/    `Runner` and `NetworkRunner`, what the daemon's automaton thread steps
+
+This module is their front: compile a mission's text or file, check it, step it.
 """
 
 from __future__ import annotations
@@ -15,16 +25,17 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Literal, overload
 
-from orccadd.automaton import ast as A
-from orccadd.automaton.automaton import Automaton, Runner
-from orccadd.automaton.compiler import DEFAULT_MAX_STATES, Progress, compile_program
-from orccadd.automaton.elaborate import elaborate
-from orccadd.automaton.network import Network, compile_mission, find_split
-from orccadd.automaton.network_runner import NetworkRunner
-from orccadd.automaton.network_verify import verify_network
-from orccadd.automaton.parser import load_mission_file, parse_mission
-from orccadd.automaton.program import Program
-from orccadd.automaton.verify import Report, verify
+from orccadd.automaton.checks.network_verify import verify_network
+from orccadd.automaton.checks.verify import Report, verify
+from orccadd.automaton.compiler.automaton import Automaton
+from orccadd.automaton.compiler.explicit import DEFAULT_MAX_STATES, Progress, compile_program
+from orccadd.automaton.compiler.network import Network, compile_mission, find_split
+from orccadd.automaton.language import ast as A
+from orccadd.automaton.language.elaborate import elaborate
+from orccadd.automaton.language.parser import load_mission_file, parse_mission
+from orccadd.automaton.language.program import Program
+from orccadd.automaton.runtime.network_runner import NetworkRunner
+from orccadd.automaton.runtime.runner import Runner
 from orccadd.errors import MissionError
 from orccadd.types import TaskFileReader
 

@@ -28,7 +28,7 @@ from orccadd.confine import Confinement, read_fd
 from orccadd.daemon.compile_cache import CompileCache
 from orccadd.errors import MissionError, OrccaddError
 
-MAX_MISSION_CHARS = 1_000_000  # orccadd.automaton.parser's (tests/daemon/test_compile_cache.py)
+MAX_MISSION_CHARS = 1_000_000  # orccadd.automaton.language.parser's (tests/daemon/test_compile_cache.py)
 MAX_MISSION_BYTES = 4 * MAX_MISSION_CHARS  # UTF-8: at most 4 bytes a character
 RESERVE_BYTES = 16 << 20
 

@@ -117,7 +117,7 @@ def cmd_modules(args: argparse.Namespace) -> int:
 
 def cmd_check(args: argparse.Namespace) -> int:
     from orccadd.automaton import Network, compile_file, verify, verify_network
-    from orccadd.automaton.verify import format_trace
+    from orccadd.automaton.checks.verify import format_trace
     from orccadd.mission import check_mission
     from orccadd.task.spec import read_task_interface
 
@@ -172,7 +172,7 @@ def _on_robot(a: Any, config: str | None) -> list[Any]:
     joints): `config`'s, else the service's on this PC; without either, the parameter names
     alone (they do not depend on the robot) and a warning that says which checks did not run
     (never a silent ok)."""
-    from orccadd.automaton.verify import WARNING, CheckResult
+    from orccadd.automaton.checks.verify import WARNING, CheckResult
     from orccadd.config.shipped import SERVICE_CONFIG, robot_config_path
     from orccadd.mission import check_on_robot, check_parameter_names
     from orccadd.robot import create_resource, load_cell_config
@@ -199,7 +199,7 @@ def _on_robot(a: Any, config: str | None) -> list[Any]:
 
 def cmd_graph(args: argparse.Namespace) -> int:
     from orccadd.automaton import Network, compile_file
-    from orccadd.automaton.views import full_view, minimize, project, render, to_dot
+    from orccadd.automaton.checks.views import full_view, minimize, project, render, to_dot
     from orccadd.task.spec import read_task_interface
 
     a = compile_file(args.file, task_files=read_task_interface, progress=_progress(), allow_network=True)
@@ -217,7 +217,7 @@ def cmd_graph(args: argparse.Namespace) -> int:
 
 def _graph_network(net: Any, args: argparse.Namespace) -> int:
     """A network: the context's and each branch's automaton, each in full (they are small)."""
-    from orccadd.automaton.views import network_views, render, to_dot_network
+    from orccadd.automaton.checks.views import network_views, render, to_dot_network
 
     if args.abstract:
         raise OrccaddError(f"{args.file}: --abstract draws one automaton; this mission is {net.describe()}")
@@ -228,7 +228,7 @@ def _graph_network(net: Any, args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     from orccadd.automaton import compile_file
-    from orccadd.automaton.promela import PROPERTIES, export_model
+    from orccadd.automaton.promela.export import PROPERTIES, export_model
     from orccadd.task.spec import read_task_interface
 
     unknown = sorted(set(args.property or ()) - set(PROPERTIES))

@@ -1,4 +1,4 @@
-"""Events the program cannot tell apart are explored once (orccadd/automaton/classes.py): a
+"""Events the program cannot tell apart are explored once (orccadd/automaton/compiler/classes.py): a
 task's built-in type 3 exceptions under one `on fatal` are one class; two type 2 exceptions the
 procedure handles differently are two. Every member of a class reacts as its representative."""
 

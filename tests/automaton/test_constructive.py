@@ -1,4 +1,4 @@
-"""Constructive causality (Esterel v5's rule, `orccadd.automaton.constructive`): a signal's status
+"""Constructive causality (Esterel v5's rule, `orccadd.automaton.compiler.constructive`): a signal's status
 in an instant is established by what must or cannot be emitted, never by a guess that justifies
 itself. Programs Esterel refuses are refused at their line, naming the signal; programs it accepts
 keep their meaning; a network's branches follow the same rule."""
@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from orccadd.automaton import Network, Runner, compile_text, verify_network
-from orccadd.automaton.constructive import Env, analyse, establish
+from orccadd.automaton.compiler.constructive import Env, analyse, establish
 from orccadd.errors import MissionError
 from tests.automaton.conftest import two_branch_network
 
@@ -86,7 +86,7 @@ def test_three_valued_analysis_of_a_test_on_an_unknown_signal() -> None:
     can; the fixpoint establishes nothing (X stays unknown)."""
     a = compile_text(HEAD + "  present X then emit Y end\nend\n", "c.mission")
     x, y = (1 << a.program.internals.index(s) for s in ("X", "Y"))
-    from orccadd.automaton import kernel as K
+    from orccadd.automaton.language import kernel as K
 
     term = K.Present((K.INT, x), K.Emit(x), K.Emit(y))
     o = analyse(term, Env(0, 0, 0))
@@ -121,9 +121,9 @@ def test_a_network_branch_follows_the_same_rule() -> None:
 def test_the_reference_interpreter_refuses_them_too(body: str) -> None:
     """The interpreter (on the syntax tree, its own three-valued evaluation) refuses what the
     compiler refuses, in the instant it happens."""
-    from orccadd.automaton.elaborate import elaborate
-    from orccadd.automaton.interpreter import Interpreter, InterpreterError
-    from orccadd.automaton.parser import parse_mission
+    from orccadd.automaton.checks.interpreter import Interpreter, InterpreterError
+    from orccadd.automaton.language.elaborate import elaborate
+    from orccadd.automaton.language.parser import parse_mission
 
     text = HEAD + body + "\nend\n"
     interp = Interpreter(elaborate(parse_mission(text, "c.mission")))
@@ -148,7 +148,7 @@ def test_the_reference_interpreter_refuses_them_too(body: str) -> None:
     ],
 )
 def test_the_reference_interpreter_accepts_what_the_compiler_accepts(body: str, actions: list[str]) -> None:
-    from orccadd.automaton.interpreter import Interpreter
+    from orccadd.automaton.checks.interpreter import Interpreter
 
     a = compile_text(HEAD + body + "\nend\n", "c.mission")
     assert a.describe_actions(Interpreter(a.program).react(0)) == actions == first_instant(body)

@@ -6,7 +6,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from orccadd.automaton import compile_text, verify
-from orccadd.automaton.parser import parse_mission
+from orccadd.automaton.language.parser import parse_mission
 from orccadd.errors import MissionError
 from tests.automaton.conftest import KEEPSTABLE
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from orccadd.automaton import compile_file, verify
-from orccadd.automaton.views import minimize, project
+from orccadd.automaton.checks.views import minimize, project
 from tests.automaton.conftest import KEEPSTABLE, NO_GUARD
 from tests.conftest import ROOT
 
@@ -72,7 +72,7 @@ def test_exomars_scale_mission_passes_every_check() -> None:
 
 
 def _task_activations(t: object) -> int:
-    from orccadd.automaton import kernel as K
+    from orccadd.automaton.language import kernel as K
 
     if isinstance(t, K.Run):
         return 1

@@ -4,8 +4,8 @@ sequence costs O(1)), and are equal, hashed and `mentions`-ed as the sequence th
 
 from __future__ import annotations
 
-from orccadd.automaton import kernel as K
-from orccadd.automaton.ast import Loc
+from orccadd.automaton.language import kernel as K
+from orccadd.automaton.language.ast import Loc
 
 N = 200
 END_MASKS = tuple(1 << t for t in range(N))  # task t ends on input bit t

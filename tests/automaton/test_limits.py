@@ -8,9 +8,9 @@ import sys
 import pytest
 
 from orccadd.automaton import compile_text, verify
-from orccadd.automaton.automaton import Runner
-from orccadd.automaton.elaborate import MAX_EXPANDED_NESTING, MAX_EXPANDED_STATEMENTS
-from orccadd.automaton.parser import MAX_MISSION_CHARS, MAX_NESTING
+from orccadd.automaton.language.elaborate import MAX_EXPANDED_NESTING, MAX_EXPANDED_STATEMENTS
+from orccadd.automaton.language.parser import MAX_MISSION_CHARS, MAX_NESTING
+from orccadd.automaton.runtime.runner import Runner
 from orccadd.errors import MissionError
 from tests.conftest import ROOT
 
@@ -107,7 +107,8 @@ def test_a_pass_that_still_runs_out_of_stack_is_a_mission_error(monkeypatch: pyt
 
 
 def test_a_long_compilation_reports_its_progress(monkeypatch: pytest.MonkeyPatch) -> None:
-    from orccadd.automaton import compile_file, compiler
+    from orccadd.automaton import compile_file
+    from orccadd.automaton.compiler import explicit as compiler
 
     monkeypatch.setattr(compiler, "PROGRESS_EVERY_S", 0.0)  # every 64 states, however quick
     seen: list[tuple[int, int]] = []

@@ -19,10 +19,10 @@ from orccadd.automaton import (
     verify,
     verify_network,
 )
-from orccadd.automaton.compiler import compile_program
-from orccadd.automaton.interpreter import Interpreter
-from orccadd.automaton.network import compile_mission, find_split
-from orccadd.automaton.program import Program
+from orccadd.automaton.checks.interpreter import Interpreter
+from orccadd.automaton.compiler.explicit import compile_program
+from orccadd.automaton.compiler.network import compile_mission, find_split
+from orccadd.automaton.language.program import Program
 from orccadd.errors import MissionError
 from tests.automaton.conftest import two_branch_network
 from tests.automaton.random_par import random_mission

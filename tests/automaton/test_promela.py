@@ -8,8 +8,8 @@ import shutil
 import pytest
 
 from orccadd.automaton import compile_file, verify
-from orccadd.automaton.promela import export_promela
-from orccadd.automaton.promela_spin import c_compiler, check_name, parse_pan, run_spin
+from orccadd.automaton.promela.export import export_promela
+from orccadd.automaton.promela.spin import c_compiler, check_name, parse_pan, run_spin
 from orccadd.errors import OrccaddError
 from tests.automaton.conftest import KEEPSTABLE, NO_GUARD, UNHANDLED_T3
 

@@ -18,11 +18,11 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from orccadd.automaton import Automaton, compile_file, compile_text, verify
-from orccadd.automaton import kernel as K
-from orccadd.automaton.promela import export_model
-from orccadd.automaton.promela_props import PROPERTIES, exported_checks
-from orccadd.automaton.promela_spin import SpinVerdict, c_compiler, run_spin
-from orccadd.automaton.promela_structure import Names, export_structure
+from orccadd.automaton.language import kernel as K
+from orccadd.automaton.promela.export import export_model
+from orccadd.automaton.promela.props import PROPERTIES, exported_checks
+from orccadd.automaton.promela.spin import SpinVerdict, c_compiler, run_spin
+from orccadd.automaton.promela.structure import Names, export_structure
 from orccadd.errors import MissionError, OrccaddError
 from orccadd.task.spec import read_task_interface
 from tests.automaton.conftest import KEEPSTABLE, MISSIONS, NO_GUARD, TEST_MISSIONS, UNHANDLED_T3

@@ -5,10 +5,10 @@ the safe procedure as failed; the checks neither await it nor count on it."""
 from __future__ import annotations
 
 from orccadd.automaton import Runner, compile_text, verify
-from orccadd.automaton.automaton import MAIN, SAFE
-from orccadd.automaton.interpreter import Interpreter
-from orccadd.automaton.program import Program
-from orccadd.automaton.verify import Report
+from orccadd.automaton.checks.interpreter import Interpreter
+from orccadd.automaton.checks.verify import Report
+from orccadd.automaton.compiler.automaton import MAIN, SAFE
+from orccadd.automaton.language.program import Program
 
 HEADER = """
 mission M

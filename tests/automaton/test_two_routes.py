@@ -10,10 +10,10 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from orccadd.automaton import Automaton, Runner, compile_file, compile_text
-from orccadd.automaton.compiler import ReactionError
-from orccadd.automaton.elaborate import elaborate
-from orccadd.automaton.interpreter import Interpreter, InterpreterError
-from orccadd.automaton.parser import parse_mission
+from orccadd.automaton.checks.interpreter import Interpreter, InterpreterError
+from orccadd.automaton.compiler.explicit import ReactionError
+from orccadd.automaton.language.elaborate import elaborate
+from orccadd.automaton.language.parser import parse_mission
 from orccadd.errors import MissionError
 from tests.automaton.conftest import KEEPSTABLE
 

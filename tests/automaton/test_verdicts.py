@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from orccadd.automaton import Automaton, compile_file, compile_text, verify
-from orccadd.automaton.interpreter import Interpreter
-from orccadd.automaton.verify import CheckResult, Report, format_trace
+from orccadd.automaton.checks.interpreter import Interpreter
+from orccadd.automaton.checks.verify import CheckResult, Report, format_trace
 from orccadd.errors import MissionError
 from orccadd.offline.commands import cmd_check
 from orccadd.task.spec import read_task_interface

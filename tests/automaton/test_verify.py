@@ -7,8 +7,8 @@ from collections.abc import Callable
 import pytest
 
 from orccadd.automaton import Automaton, compile_file, compile_text, verify
-from orccadd.automaton.automaton import END
-from orccadd.automaton.verify import Report
+from orccadd.automaton.checks.verify import Report
+from orccadd.automaton.compiler.automaton import END
 from tests.automaton.conftest import UNHANDLED_T3
 
 HEADER = """

@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 
 from orccadd.automaton import compile_file
-from orccadd.automaton.automaton import SAFE
-from orccadd.automaton.views import TYPE_3, full_view, to_dot
+from orccadd.automaton.checks.views import TYPE_3, full_view, to_dot
+from orccadd.automaton.compiler.automaton import SAFE
 from orccadd.task.spec import read_task_interface
 from tests.conftest import ROOT
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from orccadd.automaton import parser
+from orccadd.automaton.language import parser
 from orccadd.daemon import compile_cache, compile_worker
 from orccadd.daemon.compile_cache import CompileCache
 from orccadd.daemon.machine import Machine

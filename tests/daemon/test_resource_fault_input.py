@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from orccadd.automaton.automaton import SAFE
+from orccadd.automaton.compiler.automaton import SAFE
 from orccadd.daemon.machine import Machine
 from orccadd.types import Status
 from orccadd.wire.schema import MissionResult

@@ -74,7 +74,7 @@ def test_a_compiler_answer_this_daemon_cannot_read_is_refused_saying_why(
     from orccadd.daemon import loader
 
     def newer_code(data: bytes) -> object:
-        raise AttributeError("Can't get attribute '_Shared' on <module 'orccadd.automaton.kernel'>")
+        raise AttributeError("Can't get attribute '_Shared' on <module 'orccadd.automaton.language.kernel'>")
 
     with machine.reactor.held():
         reply = machine.command("load", {"path": str(ROOT / "configs/missions/demo.mission")})

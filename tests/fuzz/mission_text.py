@@ -1,6 +1,6 @@
 """Grammar-aware mutations of mission texts.
 
-The shipped missions are parsed with the language's own grammar (orccadd/automaton/mission.lark)
+The shipped missions are parsed with the language's own grammar (orccadd/automaton/language/mission.lark)
 into lark trees; a mutation edits a tree (statements deleted, duplicated, swapped, moved, nested
 hundreds deep; expressions turned into `not not …` or long `or` chains; names, numbers and paths
 replaced), then `unparse` prints it back, and a last text-level step may cut it or insert a
@@ -18,7 +18,7 @@ import lark
 from hypothesis import strategies as st
 from lark import Token, Tree
 
-from orccadd.automaton.parser import GRAMMAR
+from orccadd.automaton.language.parser import GRAMMAR
 
 ROOT = Path(__file__).resolve().parents[2]
 SEEDS = sorted(

@@ -16,10 +16,10 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 
-from orccadd.automaton import kernel as K
-from orccadd.automaton.ast import Loc
-from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
-from orccadd.automaton.program import Site
+from orccadd.automaton.compiler.automaton import END, MAIN, SAFE, Automaton
+from orccadd.automaton.language import kernel as K
+from orccadd.automaton.language.ast import Loc
+from orccadd.automaton.language.program import Site
 
 
 class CoverageError(Exception):

@@ -8,7 +8,7 @@ re-running the instant on a copy of the program for every guess; and that status
 constructive semantics establishes (Esterel's rule): each node's `potential` is its instant in
 three-valued logic (what it must emit, what it can, its completion codes), signals present when
 they must be emitted, absent when they cannot be, iterated; computed on the syntax tree's nodes,
-apart from the compiler's (`constructive.py`, on kernel terms).
+apart from the compiler's (`compiler/constructive.py`, on kernel terms).
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ import copy
 import itertools
 from collections.abc import Callable
 
-from orccadd.automaton import ast as A
-from orccadd.automaton.compiler import ActionLayout
-from orccadd.automaton.program import Program
+from orccadd.automaton.compiler.explicit import ActionLayout
+from orccadd.automaton.language import ast as A
+from orccadd.automaton.language.program import Program
 from orccadd.errors import OrccaddError
 
 DONE, PAUSED = 0, 1

@@ -1,4 +1,4 @@
-"""Verifying a `Network` (network.py) without its product: the checks run on small products.
+"""Verifying a `Network` (compiler/network.py) without its product: the checks run on small products.
 
 Each product is an ordinary explicit automaton, checked by `verify`: the context (exactly), the
 branches the check needs (exactly: by default one, a property the branches it mentions), and the
@@ -32,14 +32,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from orccadd.automaton import ast as A
-from orccadd.automaton import kernel as K
-from orccadd.automaton.automaton import END, Automaton
-from orccadd.automaton.compiler import DEFAULT_MAX_STATES, compile_program
-from orccadd.automaton.coverage import CoverageError, executed_sites
-from orccadd.automaton.network import Network, _emits, remap_sites, substitute
-from orccadd.automaton.program import Program, TaskInfo
-from orccadd.automaton.verify import (
+from orccadd.automaton.checks.coverage import CoverageError, executed_sites
+from orccadd.automaton.checks.verify import (
     ERROR,
     NOTE,
     WARNING,
@@ -50,6 +44,12 @@ from orccadd.automaton.verify import (
     dead_code_result,
     verify,
 )
+from orccadd.automaton.compiler.automaton import END, Automaton
+from orccadd.automaton.compiler.explicit import DEFAULT_MAX_STATES, compile_program
+from orccadd.automaton.compiler.network import Network, _emits, remap_sites, substitute
+from orccadd.automaton.language import ast as A
+from orccadd.automaton.language import kernel as K
+from orccadd.automaton.language.program import Program, TaskInfo
 
 
 @dataclass(frozen=True)

@@ -17,9 +17,9 @@ from collections.abc import Callable, Iterable
 from functools import partial
 from pathlib import Path
 
-from orccadd.automaton import ast as A
-from orccadd.automaton import kernel as K
-from orccadd.automaton.program import (
+from orccadd.automaton.language import ast as A
+from orccadd.automaton.language import kernel as K
+from orccadd.automaton.language.program import (
     BUILTIN_T2,
     EVENT_KINDS,
     Program,

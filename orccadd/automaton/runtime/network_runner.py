@@ -1,4 +1,4 @@
-"""Steps a `Network` (network.py): the context's automaton and the branch automata of its `par`.
+"""Steps a `Network` (compiler/network.py): the context's automaton and the branch automata of its `par`.
 
 An instant is one lookup in the context. Where the context's reaction depends on the par's
 completion code (the row holds one reaction per code), the branches react first, each by its own
@@ -17,12 +17,12 @@ from __future__ import annotations
 import copy
 from typing import Any
 
-from orccadd.automaton.automaton import Automaton
-from orccadd.automaton.network import Network
+from orccadd.automaton.compiler.automaton import Automaton
+from orccadd.automaton.compiler.network import Network
 
 NetState = tuple[int, tuple[int, ...], int, int, int, frozenset[int]]
 DONE_I, PAUSED_I = 0, 1  # code indices (`Network.codes` is ordered: done, paused, the exits)
-# A branch instant left out of its table (not causal; network.py): computed ahead of the
+# A branch instant left out of its table (not causal; compiler/network.py): computed ahead of the
 # context's lookup, it only matters if the context takes it.
 _NO_REACTION = (-1, 0)
 
@@ -341,7 +341,7 @@ class NetworkRunner:
             if not self.n_alive:  # the par starts: every branch moves from its first state
                 self.n_alive = len(st)
             for b, nxt, actions in moves:
-                if nxt < 0:  # the verifier refuses a mission that can get here (network.py)
+                if nxt < 0:  # the verifier refuses a mission that can get here (compiler/network.py)
                     raise RuntimeError(f"branch {b} of the par has no reaction in state {st[b]}")
                 self.running = self.running & ~tasks[b][st[b]] | tasks[b][nxt]
                 events = self.state_events[b]

@@ -1,4 +1,4 @@
-"""Kernel terms → Promela processes: the code of the structural spin model (`promela_structure.py`).
+"""Kernel terms → Promela processes: the code of the structural spin model (`promela/structure.py`).
 
 One process per branch of every `par` (`proctype b<n>`, created once and reused each time the
 `par` starts again); the main and the safe procedure run in process `mission`. A parent drives a
@@ -25,7 +25,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from orccadd.automaton import kernel as K
+from orccadd.automaton.language import kernel as K
 from orccadd.errors import OrccaddError
 
 START, RESUME, KILL = 1, 2, 3

@@ -21,9 +21,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from orccadd.automaton import kernel as K
-from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
-from orccadd.automaton.network import Network
+from orccadd.automaton.compiler.automaton import END, MAIN, SAFE, Automaton
+from orccadd.automaton.compiler.network import Network
+from orccadd.automaton.language import kernel as K
 from orccadd.errors import OrccaddError
 
 TAU = ""
@@ -249,7 +249,7 @@ def network_views(net: Network, *, faults: bool = False) -> list[tuple[str, Lts]
 
 
 def to_dot_network(parts: list[tuple[str, Lts]], title: str) -> str:
-    """A network (network.py): each component's graph in a box of its own (the context's, then
+    """A network (compiler/network.py): each component's graph in a box of its own (the context's, then
     each branch's), drawn as `to_dot` draws one automaton."""
     out = [f'digraph "{_q(title)}" {{', *_DOT_HEAD]
     for k, (name, lts) in enumerate(parts):

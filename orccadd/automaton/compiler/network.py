@@ -20,7 +20,7 @@ hold) refuse the mission where it can get there, with the path.
 
 `NetworkRunner` steps them together: one lookup in the context, and one per branch an input of
 the instant concerns (or that moves on its own); the others stay paused at no cost. The verifier
-(`network_verify.py`) checks products of the context with one branch at a time.
+(`checks/network_verify.py`) checks products of the context with one branch at a time.
 
 Not split: a par inside the safe procedure, whose branches interact, or that a loop can end and
 start again within one instant (`loop par(...) end`: the context would step it twice); those
@@ -39,11 +39,10 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Generic, TypeVar
 
-from orccadd.automaton import kernel as K
-from orccadd.automaton.ast import Loc
-from orccadd.automaton.automaton import END, MAIN, Automaton
-from orccadd.automaton.classes import event_classes
-from orccadd.automaton.compiler import (
+from orccadd.automaton.compiler.automaton import END, MAIN, Automaton
+from orccadd.automaton.compiler.classes import event_classes
+from orccadd.automaton.compiler.constructive import Env, analyse
+from orccadd.automaton.compiler.explicit import (
     DEFAULT_MAX_STATES,
     ActionLayout,
     Progress,
@@ -59,8 +58,9 @@ from orccadd.automaton.compiler import (
     possible_inputs,
     resolve,
 )
-from orccadd.automaton.constructive import Env, analyse
-from orccadd.automaton.program import Program, Site
+from orccadd.automaton.language import kernel as K
+from orccadd.automaton.language.ast import Loc
+from orccadd.automaton.language.program import Program, Site
 from orccadd.errors import MissionError
 
 # A par is compiled apart when its branches' state counts multiplied exceed this (below, the

@@ -1,8 +1,8 @@
 """The structural spin model: Promela written from the program's kernel terms, not from the table.
 
-`promela.py` replays the compiled automaton, so spin re-checks the compiler's own output. This
+`promela/export.py` replays the compiled automaton, so spin re-checks the compiler's own output. This
 model is built from the elaborated program (`Program.main`, `Program.safe`) by another route: one
-process per parallel branch, code that follows the statements (`promela_terms.py`), and its own
+process per parallel branch, code that follows the statements (`promela/terms.py`), and its own
 account of signals and tasks. Where the two exports and the verifier agree, the compiler and the
 semantics have been checked against each other.
 
@@ -38,13 +38,13 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 
-from orccadd.automaton import ast as A
-from orccadd.automaton import kernel as K
-from orccadd.automaton.classes import EventClass, input_masks, task_classes
-from orccadd.automaton.program import Program
-from orccadd.automaton.promela_props import PROPERTIES, PropCode, check_properties, encode_properties
-from orccadd.automaton.promela_spin import SETTINGS
-from orccadd.automaton.promela_terms import Codegen
+from orccadd.automaton.compiler.classes import EventClass, input_masks, task_classes
+from orccadd.automaton.language import ast as A
+from orccadd.automaton.language import kernel as K
+from orccadd.automaton.language.program import Program
+from orccadd.automaton.promela.props import PROPERTIES, PropCode, check_properties, encode_properties
+from orccadd.automaton.promela.spin import SETTINGS
+from orccadd.automaton.promela.terms import Codegen
 from orccadd.errors import OrccaddError
 
 MAX_PROCESSES = 250  # spin's limit is 255, with the clock and the mission's process
@@ -176,7 +176,7 @@ def _header(p: Program, props: PropCode) -> list[str]:
     out = [
         f"/* mission {p.name} from {p.file}:",
         "   the structural model (orccadctl export-promela --model structure).",
-        "   Written from the program's statements, not from the compiled table (promela_structure.py).",
+        "   Written from the program's statements, not from the compiled table (promela/structure.py).",
         f"   Check with: {SETTINGS}",
     ]
     out += [f"   Not exported: {s}" for s in props.skipped]

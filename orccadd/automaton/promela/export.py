@@ -2,26 +2,26 @@
 
 Two models (`export_model`, `orccadctl export-promela --model ...`):
 
-- `structure` (the default, `promela_structure.py`): written from the program's statements, a
+- `structure` (the default, `promela/structure.py`): written from the program's statements, a
   process per parallel branch; spin then checks the compiler and the semantics against each other;
-- `lockstep` (`promela_lockstep.py`): both in one model, spin asserts they react alike;
+- `lockstep` (`promela/lockstep.py`): both in one model, spin asserts they react alike;
 - `table` (`export_promela` below): replays the compiled automaton's table, keeping its own account
   of which Robot-Tasks are active (from the start/stop actions of each transition) and applying the
   environment model itself: a transition whose inputs hold events of a task spin believes inactive
   is not taken.
 
 Both assert, after each instant, with the verifier's check names (`ok_<check>`, see
-`promela_spin.py`): safety (an instant holding a type 3 exception of an active task, or a
+`promela/spin.py`): safety (an instant holding a type 3 exception of an active task, or a
 resource's fault, enters the safe procedure, or ends it failed), conflicts (no two active tasks
-claim the same resource or joints), and the mission's `never` and `alternate` properties (`promela_props.py`).
+claim the same resource or joints), and the mission's `never` and `alternate` properties (`promela/props.py`).
 """
 
 from __future__ import annotations
 
-from orccadd.automaton import ast as A
-from orccadd.automaton.automaton import Automaton
-from orccadd.automaton.promela_props import PROPERTIES, check_properties, encode_properties
-from orccadd.automaton.promela_spin import SETTINGS, SpinVerdict, run_spin
+from orccadd.automaton.compiler.automaton import Automaton
+from orccadd.automaton.language import ast as A
+from orccadd.automaton.promela.props import PROPERTIES, check_properties, encode_properties
+from orccadd.automaton.promela.spin import SETTINGS, SpinVerdict, run_spin
 from orccadd.errors import OrccaddError
 
 __all__ = ["MODELS", "PROPERTIES", "SpinVerdict", "export_model", "export_promela", "run_spin"]
@@ -32,13 +32,13 @@ MAX_TASKS = 30  # the table model keeps the active tasks as the bits of one int
 
 def export_model(a: Automaton, model: str = "structure", properties: tuple[str, ...] = PROPERTIES) -> str:
     if model == "structure":
-        from orccadd.automaton.promela_structure import export_structure
+        from orccadd.automaton.promela.structure import export_structure
 
         return export_structure(a.program, properties)
     if model == "table":
         return export_promela(a, properties)
     if model == "lockstep":
-        from orccadd.automaton.promela_lockstep import export_lockstep
+        from orccadd.automaton.promela.lockstep import export_lockstep
 
         return export_lockstep(a, properties)
     raise OrccaddError(f"unknown model {model!r} (choose from {', '.join(MODELS)})")

@@ -1,4 +1,4 @@
-"""Mission text → syntax tree (`ast.py`). Every error is a `MissionError` citing file:line:col."""
+"""Mission text → syntax tree (`language/ast.py`). Every error is a `MissionError` citing file:line:col."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 
 import lark
 
-from orccadd.automaton import ast as A
+from orccadd.automaton.language import ast as A
 from orccadd.errors import MissionError
 
 GRAMMAR = Path(__file__).with_name("mission.lark")

@@ -4,7 +4,7 @@ combination the environment can produce (synchronous semantics, one reaction per
 Environment model, shared with the verifier: operator inputs may come in any combination; a
 Robot-Task raises events only while active, at most one per instant (the runtime keeps the most
 severe of one tick's events: T3 > T2 > post > pre > sync). Events the program cannot tell apart
-are explored once, through their class's representative (`classes.py`: e.g. a task's built-in
+are explored once, through their class's representative (`compiler/classes.py`: e.g. a task's built-in
 type 3 exceptions under one `on fatal`).
 """
 
@@ -18,13 +18,13 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TypeVar
 
-from orccadd.automaton import ast as A
-from orccadd.automaton import kernel as K
-from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
-from orccadd.automaton.causality import dependencies, find_cycle
-from orccadd.automaton.classes import EventClass, event_classes, event_reps
-from orccadd.automaton.constructive import Env, analyse, establish
-from orccadd.automaton.program import Program
+from orccadd.automaton.compiler.automaton import END, MAIN, SAFE, Automaton
+from orccadd.automaton.compiler.causality import dependencies, find_cycle
+from orccadd.automaton.compiler.classes import EventClass, event_classes, event_reps
+from orccadd.automaton.compiler.constructive import Env, analyse, establish
+from orccadd.automaton.language import ast as A
+from orccadd.automaton.language import kernel as K
+from orccadd.automaton.language.program import Program
 from orccadd.errors import MissionError
 
 DEFAULT_MAX_STATES = 200_000

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from orccadd.automaton import ast as A
+from orccadd.automaton.language import ast as A
 
 
 @dataclass(frozen=True)

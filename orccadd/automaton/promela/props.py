@@ -15,9 +15,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from orccadd.automaton import ast as A
-from orccadd.automaton.program import Program
-from orccadd.automaton.promela_spin import prop_bit
+from orccadd.automaton.language import ast as A
+from orccadd.automaton.language.program import Program
+from orccadd.automaton.promela.spin import prop_bit
 from orccadd.errors import OrccaddError
 
 # What an export can assert: the two built-in checks and the mission's own property lines.

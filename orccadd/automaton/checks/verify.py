@@ -34,10 +34,10 @@ from collections.abc import Callable, Iterator, Set
 from dataclasses import dataclass, field
 from functools import partial
 
-from orccadd.automaton import ast as A
-from orccadd.automaton.automaton import END, MAIN, SAFE, Automaton
-from orccadd.automaton.coverage import CoverageError, executed_sites
-from orccadd.automaton.program import Program, Site
+from orccadd.automaton.checks.coverage import CoverageError, executed_sites
+from orccadd.automaton.compiler.automaton import END, MAIN, SAFE, Automaton
+from orccadd.automaton.language import ast as A
+from orccadd.automaton.language.program import Program, Site
 from orccadd.types import TASK_TIMEOUT
 
 ERROR, WARNING, NOTE = "error", "warning", "note"

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from orccadd.automaton import kernel as K
-from orccadd.automaton.program import Program
+from orccadd.automaton.language import kernel as K
+from orccadd.automaton.language.program import Program
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
 """The kernel of the mission language and its synchronous semantics (one reaction per instant).
 
-A mission is elaborated (`elaborate.py`) into a kernel term; a *reaction* rewrites the term given
+A mission is elaborated (`language/elaborate.py`) into a kernel term; a *reaction* rewrites the term given
 the input signals present in the instant and returns the residual term (the program's next state),
 a completion code and the actions. Esterel's completion codes: 0 terminated, 1 paused (alive),
 k ≥ 2 exit of the trap with code k (outer traps have larger codes, so a parallel takes the max).
@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from orccadd.automaton.ast import Loc
+from orccadd.automaton.language.ast import Loc
 
 DONE = 0
 PAUSED = 1
@@ -229,7 +229,7 @@ class Handle:
 
 @dataclass(frozen=True, slots=True)
 class Hole:
-    """A `par` compiled apart as a network of branch automata (`network.py`). Its completion code
+    """A `par` compiled apart as a network of branch automata (`compiler/network.py`). Its completion code
     in an instant is given to the context's compilation like an input (`Instant.hole_code`), and
     the instant records whether the context steps it (afresh or not), and whether it kills it
     before or after. `alive`: started in an earlier instant. At most one per mission, stepped at
@@ -359,7 +359,7 @@ class Instant:
         self.cancelled: list[int] = []
         self.prev_in = 0  # the previous instant's inputs and emitted signals that `pre(S)` tests
         self.prev_int = 0
-        self.hole_code = PAUSED  # a `Hole`'s completion code in this instant (network.py)
+        self.hole_code = PAUSED  # a `Hole`'s completion code in this instant (compiler/network.py)
         self.hole_stepped = False
         self.hole_fresh = False  # the step started it afresh
         self.hole_killed = False  # killed after the step, or without one

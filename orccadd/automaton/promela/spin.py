@@ -1,6 +1,6 @@
 """Run spin's exhaustive safety verifier on a Promela model and read its verdict, check by check.
 
-Both exports (`promela.py`, the table replay; `promela_structure.py`, the model built from the
+Both exports (`promela/export.py`, the table replay; `promela/structure.py`, the model built from the
 program's structure) name each check's assertion `ok_<check>`: `ok_safety`, `ok_conflicts`,
 `ok_prop<i>_<Name>` for the mission's `property` lines. pan runs with `-c0` (it does not stop at the
 first error), so one run gives the verdict of every check in the model.

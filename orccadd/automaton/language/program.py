@@ -5,8 +5,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
-from orccadd.automaton.ast import Loc, MissionAst, PropDecl, SigExpr
-from orccadd.automaton.kernel import Term
+from orccadd.automaton.language.ast import Loc, MissionAst, PropDecl, SigExpr
+from orccadd.automaton.language.kernel import Term
 from orccadd.errors import OrccaddError
 
 # Event kinds of a Robot-Task as the mission sees them, in input-bit order within a task.
@@ -130,7 +130,7 @@ class Program:
 
 def sig_names(e: SigExpr) -> list[str]:
     """Every signal name an expression mentions (for messages)."""
-    from orccadd.automaton import ast as A
+    from orccadd.automaton.language import ast as A
 
     if isinstance(e, A.SigRef):
         return [e.name]

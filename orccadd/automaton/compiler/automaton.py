@@ -1,4 +1,4 @@
-"""The compiled Robot-Procedure: an immutable explicit automaton, and the runtime that steps it.
+"""The compiled Robot-Procedure: an immutable explicit automaton (`runtime.runner` steps it).
 
 At run time a reaction is one masked dictionary lookup: `table[state][inputs & relevant[state]]`
 gives `(next state, action bits)`. Action bits are ordered so that decoding them in bit order gives
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
-from orccadd.automaton.program import Program
+from orccadd.automaton.language.program import Program
 
 MAIN, SAFE, END = 0, 1, 2  # phases of a state
 STANDS_FOR_LIMIT = 64  # input sets a row is copied under at most (see `Automaton.stands_for`)
@@ -40,7 +40,7 @@ class Automaton:
     failed_bit: int
     safe_done_bit: int
     # per input index, the input bit standing for it in the table: its event class's representative
-    # (orccadd/automaton/classes.py; an operator input stands for itself)
+    # (orccadd/automaton/compiler/classes.py; an operator input stands for itself)
     event_rep: tuple[int, ...] = ()
 
     @property
@@ -97,7 +97,7 @@ class Automaton:
         one resource's fault (the first) where no active task runs on it (not in the first instant),
         events only from active tasks, at most one per task (T3 > T2 > post > pre > sync), each
         event standing as its class's representative (`event_rep`)."""
-        from orccadd.automaton.program import PRIORITY
+        from orccadd.automaton.language.program import PRIORITY
 
         p = self.program
         out = inputs & p.operator_mask
@@ -114,56 +114,6 @@ class Automaton:
             bit = best[2]
             out |= self.event_rep[bit.bit_length() - 1] if self.event_rep else bit
         return out & self.relevant[state]
-
-
-class Runner:
-    """Steps an automaton, one reaction per instant. Cheap enough for the highest-priority thread."""
-
-    __slots__ = ("automaton", "relevant", "state", "table")
-
-    def __init__(self, automaton: Automaton) -> None:
-        self.automaton = automaton
-        # a private plain-dict copy: the automaton's rows are read-only views, a lookup through one
-        # costs about 50 ns more; each row also under every input set it stands for (a class's
-        # other events: one lookup, no `normalize`); built once when the mission is loaded
-        self.table = tuple(
-            {x: hit for key, hit in row.items() for x in automaton.stands_for(key)} for row in automaton.table
-        )
-        self.relevant = automaton.relevant
-        self.state = 0
-
-    def react(self, inputs: int) -> int:
-        """Inputs present in this instant → action bits. Never raises for inputs outside the model."""
-        self.state, actions = self.peek(self.state, inputs)
-        return actions
-
-    def peek(self, state: int, inputs: int) -> tuple[int, int]:
-        """The reaction of `state` to `inputs`, (next state, action bits), without taking it."""
-        hit = self.table[state].get(inputs & self.relevant[state])
-        if hit is None:
-            hit = self.table[state][self.automaton.normalize(state, inputs)]
-        return hit
-
-    # the stepping interface the daemon drives a mission by, the same for a `NetworkRunner`
-    # (whose states are snapshots): where it is, what the tasks there are, whether it waits
-    def snapshot(self) -> int:
-        return self.state
-
-    def restore(self, state: int) -> None:
-        self.state = state
-
-    def active_in(self, state: int) -> tuple[int, ...]:
-        """The Robot-Tasks active in `state` (task indices, a task once)."""
-        return tuple(sorted(set(self.automaton.active[state])))
-
-    def waits(self, state: int) -> bool:
-        """`state` reacts to no input by staying as it is, doing nothing: it waits for one."""
-        nxt = self.table[state].get(0)
-        return nxt is None or (nxt[0] == state and nxt[1] == 0)
-
-    def number(self, state: int) -> int:
-        """The state as the trace records it."""
-        return state
 
 
 def _unpickle(fields: dict[str, Any]) -> Automaton:

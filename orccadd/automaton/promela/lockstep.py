@@ -1,6 +1,6 @@
 """Both routes in one spin model: the structural model and the compiled table, in lockstep.
 
-The clock of the structural model (`promela_structure.py`) also steps the table: after each instant
+The clock of the structural model (`promela/structure.py`) also steps the table: after each instant
 it looks up the table's transition for the inputs the environment gave (each class's first event,
 masked by the state's relevant inputs as the runtime does) and asserts that the table's actions and
 next active tasks are the model's own (`ok_lockstep`, check "lockstep"). spin explores every input
@@ -10,9 +10,9 @@ alike in every reachable instant: a far finer cross-check than comparing verdict
 
 from __future__ import annotations
 
-from orccadd.automaton.automaton import Automaton
-from orccadd.automaton.promela_props import PROPERTIES, PropCode
-from orccadd.automaton.promela_structure import Names, export_structure
+from orccadd.automaton.compiler.automaton import Automaton
+from orccadd.automaton.promela.props import PROPERTIES, PropCode
+from orccadd.automaton.promela.structure import Names, export_structure
 
 
 def export_lockstep(a: Automaton, properties: tuple[str, ...] = PROPERTIES) -> str:

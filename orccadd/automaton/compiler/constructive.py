@@ -24,7 +24,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from orccadd.automaton import kernel as K
+from orccadd.automaton.language import kernel as K
 
 Codes = frozenset[int]
 _DONE: Codes = frozenset((K.DONE,))
