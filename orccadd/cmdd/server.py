@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import json
 import logging
 import os
 import pwd
@@ -20,17 +19,15 @@ import signal
 import socket
 import stat
 import sys
-import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from orccadd.cellnet import keys
 from orccadd.cmdd import logfetch, views
-from orccadd.cmdd.cellpeer import CellPeer
+from orccadd.cmdd.cellplug import CellPlugin
 from orccadd.cmdd.csvlog import LogDir
 from orccadd.cmdd.logsession import LogSource, TelemetryLog, mission_record
+from orccadd.cmdd.rtlink import RtLink
 from orccadd.cmdd.urdf import urdf_path
 from orccadd.config.cell import read_cell_config
 from orccadd.config.cellnet import CellNetConfig
@@ -53,7 +50,7 @@ from orccadd.wire.commands import (
 )
 from orccadd.wire.roles import Roles, peer_credentials
 from orccadd.wire.schema import PROTOCOL_VERSION, H, MissionResult, S
-from orccadd.wire.socketdir import SocketPathError, prepare_socket_dir, urgent_socket_path
+from orccadd.wire.socketdir import SocketPathError, prepare_socket_dir
 from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 
 log = logging.getLogger("orccadd.cmdd")
@@ -66,15 +63,7 @@ ROLELESS_WAIT_S = 2.0
 # for at once (a newer one closes the oldest), each for its first line this long
 RESERVED_MAX = 4
 RESERVED_WAIT_S = 2.0
-RT_MAX = 1 << 20
-LATE_MAX = 256  # requests given up on whose late replies are still recognised
-# the cell's publishing loop sleeps at least this long (no spinning); it wakes at each joint
-# state's own deadline: a floor of 5 ms here held joints_hz 500 to ~180 a second
-CELL_TICK_S = 0.0005
-CELL_CATCH_UP_S = 0.05  # joint states late by up to this are still sent (the newest state each)
 CELL_SWITCH_INTERVAL_S = 0.0005  # with a cell: Zenoh's threads get the GIL this soon
-CELL_STATUS_MIN_S = 0.1  # a status on an event: not more often (its timing figures cost ~1 ms)
-CELL_TRACE_S = 0.05  # ... and at least this often (the trace's events to the cell)
 
 
 class ClientReader(asyncio.StreamReader):
@@ -95,136 +84,6 @@ class ClientReader(asyncio.StreamReader):
         self.ended.set()
 
 
-class RtLink:
-    """The SEQPACKET link to the real-time process. Requests go out as they come, each with its
-    own id; one reader task hands each reply to the request it answers. So a long request (a
-    `load` compiling for seconds) never holds up an `abort` sent after it."""
-
-    def __init__(self, path: str) -> None:
-        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET | socket.SOCK_CLOEXEC)
-        self.sock.connect(path)
-        self.sock.setblocking(False)
-        self.send_lock = asyncio.Lock()
-        self.waiting: dict[int, asyncio.Future[dict[str, Any]]] = {}
-        self.reader: asyncio.Task[None] | None = None
-        self.next_id = 0
-        self.closed = False
-        self.on_push: Callable[[dict[str, Any]], None] = lambda msg: None  # unasked: `{"push": …}`
-        self.oneway_id = 0  # requests whose reply nobody awaits: negative ids, counting down
-        self._oneway_lock = threading.Lock()  # `send_oneway` is called from other threads
-        # a one-way request refused (the real-time process replies to those only then)
-        self.on_refused: Callable[[dict[str, Any]], None] = lambda reply: None
-        self.discarded: dict[str, int] = {}  # what the real-time process dropped, its link full
-        self.late: dict[int, tuple[str, float]] = {}  # requests given up on: (command, when)
-        self.late_replies = 0
-
-    async def _read_replies(self) -> None:
-        loop = asyncio.get_running_loop()
-        with contextlib.suppress(OSError):
-            while True:
-                data = await loop.sock_recv(self.sock, RT_MAX)
-                if not data:
-                    break
-                try:
-                    reply = json.loads(data)
-                except ValueError:
-                    continue
-                if isinstance(reply, dict) and "push" in reply:
-                    self._pushed(reply)
-                    continue
-                rid = reply.get("id") if isinstance(reply, dict) else None
-                fut = self.waiting.pop(rid, None) if isinstance(rid, int) else None
-                if fut is not None and not fut.done():
-                    fut.set_result(reply)
-                elif isinstance(rid, int) and rid < 0:
-                    self.on_refused(reply)
-                elif isinstance(rid, int) and rid in self.late:
-                    self._late(rid, reply)
-        self.closed = True
-        for fut in self.waiting.values():
-            if not fut.done():
-                fut.set_result({"ok": False, "error": "the real-time process is gone"})
-        self.waiting.clear()
-
-    def _pushed(self, msg: dict[str, Any]) -> None:
-        if msg.get("push") == "link_discarded" and isinstance(msg.get("counts"), dict):
-            self.discarded = {str(k): int(v) for k, v in msg["counts"].items()}
-            log.error(
-                "the real-time process's link to this daemon was full: it discarded %s",
-                ", ".join(f"{n} {k}" for k, n in sorted(self.discarded.items())),
-            )
-            return
-        self.on_push(msg)
-
-    def _late(self, rid: int, reply: dict[str, Any]) -> None:
-        """A reply that came after its request was answered `NOT confirmed`: said, with what
-        it says (the client was told the command may have been done)."""
-        cmd, since = self.late.pop(rid)
-        self.late_replies += 1
-        log.warning(
-            "the real-time process answered %s %.1f s after the wait ended (its client was told "
-            "NOT confirmed): %s",
-            cmd,
-            time.monotonic() - since,
-            "ok" if reply.get("ok") else f"error: {reply.get('error')}",
-        )
-
-    def report(self) -> dict[str, Any]:
-        """For `status`'s `rt_link`: messages the real-time process discarded (its link full),
-        by kind; replies that came after their wait ended."""
-        return {"discarded": dict(self.discarded), "late_replies": self.late_replies}
-
-    def send_oneway(self, cmd: str, args: dict[str, Any]) -> bool:
-        """From any thread (a peer's signal from Zenoh's): `cmd` as a one-way request, a
-        negative id the real-time process replies to only to refuse it (`on_refused`). Sent
-        whole at once (one datagram) or not at all: False if the link's buffer is full or the
-        link is gone."""
-        if self.closed:
-            return False
-        with self._oneway_lock:  # each id once, on the link in the order of the ids
-            rid = self.oneway_id - 1
-            try:
-                self.sock.send(json.dumps({"id": rid, "cmd": cmd, "args": args}).encode())
-            except OSError:  # the buffer full (EAGAIN), or the link gone: the caller's queue then
-                return False
-            self.oneway_id = rid
-        return True
-
-    async def call(
-        self, cmd: str, args: dict[str, Any], timeout_s: float | None = RT_REPLY_S
-    ) -> dict[str, Any]:
-        """The reply to `cmd`, or an error reply (no answer within `timeout_s`; None: until one
-        comes or the link is lost)."""
-        if self.closed:
-            return {"ok": False, "error": "the real-time process is gone"}
-        loop = asyncio.get_running_loop()
-        if self.reader is None:
-            self.reader = loop.create_task(self._read_replies())
-        self.next_id += 1
-        rid = self.next_id
-        fut: asyncio.Future[dict[str, Any]] = loop.create_future()
-        self.waiting[rid] = fut
-        try:
-            async with self.send_lock:  # one message at a time on the socket
-                await loop.sock_sendall(self.sock, json.dumps({"id": rid, "cmd": cmd, "args": args}).encode())
-            return await asyncio.wait_for(fut, timeout_s)
-        except TimeoutError:
-            # not a failure: the command may have been done, and its reply come later (`_late`)
-            if len(self.late) >= LATE_MAX:
-                self.late.pop(next(iter(self.late)))
-            self.late[rid] = (cmd, time.monotonic())
-            return {
-                "ok": False,
-                "error": f"{cmd} NOT confirmed: the real-time process did not answer within "
-                f"{timeout_s:g} s; it may still have been done (`events` says)",
-            }
-        except OSError as e:
-            self.closed = True
-            return {"ok": False, "error": f"link to the real-time process lost: {e}"}
-        finally:
-            self.waiting.pop(rid, None)
-
-
 class CommandDaemon:
     def __init__(
         self,
@@ -238,7 +97,7 @@ class CommandDaemon:
     ) -> None:
         self.cfg = cfg
         self.net = net  # `[cell]`: a peer of a cell of PCs over Zenoh
-        self.cell: CellPeer | None = None  # its Zenoh peer, once joined
+        self.cell: CellPlugin | None = None  # its part in the cell (`cellplug`), once joined
         self.socket_path = socket_path
         self.log_dir = log_dir or Path(socket_path).parent / "logs"
         self.logs = LogDir(self.log_dir, cfg.socket_group)
@@ -272,7 +131,7 @@ class CommandDaemon:
                 self.missions = {int(m["generation"]): m for m in self.desc.get("missions", [])}
                 self._attach_units()
                 if self.cell is not None:  # the inputs it takes from the cell, its outputs to it
-                    self.cell.mission_changed(self.desc.get("mission"))
+                    self.cell.peer.mission_changed(self.desc.get("mission"))
 
     def _attach_units(self) -> None:
         """A cell's other resources' telemetry blocks (the first's is `tel`), once."""
@@ -346,12 +205,11 @@ class CommandDaemon:
             loop.add_signal_handler(sig, self.done.set)
         self._resume_log()
         pump = asyncio.create_task(self._pump())
-        peer, cell_pump = await self._join_cell()
+        if self.net is not None:
+            self.cell = await CellPlugin.join(self, self.net)
         await self.done.wait()
-        if cell_pump is not None:
-            cell_pump.cancel()
-        if peer is not None:
-            peer.close()
+        if self.cell is not None:
+            self.cell.close()
         for reader in self.readers.values():  # streams end now
             reader.ended.set()
         pump.cancel()
@@ -364,136 +222,6 @@ class CommandDaemon:
         with contextlib.suppress(FileNotFoundError):
             if os.stat(self.socket_path).st_ino == self.sock_ino:
                 os.unlink(self.socket_path)
-
-    async def _join_cell(self) -> tuple[CellPeer | None, asyncio.Task[None] | None]:
-        """With `[cell]`: the Zenoh peer and its publishing task. A cell that cannot be joined
-        (Zenoh missing, an endpoint taken, a bad certificate) is logged; the robot is served on
-        its socket all the same."""
-        if self.net is None:
-            return None, None
-        peer = CellPeer(self.net, self.answer, urgent_socket_path(self.socket_path))
-        try:
-            await peer.open()
-        except Exception as e:  # ImportError, zenoh.ZError: the daemon carries on without it
-            log.error("cell %s: cannot join: %s: %s", self.net.name, type(e).__name__, e)
-            peer.close()
-            return None, None
-        self.rt.on_push = lambda msg: self._pushed(peer, msg)
-        self.rt.on_refused = lambda reply: peer.say(
-            "cell: inputs refused",
-            logging.WARNING,
-            "cell: an input from the cell refused by the real-time process: %s",
-            reply.get("error"),
-        )
-        peer.deliver_now = self._deliver_now
-        peer.mission_changed(self.desc.get("mission"))
-        self.cell = peer
-        arrivals = asyncio.create_task(self._cell_arrivals(peer))
-        pump = asyncio.create_task(self._cell_pump(peer))
-        pump.add_done_callback(lambda _: arrivals.cancel())
-        return peer, pump
-
-    @staticmethod
-    def _pushed(peer: CellPeer, msg: dict[str, Any]) -> None:
-        """The real-time process's own news: a mission's output to the cell, emitted just now."""
-        if msg.get("push") == "cell_output" and isinstance(msg.get("name"), str):
-            peer.emit(msg["name"], str(msg.get("mission", "")))  # one not published: counted, said
-
-    def _mission_input(self, who: str, name: str, what: str) -> str:
-        """The loaded mission's input for a peer's signal or loss ("" if it takes none)."""
-        mission = self.desc.get("mission") or {}
-        if what == "signal":
-            return name if [name, who] in mission.get("remote_inputs", []) else ""
-        if what == "lost":
-            return next((n for n, p in mission.get("lost_inputs", []) if p == who), "")
-        return ""
-
-    def _deliver_now(self, who: str, name: str, what: str) -> bool:
-        """From Zenoh's thread: a `cell_input` datagram on the link, one-way (a negative id: the
-        real-time process serves it on arrival, traces it, and replies only to refuse it,
-        `RtLink.on_refused`); False if it could not be sent."""
-        taken = self._mission_input(who, name, what)
-        if not taken:
-            return True  # nothing to deliver: done
-        return self.rt.send_oneway("cell_input", {"input": taken, "peer": who})
-
-    async def _cell_arrivals(self, peer: CellPeer) -> None:
-        """Peers' signals and losses to the real-time process, one at a time in arrival order,
-        when they could not go straight (`_deliver_now`): each one the running mission takes is
-        one input of one instant (`cell_input`)."""
-        while True:
-            who, name, what = await peer.arrivals.get()
-            name = self._mission_input(who, name, what)
-            if not name:
-                continue
-            reply = await self.rt.call("cell_input", {"input": name, "peer": who})
-            if not reply.get("ok"):
-                peer.say(
-                    f"cell: {name} from {who} not taken",
-                    logging.WARNING,
-                    "cell: %s from %s not taken: %s",
-                    name,
-                    who,
-                    reply.get("error"),
-                )
-
-    def _cell_started(self, peer: CellPeer) -> None:
-        """A run began: a peer it must see is not there now, so its loss is this run's first news."""
-        mission = self.desc.get("mission") or {}
-        for _, who in mission.get("lost_inputs", []):
-            if who not in peer.alive:
-                peer.queue((who, "", "lost"))
-
-    async def _cell_pump(self, peer: CellPeer) -> None:
-        """Publish to the cell: every trace event as it comes (and the status with it), the
-        status at `status_hz`, the joint states at `joints_hz` (each at its deadline, on a fixed
-        grid: the rate asked is the rate sent; `benchmarks/cell_joints.py`)."""
-        assert self.net is not None
-        trace = RingReader(self.tel.trace, self.tel.header, H.TRACE_HEAD, from_now=True)
-        joints_s = 1.0 / self.net.joints_hz if self.net.joints_hz else float("inf")
-        status_s = 1.0 / self.net.status_hz
-        next_joints = next_status = time.monotonic()
-        status_at = 0.0
-        while True:
-            try:
-                seen = trace.lost
-                new = trace.poll()
-                if trace.lost > seen:  # the ring overran: the outputs in those records unchecked
-                    peer.untraced(trace.lost - seen)
-                if len(new):
-                    await self.refresh()
-                    for rec in new:
-                        event = self.decode_trace(rec)
-                        peer.put(keys.EVENTS, event)
-                        peer.traced(event)  # an output it emitted: told of, or counted lost
-                        if event.get("command") == "start":
-                            self._cell_started(peer)
-                now = time.monotonic()
-                if now >= next_status or (len(new) and now - status_at >= CELL_STATUS_MIN_S):
-                    await self.refresh()
-                    log_state = self.recording.describe() if self.recording else self.last_log
-                    peer.put(keys.STATUS, self._status(log_state))
-                    next_status = max(next_status + status_s, now)
-                    status_at = now
-                if now >= next_joints:
-                    peer.put(keys.JOINTS, views.joint_states(self.tel, self.desc, self.units()))
-                    # on the deadlines' grid: one missed (the loop busy) is made up at once, up
-                    # to `CELL_CATCH_UP_S` behind; beyond, the grid starts again from now
-                    next_joints += joints_s
-                    if next_joints < now - CELL_CATCH_UP_S:
-                        next_joints = now + joints_s
-            except asyncio.CancelledError:
-                raise
-            except Exception as e:  # a publication lost must not end the others
-                peer.say(
-                    "cell: publishing failed",
-                    logging.WARNING,
-                    "cell: publishing: %s: %s",
-                    type(e).__name__,
-                    e,
-                )
-            nxt = min(next_joints, next_status, time.monotonic() + CELL_TRACE_S)
-            await asyncio.sleep(max(CELL_TICK_S, nxt - time.monotonic()))
 
     async def _pump(self) -> None:
         """Background: follow the log, notice the real-time process going away."""
@@ -689,14 +417,18 @@ class CommandDaemon:
     @handles("status")
     async def do_status(self, writer: asyncio.StreamWriter, rid: Any) -> dict[str, Any]:
         await self.refresh()
-        return self._status(self.recording.describe() if self.recording else self.last_log)
+        return self.status_of(self.log_state())
 
-    def _status(self, log_state: dict[str, Any] | None) -> dict[str, Any]:
+    def log_state(self) -> dict[str, Any] | None:
+        """The log being written, or the last one (None: none since the start)."""
+        return self.recording.describe() if self.recording else self.last_log
+
+    def status_of(self, log_state: dict[str, Any] | None) -> dict[str, Any]:
         """`status`'s result; with a cell, its `cell` section (what was dropped, and why)."""
         out = views.status(self.tel, self.desc, log_state, self.units())
         out["rt_link"] = self.rt.report()
         if self.cell is not None:
-            out["cell"] = self.cell.report()
+            out["cell"] = self.cell.peer.report()
         return out
 
     @handles("monitor")

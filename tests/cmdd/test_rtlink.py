@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from orccadd.cmdd.server import RtLink
+from orccadd.cmdd.rtlink import RtLink
 
 
 @pytest.fixture
