@@ -4,7 +4,6 @@ waits on the device, and one that fails is a fault of that resource until a rese
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Iterator
 
 import pytest
@@ -16,6 +15,7 @@ from orccadd.robot import create_resource, load_robot_config, with_backend
 from orccadd.runtime.threads import ThreadGroup
 from orccadd.types import CommandMode, Status
 from tests.daemon.conftest import ROBOT
+from tests.ursim.conftest import wait_until
 
 
 @pytest.fixture
@@ -27,13 +27,6 @@ def arm() -> Iterator[PhysicalResource]:
         yield res
     finally:
         res.shutdown()
-
-
-def wait_until(what: str, pred: object, timeout_s: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not pred():  # type: ignore[operator]
-        assert time.monotonic() < deadline, what
-        time.sleep(0.005)
 
 
 def test_queuing_never_waits_on_the_device_and_actions_keep_their_order(
@@ -52,7 +45,7 @@ def test_queuing_never_waits_on_the_device_and_actions_keep_their_order(
         worker.request(name)  # returns while the device holds the first call
     assert done == []  # (were it waiting, the device would have answered first)
     release.set()
-    wait_until("the actions performed", lambda: len(done) == 3)
+    wait_until(lambda: len(done) == 3, what="the actions performed")
     assert done == ["close_gripper", "open_gripper", "close_gripper"]
     assert worker.performed == 3 and worker.failed == 0
     worker.close()
@@ -71,7 +64,7 @@ def test_a_failed_action_is_a_fault_of_its_resource_until_a_reset(
     threads = ThreadGroup("test")
     worker = OutputWorker(arm, threads)
     worker.request("close_gripper")
-    wait_until("the failure", lambda: worker.failed == 1)
+    wait_until(lambda: worker.failed == 1, what="the failure")
     st = arm.read(0.002)
     assert st.status & Status.FAULT  # the task's ResourceFault at its next tick
     assert arm.fault is not None and arm.fault.kind == "device"
@@ -88,7 +81,7 @@ def test_an_action_the_resource_does_not_have_is_a_fault_too(arm: PhysicalResour
     threads = ThreadGroup("test")
     worker = OutputWorker(arm, threads)
     worker.request("no_such_output")  # the sim arm has no outputs: its set_output refuses
-    wait_until("the refusal", lambda: worker.failed == 1)
+    wait_until(lambda: worker.failed == 1, what="the refusal")
     assert arm.read(0.0).status & Status.FAULT and "has no output 'no_such_output'" in arm.fault_message
     worker.close()
     assert threads.join(5.0) == []
