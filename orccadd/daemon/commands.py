@@ -295,12 +295,14 @@ class RtCommands:
         """Fault injection for commissioning and tests (only with --allow-fault-injection)."""
         if not self.m.allow_fault_injection:
             raise CommandError("fault injection is disabled (start orccadd with --allow-fault-injection)")
-        on = self.m.unit(resource) if resource else self.m.units[0]
+        on = self.m.unit(resource) if resource else self.m.default
         if fault == "resource":
             try:
                 on.resource.inject_fault("device", "injected fault")
             except OrccaddError as e:
                 raise CommandError(str(e)) from None
+        elif fault == "control_thread":
+            on.loop.inject_failure()
         else:
             if not 0.0 <= extra_ms <= MAX_INJECTED_MS:
                 raise CommandError(f"inject: extra_ms (={extra_ms:g}) must be in [0, {MAX_INJECTED_MS:g}]")

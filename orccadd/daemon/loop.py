@@ -87,6 +87,7 @@ class SwitchingLoop(ControlLoop):
         self.switches = 0
         self._busy_ns = 0  # fault injection: extra compute per tick (real overruns)
         self._busy_ticks = 0
+        self._fail_wanted = False  # fault injection: the next tick raises (the thread ends)
         self._stop_wanted = False
         self._slack_r, self._slack_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self._slack_wanted = False
@@ -127,6 +128,10 @@ class SwitchingLoop(ControlLoop):
         self._busy_ns = extra_ns
         self._busy_ticks = ticks
 
+    def inject_failure(self) -> None:
+        """Fault injection: the next tick raises, ending the control thread (a bug's effect)."""
+        self._fail_wanted = True
+
     @property
     def slack_fd(self) -> int:
         """Readable once a tick has ended after the last `want_slack()`."""
@@ -149,6 +154,9 @@ class SwitchingLoop(ControlLoop):
     # ---- the control thread ---------------------------------------------------------------
     def step(self, t_s: float) -> None:
         self._t_s = t_s
+        if self._fail_wanted:
+            self._fail_wanted = False
+            raise RuntimeError("injected failure of the control thread")
         if self._stop_wanted:
             self._stop_wanted = False
             self.resource.safe_stop()

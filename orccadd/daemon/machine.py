@@ -19,25 +19,23 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
 from typing import Any
 
 from orccadd.config.cell import CellConfig
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.commands import RtCommands, describe_resource
 from orccadd.daemon.inline import InlineReactor
-from orccadd.daemon.loop import SwitchingLoop
-from orccadd.daemon.outputs import OutputWorker
 from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.supervision import FaultHistory, Supervisor
+from orccadd.daemon.unit import ResourceUnit
 from orccadd.fault import Fault, FaultKind, StopCause
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
-from orccadd.runtime.threads import ThreadGroup
-from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
+from orccadd.task import EventRegistry, RobotTask
 from orccadd.task.events import EventKind
+from orccadd.types import Phase
 from orccadd.wire.commands import COMMANDS, Dispatcher, with_defaults
 from orccadd.wire.schema import MissionResult, S, Trace, status_names
 from orccadd.wire.telemetry import TelemetryBlock
@@ -46,37 +44,10 @@ log = logging.getLogger("orccadd.machine")
 NOTES_KEPT = 50
 
 
-@dataclass
-class Unit:
-    """One resource and its clock domain: its control loop (one thread of its own), Hold task,
-    event queue (the loop's events, one producer), telemetry block and supervisor."""
-
-    cfg: RobotConfig
-    resource: PhysicalResource
-    clock: Clock
-    tel: TelemetryBlock
-    queue: EventQueue
-    loop: SwitchingLoop
-    supervisor: Supervisor
-
-    @property
-    def name(self) -> str:
-        return self.resource.name
-
-
-def hold_task(
-    cfg: RobotConfig, resource: PhysicalResource, registry: EventRegistry, queue: EventQueue, name: str
-) -> RobotTask:
-    """The resource's own task, which holds it for as long as nothing else commands it."""
-    spec = load_task_file(cfg.resolve(cfg.daemon.hold_task))
-    spec = replace(spec, task=replace(spec.task, name=name, timeout_s=float("inf")))
-    return build_task(spec, resource, registry, queue)
-
-
 class Machine:
-    """Missions, the automaton and commands, over every resource of the robot (`units`, in the
-    config's order; `loop`, `resource`, `tel`, ... are the first's, which carries the status area
-    and the trace). Methods run in the automaton thread only."""
+    """Missions, the automaton and commands, over every resource of the daemon (`units`, in the
+    config's order, each a `ResourceUnit`: no resource is special). Methods run in the automaton
+    thread only."""
 
     def __init__(
         self,
@@ -89,81 +60,65 @@ class Machine:
         allow_fault_injection: bool = False,
     ) -> None:
         self.cell = cell
-        self.cfg = cell.resources[0]
         self.pub = Publisher(telemetry[0])
         self.registry = EventRegistry()
         self.faults = FaultHistory()
         self.faults.on_cause = lambda n: self.pub.trace(Trace.FAULT, self.now_s(), code=n)
-        loops: list[SwitchingLoop] = []
-        queues: list[EventQueue] = []
-        for cfg, res, clock, tel in zip(cell.resources, resources, clocks, telemetry, strict=True):
-            queue = EventQueue(4096)
-            name = f"Hold_{res.name}" if cell.listed else "Hold"  # events and tunes name it
-            loops.append(
-                SwitchingLoop(
-                    res,
-                    clock,
-                    hold_task(cfg, res, self.registry, queue, name),
-                    queue,
-                    tel,
-                    wake_fd,
-                    overrun_limit=cfg.daemon.overrun_limit,
-                    blend_ticks=int(round(cfg.daemon.switch_blend_s / cfg.control_period_s)),
-                )
-            )
-            queues.append(queue)
-        self.allow_fault_injection = allow_fault_injection
-        self.notes: list[str] = []  # recent notable happenings (bounded), for `describe`
-        self.mission = MissionControl(loops, self.pub, self.note, self.abort)
-        self.output_threads = ThreadGroup("outputs")  # each resource's output actions
-        self.mission.outputs = {res.name: OutputWorker(res, self.output_threads) for res in resources}
-        self.reactor = InlineReactor(self.mission, self.registry)
         self.units = tuple(
-            Unit(
+            ResourceUnit(
                 cfg,
                 res,
                 clock,
                 tel,
-                queue,
-                loop,
-                Supervisor(cfg, res, loop, self.mission, self.note, self.faults),
+                self.registry,
+                wake_fd,
+                hold_name=f"Hold_{res.name}" if cell.listed else "Hold",  # events and tunes name it
             )
-            for cfg, res, clock, tel, queue, loop in zip(
-                cell.resources, resources, clocks, telemetry, queues, loops, strict=True
-            )
+            for cfg, res, clock, tel in zip(cell.resources, resources, clocks, telemetry, strict=True)
         )
+        self.allow_fault_injection = allow_fault_injection
+        self.notes: list[str] = []  # recent notable happenings (bounded), for `describe`
+        self.mission = MissionControl([u.loop for u in self.units], self.pub, self.note, self.abort)
+        self.mission.outputs = {u.name: u.outputs for u in self.units}
+        self.reactor = InlineReactor(self.mission, self.registry)
         for u in self.units:
+            u.bind(Supervisor(u.cfg, u.resource, u.loop, self.mission, self.note, self.faults))
             u.loop.reactor = self.reactor
         self.mission.publish_task_ids()
-        first = self.units[0]
-        self.resource, self.clock, self.tel, self.loop, self.queue = (
-            first.resource, first.clock, first.tel, first.loop, first.queue,
-        )  # fmt: skip
-        self.supervisor = first.supervisor
+        # the daemon's clock (trace times, command times): the fastest resource's, which also
+        # paces the automaton thread's work between ticks (`pacing`)
+        self.pacing = min(self.units, key=lambda u: u.cfg.control_period_s)
         self.rt_commands = RtCommands(self)
         self.commands = Dispatcher(self.rt_commands, "rt")
         self.publish()
 
     def close_outputs(self, timeout_s: float) -> list[str]:
-        """The output threads end once what was queued is done, waited for `timeout_s` in all;
-        the names of those still running (a device call that hangs), logged."""
-        for w in self.mission.outputs.values():
-            w.close()
-        return self.output_threads.join(timeout_s)
+        """Every unit's threads but the control threads' ended (their output actions done, a
+        reset's device work), waited for `timeout_s` in all; the names of those still running."""
+        end = time.monotonic() + timeout_s
+        return [name for u in self.units for name in u.join(max(0.0, end - time.monotonic()))]
 
-    def unit(self, name: str) -> Unit:
+    def unit(self, name: str) -> ResourceUnit:
         """The resource `name`'s unit; `CommandError` naming those there are."""
         for u in self.units:
             if u.name == name:
                 return u
         raise CommandError(f"no resource {name!r} (resources: {', '.join(u.name for u in self.units)})")
 
-    def unit_of(self, task: RobotTask) -> Unit:
+    def unit_of(self, task: RobotTask) -> ResourceUnit:
         return self.unit(task.resource.name)
 
     @property
+    def default(self) -> ResourceUnit:
+        """The resource a client addresses when it names none: the first listed. The wire's
+        top-level `joints`, `telemetry`, `resource`, `helper_pid` are its, so that a client of a
+        one-resource daemon needs no name; nothing in the daemon itself treats it apart."""
+        return self.units[0]
+
+    @property
     def fault(self) -> StopCause | None:
-        """The first resource's stop cause (None if none is safe-stopped)."""
+        """The stop cause of the first resource in the config's order that is safe-stopped
+        (None if none is)."""
         return next((u.supervisor.fault for u in self.units if u.supervisor.fault), None)
 
     def abort(self, why: str, kind: FaultKind = FaultKind.ABORT) -> None:
@@ -176,12 +131,12 @@ class Machine:
     def link_lost(self, why: str) -> None:
         """The command daemon's link is gone: noted; the run aborted if the config says so."""
         self.note(why, logging.WARNING)
-        if self.cfg.daemon.on_command_daemon_loss == "safe_stop" and self.mission.running:
+        if self.cell.daemon.on_command_daemon_loss == "safe_stop" and self.mission.running:
             self.abort(f"{why} (on_command_daemon_loss = safe_stop)")
 
     # ---- helpers ------------------------------------------------------------------------
     def now_s(self) -> float:
-        return self.clock.now_ns() * 1e-9
+        return self.pacing.clock.now_ns() * 1e-9
 
     def note(self, msg: str, level: int = logging.INFO) -> None:
         """A line for the journal (WARNING for what an operator must see: a safe stop, an abort,
@@ -199,22 +154,23 @@ class Machine:
                 S.INSTANTS: float(mc.instants),
                 S.RESULT: float(mc.result),
                 S.FAULTED: float(self.faults.count) if self.fault else 0.0,
-                S.HELPER_PID: float(self.resource.helper_pid()),
+                S.HELPER_PID: float(self.default.resource.helper_pid()),
             }
         )
 
     def describe(self) -> dict[str, Any]:
         mc = self.mission
+        d = self.default
         return {
             "robot": self.cell.name,
             "config": self.cell.source,
-            "dof": self.cfg.dof,
-            "joints": list(self.cfg.joint_names),
+            "dof": d.cfg.dof,
+            "joints": list(d.cfg.joint_names),
             # the limits the controller enforces, per joint (SI units in the keys)
-            "joint_limits": joint_limits(self.cfg),
-            "period_s": self.cfg.control_period_s,
-            "telemetry": self.tel.name,
-            "resource": describe_resource(self.resource),
+            "joint_limits": joint_limits(d.cfg),
+            "period_s": d.cfg.control_period_s,
+            "telemetry": d.tel.name,
+            "resource": describe_resource(d.resource),
             "resources": [self._describe_unit(u) for u in self.units],
             "generation": mc.generation,
             "tasks": [t.name for t in mc.tasks()],
@@ -228,7 +184,7 @@ class Machine:
             "faults": self.faults.recent(),
         }
 
-    def _describe_unit(self, u: Unit) -> dict[str, Any]:
+    def _describe_unit(self, u: ResourceUnit) -> dict[str, Any]:
         """One resource as an operator sees it: backend, clock, joints, state, fault, telemetry."""
         st = u.resource.state
         return {
@@ -263,6 +219,8 @@ class Machine:
         held_fault = ""  # a type 3 of a resource the mission has no input for (it does not declare it)
         faults: list[int] = []  # the mission's `R.fault` inputs: one per instant, in resource order
         for k, u in enumerate(self.units):
+            if why := u.take_failure():
+                self._control_failed(u, why)
             index, upto = u.queue.tail, self.reactor.upto[k]
             for t_s, eid in u.queue.drain():
                 info = self.registry.info(eid)
@@ -296,6 +254,18 @@ class Machine:
             self._end_on_held_fault(held_fault)
         self.publish()
 
+    def _control_failed(self, u: ResourceUnit, why: str) -> None:
+        """`u`'s control thread ended on `why` (it safe-stopped the resource first): its active
+        task's type 3 `LawError` (the controller failed), queued here as its tick would have
+        (the thread is gone: this one is the queue's only producer now), so the mission takes
+        it as it takes any type 3: the task's own event, or `R.fault` when it holds."""
+        self.note(f"{u.name}: {why}: safe-stopped (a reset starts it again)", logging.ERROR)
+        task = u.loop.active
+        if task is not None and task.phase is not Phase.FAULT:
+            task.raise_t3(u.clock.now_ns() * 1e-9, "LawError", why)
+        else:
+            u.supervisor.stop(why, FaultKind.INTERNAL)
+
     def _runs_task(self, task: str) -> bool:
         """`task` is a Robot-Task of the mission, active where the run is now: its type 3 is its own
         event. Otherwise (the daemon's Hold task, or a task the mission has already stopped) the
@@ -318,7 +288,8 @@ class Machine:
         """A resource the mission does not declare safe-stopped: the mission has no input for it,
         so the run ends here, aborted, and every other resource is back on its Hold task at its
         next tick: held where it is, not stopped."""
-        self.note(f"run ended: {why}; the other resources are held", logging.WARNING)
+        others = "; the other resources are held" if len(self.units) > 1 else ""
+        self.note(f"run ended: {why}{others}", logging.WARNING)
         self.mission.end(MissionResult.ABORTED)
 
     def _task_fault(self, task: str) -> Fault | None:

@@ -4,7 +4,8 @@ Real-time threads where permitted, and nothing else:
 
 - a control thread per resource, its clock domain (SCHED_FIFO `control_priority`): it ticks the
   resource's active Robot-Task every period of that resource, on the resource's clock (our own
-  deadlines, or the device's cycle);
+  deadlines, or the device's cycle); it belongs to the resource's unit (`daemon.unit`), which
+  owns it and the resource's other threads, and whatever ends it is that resource's fault;
 - the main thread is the automaton thread (SCHED_FIFO `automaton_priority`, above the control
   threads): it sleeps in `poll()` on the control threads' event pipe, the command daemon's
   connection, signals and the command daemon's pidfd, and reacts.
@@ -27,7 +28,6 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 from collections import deque
 from pathlib import Path
@@ -35,7 +35,7 @@ from typing import Any
 
 from orccadd.config.cell import CellConfig
 from orccadd.config.shipped import list_configs, robot_config_path
-from orccadd.daemon.machine import Machine, Unit
+from orccadd.daemon.machine import Machine
 from orccadd.daemon.notify import Notifier
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.urgent import UrgentSocket
@@ -46,12 +46,12 @@ from orccadd.physres.base import PhysicalResource
 from orccadd.robot import create_resource, load_cell_config, simulated, with_backend
 from orccadd.runtime import enter_realtime, leave_realtime
 from orccadd.runtime.rt import RealtimeReport, lock_memory_early
-from orccadd.runtime.threads import ThreadGroup
+from orccadd.runtime.threads import ThreadGroup, threads_left
 from orccadd.task import load_task_file
 from orccadd.task.loop import resource_clock
 from orccadd.types import CommandMode, Status
 from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, ProtocolError, parse_request
-from orccadd.wire.schema import H, Layout, MachineState, MissionResult, OperatorAction, Trace
+from orccadd.wire.schema import Layout, MachineState, MissionResult, OperatorAction, Trace
 from orccadd.wire.socketdir import check_socket_path, prepare_socket_dir, urgent_socket_path
 from orccadd.wire.telemetry import TelemetryBlock
 from orccadd.wire.version import version_text
@@ -105,13 +105,11 @@ def rt_socket_path(public: str) -> str:
 class RealtimeProcess:
     def __init__(self, cell: CellConfig, socket_path: str, args: argparse.Namespace) -> None:
         self.cell = cell
-        self.cfg = cell.resources[0]  # the first resource's: its telemetry carries the status and trace
         self.args = args
         self.socket_path = socket_path
         self.rt_path = rt_socket_path(socket_path)
         self.notifier = Notifier()
         self.resources = [create_resource(cfg) for cfg in cell.resources]
-        self.resource = self.resources[0]
         spin_s = args.spin_us * 1e-6
         self.clocks = [resource_clock(r, spin_margin_s=spin_s) for r in self.resources]
         self.tels: list[TelemetryBlock] = []
@@ -123,10 +121,8 @@ class RealtimeProcess:
         self.respawn_at = 0.0
         self.respawn_delay_s = RESPAWN_DELAY_S / 2  # doubled before the first respawn
         self.cmdd_started = 0.0
-        self.control_error = ""
         self.stop_requested = ""
-        self.control_threads: list[threading.Thread] = []
-        self.threads = ThreadGroup("orccadd")  # the control threads
+        self.started = False  # every unit's control thread ticks
         self.memory_locked = False  # by `lock_memory_early` at startup
         self.inbox: deque[Request] = deque()  # requests waiting for the loop's slack
         self.inbox_since_ns = 0
@@ -142,9 +138,9 @@ class RealtimeProcess:
 
     # ---- startup --------------------------------------------------------------------------
     def start(self) -> None:
-        cfg = self.cfg
+        daemon = self.cell.daemon
         # the socket's place first: nothing is started for a daemon that could not be reached
-        self.gid = prepare_socket_dir(Path(self.socket_path).parent, cfg.daemon.socket_group)
+        self.gid = prepare_socket_dir(Path(self.socket_path).parent, daemon.socket_group)
         check_socket_path(Path(self.socket_path))
         check_socket_path(Path(urgent_socket_path(self.socket_path)))
         holds = [load_task_file(c.resolve(c.daemon.hold_task)) for c in self.cell.resources]  # checked first
@@ -182,11 +178,14 @@ class RealtimeProcess:
             self.wake_w,
             allow_fault_injection=self.args.allow_fault_injection,
         )
-        self.urgent = UrgentSocket(urgent_socket_path(self.socket_path), cfg.daemon, self.gid, self._urgent)
+        self.urgent = UrgentSocket(urgent_socket_path(self.socket_path), daemon, self.gid, self._urgent)
         # each resource is held (its Hold task) while the startup mission loads
         for u in self.machine.units:
-            name = "control" if len(self.resources) == 1 else f"control-{u.name}"
-            self.control_threads.append(self.threads.start(self._control_main, u, name=name))
+            try:
+                u.start_control(self._enter_realtime, daemon.control_priority)
+            except OrccaddError as e:
+                raise ResourceError(f"resource {u.name}: {e}") from None
+        self.started = True
         if self.args.mission:
             reply = self.machine.command("load", {"path": str(Path(self.args.mission).resolve())})
             while isinstance(reply, Pending):  # the automaton thread has not started serving yet
@@ -227,25 +226,9 @@ class RealtimeProcess:
         rt.memory_locked = rt.memory_locked or self.memory_locked
         return rt
 
-    # ---- the control thread ----------------------------------------------------------------
-    def _control_main(self, unit: Unit) -> None:
-        rt = self._enter_realtime(self.cfg.daemon.control_priority)
-        for w in rt.warnings:
-            log.warning("control thread of %s: %s", unit.name, w)
-        try:
-            unit.loop.executor.run()
-        except BaseException as e:
-            self.control_error = f"control thread of {unit.name} failed: {type(e).__name__}: {e}"
-            unit.resource.safe_stop()
-            log.exception("control thread of %s failed", unit.name)
-            with contextlib.suppress(OSError):
-                os.write(self.wake_w, b"x")
-        finally:
-            leave_realtime(rt)
-
     # ---- the automaton thread (main) ------------------------------------------------------
     def run(self) -> int:
-        rt = self._enter_realtime(self.cfg.daemon.automaton_priority)
+        rt = self._enter_realtime(self.cell.daemon.automaton_priority)
         for w in rt.warnings:
             log.warning("automaton thread: %s", w)
         sig_r, sig_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
@@ -268,7 +251,7 @@ class RealtimeProcess:
         poller = select.poll()
         registered: set[int] = set()
         try:
-            while not self.stop_requested and not self.control_error:
+            while not self.stop_requested:
                 fds = {self.wake_r, sig_r, self.listener.fileno() if self.listener else -1}
                 if self.conn is not None:
                     fds.add(self.conn.fileno())
@@ -277,7 +260,7 @@ class RealtimeProcess:
                 if self.urgent is not None:
                     fds.update(self.urgent.fds())
                 if self.inbox:
-                    fds.add(self.machine.loop.slack_fd)
+                    fds.add(self.machine.pacing.loop.slack_fd)
                 fds.discard(-1)
                 for fd in registered - fds:
                     poller.unregister(fd)
@@ -285,7 +268,8 @@ class RealtimeProcess:
                     poller.register(fd, select.POLLIN)
                 registered = fds
                 busy = bool(self.inbox or self.pending or self.outbox)
-                ready = poller.poll(max(1, int(self.cfg.control_period_s * 1e3)) if busy else 100)
+                period_ms = self.machine.pacing.cfg.control_period_s * 1e3
+                ready = poller.poll(max(1, int(period_ms)) if busy else 100)
                 with self.machine.reactor.held():  # the control thread reacts to nothing meanwhile
                     self._work(ready, sig_r)
                 if self.cmdd is None and self.respawn_at and time.monotonic() >= self.respawn_at:
@@ -328,14 +312,13 @@ class RealtimeProcess:
         self.stop_requested = signal.Signals(signum).name
 
     def _healthy(self) -> bool:
-        """Every control thread alive, each one's heartbeat fresh (in its own periods)."""
+        """Each unit's control loop ticking (its heartbeat fresh, in its own periods), or ended
+        and recorded as that resource's fault (safe-stopped, waiting for a reset)."""
         now = time.monotonic_ns()
-        for c, tel, thread in zip(self.cell.resources, self.tels, self.control_threads, strict=True):
-            age_ns = now - int(tel.header[H.HEARTBEAT_NS])
-            stale = c.daemon.watchdog_stale_periods * c.control_period_s
-            if not thread.is_alive() or age_ns >= stale * 1e9:
-                return False
-        return bool(self.control_threads)
+        return self.started and all(
+            u.heartbeat_fresh(now) if u.control_running() else u.supervisor.fault is not None
+            for u in self.machine.units
+        )
 
     def _ping(self) -> float:
         """WATCHDOG=1 only while the control loop is healthy; returns when to ping next."""
@@ -396,7 +379,7 @@ class RealtimeProcess:
                 continue
             if not self.inbox:
                 self.inbox_since_ns = time.monotonic_ns()
-                self.machine.loop.want_slack()
+                self.machine.pacing.loop.want_slack()
             self.inbox.append(req)
 
     def _serve_inbox(self) -> None:
@@ -404,8 +387,9 @@ class RealtimeProcess:
         after two periods: there is nothing to keep out of the way of)."""
         if not self.inbox:
             return
-        loop = self.machine.loop
-        period_ns = self.cfg.control_period_s * 1e9
+        pacing = self.machine.pacing
+        loop = pacing.loop
+        period_ns = pacing.cfg.control_period_s * 1e9
         now = time.monotonic_ns()
         slack = False
         with contextlib.suppress(BlockingIOError):
@@ -560,12 +544,10 @@ class RealtimeProcess:
     # ---- shutdown -------------------------------------------------------------------------
     def abandon(self) -> None:
         """Undo a failed `start` (nothing moved yet): release what was acquired."""
-        if self.control_threads:
-            for u in self.machine.units:
-                u.loop.executor.stop()
-            self.threads.join(JOIN_S)
         if hasattr(self, "machine"):
-            self.machine.close_outputs(JOIN_S)
+            for u in self.machine.units:
+                u.stop()
+            self.machine.close_outputs(JOIN_S)  # every unit's threads, its control thread too
         if self.cmdd is not None:
             self.cmdd.terminate()
             self.cmdd.wait()
@@ -581,8 +563,8 @@ class RealtimeProcess:
 
     def shutdown(self) -> int:
         m = self.machine
-        why = self.stop_requested or self.control_error
-        log.log(logging.ERROR if self.control_error else logging.INFO, "stopping (%s): safe stop first", why)
+        why = self.stop_requested
+        log.info("stopping (%s): safe stop first", why)
         self.notifier.send("STOPPING=1", f"STATUS=stopping ({why})")
         if m.mission.running:
             m.mission.result = MissionResult.STOPPED
@@ -592,18 +574,19 @@ class RealtimeProcess:
         timeout_s = max(c.safe_stop.timeout_s for c in self.cell.resources) + 1.0
         deadline = time.monotonic() + timeout_s
         stopped = False
-        while time.monotonic() < deadline and all(t.is_alive() for t in self.control_threads):
-            if all(res.state.status & Status.STOPPED for res in self.resources):
+        # a unit whose control thread ended was safe-stopped by it (`safe_stop()`, no tick):
+        # its device's stop is all there is to wait for, and its reads are not there to show it
+        ticking = [u for u in m.units if u.control_running()]
+        while time.monotonic() < deadline and all(u.control_running() for u in ticking):
+            if all(u.resource.state.status & Status.STOPPED for u in ticking):
                 stopped = True
                 break
             time.sleep(0.01)
+        failed = [u.name for u in m.units if u.failures]
         for u in m.units:
-            u.loop.executor.stop()
+            u.stop()
         m.rt_commands.close()
-        self.threads.join(JOIN_S)
-        for u in m.units:
-            u.supervisor.threads.join(JOIN_S)  # a reset under way: its device work
-        m.close_outputs(JOIN_S)  # an output action under way: its device call
+        m.close_outputs(JOIN_S)  # every unit's threads: control, outputs, a reset's device work
         m.mission.state = MachineState.IDLE
         m.publish()
         for u in m.units:
@@ -635,7 +618,9 @@ class RealtimeProcess:
             )
         else:
             log.error("safe stop not confirmed, %s", what)
-        return 1 if self.control_error or not stopped or not released else 0
+        if failed:
+            log.error("the control thread of %s failed while it ran", ", ".join(failed))
+        return 1 if failed or not stopped or not released else 0
 
     def _release(self) -> bool:
         """Each resource's `shutdown` in a thread of its own, all waited for `RELEASE_S` in all:
@@ -709,8 +694,22 @@ def main(argv: list[str] | None = None) -> int:
     except (OrccaddError, CommandError) as e:
         log.error("%s", e)
         proc.abandon()
-        return 2
-    return proc.run()
+        return exit_now(2)
+    return exit_now(proc.run())
+
+
+def exit_now(code: int) -> int:
+    """`code`, once every thread the daemon owns has ended; a thread that did not (stuck in a
+    device call past its owner's join, named in the log then) must not keep the process alive:
+    the process ends without waiting for it, its logs flushed."""
+    left = threads_left()
+    if left:
+        log.error("exiting with %d thread(s) still running: %s", len(left), ", ".join(left))
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@ from collections import deque
 from collections.abc import Callable
 from logging import WARNING
 from pathlib import Path
+from typing import Protocol
 
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.loop import SwitchingLoop
@@ -61,6 +62,16 @@ class FaultHistory:
         return [{"n": n, **c.to_wire()} for n, c in self.history]
 
 
+class ControlThread(Protocol):
+    """The resource's unit as its reset uses it (`orccadd.daemon.unit.ResourceUnit`): its threads
+    (a reset's device work runs in them) and its control thread, started again if it failed."""
+
+    threads: ThreadGroup
+
+    def control_ended(self) -> bool: ...
+    def restart_control(self) -> None: ...
+
+
 class Supervisor:
     """One resource's: its safe stop's cause, its reset."""
 
@@ -81,7 +92,8 @@ class Supervisor:
         self.fault: StopCause | None = None  # why the resource was safe-stopped (None when not)
         self.history = history if history is not None else FaultHistory()
         self._resetting: _DeviceReset | None = None  # the device's last reset
-        self.threads = ThreadGroup("supervisor")  # a reset's device work
+        self.unit: ControlThread | None = None  # its unit (`ResourceUnit.bind`); None: a test's
+        self.threads = ThreadGroup("supervisor")  # a reset's device work when there is no unit
 
     def on_t3(self, event: str, fault: Fault | None) -> None:
         """The type 3 exception `event` safe-stopped the arm, about `fault` (the task's)."""
@@ -113,7 +125,10 @@ class Supervisor:
             return {"reset": False, "detail": "nothing to reset"}
         self.check_reset()
         wait_s = max(100 * self.cfg.control_period_s, RESET_WAIT_S)
-        device = self._resetting = _DeviceReset(self.threads, res, self.loop, wait_s)
+        unit = self.unit
+        threads = unit.threads if unit is not None else self.threads
+        restart = unit.restart_control if unit is not None and unit.control_ended() else None
+        device = self._resetting = _DeviceReset(threads, res, self.loop, wait_s, restart)
 
         def poll() -> Result | None:
             if not device.done():
@@ -137,7 +152,8 @@ class Supervisor:
         """`CommandError` if a reset cannot begin now (a run or the stop still under way)."""
         if self.mission.running:
             raise CommandError(self._still_running())
-        if not self.resource.state.status & Status.STOPPED:
+        ended = self.unit is not None and self.unit.control_ended()
+        if not ended and not self.resource.state.status & Status.STOPPED:
             raise CommandError(
                 f"the safe stop of {self.resource.name} is still under way: wait until it is at rest"
             )
@@ -162,7 +178,8 @@ class Supervisor:
 
 
 class _DeviceReset:
-    """The reset's talk with the device, in a thread of its own: the device's fault reset (if it
+    """The reset's talk with the device, in a thread of its own: the control thread started
+    again if it had failed (`restart`: it ticks the resource, safe-stopped), the device's fault reset (if it
     has one), a wait (up to `wait_s`) for its reads to show neither fault nor lost link, the Hold
     task restarted from the measured state while the stop still holds (the outgoing task's last
     command is stale: the arm may be elsewhere now, after a controller's restart), then the
@@ -171,15 +188,25 @@ class _DeviceReset:
     step), so that a reset whose device work failed never answers success."""
 
     def __init__(
-        self, threads: ThreadGroup, resource: PhysicalResource, loop: SwitchingLoop, wait_s: float
+        self,
+        threads: ThreadGroup,
+        resource: PhysicalResource,
+        loop: SwitchingLoop,
+        wait_s: float,
+        restart: Callable[[], None] | None = None,
     ) -> None:
         self._error = ""
         self._started = time.monotonic()
         self.step = "starting"  # what the thread does now, in words (`where`)
-        self._thread = threads.start(self._run, resource, loop, wait_s, name="device-reset")
+        self._thread = threads.start(self._run, resource, loop, wait_s, restart, name="device-reset")
 
-    def _run(self, res: PhysicalResource, loop: SwitchingLoop, wait_s: float) -> None:
+    def _run(
+        self, res: PhysicalResource, loop: SwitchingLoop, wait_s: float, restart: Callable[[], None] | None
+    ) -> None:
         try:
+            if restart is not None:
+                self.step = "starting the control thread again (restart_control)"
+                restart()
             res.clear_output_fault()  # an output action that failed: the reset's to forget
             if res.description.fault_reset:
                 self.step = "the device's fault reset (reset_fault)"

@@ -6,8 +6,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Protocol
 
+from orccadd.config.cell import CellConfig
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.loop import SwitchingLoop
+from orccadd.daemon.outputs import OutputWorker
 from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.supervision import Supervisor
@@ -17,13 +19,14 @@ from orccadd.task.events import EventQueue, EventRegistry
 
 
 class UnitView(Protocol):
-    """What the handlers use of one resource's unit (`orccadd.daemon.machine.Unit`)."""
+    """What the handlers use of one resource's unit (`orccadd.daemon.unit.ResourceUnit`)."""
 
     cfg: RobotConfig
     resource: PhysicalResource
     queue: EventQueue
     loop: SwitchingLoop
     supervisor: Supervisor
+    outputs: OutputWorker
 
     @property
     def name(self) -> str: ...
@@ -32,16 +35,16 @@ class UnitView(Protocol):
 class Machine(Protocol):
     """What the handlers use of the execution machine (`orccadd.daemon.machine.Machine`)."""
 
-    cfg: RobotConfig
-    resource: PhysicalResource
+    cell: CellConfig
     registry: EventRegistry
-    loop: SwitchingLoop
     pub: Publisher
     mission: MissionControl
     allow_fault_injection: bool
 
     @property
     def units(self) -> Sequence[UnitView]: ...
+    @property
+    def default(self) -> UnitView: ...
     def unit(self, name: str) -> UnitView: ...
     def unit_of(self, task: RobotTask) -> UnitView: ...
     def abort(self, why: str) -> None: ...

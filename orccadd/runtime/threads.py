@@ -1,9 +1,13 @@
-"""Threads with an owner: `ThreadGroup` starts them, tells them to stop, joins them and names
-any that outlived their join. No thread is left to die with the interpreter unseen.
+"""Threads with an owner: `ThreadGroup` starts them, hands their errors to the owner, tells them
+to stop, joins them and names any that outlived their join.
 
-The threads are still daemon threads underneath: a thread stuck in a C call (a socket without
-a timeout, a bus driver) must not keep a process from ending once its owner has given up on it;
-but the owner has waited for it, and said so in the log.
+A thread's exception is never lost: it is logged with its traceback, kept (`errors`) and passed to
+the owner's `on_error(name, exception)` from that thread, before the thread ends.
+
+`daemon=False` (the real-time process's groups): the threads are joined, not abandoned; one
+stuck in a C call past its join (a socket without a timeout, a bus driver) is named in the log,
+and the process's end does not wait for it (`orccadd.daemon.rtproc.main` exits without joining
+what its owners gave up on). The simulators' groups keep `daemon=True` (a blocked `accept`).
 """
 
 from __future__ import annotations
@@ -16,24 +20,40 @@ from typing import Any
 
 log = logging.getLogger("orccadd.threads")
 
+ErrorHandler = Callable[[str, BaseException], None]
+
 
 class ThreadGroup:
     """The threads one object runs. `stopping` is set by `join` before it waits: a thread's loop
     watches it (or the owner closes what the thread blocks on first)."""
 
-    def __init__(self, owner: str) -> None:
+    def __init__(self, owner: str, *, daemon: bool = True, on_error: ErrorHandler | None = None) -> None:
         self.owner = owner
+        self.daemon = daemon
+        self.on_error = on_error
         self.stopping = threading.Event()
+        self.errors: list[tuple[str, BaseException]] = []  # (thread name, what ended it)
         self._threads: list[threading.Thread] = []
         self._lock = threading.Lock()
 
     def start(self, target: Callable[..., Any], *args: Any, name: str) -> threading.Thread:
-        t = threading.Thread(target=target, args=args, name=f"{self.owner}:{name}", daemon=True)
+        full = f"{self.owner}:{name}"
+        t = threading.Thread(target=self._run, args=(full, target, args), name=full, daemon=self.daemon)
         with self._lock:
             self._threads = [x for x in self._threads if x.is_alive()]  # the ended ones forgotten
             self._threads.append(t)
         t.start()
         return t
+
+    def _run(self, name: str, target: Callable[..., Any], args: tuple[Any, ...]) -> None:
+        try:
+            target(*args)
+        except BaseException as e:
+            log.error("%s failed: %s: %s", name, type(e).__name__, e, exc_info=True)
+            with self._lock:
+                self.errors.append((name, e))
+            if self.on_error is not None:
+                self.on_error(name, e)
 
     def alive(self) -> list[str]:
         with self._lock:
@@ -53,3 +73,10 @@ class ThreadGroup:
         if left:
             log.error("%s: %d thread(s) still running after %g s: %s", self.owner, len(left), timeout_s, left)
         return left
+
+
+def threads_left() -> list[str]:
+    """The process's non-daemon threads still running but the caller's: what would keep the
+    interpreter from exiting."""
+    me = threading.current_thread()
+    return [t.name for t in threading.enumerate() if t is not me and not t.daemon and t.is_alive()]

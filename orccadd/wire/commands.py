@@ -342,10 +342,16 @@ COMMANDS: dict[str, CommandSpec] = {
             "rt",
             "inject a fault for tests and commissioning (only with `orccadd --allow-fault-injection`)",
             (
-                Arg("fault", (str,), "resource or overrun", required=True, choices=("resource", "overrun")),
+                Arg(
+                    "fault",
+                    (str,),
+                    "resource (the device's fault), overrun, or control_thread (its next tick raises)",
+                    required=True,
+                    choices=("resource", "overrun", "control_thread"),
+                ),
                 Arg("ticks", (int,), "overrun: how many ticks", default=20),
                 Arg("extra_ms", NUMBER, "overrun: extra compute per tick (0: 1.5 periods)", default=0.0),
-                Arg("resource", (str,), "the resource (default: the robot config's first)", default=""),
+                Arg("resource", (str,), "the resource (default: the first listed)", default=""),
             ),
         ),
     )

@@ -287,3 +287,44 @@ def test_a_mission_compiled_as_a_network_runs_each_branch_on_its_arm(tmp_path: P
     for side in "LR":  # each branch through its thirty dwells, alternating its two tasks
         done = [i for ins, _ in steps for i in ins if i.startswith(f"Dwell{side}")]
         assert done == [f"Dwell{side}{k % 2}.done" for k in range(30)], done
+
+
+def test_a_control_thread_that_fails_faults_its_resource_alone_and_a_reset_starts_it_again(
+    slow: tuple[Daemon, str],
+) -> None:
+    # a bug in left's control thread (injected: its next tick raises) while left reaches: left
+    # safe-stopped with an `internal` fault, the mission's safe procedure entered on left.fault,
+    # right holding and ticking all along; the daemon runs on, and `reset` restarts the thread
+    dual, mission = slow
+    dual.call("load", path=mission)
+    dual.call("start")
+    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
+    dual.call("inject", fault="control_thread", resource="left")
+    dual.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(dual)), timeout_s=30)
+    entry = next(e for e in instants(dual) if "safe" in e["actions"])
+    assert entry["inputs"] == ["MeetL.T3.LawError"], entry  # the task it ran: its type 3
+    r = resources(dual)
+    fault = r["left"]["fault"]
+    assert (
+        fault["kind"] == "internal" and fault["resource"] == "left" and fault["event"] == "MeetL.T3.LawError"
+    ), fault
+    assert "injected failure of the control thread" in fault["text"], fault
+    assert r["right"]["fault"] is None and r["right"]["task"] == "Hold_right", r["right"]
+
+    def ticks(name: str) -> int:
+        return next(int(u["ticks"]) for u in dual.status()["resources"] if u["name"] == name)
+
+    left, right = ticks("left"), ticks("right")
+    dual.wait(lambda s: ticks("right") > right + 100, timeout_s=10)  # right ticks on (500 Hz)
+    assert ticks("left") == left  # left's thread has ended
+    dual.call("send", input="Stop")
+    dual.wait(lambda s: s["state"] != "running", timeout_s=30)
+    assert cast(dict[str, Any], dual.call("reset", resource="left"))["reset"]
+    r = resources(dual)
+    assert r["left"]["fault"] is None and r["left"]["task"] == "Hold_left", r["left"]
+    dual.wait(lambda s: ticks("left") > left + 100, timeout_s=10)  # its control thread again
+    dual.call("start")  # and left moves again: the mission's tasks on it
+    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
+    dual.call("send", input="Stop")
+    s = dual.wait(lambda s: s["state"] != "running", timeout_s=30)
+    assert not s["faulted"], s

@@ -55,22 +55,22 @@ def csp_machine(tmp_path: Path) -> Iterator[Machine]:
 
 def tick(machine: Machine, ticks: int = 1) -> None:
     for _ in range(ticks):
-        machine.loop.executor.run(max_ticks=1)
+        machine.default.loop.executor.run(max_ticks=1)
         with machine.reactor.held():
             machine.on_events()
 
 
 def commands(machine: Machine) -> npt.NDArray[np.float64]:
     """The command of every tick so far (the telemetry ring has not wrapped)."""
-    recs = machine.tel.ticks[: int(machine.tel.header[H.TICK_HEAD])]
-    return np.array(recs[:, TickLayout(machine.tel.dof).cmd])
+    recs = machine.default.tel.ticks[: int(machine.default.tel.header[H.TICK_HEAD])]
+    return np.array(recs[:, TickLayout(machine.default.tel.dof).cmd])
 
 
 def test_hold_brings_a_fast_position_command_to_rest_within_the_acceleration_limits(
     csp_machine: Machine, tmp_path: Path
 ) -> None:
     m = csp_machine
-    res, loop = m.resource, m.loop
+    res, loop = m.default.resource, m.default.loop
     path = tmp_path / "reach.mission"
     path.write_text(MISSION)
     load_in(m, path)
@@ -82,7 +82,7 @@ def test_hold_brings_a_fast_position_command_to_rest_within_the_acceleration_lim
             break
     speed_rad_s = float(np.abs(res.state.dq_rad_s).max())
     assert speed_rad_s > 1.0 and loop.active is not loop.hold
-    switch_tick = int(m.tel.header[H.TICK_HEAD])
+    switch_tick = int(m.default.tel.header[H.TICK_HEAD])
     with m.reactor.held():
         m.command("hold", {})
     for _ in range(5000):  # until the arm is at rest on the Hold task, its command too
@@ -97,7 +97,7 @@ def test_hold_brings_a_fast_position_command_to_rest_within_the_acceleration_lim
 
     period_s = res.config.control_period_s
     cmd = commands(m)
-    recs = m.tel.ticks[: int(m.tel.header[H.TICK_HEAD])]
+    recs = m.default.tel.ticks[: int(m.default.tel.header[H.TICK_HEAD])]
     assert recs[:, T.WROTE].all()  # a fresh command every tick, through the switch
     around = cmd[switch_tick - 5 :]
     ddq = np.diff(around, n=2, axis=0) / period_s**2  # the commanded acceleration, tick by tick

@@ -37,7 +37,8 @@ class Switch:
 
 def switches(machine: Machine) -> list[Switch]:
     """Every Track <-> Dwell switch the ring holds, with the tick of its event."""
-    recs = machine.tel.ticks[: int(machine.tel.header[H.TICK_HEAD])]  # the ring has not wrapped
+    tel = machine.default.tel
+    recs = tel.ticks[: int(tel.header[H.TICK_HEAD])]  # the ring has not wrapped
     task, phase, wrote = recs[:, T.TASK], recs[:, T.PHASE], recs[:, T.WROTE]
     ids = {machine.mission.tasks().index(t) for t in machine.mission.tasks() if t.name in ("Track", "Dwell")}
     out = []
@@ -49,7 +50,7 @@ def switches(machine: Machine) -> list[Switch]:
 
 
 def instant_times(machine: Machine) -> list[float]:
-    trace = machine.tel.trace
+    trace = machine.default.tel.trace
     rows = trace[(trace[:, R.SEQ] > 0) & (trace[:, R.KIND] == Trace.INSTANT)]
     return sorted(float(t) for t in rows[:, R.T_S])
 
@@ -60,10 +61,10 @@ def run(machine: Machine, ticks: int, busy: bool) -> None:
     for _ in range(ticks):
         if busy:
             with machine.reactor.held():
-                machine.loop.executor.run(max_ticks=1)
+                machine.default.loop.executor.run(max_ticks=1)
                 machine.on_events()
         else:
-            machine.loop.executor.run(max_ticks=1)
+            machine.default.loop.executor.run(max_ticks=1)
             with machine.reactor.held():
                 machine.on_events()
 
@@ -75,7 +76,7 @@ def test_the_new_law_commands_the_tick_of_the_event(machine: Machine, tmp_path: 
     assert len(seen) >= 6, f"only {len(seen)} switches in 600 ticks"
     assert all(s.tick == s.event_tick for s in seen), [(s.tick, s.event_tick) for s in seen]
     assert all(s.wrote for s in seen)  # the new law's command went out in the event's tick
-    ticks_t = machine.tel.ticks[: int(machine.tel.header[H.TICK_HEAD]), T.T_S]
+    ticks_t = machine.default.tel.ticks[: int(machine.default.tel.header[H.TICK_HEAD]), T.T_S]
     instants = set(instant_times(machine))
     # the automaton's instant is recorded at the event's tick, which the new task commanded
     kept = [float(ticks_t[s.tick]) for s in seen if ticks_t[s.tick] >= min(instants)]  # the trace ring's
@@ -103,5 +104,5 @@ def test_a_stop_while_running_ends_the_run_the_same_way(machine: Machine, tmp_pa
         machine.command("send", {"input": "Stop"})
     run(machine, 50, busy=False)
     assert machine.mission.state.name == "READY" and machine.mission.result.name == "SUCCESS"
-    assert machine.loop.active is machine.loop.hold
-    assert np.isfinite(machine.resource.last_command).all()
+    assert machine.default.loop.active is machine.default.loop.hold
+    assert np.isfinite(machine.default.resource.last_command).all()

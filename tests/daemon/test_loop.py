@@ -17,16 +17,16 @@ from orccadd.wire.schema import H
 
 
 def test_slack_fd_becomes_readable_only_after_a_tick_ends(machine: Machine) -> None:
-    loop = machine.loop
+    loop = machine.default.loop
     control = threading.Thread(target=loop.executor.run, kwargs={"max_ticks": 2000})
     control.start()
     try:
         for _ in range(20):
             loop.want_slack()
-            before = int(machine.tel.header[H.TICK_HEAD])
+            before = int(machine.default.tel.header[H.TICK_HEAD])
             ready, _, _ = select.select([loop.slack_fd], [], [], 1.0)
             assert ready
-            assert int(machine.tel.header[H.TICK_HEAD]) > before  # a tick ended meanwhile
+            assert int(machine.default.tel.header[H.TICK_HEAD]) > before  # a tick ended meanwhile
             os.read(loop.slack_fd, 64)
     finally:
         loop.executor.stop()
@@ -34,13 +34,13 @@ def test_slack_fd_becomes_readable_only_after_a_tick_ends(machine: Machine) -> N
 
 
 def test_slack_fd_stays_quiet_when_the_loop_is_stopped(machine: Machine) -> None:
-    machine.loop.want_slack()
-    ready, _, _ = select.select([machine.loop.slack_fd], [], [], 0.05)
+    machine.default.loop.want_slack()
+    ready, _, _ = select.select([machine.default.loop.slack_fd], [], [], 0.05)
     assert not ready
 
 
 def test_a_tune_is_applied_at_one_tick_boundary_and_acknowledged_with_its_tick(machine: Machine) -> None:
-    loop = machine.loop
+    loop = machine.default.loop
     hold = loop.hold
     name, (_, param) = next((k, v) for k, v in hold._tunable.items() if v[1].tunable)
     new_value = param.value.copy() * 0.5 + 1.0
@@ -49,18 +49,19 @@ def test_a_tune_is_applied_at_one_tick_boundary_and_acknowledged_with_its_tick(m
     assert not np.array_equal(param.value, new_value)  # waiting for the control thread
     loop.executor.run(max_ticks=1)
     tick = loop.tunes.acked(seq)
-    assert tick == int(machine.tel.header[H.TICK_HEAD])  # the tick record of the tick it applied in
+    assert tick == int(machine.default.tel.header[H.TICK_HEAD])  # the tick record of the tick it applied in
     assert np.array_equal(param.value, new_value)
 
 
 def test_reset_is_a_pending_reply_and_never_sleeps(machine: Machine) -> None:
-    loop = machine.loop
+    loop = machine.default.loop
     loop.executor.run(max_ticks=5)
-    machine.resource.inject_fault("device", "test fault")
+    machine.default.resource.inject_fault("device", "test fault")
     loop.executor.run(max_ticks=5)  # the fault → type 3 → safe stop from the control thread
     machine.on_events()
-    assert machine.supervisor.fault
-    loop.executor.run(max_ticks=2000, until=lambda: bool(machine.resource.state.status & Status.STOPPED))
+    assert machine.default.supervisor.fault
+    res = machine.default.resource
+    loop.executor.run(max_ticks=2000, until=lambda: bool(res.state.status & Status.STOPPED))
     t0 = time.monotonic()
     reply = machine.command("reset", {})
     assert time.monotonic() - t0 < 0.5  # no wait inside the command (order of magnitude only)
@@ -69,4 +70,4 @@ def test_reset_is_a_pending_reply_and_never_sleeps(machine: Machine) -> None:
         assert time.monotonic() < end, "the reset did not answer"
         loop.executor.run(max_ticks=1)
         time.sleep(0.001)
-    assert not machine.supervisor.fault
+    assert not machine.default.supervisor.fault

@@ -19,7 +19,7 @@ from tests.daemon.test_inline import load_and_start, run
 
 def t3_events(machine: Machine) -> list[str]:
     """The name of every type 3 event pushed so far (the queue's ring has not wrapped)."""
-    queue, registry = machine.loop.queue, machine.registry
+    queue, registry = machine.default.loop.queue, machine.registry
     assert queue.pushed <= 1024
     infos = [registry.info(queue.event_at(i)) for i in range(queue.pushed)]
     return [e.name for e in infos if e.kind is EventKind.T3]
@@ -39,15 +39,15 @@ def run_until(machine: Machine, what: str, done: Callable[[], bool], timeout_s: 
 def test_a_device_fault_mid_mission_is_one_type_3_until_reset(
     machine: Machine, tmp_path: Path, busy: bool
 ) -> None:
-    res = machine.resource
+    res = machine.default.resource
     load_and_start(machine, tmp_path)
     run(machine, 300, busy=False)
-    assert machine.loop.active is not machine.loop.hold  # a mission's task runs
+    assert machine.default.loop.active is not machine.default.loop.hold  # a mission's task runs
     res.inject_fault("device", "test fault")
     run(machine, 5, busy=busy)  # the type 3, the safe procedure, Hold takes the resource
     run_until(machine, "the arm stopped", lambda: bool(res.state.status & Status.STOPPED))
     run(machine, 200, busy=False)  # Hold ticks on a resource that still reports the fault
-    assert machine.loop.active is machine.loop.hold
+    assert machine.default.loop.active is machine.default.loop.hold
     assert res.state.status & Status.FAULT
     names = t3_events(machine)
     assert len(names) == 1 and names[0].endswith(".T3.ResourceFault"), names
@@ -60,7 +60,7 @@ def test_a_device_fault_mid_mission_is_one_type_3_until_reset(
         reply = machine.command("reset", {})
     if isinstance(reply, Pending):
         run_until(machine, "the reset answered", lambda: reply.poll() is not None)
-    assert not machine.supervisor.fault and not res.stopping_or_stopped
+    assert not machine.default.supervisor.fault and not res.stopping_or_stopped
     run(machine, 50, busy=False)
     assert t3_events(machine) == names  # still one
 

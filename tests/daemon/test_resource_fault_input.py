@@ -40,18 +40,20 @@ end
 def test_a_fault_of_the_held_arm_enters_the_safe_procedure(machine: Machine, tmp_path: Path) -> None:
     path = tmp_path / "wait_go.mission"
     path.write_text(MISSION)
-    loop = machine.loop
+    loop = machine.default.loop
     load_in(machine, path)
     with machine.reactor.held():
         machine.command("start", {})
     loop.executor.run(max_ticks=5)
     assert loop.active is loop.hold  # the mission waits for Go: the arm on the daemon's Hold task
-    machine.resource.inject_fault("device", "test fault")
-    loop.executor.run(max_ticks=2000, until=lambda: bool(machine.resource.state.status & Status.STOPPED))
+    res = machine.default.resource
+    res.inject_fault("device", "test fault")
+    loop.executor.run(max_ticks=2000, until=lambda: bool(res.state.status & Status.STOPPED))
     with machine.reactor.held():
         machine.on_events()
     mc = machine.mission
-    assert mc.running and machine.supervisor.fault and mc.mission is not None and mc.runner is not None
+    assert mc.running and machine.default.supervisor.fault
+    assert mc.mission is not None and mc.runner is not None
     state = mc.runner.number(mc.runner.snapshot())
     assert mc.mission.top.phase[state] == SAFE, mc.mission.top.where[state]  # entered on arm.fault
     with machine.reactor.held():

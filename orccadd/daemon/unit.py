@@ -1,0 +1,193 @@
+"""One resource and its clock domain, as one object that owns everything it starts.
+
+A `ResourceUnit` builds what the domain needs from the resource's config — its Hold task, event
+queue, control loop (`SwitchingLoop`), output thread (`OutputWorker`) — and runs its threads in
+a scope of its own (`threads`, joined on exit, none a daemon thread): the control thread, the
+output thread, a reset's device work. Every resource is a unit in the same way; none is special.
+
+Whatever ends the control thread is this resource's fault, never the daemon's end: the thread
+safe-stops the resource (`safe_stop()`: the device's own stop, without a tick), records why
+(`failure`) and wakes the automaton thread, which records it as the resource's stop cause
+(`internal`) and hands it to the mission as that resource's fault (`Machine.on_events`); the
+other resources tick on. `reset` starts the control thread again (`restart_control`) before
+the device's reset; a thread that fails again at once is the reset's refusal.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import replace
+
+from orccadd.config.robot import RobotConfig
+from orccadd.daemon.loop import SwitchingLoop
+from orccadd.daemon.outputs import OutputWorker
+from orccadd.daemon.supervision import Supervisor
+from orccadd.errors import OrccaddError
+from orccadd.physres.base import PhysicalResource
+from orccadd.runtime.clock import Clock
+from orccadd.runtime.rt import RealtimeReport, leave_realtime
+from orccadd.runtime.threads import ThreadGroup
+from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
+from orccadd.wire.schema import H
+from orccadd.wire.telemetry import TelemetryBlock
+
+log = logging.getLogger("orccadd")
+
+QUEUE_LEN = 4096  # the loop's events waiting for the automaton thread
+HOLDING_WAIT_S = 5.0  # longest `start_control` waits for the loop's first tick
+
+EnterRealtime = Callable[[int], RealtimeReport]  # SCHED_FIFO for the calling thread
+
+
+class ControlThreadError(OrccaddError):
+    """A unit's control thread ended on an exception (or did not tick in time)."""
+
+
+def hold_task(
+    cfg: RobotConfig, resource: PhysicalResource, registry: EventRegistry, queue: EventQueue, name: str
+) -> RobotTask:
+    """The resource's own task, which holds it for as long as nothing else commands it."""
+    spec = load_task_file(cfg.resolve(cfg.daemon.hold_task))
+    spec = replace(spec, task=replace(spec.task, name=name, timeout_s=float("inf")))
+    return build_task(spec, resource, registry, queue)
+
+
+class ResourceUnit:
+    """One resource's clock domain: its config, resource, clock, telemetry block, event queue,
+    control loop, supervisor (`bind`), output worker, and the threads that run them."""
+
+    def __init__(
+        self,
+        cfg: RobotConfig,
+        resource: PhysicalResource,
+        clock: Clock,
+        tel: TelemetryBlock,
+        registry: EventRegistry,
+        wake_fd: int,
+        *,
+        hold_name: str,
+    ) -> None:
+        self.cfg = cfg
+        self.resource = resource
+        self.clock = clock
+        self.tel = tel
+        self.wake_fd = wake_fd
+        self.queue = EventQueue(QUEUE_LEN)
+        self.loop = SwitchingLoop(
+            resource,
+            clock,
+            hold_task(cfg, resource, registry, self.queue, hold_name),
+            self.queue,
+            tel,
+            wake_fd,
+            overrun_limit=cfg.daemon.overrun_limit,
+            blend_ticks=int(round(cfg.daemon.switch_blend_s / cfg.control_period_s)),
+        )
+        self.threads = ThreadGroup(f"unit-{resource.name}", daemon=False)
+        self.outputs = OutputWorker(resource, self.threads)
+        self.supervisor: Supervisor  # `bind`: it needs the mission, built over every unit's loop
+        self.failure = ""  # why the control thread ended, in words ("" while it runs or never ran)
+        self.failures = 0  # how many times it ended so
+        self._failures_taken = 0
+        self._control: threading.Thread | None = None
+        self._enter_rt: EnterRealtime | None = None
+        self._priority = 0
+
+    @property
+    def name(self) -> str:
+        return self.resource.name
+
+    def bind(self, supervisor: Supervisor) -> None:
+        self.supervisor = supervisor
+        supervisor.unit = self
+
+    # ---- the control thread ---------------------------------------------------------------
+    def start_control(self, enter_rt: EnterRealtime, priority: int) -> None:
+        """Start the control thread (SCHED_FIFO `priority` through `enter_rt`); return once it
+        has ticked: the resource is held by its Hold task. `ControlThreadError` if it ended or
+        did not tick within `HOLDING_WAIT_S`."""
+        self._enter_rt, self._priority = enter_rt, priority
+        self._start_and_wait()
+
+    def restart_control(self) -> None:
+        """The control thread again, after it failed (a reset's first step); as `start_control`."""
+        if not self.control_ended():
+            return
+        if self._enter_rt is None:
+            raise ControlThreadError(f"{self.name}: its control thread was never started")
+        self._start_and_wait()
+
+    def _start_and_wait(self) -> None:
+        ticks = int(self.tel.header[H.TICKS])
+        failures = self.failures
+        self.failure = ""
+        self._control = self.threads.start(self._control_main, name="control")
+        end = time.monotonic() + HOLDING_WAIT_S
+        while int(self.tel.header[H.TICKS]) == ticks:
+            if self.failures != failures:
+                raise ControlThreadError(f"{self.name}: {self.failure}")
+            if time.monotonic() > end:
+                raise ControlThreadError(
+                    f"{self.name}: its control thread did not tick within {HOLDING_WAIT_S:g} s"
+                )
+            time.sleep(0.001)
+
+    def control_running(self) -> bool:
+        return self._control is not None and self._control.is_alive()
+
+    def control_ended(self) -> bool:
+        """Its control thread was started and has ended (it failed, or the unit was stopped)."""
+        return self._control is not None and not self._control.is_alive()
+
+    def _control_main(self) -> None:
+        assert self._enter_rt is not None
+        rt = self._enter_rt(self._priority)
+        rt.gc_frozen = False  # the collector stays frozen for the process: the others still tick
+        for w in rt.warnings:
+            log.warning("control thread of %s: %s", self.name, w)
+        try:
+            self.loop.executor.run()
+        except BaseException as e:
+            self._failed(f"its control thread failed: {type(e).__name__}: {e}")
+            log.exception("control thread of %s failed", self.name)
+        finally:
+            leave_realtime(rt)
+
+    def _failed(self, why: str) -> None:
+        """The control thread's last act: the resource's own safe stop, why, the automaton told."""
+        try:
+            self.resource.safe_stop()
+        except Exception:
+            log.exception("%s: safe stop after its control thread failed", self.name)
+        self.failure = why
+        self.failures += 1
+        with contextlib.suppress(OSError):
+            os.write(self.wake_fd, b"x")
+
+    def take_failure(self) -> str:
+        """The automaton thread's: why the control thread ended, once per failure ("" if not)."""
+        if self.failures == self._failures_taken:
+            return ""
+        self._failures_taken = self.failures
+        return self.failure
+
+    # ---- health and the end ---------------------------------------------------------------
+    def heartbeat_fresh(self, now_ns: int) -> bool:
+        """The control loop ticked within its watchdog's periods."""
+        stale_s = self.cfg.daemon.watchdog_stale_periods * self.cfg.control_period_s
+        return now_ns - int(self.tel.header[H.HEARTBEAT_NS]) < stale_s * 1e9
+
+    def stop(self) -> None:
+        """The control loop returns after its current tick."""
+        self.loop.executor.stop()
+
+    def join(self, timeout_s: float) -> list[str]:
+        """Every thread of the unit ended (the output thread once its queue is done), waited for
+        `timeout_s` in all; the names of those still running (a device call that hangs)."""
+        self.outputs.close()
+        return self.threads.join(timeout_s)
