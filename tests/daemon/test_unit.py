@@ -1,0 +1,66 @@
+"""A resource's unit starts its control thread and returns once it ticks, hands a failure of that
+thread to the automaton thread once, starts it again on request, and joins every thread it owns."""
+
+from __future__ import annotations
+
+import time
+
+from orccadd.daemon.machine import Machine
+from orccadd.runtime.rt import RealtimeReport
+from orccadd.types import Status
+from orccadd.wire.schema import H
+
+
+def no_realtime(priority: int) -> RealtimeReport:
+    return RealtimeReport()  # a test's threads stay time-shared
+
+
+def wait_for(pred: object, timeout_s: float = 10.0) -> None:
+    end = time.monotonic() + timeout_s
+    while not pred():  # type: ignore[operator]
+        assert time.monotonic() < end, "condition not met"
+        time.sleep(0.001)
+
+
+def test_start_returns_once_held_and_a_failure_is_taken_once_then_a_restart_ticks_again(
+    machine: Machine,
+) -> None:
+    u = machine.default
+    assert not u.control_running() and not u.control_ended()  # never started: nothing to restart
+    u.start_control(no_realtime, 0)
+    try:
+        assert int(u.tel.header[H.TICKS]) > 0 and u.loop.active is u.loop.hold  # held
+        assert u.control_running() and u.take_failure() == ""
+        u.loop.inject_failure()
+        wait_for(u.control_ended)
+        assert u.resource.stopping_or_stopped  # its dying act: the resource's own safe stop
+        assert (
+            u.take_failure()
+            == "its control thread failed: RuntimeError: injected failure of the control thread"
+        )
+        assert u.take_failure() == ""  # once
+        assert [name for name, _ in u.threads.errors] == []  # the unit's own, not a lost exception
+        ticks = int(u.tel.header[H.TICKS])
+        u.restart_control()
+        assert u.control_running() and int(u.tel.header[H.TICKS]) > ticks
+    finally:
+        u.stop()
+        assert u.join(5.0) == []
+    assert not u.control_running() and u.threads.alive() == []
+
+
+def test_a_failure_becomes_the_active_tasks_type_3_and_the_resources_stop_cause(machine: Machine) -> None:
+    u = machine.default
+    u.start_control(no_realtime, 0)
+    try:
+        u.loop.inject_failure()
+        wait_for(u.control_ended)
+        with machine.reactor.held():
+            machine.on_events()
+        cause = u.supervisor.fault
+        assert cause is not None and cause.event == "Hold.T3.LawError", cause
+        assert cause.fault.kind == "internal" and "injected failure" in cause.fault.text
+        assert u.resource.state.status & Status.STOPPED or u.resource.stopping_or_stopped
+    finally:
+        u.stop()
+        u.join(5.0)
