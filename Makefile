@@ -72,7 +72,7 @@ bench: setup
 	$(PY) benchmarks/canopen_cycle.py
 	$(PY) benchmarks/canopen_cycle.py --buses 2 --rates 1000
 	$(PY) benchmarks/ur_rtde_cycle.py
-	$(PY) benchmarks/cell.py
+	$(PY) benchmarks/station.py
 	$(PY) benchmarks/cell_zenoh.py
 
 clean:

@@ -336,7 +336,7 @@ def main() -> None:
         row("generated, ~100,000 states", a, t, args.reactions)
     for branches in (1, 2, 3, 4, 10):  # up to 3 one automaton; from 4 a network; 10 is the target
         scale_target(branches, min(args.reactions, 100_000))
-    cell = ROOT / "benchmarks" / "missions" / "dual_arm_cell.mission"
+    cell = ROOT / "benchmarks" / "missions" / "dual_arm_station.mission"
     network_row("dual-arm cell (5 cycles)", cell.read_text(), str(cell), min(args.reactions, 100_000))
     print(
         "\ntargets (issue 19): 10 branches × 5-task sequences × 3 exceptions compiled and verified in"

@@ -11,8 +11,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from orccadd.config.cell import CellConfig, override_key, read_cell_config
 from orccadd.config.robot import RobotConfig, read_robot_config
+from orccadd.config.station import StationConfig, override_key, read_station_config
 from orccadd.errors import ConfigError
 from orccadd.model import RobotModel
 from orccadd.physres import PhysicalResource, backend_class
@@ -40,32 +40,32 @@ def load_robot_config(path: str | Path, *, check_model: bool = True) -> RobotCon
     return _checked(replace(cfg, backend_settings=settings), backend, check_model)
 
 
-def load_cell_config(path: str | Path, *, check_model: bool = True) -> CellConfig:
-    """Read a cell config (or a one-resource robot config: a cell of one), each resource checked
-    as `load_robot_config` checks one, and none claiming what another holds (a serial port, a
-    CAN bus, a controller). `ConfigError` naming the file, key, value and what was allowed."""
-    cell = read_cell_config(path)
+def load_station_config(path: str | Path, *, check_model: bool = True) -> StationConfig:
+    """Read a station config (or a one-resource robot config: a station of one), each resource
+    checked as `load_robot_config` checks one, and none claiming what another holds (a serial
+    port, a CAN bus, a controller). `ConfigError` naming the file, key, value and what was allowed."""
+    station = read_station_config(path)
     out: list[RobotConfig] = []
     claimed: dict[str, int] = {}
-    for i, cfg in enumerate(cell.resources):
+    for i, cfg in enumerate(station.resources):
         backend = backend_class(cfg.resource.backend, cfg.source)
         try:
             settings = backend.load_settings(cfg.resource.settings or {}, cfg, cfg.source)
         except ConfigError as e:
-            raise override_key(cell, i, e) from None
+            raise override_key(station, i, e) from None
         cfg = _checked(replace(cfg, backend_settings=settings), backend, check_model)
         for claim in backend.claims(cfg):
             if claim in claimed:
                 j = claimed[claim]
                 raise ConfigError(
-                    cell.source,
+                    station.source,
                     f"resources[{i}]",
                     f"(={cfg.resource.name!r}) claims {claim}, which resources[{j}] "
-                    f"(={cell.resources[j].resource.name!r}) holds: one device, one resource",
+                    f"(={station.resources[j].resource.name!r}) holds: one device, one resource",
                 )
             claimed[claim] = i
         out.append(cfg)
-    return cell.with_resources(tuple(out))
+    return station.with_resources(tuple(out))
 
 
 def _checked(cfg: RobotConfig, backend: type[PhysicalResource], check_model: bool) -> RobotConfig:

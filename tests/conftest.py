@@ -77,7 +77,7 @@ ONE_AT_A_TIME_MODULES = (
     "tests/dxlsim/test_sdk.py",
     "tests/physres/test_sim_process.py",  # this process's loop against the plant's watchdog
     "tests/physres/test_fault_matrix.py",
-    "tests/daemon/test_cell.py",  # two arms: two plants and two loops
+    "tests/daemon/test_station.py",  # two arms: two plants and two loops
     "tests/cellnet/test_cell_missions.py",  # two or three daemons, each with its plant
     "tests/cellnet/test_cmdd_threads.py",
     "tests/cellnet/test_console.py",

@@ -44,9 +44,11 @@ class Daemon(Protocol):
 
     rt: RtLink  # the one link to the real-time process
     socket_path: str  # its public socket (the urgent one is beside it)
-    tel: TelemetryBlock  # the first resource's block: the status and the trace
+    block: TelemetryBlock  # the daemon's own block: the status and the trace
     desc: dict[str, Any]  # the real-time process's `describe`, as of the last `refresh`
 
+    @property
+    def tel(self) -> TelemetryBlock: ...  # the block of the resource a client addresses by default
     @property
     def answer(self) -> Answer: ...  # a request line, checked and served as the socket's are
     async def refresh(self, timeout_s: float | None = ...) -> None: ...
@@ -150,7 +152,7 @@ class CellPlugin:
         the joint states at `joints_hz` (each at its deadline, on a fixed grid: the rate asked
         is the rate sent; `benchmarks/cell_joints.py`)."""
         d, peer = self.daemon, self.peer
-        trace = RingReader(d.tel.trace, d.tel.header, H.TRACE_HEAD, from_now=True)
+        trace = RingReader(d.block.trace, d.block.header, H.TRACE_HEAD, from_now=True)
         joints_s = 1.0 / self.net.joints_hz if self.net.joints_hz else float("inf")
         status_s = 1.0 / self.net.status_hz
         next_joints = next_status = time.monotonic()

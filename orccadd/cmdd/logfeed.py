@@ -39,12 +39,12 @@ UNITS = {
 
 
 def unit(signal: str) -> str:
-    """The unit of a signal or signal group (`q`, `q.elbow_joint`, a cell's `left/q`, ...)."""
+    """The unit of a signal or signal group (`q`, `q.elbow_joint`, a station's `left/q`, ...)."""
     return UNITS.get(base_signal(signal), "1")
 
 
 def base_signal(label: str) -> str:
-    """The tick field of a label or group: `q` of `q.elbow_joint` and of a cell's `left/q.0`."""
+    """The tick field of a label or group: `q` of `q.elbow_joint` and of a station's `left/q.0`."""
     return label.partition(".")[0].rpartition("/")[2]
 
 
@@ -120,8 +120,8 @@ def decode_event(rec: FloatArray, decode: Decoder, origin: LogOrigin) -> LogEven
 
 
 class LogFeed:
-    """New tick records (those after tick `after_tick`) and log events (trace records after
-    `after_trace`), polled together."""
+    """New tick records of a resource's block `tel` (those after tick `after_tick`) and, with
+    the daemon's block `trace`, log events (trace records after `after_trace`), polled together."""
 
     def __init__(
         self,
@@ -129,20 +129,23 @@ class LogFeed:
         origin: LogOrigin,
         decode: Decoder,
         after_tick: int,
+        trace: TelemetryBlock | None = None,
         after_trace: int | None = None,
     ) -> None:
         self.tel = tel
         self.origin = origin
         self.decode = decode
         self.ticks = RingReader(tel.ticks, tel.header, H.TICK_HEAD, from_now=True)
-        self.trace = RingReader(tel.trace, tel.header, H.TRACE_HEAD, from_now=after_trace is None)
+        self.trace: RingReader | None = None
+        if trace is not None:
+            self.trace = RingReader(trace.trace, trace.header, H.TRACE_HEAD, from_now=after_trace is None)
         oldest = max(0, int(tel.header[H.TICK_HEAD]) - len(tel.ticks))
         # a gap longer than the ring keeps (no command daemon for longer): its ticks are lost,
         # counted in `lost` and marked by a `gap` event where the rows resume
         self.gap_ticks = max(0, oldest - after_tick)
         self._gap_mark = self.gap_ticks > 0
         self.ticks.next = max(after_tick, oldest)
-        if after_trace is not None:
+        if after_trace is not None and self.trace is not None:
             self.trace.next = max(after_trace, self.trace.next)
         self.last_mode: float | None = None
 
@@ -159,7 +162,7 @@ class LogFeed:
     def poll(self) -> tuple[FloatArray, list[LogEvent]]:
         """The new tick records and the new events (trace and mode changes), in time order."""
         recs = self.ticks.poll()
-        trace = self.trace.poll()
+        trace = self.trace.poll() if self.trace is not None else np.empty((0, 0))
         events = [decode_event(r, self.decode, self.origin) for r in trace] if len(trace) else []
         events += self._mode_changes(recs)
         if self._gap_mark and len(recs):

@@ -55,7 +55,7 @@ def tick_at(tel: TelemetryBlock, t_s: float) -> int:
 
 
 def csv_name(name: str, resource: str) -> str:
-    """A log's CSV: `run.csv` itself, or in a cell each resource's `run.<resource>.csv`."""
+    """A log's CSV: `run.csv` itself, or in a station each resource's `run.<resource>.csv`."""
     return f"{name.removesuffix('.csv')}.{resource}.csv" if resource else name
 
 
@@ -79,9 +79,9 @@ class Stream:
 
 
 class TelemetryLog:
-    """Chosen signals at full rate into `<name>.csv` and `<name>.mcap`, events in both. A cell's
+    """Chosen signals at full rate into `<name>.csv` and `<name>.mcap`, events in both. A station's
     log: a CSV per resource (`<name>.<resource>.csv`, its own rate, its columns named by it) and
-    one MCAP of every resource; the events (the trace of the first resource's block) in each."""
+    one MCAP of every resource; the events (the trace, in the daemon's own block) in each."""
 
     def __init__(
         self,
@@ -115,6 +115,7 @@ class TelemetryLog:
     def start(
         logs: LogDir,
         sources: list[LogSource],
+        trace: TelemetryBlock,
         name: str,
         desc: Callable[[], dict[str, Any]],
         decode: Decoder,
@@ -127,7 +128,7 @@ class TelemetryLog:
             if origin.tick == 0:
                 who = f"resource {s.resource}'s" if s.resource else "the"
                 raise ValueError(f"log: {who} control loop has not ticked yet: no time to start the log from")
-        trace_start = int(sources[0].tel.header[H.TRACE_HEAD])
+        trace_start = int(trace.header[H.TRACE_HEAD])
         created: list[str] = []
         streams: list[Stream] = []
         try:
@@ -145,7 +146,8 @@ class TelemetryLog:
                 fh = logs.create(file)
                 created.append(file)
                 csv = CsvLog(fh, logs.path / file, s.selection, origin, meta)
-                streams.append(Stream(s.resource, LogFeed(s.tel, origin, decode, origin.tick), csv))
+                events = trace if not streams else None  # the first stream carries the events
+                streams.append(Stream(s.resource, LogFeed(s.tel, origin, decode, origin.tick, events), csv))
             mcap_fd = logs.create_fd(part_name(name, 1))
             created.append(part_name(name, 1))
         except ValueError:
@@ -186,13 +188,15 @@ class TelemetryLog:
     def resume(
         logs: LogDir,
         blocks: dict[str, tuple[TelemetryBlock, list[str]]],
+        trace: TelemetryBlock,
         state: dict[str, Any],
         desc: Callable[[], dict[str, Any]],
         decode: Decoder,
         urdf_path: Path | None,
     ) -> TelemetryLog:
         """The log of `state` carried on after each CSV's last complete row, `blocks` giving each
-        resource's telemetry block and joints ("": a one-resource robot's) (`KeyError`,
+        resource's telemetry block and joints ("": a one-resource robot's), `trace` the daemon's
+        block (its events) (`KeyError`,
         `ValueError`, `OSError`... if it cannot be)."""
         streams: list[Stream] = []
         last_s: list[float] = []
@@ -207,7 +211,7 @@ class TelemetryLog:
                 last = tail.last_time_s
                 after_tick = origin.tick if last == float("-inf") else tick_at(tel, origin.t_s + last)
                 after_trace = max(tail.last_event_seq, int(state["trace_start"])) if k == 0 else None
-                feed = LogFeed(tel, origin, decode, after_tick, after_trace)
+                feed = LogFeed(tel, origin, decode, after_tick, trace if k == 0 else None, after_trace)
                 csv = CsvLog(fh, logs.path / str(entry["csv"]), sel, origin, rows=tail.rows)
                 streams.append(Stream(resource, feed, csv))
                 last_s.append(max(last, 0.0))
@@ -398,7 +402,7 @@ class TelemetryLog:
             "origin_t_s": origin.t_s,
             "urdf": str(self.urdf.path) if self.urdf.text else None,
         }
-        if self.streams[0].resource:  # a cell: a CSV per resource
+        if self.streams[0].resource:  # a station: a CSV per resource
             out["name"] = str(self.logs.path / str(self.state["file"]))
             out["files"] = [str(st.csv.path) for st in self.streams]
             out["resources"] = {

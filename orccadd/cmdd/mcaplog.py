@@ -117,7 +117,7 @@ class _Source:
 
 
 class McapLog:
-    """A log's MCAP part: `write` the feed's records and events, `close` at the end. A cell's
+    """A log's MCAP part: `write` the feed's records and events, `close` at the end. A station's
     resources are streams of it: their channels named by resource (`/left/q`), every joint on
     the one `/joint_states`, the events (`/events`, `/faults`) once, timed on the first's clock."""
 

@@ -29,9 +29,9 @@ from orccadd.cmdd.csvlog import LogDir
 from orccadd.cmdd.logsession import LogSource, TelemetryLog, mission_record
 from orccadd.cmdd.rtlink import RtLink
 from orccadd.cmdd.urdf import urdf_path
-from orccadd.config.cell import read_cell_config
 from orccadd.config.cellnet import CellNetConfig
 from orccadd.config.robot import DaemonConfig
+from orccadd.config.station import read_station_config
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.wire.commands import (
     COMMANDS,
@@ -103,8 +103,8 @@ class CommandDaemon:
         self.logs = LogDir(self.log_dir, cfg.socket_group)
         self.urdf = urdf  # attached to each log's MCAP
         self.rt = RtLink(rt_path)
-        self.tel = TelemetryBlock.attach(telemetry)
-        self.unit_tels: dict[str, TelemetryBlock] = {telemetry: self.tel}  # a cell's, by block name
+        self.block = TelemetryBlock.attach(telemetry)  # the daemon's own: status, trace, its pid
+        self.unit_tels: dict[str, TelemetryBlock] = {}  # each resource's, by block name (`describe`)
         self.roles = Roles(cfg)
         self.desc: dict[str, Any] = {}
         self.desc_mark = (0, 0)  # (mission generation, safe stop number) `desc` was read at
@@ -121,7 +121,7 @@ class CommandDaemon:
         self.readers: dict[asyncio.StreamWriter, ClientReader] = {}  # for streams: gone?
 
     async def refresh(self, timeout_s: float | None = RT_REPLY_S) -> None:
-        st = read_status(self.tel)
+        st = read_status(self.block)
         mark = (int(st[S.MISSION_GEN]), int(st[S.FAULTED]))
         if not self.desc or mark != self.desc_mark:  # a new mission, a new fault, or one cleared
             reply = await self.rt.call("describe", {}, timeout_s)
@@ -134,7 +134,7 @@ class CommandDaemon:
                     self.cell.peer.mission_changed(self.desc.get("mission"))
 
     def _attach_units(self) -> None:
-        """A cell's other resources' telemetry blocks (the first's is `tel`), once."""
+        """Each resource's telemetry block (its ticks), once."""
         for r in self.desc.get("resources", []):
             name = r.get("telemetry", "")
             if name and name not in self.unit_tels:
@@ -144,14 +144,21 @@ class CommandDaemon:
                     log.warning("resource %s: its telemetry block %s: %s", r.get("name"), name, e)
 
     def units(self) -> list[tuple[dict[str, Any], TelemetryBlock]]:
-        """A cell's resources with their telemetry blocks (none for a one-resource robot)."""
+        """A station's resources with their telemetry blocks (none for a one-resource robot: its
+        signals, streams and logs are named without it)."""
         found = [(r, self.unit_tels.get(r.get("telemetry", ""))) for r in self.desc.get("resources", [])]
         if len(found) < 2:
             return []
         return [(r, t) for r, t in found if t is not None]
 
+    @property
+    def tel(self) -> TelemetryBlock:
+        """The telemetry block of the resource a client addresses when it names none (the one
+        resource, or the first listed: `describe`'s top-level `telemetry`)."""
+        return self.unit_tels[str(self.desc["telemetry"])]
+
     def _sources(self, names: list[str]) -> list[LogSource]:
-        """What `monitor` and `log` sample: in a cell each resource's signals from its own block,
+        """What `monitor` and `log` sample: in a station each resource's signals from its own block,
         labelled by it (`left/q.0`); else the one resource's. `ValueError` naming a signal no
         resource has."""
         units = self.units()
@@ -217,7 +224,7 @@ class CommandDaemon:
         if self.recording is not None:
             with contextlib.suppress(OSError):
                 self.recording.close("the command daemon stopped")
-            if not _alive(int(self.tel.header[H.PID])):
+            if not _alive(int(self.block.header[H.PID])):
                 self.logs.clear_state()  # the daemon stopped; else a successor carries the log on
         with contextlib.suppress(FileNotFoundError):
             if os.stat(self.socket_path).st_ino == self.sock_ino:
@@ -245,7 +252,7 @@ class CommandDaemon:
                     )
                 except OSError as e:
                     self._end_log(self.recording.abandon(e))
-            if self.rt.closed or not _alive(int(self.tel.header[H.PID])):
+            if self.rt.closed or not _alive(int(self.block.header[H.PID])):
                 log.info("the real-time process is gone; exiting")
                 self.done.set()
                 return
@@ -425,7 +432,7 @@ class CommandDaemon:
 
     def status_of(self, log_state: dict[str, Any] | None) -> dict[str, Any]:
         """`status`'s result; with a cell, its `cell` section (what was dropped, and why)."""
-        out = views.status(self.tel, self.desc, log_state, self.units())
+        out = views.status(self.block, self.tel, self.desc, log_state, self.units())
         out["rt_link"] = self.rt.report()
         if self.cell is not None:
             out["cell"] = self.cell.peer.report()
@@ -498,7 +505,7 @@ class CommandDaemon:
         await self.refresh()
         if not 0 <= last <= 100_000:
             raise ValueError("events: last must be in [0, 100000]")
-        r = RingReader(self.tel.trace, self.tel.header, H.TRACE_HEAD, from_now=False)
+        r = RingReader(self.block.trace, self.block.header, H.TRACE_HEAD, from_now=False)
         recs: Any = r.poll()[-last:] if last else []
         out = [self.decode_trace(rec) for rec in recs]
         if not follow:
@@ -530,9 +537,9 @@ class CommandDaemon:
             await self.refresh()
             sources = self._sources([str(s) for s in signals or self._log_signals()])
             name = name or f"orccadd-{time.strftime('%Y%m%d-%H%M%S')}.csv"
-            extra = {"rt_pid": int(self.tel.header[H.PID])}
+            extra = {"rt_pid": int(self.block.header[H.PID])}
             rec = TelemetryLog.start(
-                self.logs, sources, name, lambda: self.desc, self.decode_trace, self.urdf, extra
+                self.logs, sources, self.block, name, lambda: self.desc, self.decode_trace, self.urdf, extra
             )
             self.recording = rec
             await self._record_mission(rec)
@@ -541,7 +548,7 @@ class CommandDaemon:
         if self.recording is None:
             raise ValueError("log: not logging")
         try:
-            result = MissionResult(int(read_status(self.tel)[S.RESULT])).name.lower()
+            result = MissionResult(int(read_status(self.block)[S.RESULT])).name.lower()
             self._end_log(self.recording.close(result=result))
         except OSError as e:
             self._end_log(self.recording.abandon(e))
@@ -598,7 +605,7 @@ class CommandDaemon:
         state = self.logs.load_state()
         if state is None:
             return
-        if state.get("rt_pid") != int(self.tel.header[H.PID]):
+        if state.get("rt_pid") != int(self.block.header[H.PID]):
             log.info("log %s was open when the previous daemon stopped; left as it is", state.get("file"))
             self.logs.clear_state()
             return
@@ -606,7 +613,7 @@ class CommandDaemon:
             blocks = {str(r["name"]): (t, list(r["joints"])) for r, t in self.units()}
             blocks[""] = (self.tel, list(self.desc.get("joints", [])))
             rec = TelemetryLog.resume(
-                self.logs, blocks, state, lambda: self.desc, self.decode_trace, self.urdf
+                self.logs, blocks, self.block, state, lambda: self.desc, self.decode_trace, self.urdf
             )
         except (OSError, SocketPathError, ValueError, KeyError, TypeError) as e:
             log.error("cannot carry on log %s: %s", state.get("file"), e)
@@ -659,19 +666,19 @@ def main(argv: list[str] | None = None) -> int:
     except LogSetupError as e:
         ap.exit(2, f"{ap.prog}: error: {e}\n")
     _above_clients()
-    cell = read_cell_config(args.config)
-    if cell.net is not None:  # a peer's signal waits for the GIL in Zenoh's thread: not 5 ms
+    station = read_station_config(args.config)
+    if station.cell is not None:  # a peer's signal waits for the GIL in Zenoh's thread: not 5 ms
         sys.setswitchinterval(CELL_SWITCH_INTERVAL_S)
-    log_dir = cell.resolve(cell.daemon.log_dir) if cell.daemon.log_dir else None
+    log_dir = station.resolve(station.daemon.log_dir) if station.daemon.log_dir else None
     try:
         d = CommandDaemon(
-            cell.daemon,
+            station.daemon,
             args.socket,
             args.rt_socket,
             args.telemetry,
             log_dir,
-            urdf_path(cell.resources[0]),
-            cell.net,
+            urdf_path(station.resources[0]),
+            station.cell,
         )
     except (OSError, ValueError) as e:
         log.error("cannot attach to the real-time process: %s", e)

@@ -35,7 +35,7 @@ from orccadd.wire.telemetry import TelemetryBlock, read_status
 
 class SignalSelection:
     """Signal names → columns of a tick record: `q`, `dq.3`, `tau.elbow_joint`, `wake_us`, ...
-    In a cell, one resource's (`resource`): its labels are named by it (`left/q.elbow_joint`),
+    In a station, one resource's (`resource`): its labels are named by it (`left/q.elbow_joint`),
     and a name may be so too."""
 
     def __init__(
@@ -111,7 +111,7 @@ def cell_selections(
     resources: list[tuple[str, list[str]]],
     signals: Mapping[str, Sequence[Mapping[str, Any]]] | None = None,
 ) -> dict[str, SignalSelection]:
-    """A cell's signals, by resource (name, joints), for those any name picks from: `left/q` is
+    """A station's signals, by resource (name, joints), for those any name picks from: `left/q` is
     resource left's only; an unnamed one is every resource's that has it (`q` all of them,
     `q.finger` the one with that joint). `signals`: each resource's own (`tick_signals`), which
     a name picks from through its resource (`left/wrench`). `ValueError` naming what matches
@@ -177,15 +177,17 @@ def timing(tel: TelemetryBlock, window_s: float = 5.0) -> dict[str, float]:
 
 
 def status(
+    block: TelemetryBlock,
     tel: TelemetryBlock,
     desc: dict[str, Any],
     log: dict[str, Any] | None,
     units: Sequence[tuple[dict[str, Any], TelemetryBlock]] = (),
 ) -> dict[str, Any]:
-    """The daemon's state from its first resource's telemetry block (the status area, the
-    trace), and, for a cell (`units`: each resource's description and block), `resources`: each
-    one's task, status, timing and joints from its own block."""
-    st = read_status(tel)
+    """The daemon's state from its own block's status area (`block`), the loop of the resource a
+    client addresses when it names none from that resource's block (`tel`), and, for several
+    resources (`units`: each one's description and block), `resources`: each one's task, status,
+    timing and joints from its own block."""
+    st = read_status(block)
     out: dict[str, Any] = {
         "robot": desc.get("robot"),
         "state": MachineState(int(st[S.MACHINE])).name.lower(),

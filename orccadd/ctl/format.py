@@ -95,7 +95,7 @@ def format_status(s: dict[str, Any]) -> str:
         + automaton
         + (f"; fault: {cause_words(s.get('fault'))} (`reset` needed)" if s.get("faulted") else "")
     )
-    if s.get("resources"):  # a cell: each resource, its loop and joints
+    if s.get("resources"):  # a station: each resource, its loop and joints
         lines = [head, f"last result {s['result']}"]
         for r in s["resources"]:
             fault = f"; fault: {cause_words(r['fault'])}" if r.get("fault") else ""

@@ -6,7 +6,7 @@ Follows the daemon's `monitor` stream (q, dq, tau, cmd at `--rate`) and its reac
 holding no role on the daemon, nor to a web page of another origin than Foxglove's. From another
 machine, tunnel the port over SSH. Channels as in a log's MCAP, with the same schemas: `/q`,
 `/dq`, `/tau`, `/cmd` (units in their schemas), `/joint_states` (foxglove.JointStates, for a URDF
-layer of the 3D panel) and `/events` (foxglove.Log). A cell: each resource's channels named by it
+layer of the 3D panel) and `/events` (foxglove.Log). A station: each resource's channels named by it
 (`/left/q`), every joint on `/joint_states`.
 """
 
@@ -64,7 +64,7 @@ class LiveView:
             fields.setdefault(base, []).append(joint or "value")
         channels = []
         for base, (cid, _) in self.groups.items():
-            signal = base.rpartition("/")[2]  # a cell's `left/q` is a `q`
+            signal = base.rpartition("/")[2]  # a station's `left/q` is a `q`
             unit = UNITS.get(signal, "1")
             schema = sch.group_schema(signal, fields[base], unit)
             channels.append(Channel(cid, f"/{base}", f"orccadd.{signal}", schema))
@@ -75,7 +75,7 @@ class LiveView:
         )
         channels.append(Channel(self.events_id, "/events", "foxglove.Log", sch.LOG_SCHEMA))
         self.index = {label: i for i, label in enumerate(labels)}
-        # (name on /joint_states, the resource's label prefix, joint): a cell's joints all there,
+        # (name on /joint_states, the resource's label prefix, joint): a station's joints all there,
         # a name two resources share told apart by its resource's (`left/elbow_joint`)
         qs = [label.partition(".") for label in labels if label.partition(".")[0].rpartition("/")[2] == "q"]
         names = [joint for _, _, joint in qs]

@@ -43,7 +43,7 @@ def _generic(r: dict[str, Any], _: dict[str, Any]) -> str:
 def _describe(r: dict[str, Any], ctx: dict[str, Any]) -> str:
     period = float(r["period_s"])
     units = r.get("resources") or []
-    if len(units) > 1:  # a cell: each resource on its own clock
+    if len(units) > 1:  # a station: each resource on its own clock
         lines = [f"robot {r['robot']}: {len(units)} resources, each on its own control thread"]
         lines += table([("config", str(r["config"]))], "  ")
         for u in units:
@@ -91,9 +91,9 @@ def _describe(r: dict[str, Any], ctx: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _task_resources(mission: dict[str, Any] | None, cell: bool) -> dict[str, str]:
-    """In a cell, " (on RESOURCE)" by task name, from the mission's description; else nothing."""
-    if not mission or not cell:
+def _task_resources(mission: dict[str, Any] | None, station: bool) -> dict[str, str]:
+    """In a station, " (on RESOURCE)" by task name, from the mission's description; else nothing."""
+    if not mission or not station:
         return {}
     pairs = zip(mission.get("tasks") or [], mission.get("task_resources") or [], strict=False)
     return {t: f" (on {res})" for t, res in pairs}

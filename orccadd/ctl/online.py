@@ -25,7 +25,7 @@ from orccadd.wire.socketdir import urgent_socket_path
 EXIT_OK, EXIT_REFUSED, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
 SIGNALS_HELP = (
     "q, dq, tau, cmd (all joints), q.3 or q.elbow_joint (one), wake_us, compute_us, status, ...; "
-    "in a cell, each resource's, or one's: left/q"
+    "in a station, each resource's, or one's: left/q"
 )
 
 
@@ -292,7 +292,7 @@ def _fetch_log(info: dict[str, Any], dest: Path, quiet: bool) -> int:
     this user's rights, through no link at its end (`copy_to`)."""
     stem = Path(info.get("name") or info["file"]).stem  # the name the log was given
     copies = []
-    for csv in info.get("files") or [info["file"]]:  # a cell's run.left.csv → DEST.left.csv
+    for csv in info.get("files") or [info["file"]]:  # a station's run.left.csv → DEST.left.csv
         suffix = Path(csv).stem.removeprefix(stem)
         copies.append((Path(csv), dest.with_name(f"{dest.stem}{suffix}.csv") if suffix else dest))
     for part in info.get("mcap", []):  # run.mcap → DEST's name with .mcap (run-2.mcap → DEST-2.mcap)

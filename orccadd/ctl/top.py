@@ -94,7 +94,7 @@ def render(
     width, height = size
     units = status.get("resources") or []
     joints = len(status.get("joints", []))
-    if units:  # a cell: a goal, resource and loop line and the joints of each
+    if units:  # a station: a goal, resource and loop line and the joints of each
         joints = sum(len(u.get("joints", [])) + 4 for u in units) - 3
     need = (MIN_WIDTH, HEAD_LINES + joints + 2)
     if width < need[0] or height < need[1]:
@@ -118,7 +118,7 @@ def render(
     error_line = _fit(f"{label}{error or '-'}", width, RED if colour and error and not handled else "", 9)
     head = [_fit(title, width), _fit(state, width, c, 9, 9 + len(words))]
     note_line = _fit(f"> {note}" if note else "", width)
-    if units:  # a cell: each resource's goal, status, loop and joints
+    if units:  # a station: each resource's goal, status, loop and joints
         body = [error_line, note_line]
         for u in units:
             u_flags = ", ".join(u.get("resource_status") or []) or "ok"

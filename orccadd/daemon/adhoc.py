@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from orccadd.config.cell import CellConfig
 from orccadd.config.robot import RobotConfig
+from orccadd.config.station import StationConfig
 from orccadd.daemon.replies import CommandError
 from orccadd.daemon.view import Machine, UnitView
 from orccadd.kinematics import ToolKinematics
@@ -86,7 +86,7 @@ def mode_for(unit: UnitView) -> CommandMode:
     raise CommandError(f"resource {unit.name} takes neither torque nor position commands (it takes {have})")
 
 
-def task_file(cfg: CellConfig, kind: str, mode: CommandMode) -> Path:
+def task_file(cfg: StationConfig, kind: str, mode: CommandMode) -> Path:
     """The shipped task file for `kind` in `mode`, from the first of `daemon.task_dirs` with it
     (`cfg`: the daemon's, whose directories the compiler reads)."""
     name = TASK_FILES[(kind, mode)]
@@ -145,7 +145,7 @@ def move(m: Machine, target: Sequence[float], resource: str, speed_scale: float)
     """`move`: to the joint target, at `speed_scale` of the joints' limits."""
     u = unit_for(m.units, resource)
     check_target(u.cfg, target, "move")
-    return _move(m.cell, u, list(target), speed_scale, "move")
+    return _move(m.station, u, list(target), speed_scale, "move")
 
 
 def move_pose(m: Machine, pose: Sequence[float], resource: str, speed_scale: float) -> AdHoc:
@@ -174,7 +174,7 @@ def move_pose(m: Machine, pose: Sequence[float], resource: str, speed_scale: flo
             f"move: the pose's position ({', '.join(f'{v:g}' for v in position)}) m is outside the "
             f"workspace ([workspace] in {u.cfg.source or 'the robot config'})"
         )
-    source = task_file(m.cell, "pose", mode_for(u))
+    source = task_file(m.station, "pose", mode_for(u))
     sets = [
         f"line.target_position_m = [{', '.join(map(repr, position))}]",
         f"line.target_rpy_rad = [{', '.join(map(repr, rpy))}]",
@@ -195,10 +195,10 @@ def jog(m: Machine, joint: str, by_rad: float, resource: str, speed_scale: float
     target = u.resource.state.q_rad.tolist()
     target[u.cfg.joint_names.index(joint)] += by_rad
     check_target(u.cfg, target, f"jog {joint} by {by_rad:g} rad")
-    return _move(m.cell, u, target, speed_scale, "jog")
+    return _move(m.station, u, target, speed_scale, "jog")
 
 
-def _move(cfg: CellConfig, u: UnitView, target: list[float], speed_scale: float, kind: str) -> AdHoc:
+def _move(cfg: StationConfig, u: UnitView, target: list[float], speed_scale: float, kind: str) -> AdHoc:
     if not 0.01 <= speed_scale <= 1.0:
         raise CommandError(f"{kind}: speed_scale (={speed_scale:g}) must be in [0.01, 1]")
     mode = mode_for(u)
@@ -216,7 +216,7 @@ def follow(m: Machine, csv: str, name: str, resource: str) -> AdHoc:
     traj = parse_csv(csv, name, u.cfg.joint_names)
     check_trajectory(u.cfg, traj, name, u.resource.state.q_rad.tolist())
     mode = mode_for(u)
-    source = task_file(m.cell, "follow", mode)
+    source = task_file(m.station, "follow", mode)
     text = mission_text("follow", "Follow", u.name, source, [])
     detail = {
         "resource": u.name, "points": len(traj.t_s), "duration_s": float(traj.t_s[-1]),

@@ -29,7 +29,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from orccadd.config.cell import CellConfig
+from orccadd.config.station import StationConfig
 from orccadd.daemon.replies import CommandError
 
 MAX_FILES = 64
@@ -59,7 +59,7 @@ def default_dir() -> Path:
     return Path(base) / "orccadd" / "deployments"
 
 
-def deploy_dir(cfg: CellConfig) -> Path:
+def deploy_dir(cfg: StationConfig) -> Path:
     """This daemon's deployments' directory (created 0700, owned by it and by it alone)."""
     d = cfg.daemon.deploy_dir
     path = cfg.resolve(d) if d else default_dir()

@@ -78,15 +78,15 @@ class Loader:
         """The deployment `ref` names, if it names no file of the mission directories."""
         if not deploy.NAME_RE.match(ref):
             return None
-        dirs = [self.m.cell.resolve(d) for d in self.m.cell.daemon.mission_dirs]
+        dirs = [self.m.station.resolve(d) for d in self.m.station.daemon.mission_dirs]
         if any(is_file(d / f"{ref}.mission") for d in dirs):
             return None  # a shipped or installed mission of that name comes first
-        return deploy.find(deploy.deploy_dir(self.m.cell), ref)
+        return deploy.find(deploy.deploy_dir(self.m.station), ref)
 
     def deploy(self, name: str, mission: str, files: dict[str, str], by: str) -> Result | Pending:
         """`deploy`: checked as `load` checks a file, then stored (`orccadd/daemon/deploy.py`)."""
         self.check_free("deploy a mission")
-        root = deploy.deploy_dir(self.m.cell)
+        root = deploy.deploy_dir(self.m.station)
         staged = deploy.stage(root, name, mission, files)
         if isinstance(staged, Path):
             return {**_deployed(deploy.read_record(staged)), "stored": False}
@@ -95,13 +95,13 @@ class Loader:
         except OSError as e:
             deploy.discard(staged)
             raise CommandError(f"deploy: {e.strerror or e}") from None
-        keep = self.m.cell.daemon.deployments_kept
+        keep = self.m.station.daemon.deployments_kept
 
         def verified(c: Compiled, cached: bool) -> Result:
             # load's last check, on this robot: every task builds (its parameters, its joints),
             # on resources made from the config (built, not opened: the live ones are untouched)
             fresh = [create_resource(u.cfg) for u in self.m.units]
-            built = check_on_robot(c[0], fresh, self.m.cell.name)
+            built = check_on_robot(c[0], fresh, self.m.station.name)
             if not built.ok:
                 raise CommandError("\n".join(x for x in (built.summary, built.explanation) if x))
             record = deploy.commit(root, staged, by, keep)
@@ -146,7 +146,7 @@ class Loader:
         deployment's own); `on_fail()` when it refuses or fails."""
         work = Path(tempfile.mkdtemp(prefix="orccadd-load-"))
         out = work / "result.pickle"
-        cfg = self.m.cell
+        cfg = self.m.station
         configured = (*cfg.daemon.task_dirs, *cfg.daemon.mission_dirs)
         task_dirs = [*extra_dirs, *(str(cfg.resolve(d)) for d in configured)]
         cmd = [
@@ -216,17 +216,17 @@ class Loader:
     def _cache_dir(self) -> str:
         """The compile cache's directory ('' when off): `daemon.compile_cache_dir`, relative to
         the config, or the user's cache (`compile_cache.default_dir`)."""
-        d = self.m.cell.daemon
+        d = self.m.station.daemon
         if not d.compile_cache:
             return ""
-        return str(self.m.cell.resolve(d.compile_cache_dir) if d.compile_cache_dir else default_dir())
+        return str(self.m.station.resolve(d.compile_cache_dir) if d.compile_cache_dir else default_dir())
 
     def _open_mission(self, path: str) -> tuple[int, str]:
         """A descriptor of the mission file `path` names and its real path, if it is a regular
         file inside one of the configured mission directories (checked on the descriptor: no
         link swapped in after the check, no FIFO); `CommandError` otherwise, saying where
         missions may be, never what is elsewhere. The compiler reads that descriptor."""
-        cfg = self.m.cell
+        cfg = self.m.station
         dirs = [cfg.resolve(d) for d in cfg.daemon.mission_dirs]
         conf = Confinement(dirs, "mission file", "daemon.mission_dirs")
         if is_bare_name(path):  # `load demo`: the first <dir>/demo.mission of the mission directories

@@ -21,8 +21,8 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from orccadd.config.cell import CellConfig
 from orccadd.config.robot import RobotConfig
+from orccadd.config.station import StationConfig
 from orccadd.daemon.commands import RtCommands, describe_resource
 from orccadd.daemon.inline import InlineReactor
 from orccadd.daemon.procedure import MissionControl
@@ -51,16 +51,19 @@ class Machine:
 
     def __init__(
         self,
-        cell: CellConfig,
+        station: StationConfig,
         resources: Sequence[PhysicalResource],
         clocks: Sequence[Clock],
         telemetry: Sequence[TelemetryBlock],
+        block: TelemetryBlock,
         wake_fd: int,
         *,
         allow_fault_injection: bool = False,
     ) -> None:
-        self.cell = cell
-        self.pub = Publisher(telemetry[0])
+        """`telemetry`: each resource's block (its ticks); `block`: the daemon's own (the status
+        area and the trace, of every resource)."""
+        self.station = station
+        self.pub = Publisher(block)
         self.registry = EventRegistry()
         self.faults = FaultHistory()
         self.faults.on_cause = lambda n: self.pub.trace(Trace.FAULT, self.now_s(), code=n)
@@ -72,9 +75,9 @@ class Machine:
                 tel,
                 self.registry,
                 wake_fd,
-                hold_name=f"Hold_{res.name}" if cell.listed else "Hold",  # events and tunes name it
+                hold_name=f"Hold_{res.name}" if station.listed else "Hold",  # events and tunes name it
             )
-            for cfg, res, clock, tel in zip(cell.resources, resources, clocks, telemetry, strict=True)
+            for cfg, res, clock, tel in zip(station.resources, resources, clocks, telemetry, strict=True)
         )
         self.allow_fault_injection = allow_fault_injection
         self.notes: list[str] = []  # recent notable happenings (bounded), for `describe`
@@ -131,7 +134,7 @@ class Machine:
     def link_lost(self, why: str) -> None:
         """The command daemon's link is gone: noted; the run aborted if the config says so."""
         self.note(why, logging.WARNING)
-        if self.cell.daemon.on_command_daemon_loss == "safe_stop" and self.mission.running:
+        if self.station.daemon.on_command_daemon_loss == "safe_stop" and self.mission.running:
             self.abort(f"{why} (on_command_daemon_loss = safe_stop)")
 
     # ---- helpers ------------------------------------------------------------------------
@@ -162,8 +165,8 @@ class Machine:
         mc = self.mission
         d = self.default
         return {
-            "robot": self.cell.name,
-            "config": self.cell.source,
+            "robot": self.station.name,
+            "config": self.station.source,
             "dof": d.cfg.dof,
             "joints": list(d.cfg.joint_names),
             # the limits the controller enforces, per joint (SI units in the keys)

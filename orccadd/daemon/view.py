@@ -6,8 +6,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Protocol
 
-from orccadd.config.cell import CellConfig
 from orccadd.config.robot import RobotConfig
+from orccadd.config.station import StationConfig
 from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.outputs import OutputWorker
 from orccadd.daemon.procedure import MissionControl
@@ -35,7 +35,7 @@ class UnitView(Protocol):
 class Machine(Protocol):
     """What the handlers use of the execution machine (`orccadd.daemon.machine.Machine`)."""
 
-    cell: CellConfig
+    station: StationConfig
     registry: EventRegistry
     pub: Publisher
     mission: MissionControl

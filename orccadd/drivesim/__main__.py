@@ -38,8 +38,8 @@ from typing import Any
 import can
 import numpy as np
 
-from orccadd.config.cell import pick_resource
 from orccadd.config.robot import RobotConfig, read_toml
+from orccadd.config.station import pick_resource
 from orccadd.drivers.canopen.settings import CanopenSettings
 from orccadd.drivesim.axis import AxisUnits, Strictness
 from orccadd.drivesim.simulator import AxisSpec, DriveSimulator
@@ -47,7 +47,7 @@ from orccadd.drivesim.socketcand import QueuedSocketcandBus
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.physres.sim import SimSettings, load_sim_settings
-from orccadd.robot import load_cell_config
+from orccadd.robot import load_station_config
 from orccadd.runtime import Summary, sim_control
 from orccadd.runtime.rt import realtime_device_process
 from orccadd.runtime.threads import ThreadGroup
@@ -111,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--resource",
         default="",
-        help="in a cell config (several resources): the resource to serve (default: its only canopen402 one)",
+        help="in a station config (several resources): the resource to serve "
+        "(default: its only canopen402 one)",
     )
     ap.add_argument(
         "--plant", default="", help="TOML table of `sim` settings for the arm (friction, initial_q_rad)"
@@ -150,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     except LogSetupError as e:
         ap.exit(2, f"{ap.prog}: error: {e}\n")
     try:
-        cfg = pick_resource(load_cell_config(args.config), ("canopen402",), args.resource)
+        cfg = pick_resource(load_station_config(args.config), ("canopen402",), args.resource)
         s = cfg.backend_settings
         if not isinstance(s, CanopenSettings):
             raise OrccaddError(f"{args.config}: resource.backend must be canopen402 for simulated drives")

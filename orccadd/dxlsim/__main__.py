@@ -16,7 +16,7 @@ import logging
 import signal
 import threading
 
-from orccadd.config.cell import pick_resource, read_cell_config
+from orccadd.config.station import pick_resource, read_station_config
 from orccadd.dxlsim.chain import Chain
 from orccadd.dxlsim.control import ControlServer
 from orccadd.dxlsim.link import PtyLink
@@ -54,7 +54,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--resource",
         default="",
-        help="in a cell config (several resources): the resource to serve (default: its only dynamixel one)",
+        help="in a station config (several resources): the resource to serve "
+        "(default: its only dynamixel one)",
     )
     ap.add_argument("--port", default="", help="where to link the serial port (default: the config's port)")
     ap.add_argument("--control", default="", help="the fault-injection socket (default: PORT.control)")
@@ -97,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     except LogSetupError as e:
         ap.exit(2, f"{ap.prog}: error: {e}\n")
     try:
-        cfg = pick_resource(read_cell_config(args.config), ("dynamixel",), args.resource)
+        cfg = pick_resource(read_station_config(args.config), ("dynamixel",), args.resource)
         settings = read_chain_settings(cfg)
         if args.initial_q_rad is not None and len(args.initial_q_rad) != cfg.dof:
             raise OrccaddError(

@@ -175,10 +175,10 @@ def _on_robot(a: Any, config: str | None) -> list[Any]:
     from orccadd.automaton.checks.verify import WARNING, CheckResult
     from orccadd.config.shipped import SERVICE_CONFIG, robot_config_path
     from orccadd.mission import check_on_robot, check_parameter_names
-    from orccadd.robot import create_resource, load_cell_config
+    from orccadd.robot import create_resource, load_station_config
 
     if config is None and not SERVICE_CONFIG.is_file():
-        stand_in = load_cell_config(robot_config_path(STAND_IN_ROBOT), check_model=False)
+        stand_in = load_station_config(robot_config_path(STAND_IN_ROBOT), check_model=False)
         names = check_parameter_names(a, create_resource(stand_in.resources[0]).model)
         return [
             names,
@@ -193,8 +193,8 @@ def _on_robot(a: Any, config: str | None) -> list[Any]:
             ),
         ]
     path = robot_config_path(config) if config is not None else SERVICE_CONFIG
-    cell = load_cell_config(path, check_model=False)  # ConfigError: exit 2, naming file and key
-    return [check_on_robot(a, [create_resource(r) for r in cell.resources], cell.name)]
+    station = load_station_config(path, check_model=False)  # ConfigError: exit 2, naming file and key
+    return [check_on_robot(a, [create_resource(r) for r in station.resources], station.name)]
 
 
 def cmd_graph(args: argparse.Namespace) -> int:

@@ -2,7 +2,7 @@
 
 Everything comes from the file itself (the CSV's header and `# event` lines; the MCAP's
 channels, their units, `/events` and its metadata): a log copied elsewhere reads the same. A CSV
-written before logs had a header reads without units or events. A cell's log: each resource's
+written before logs had a header reads without units or events. A station's log: each resource's
 CSV, or the one MCAP of all (columns `left/q.<joint>`, each resource's samples at its own rate,
 NaN between them).
 """
@@ -38,14 +38,14 @@ class CsvLogData:
 
 
 def log_parts(log: Path) -> list[Path]:
-    """The files `log stop -o LOG` wrote for a cell's log, where `LOG` itself is not one of them:
-    LOG's stem with each resource's name (`run.left.csv`), and the cell's MCAP (`run.mcap`)."""
+    """The files `log stop -o LOG` wrote for a station's log, where `LOG` itself is not one of them:
+    LOG's stem with each resource's name (`run.left.csv`), and the station's MCAP (`run.mcap`)."""
     parts = sorted(log.parent.glob(f"{log.stem}.*{log.suffix}")) if log.suffix else []
     return [*parts, *(p for p in (log.with_suffix(".mcap"),) if p != log and p.is_file())]
 
 
 def resolve_log(log: Path) -> Path:
-    """`log`, or where there is no such file but a cell's log under that name (`log_parts`), its
+    """`log`, or where there is no such file but a station's log under that name (`log_parts`), its
     MCAP (every resource in one file); else a `FileNotFoundError` that says which files exist."""
     if log.exists():
         return log
@@ -136,7 +136,7 @@ def read_mcap(log: Path) -> CsvLogData:
     data[:, 0] = times
     for k, c in enumerate(names):  # a time given twice: the later value, as a dict kept it
         data[np.searchsorted(times, at[c]), k + 1] = np.frombuffer(values_of[c], dtype=np.float64)
-    for group in units:  # the command's unit is its mode's, as in the CSV (a cell's `left/cmd` too)
+    for group in units:  # the command's unit is its mode's, as in the CSV (a station's `left/cmd` too)
         if group.rpartition("/")[2] == "cmd":
             units[group] = {"position": "rad", "velocity": "rad/s", "torque": "N.m"}
     # to the µs, as the messages' time_s (and the CSV): an event and the tick it happened in are at one time

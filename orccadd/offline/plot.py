@@ -5,7 +5,7 @@ many rows as they need not to overlap (matplotlib); legends beside the panels, n
 
 A log is its CSV or its MCAP (the same content), read by `orccadd.offline.logread`: a log
 copied elsewhere plots the same. A CSV written before logs had a header plots without units or
-events. A cell's log: each resource's CSV, or the one MCAP of all (a panel per resource and
+events. A station's log: each resource's CSV, or the one MCAP of all (a panel per resource and
 signal: `left/q`, `right/q`, each resource's samples at its own rate).
 """
 
@@ -78,7 +78,7 @@ def plot_csv(log: Path, out: Path, prefixes: list[str], fmt: str | None = None) 
     groups: dict[str, list[int]] = {}
     for i, name in enumerate(d.columns[1:], start=1):
         base = name.split(".", 1)[0]
-        # `q` names every resource's q in a cell's log (`left/q`, `right/q`); `left/q` one's
+        # `q` names every resource's q in a station's log (`left/q`, `right/q`); `left/q` one's
         if prefixes and base not in prefixes and base.rpartition("/")[2] not in prefixes:
             continue
         groups.setdefault(base, []).append(i)
@@ -109,7 +109,7 @@ def plot_csv(log: Path, out: Path, prefixes: list[str], fmt: str | None = None) 
                 lane.text(ts, row, name, fontsize=LABEL_FONT_PT, color=MARKED[kind], ha="left", va="center")
         axes = axes[1:]
         for ax, (base, cols) in zip(axes[:, 0], groups.items(), strict=True):
-            for c in cols:  # a column's own samples (a cell's MCAP: resources at their own rates)
+            for c in cols:  # a column's own samples (a station's MCAP: resources at their own rates)
                 y = d.data[:, c]
                 has = ~np.isnan(y) if d.meta.get("resources") else slice(None)
                 ax.plot(t[has], y[has], lw=1.0, label=d.columns[c].split(".", 1)[-1])
@@ -132,7 +132,7 @@ def plot_csv(log: Path, out: Path, prefixes: list[str], fmt: str | None = None) 
         plt.close(fig)
     unnamed = sum(1 for r in rows if r < 0)
     skipped = f", {unnamed} not named (no room)" if unnamed else ""
-    source = f" from {log} (a cell's log: every resource in its MCAP)" if log != asked else ""
+    source = f" from {log} (a station's log: every resource in its MCAP)" if log != asked else ""
     return (
         f"{out}: {len(groups)} plots, {len(d.data)} samples over {t[-1] - t[0]:.2f} s, "
         f"{len(marks)} events{skipped} ({form}){source}"

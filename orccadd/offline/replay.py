@@ -32,7 +32,7 @@ from orccadd.modules.base import CommandMotion
 from orccadd.offline.replayrun import RecordedRun, ReplayError, Tune
 from orccadd.physres import PhysicalResource, backend_class
 from orccadd.physres.description import ResourceDescription
-from orccadd.robot import load_cell_config
+from orccadd.robot import load_station_config
 from orccadd.state import FloatArray, JointState
 from orccadd.task import EventQueue, EventRegistry, RobotTask
 from orccadd.task.motion import CommandHistory
@@ -214,11 +214,11 @@ def _config_path(run: RecordedRun, given: Path | None, notes: list[str]) -> Path
 
 def _build(run: RecordedRun, config_path: Path, mission: Path | None, notes: list[str]) -> _Built:
     try:
-        cfgs = load_cell_config(config_path).resources  # a robot config, or a cell's of one resource
+        cfgs = load_station_config(config_path).resources  # a robot config, or a station of one resource
         if len(cfgs) != 1:
             names = ", ".join(c.resource.name for c in cfgs)
             raise ReplayError(
-                f"{config_path}: a cell of {len(cfgs)} resources ({names}): replay takes one's run"
+                f"{config_path}: a station of {len(cfgs)} resources ({names}): replay takes one's run"
             )
         cfg = cfgs[0]
         res = RecordedResource(cfg, RobotModel.from_config(cfg))

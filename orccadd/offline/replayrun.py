@@ -113,7 +113,7 @@ def read_run(path: Path) -> RecordedRun:
                     continue
                 if "/" in signal:
                     raise ReplayError(
-                        f"{path}: a cell's log (signal {signal}): replay takes a one-resource robot's run"
+                        f"{path}: a station's log (signal {signal}): replay takes a one-resource robot's run"
                     )
                 body = json.loads(message.data)
                 names = fields.get(signal)

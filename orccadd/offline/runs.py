@@ -95,7 +95,7 @@ class Run:
         return list(dict.fromkeys(w.task for w in self.windows))
 
     def joint_cols(self, signal: str) -> dict[str, int]:
-        """The columns of a per-joint signal group (`q`): joint label → column. A cell's joints
+        """The columns of a per-joint signal group (`q`): joint label → column. A station's joints
         are labelled by their resource (`left/elbow_joint`)."""
         out: dict[str, int] = {}
         for i, name in enumerate(self.log.columns[1:], start=1):

@@ -122,7 +122,7 @@ class PhysicalResource(ABC):
     @classmethod
     def claims(cls, config: RobotConfig) -> tuple[str, ...]:
         """What this resource holds alone (a serial port, a CAN node on its bus, a controller's
-        address), in words: a cell refuses two resources that claim the same. Default: none."""
+        address), in words: a station refuses two resources that claim the same. Default: none."""
         return ()
 
     @classmethod

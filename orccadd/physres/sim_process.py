@@ -36,8 +36,8 @@ from orccadd.types import CommandMode, Lifecycle, Status
 
 SELF_STOPPED = int(Status.STOPPING | Status.STOPPED)
 # the watchdogs' default tolerance: a development machine's scheduler stalls the real-time threads
-# of a busy cell for tens of milliseconds now and then (RT throttling fired on our CI VMs; a CI
-# run tripped a 40 ms watchdog while a four-resource cell held), as ur5e-rtde-sim.toml's 0.5 s
+# of a busy station for tens of milliseconds now and then (RT throttling fired on our CI VMs; a CI
+# run tripped a 40 ms watchdog while a four-resource station held), as ur5e-rtde-sim.toml's 0.5 s
 # RTDE watchdog allows for the same reason
 WATCHDOG_S = 0.1
 WATCHDOG_MIN_PERIODS = 20
@@ -49,7 +49,7 @@ class SimProcessSettings(SimSettings):
     """`sim` settings plus the process link's watchdogs."""
 
     # 0: as many periods as `WATCHDOG_S`, at least `WATCHDOG_MIN_PERIODS` (the same tolerance in
-    # time whatever the period: a cell may run the arm faster than its config does)
+    # time whatever the period: a station may run the arm faster than its config does)
     watchdog_periods: int = field(default=0, bounds=(0, 100000))
     heartbeat_timeout_periods: int = field(default=0, bounds=(0, 100000))
     startup_timeout_s: float = field(default=30.0, bounds=(0.1, 600.0))

@@ -23,8 +23,8 @@ import threading
 from functools import partial
 from pathlib import Path
 
-from orccadd.config.cell import pick_resource, read_cell_config
 from orccadd.config.robot import read_toml
+from orccadd.config.station import pick_resource, read_station_config
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.runtime import sim_control
@@ -58,7 +58,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument(
         "--resource",
         default="",
-        help="in a cell config (several resources): the resource to serve (default: its only ur_rtde one)",
+        help="in a station config (several resources): the resource to serve (default: its only ur_rtde one)",
     )
     ap.add_argument(
         "--host", type=_loopback, default="127.0.0.1", help="a loopback address (default 127.0.0.1)"
@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     except LogSetupError as e:
         raise SystemExit(f"python -m orccadd.ursim: error: {e}") from None
     try:
-        cfg = pick_resource(read_cell_config(args.config), ("ur_rtde",), args.resource)
+        cfg = pick_resource(read_station_config(args.config), ("ur_rtde",), args.resource)
         if cfg.dof != UR_DOF:
             raise OrccaddError(f"{args.config}: a UR arm has {UR_DOF} joints, this config {cfg.dof}")
         plant = read_toml(Path(args.plant)) if args.plant else {}

@@ -131,7 +131,7 @@ COMMANDS: dict[str, CommandSpec] = {
             "cmdd",
             "stream of `{t_s, values}`: `q`, `dq`, `tau`, `cmd` (sent to the device, in `mode`: "
             "1 position, 2 velocity, 3 torque) (or `q.3`, `q.<joint>`), `wake_us`, `compute_us`, `task`, "
-            "`phase`, `status`, `mode`; in a cell every resource's (labels `left/q.<joint>`), or one's "
+            "`phase`, `status`, `mode`; in a station every resource's (labels `left/q.<joint>`), or one's "
             "(`left/q`)",
             (
                 Arg("signals", (list,), "signal names (default: q)", default=None),
@@ -308,7 +308,7 @@ COMMANDS: dict[str, CommandSpec] = {
             "cmdd",
             "start/stop a full-rate log, CSV and MCAP beside it, written by the command daemon into its "
             "own log directory (daemon.log_dir); the reply names the files (`file`, `mcap` parts), the "
-            "wall-clock start (`start_utc`) and the loop time rows count from (`origin_t_s`); in a cell "
+            "wall-clock start (`start_utc`) and the loop time rows count from (`origin_t_s`); in a station "
             "a CSV per resource (`files`, `resources`: `<name>.<resource>.csv`) and one MCAP",
             (
                 Arg("action", (str,), "start or stop", required=True, choices=("start", "stop")),

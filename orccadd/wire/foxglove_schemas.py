@@ -140,5 +140,5 @@ def stamp(wall_ns: int) -> dict[str, int]:
 
 def joint_state_name(resource: str, joint: str, every_joint: list[str]) -> str:
     """A joint's name on `/joint_states`: its own, or `resource/joint` when two resources of a
-    cell share it (two identical arms), as ROS prefixes do."""
+    station share it (two identical arms), as ROS prefixes do."""
     return f"{resource}/{joint}" if resource and every_joint.count(joint) > 1 else joint

@@ -170,10 +170,10 @@ def test_a_par_in_a_loop_splits_unless_it_restarts_in_the_instant_it_ends() -> N
         assert network.react(inputs) == explicit.react(inputs)
 
 
-def test_the_dual_arm_cell_is_a_network_that_passes_and_runs_as_its_product() -> None:
+def test_the_dual_arm_station_is_a_network_that_passes_and_runs_as_its_product() -> None:
     """Five cycles (two arms, a gripper, a camera, a conveyor); the safe procedure homes both
     arms with tasks the branches also run (their events are then the context's)."""
-    cell = ROOT / "benchmarks" / "missions" / "dual_arm_cell.mission"
+    cell = ROOT / "benchmarks" / "missions" / "dual_arm_station.mission"
     net = compile_file(cell, allow_network=True)
     assert isinstance(net, Network) and len(net.branches) == 5
     report = verify_network(net)

@@ -45,7 +45,9 @@ def start(
         loop.ticks(1)
     sels = cell_selections(signals, list(joints.items()))
     sources = [LogSource(r, loops[r].tel, sels[r]) for r in joints if r in sels]
-    return TelemetryLog.start(LogDir(logs, ""), sources, "run.csv", lambda: DESC, decode, URDF, {})
+    return TelemetryLog.start(
+        LogDir(logs, ""), sources, sources[0].tel, "run.csv", lambda: DESC, decode, URDF, {}
+    )
 
 
 def csv_columns(path: Path) -> tuple[list[str], np.ndarray, list[str], dict[str, object]]:
@@ -140,7 +142,7 @@ def test_a_cell_log_is_carried_on_by_the_next_command_daemon(
     blocks["arm"].ticks(60)  # nobody logs: the next one takes these from the rings
     blocks["hand"].ticks(30)
     joined = {"arm": (blocks["arm"].tel, ARM), "hand": (blocks["hand"].tel, HAND)}
-    rec2 = TelemetryLog.resume(LogDir(logs, ""), joined, state, lambda: DESC, decode, URDF)
+    rec2 = TelemetryLog.resume(LogDir(logs, ""), joined, blocks["arm"].tel, state, lambda: DESC, decode, URDF)
     assert rec2.state["mcap"] == ["run.mcap", "run-2.mcap"]
     blocks["arm"].ticks(10)
     blocks["hand"].ticks(5)

@@ -34,7 +34,7 @@ def start(tmp_path: Path, tel: TelemetryBlock, name: str = "run.csv") -> Telemet
         FakeLoop(tel).ticks(1)
     sel = SignalSelection(SIGNALS, DESC["joints"])
     return TelemetryLog.start(
-        LogDir(tmp_path / "logs", ""), [LogSource("", tel, sel)], name, lambda: DESC, decode, URDF, {}
+        LogDir(tmp_path / "logs", ""), [LogSource("", tel, sel)], tel, name, lambda: DESC, decode, URDF, {}
     )
 
 
@@ -153,7 +153,7 @@ def test_a_log_outlives_its_command_daemon(tmp_path: Path, loop: FakeLoop) -> No
     loop.ticks(300)  # nobody logs
     loop.trace(Trace.EVENT, 0)
     rec2 = TelemetryLog.resume(
-        LogDir(logs, ""), {"": (loop.tel, DESC["joints"])}, state, lambda: DESC, decode, URDF
+        LogDir(logs, ""), {"": (loop.tel, DESC["joints"])}, loop.tel, state, lambda: DESC, decode, URDF
     )
     assert rec2.state["mcap"] == ["run.mcap", "run-2.mcap"]
     loop.ticks(10)
@@ -234,7 +234,7 @@ def test_a_gap_longer_than_the_ring_is_counted_and_marked_where_the_rows_resume(
     ring = len(loop.tel.ticks)
     loop.ticks(ring + 250)  # nobody logs for longer than the ring keeps
     rec2 = TelemetryLog.resume(
-        LogDir(logs, ""), {"": (loop.tel, DESC["joints"])}, state, lambda: DESC, decode, URDF
+        LogDir(logs, ""), {"": (loop.tel, DESC["joints"])}, loop.tel, state, lambda: DESC, decode, URDF
     )
     loop.ticks(10)
     info = rec2.close()
@@ -254,6 +254,7 @@ def test_no_log_before_the_loops_first_tick(tmp_path: Path, tel: TelemetryBlock)
         TelemetryLog.start(
             LogDir(tmp_path / "logs", ""),
             [LogSource("", tel, sel)],
+            tel,
             "run.csv",
             lambda: DESC,
             decode,

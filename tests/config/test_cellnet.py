@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from orccadd.cellnet.zconfig import access_control, console_access_control, zenoh_config
-from orccadd.config.cell import read_cell_config
 from orccadd.config.cellnet import load_cellnet
+from orccadd.config.station import read_station_config
 from orccadd.errors import ConfigError
 from tests.conftest import ROOT
 
@@ -108,8 +108,8 @@ def test_the_shipped_cell_configs_read(tmp_path: Path) -> None:
     if not (certs / "ca.pem").is_file():
         pytest.skip("configs/cell/certs/ is made by `make setup`")
     for arm in ("arm-a", "arm-b"):
-        cell = read_cell_config(ROOT / f"configs/cell/{arm}.toml")
-        assert cell.net is not None and cell.net.robot == arm and cell.net.secured
+        cell = read_station_config(ROOT / f"configs/cell/{arm}.toml")
+        assert cell.cell is not None and cell.cell.robot == arm and cell.cell.secured
         assert cell.names == ("arm",)
 
 
@@ -118,4 +118,4 @@ def test_a_resource_of_a_cell_file_cannot_carry_its_own_cell_table(tmp_path: Pat
     (tmp_path / "arm.toml").write_text(robot + '\n[cell]\nname = "c"\n')
     (tmp_path / "cell.toml").write_text('name = "x"\n[[resources]]\nname = "arm"\nconfig = "arm.toml"\n')
     with pytest.raises(ConfigError, match=r"resources\[0\].config .*has a \[cell\] table"):
-        read_cell_config(tmp_path / "cell.toml")
+        read_station_config(tmp_path / "cell.toml")

@@ -13,8 +13,8 @@ from typing import cast
 import numpy as np
 import pytest
 
-from orccadd.config.cell import CellConfig
 from orccadd.config.robot import RobotConfig
+from orccadd.config.station import StationConfig
 from orccadd.daemon.machine import Machine
 from orccadd.daemon.replies import Pending
 from orccadd.launch import DaemonProcess
@@ -69,14 +69,14 @@ def start_daemon_with(tmp: Path, config: Path, *extra: str, own_group: bool = Fa
     )  # fmt: skip
 
 
-def cell_copy(cell: Path, tmp: Path, daemon_lines: str = "") -> Path:
-    """A copy of the cell config `cell` in `tmp` (its resources' configs named by absolute paths,
+def station_copy(station: Path, tmp: Path, daemon_lines: str = "") -> Path:
+    """A copy of the station config `station` in `tmp` (its resources' configs named by absolute paths,
     so that they still name the shipped files), with `daemon_lines` added to its [daemon] table."""
-    text = cell.read_text().replace('config = "', f'config = "{cell.parent}/')
+    text = station.read_text().replace('config = "', f'config = "{station.parent}/')
     if daemon_lines:
         head, found, rest = text.partition("\n[daemon]\n")
         text = f"{head}\n[daemon]\n{daemon_lines}\n{rest}" if found else f"{text}\n[daemon]\n{daemon_lines}\n"
-    out = tmp / cell.name
+    out = tmp / station.name
     out.write_text(text)
     return out
 
@@ -98,14 +98,16 @@ def machine_on(cfg: RobotConfig, mode: CommandMode, clock: Clock) -> Iterator[Ma
     res.configure()
     res.activate(mode)
     extra = sum(g.size for g in res.description.signals)  # the resource's signals in each tick
-    tel = TelemetryBlock.create(Layout(cfg.dof, 8000, 1000, extra), cfg.control_period_s)
+    tel = TelemetryBlock.create(Layout(cfg.dof, 8000, 1, extra), cfg.control_period_s)
+    block = TelemetryBlock.create(Layout(0, 1, 1000), cfg.control_period_s)  # the status, the trace
     r, w = os.pipe2(os.O_NONBLOCK)
-    m = Machine(CellConfig.of(cfg), [res], [clock], [tel], w)
+    m = Machine(StationConfig.of(cfg), [res], [clock], [tel], block, w)
     try:
         yield m
     finally:
         m.close_outputs(5.0)
         tel.close()
+        block.close()
         res.shutdown()
         os.close(r)
         os.close(w)

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from orccadd.config.cell import CellConfig
+from orccadd.config.station import StationConfig
 from orccadd.daemon.adhoc import (
     check_target,
     check_trajectory,
@@ -133,8 +133,8 @@ def test_the_mode_is_the_hold_tasks_else_torque_else_position() -> None:
     assert mode_for(stand_in({P, V}, V)) is P
     with pytest.raises(CommandError, match="resource arm takes neither torque nor position commands"):
         mode_for(stand_in({V}, V))
-    assert task_file(CellConfig.of(CFG), "move", P).name == "move_joints_csp.toml"
-    assert task_file(CellConfig.of(CFG), "follow", TQ) == ROOT / "configs/tasks/follow_joints.toml"
+    assert task_file(StationConfig.of(CFG), "move", P).name == "move_joints_csp.toml"
+    assert task_file(StationConfig.of(CFG), "follow", TQ) == ROOT / "configs/tasks/follow_joints.toml"
 
 
 def test_a_pose_outside_the_workspace_is_refused_before_anything_moves(tmp_path: Path) -> None:
@@ -155,7 +155,7 @@ def test_a_pose_outside_the_workspace_is_refused_before_anything_moves(tmp_path:
         cfg=cfg,
         loop=SimpleNamespace(hold=SimpleNamespace(signature=SimpleNamespace(command=CommandMode.TORQUE))),
     )
-    machine = SimpleNamespace(units=[unit], cell=CellConfig.of(cfg))
+    machine = SimpleNamespace(units=[unit], station=StationConfig.of(cfg))
     with pytest.raises(
         CommandError,
         match=r"move: the pose's position \(0.2, 0, 0.5\) m is outside the workspace "

@@ -50,7 +50,7 @@ def switches(machine: Machine) -> list[Switch]:
 
 
 def instant_times(machine: Machine) -> list[float]:
-    trace = machine.default.tel.trace
+    trace = machine.pub.tel.trace
     rows = trace[(trace[:, R.SEQ] > 0) & (trace[:, R.KIND] == Trace.INSTANT)]
     return sorted(float(t) for t in rows[:, R.T_S])
 

@@ -8,9 +8,9 @@ from typing import Any
 
 import pytest
 
+from orccadd.daemon.cmdlink import CommandLink, decode
 from orccadd.daemon.machine import Machine
 from orccadd.daemon.replies import CommandError, Pending
-from orccadd.daemon.rtproc import RealtimeProcess, decode
 from tests.daemon.conftest import ROOT
 
 
@@ -29,12 +29,12 @@ class Broken:
 
 def handle(msg: object) -> tuple[Any, dict[str, Any]]:
     """The message as it arrives: decoded and checked once (`decode`), then handled."""
-    proc = RealtimeProcess.__new__(RealtimeProcess)
-    proc.machine = Broken()  # type: ignore[assignment]
+    link = CommandLink.__new__(CommandLink)  # its request handling alone: no socket
+    link.machine = Broken()  # type: ignore[assignment]
     req = decode(json.dumps(msg).encode())
     if isinstance(req, dict):  # refused by the checks: never reaches the machine
         return req["id"], req
-    rid, reply = proc._handle(req)
+    rid, reply = link.handle(req)
     assert isinstance(reply, dict)
     return rid, reply
 

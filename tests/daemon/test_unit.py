@@ -64,3 +64,13 @@ def test_a_failure_becomes_the_active_tasks_type_3_and_the_resources_stop_cause(
     finally:
         u.stop()
         u.join(5.0)
+
+
+def test_the_status_and_the_trace_are_the_daemons_own_block_not_a_resources(machine: Machine) -> None:
+    u = machine.default
+    assert machine.pub.tel is not u.tel  # no resource carries what belongs to every resource
+    before = int(machine.pub.tel.header[H.TRACE_HEAD])
+    machine.command("abort", {})  # an operator command: a trace record (and a fault)
+    assert int(machine.pub.tel.header[H.TRACE_HEAD]) > before
+    assert int(u.tel.header[H.TRACE_HEAD]) == 0  # the resource's block: its ticks only
+    assert machine.pub.tel.status[1:].any()  # the status area written (machine state, ...)

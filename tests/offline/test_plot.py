@@ -34,6 +34,7 @@ def log(tmp_path: Path) -> Iterator[Path]:
         rec = TelemetryLog.start(
             LogDir(tmp_path / "logs", ""),
             [LogSource("", tel, sel)],
+            tel,  # the trace: the daemon's own block, the resource's here
             "run.csv",
             lambda: DESC,
             decode,

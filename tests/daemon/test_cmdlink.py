@@ -7,20 +7,18 @@ from __future__ import annotations
 
 import json
 import socket
-from collections import deque
+from pathlib import Path
 from typing import Any
 
-from orccadd.daemon import rtproc
-from orccadd.daemon.rtproc import RealtimeProcess, one_way
+from orccadd.daemon import cmdlink
+from orccadd.daemon.cmdlink import CommandLink, one_way
 
 
-def sender(conn: socket.socket) -> RealtimeProcess:
-    """Only the link's part of a real-time process: its connection and outbox."""
-    p = RealtimeProcess.__new__(RealtimeProcess)
-    p.conn = conn
-    p.outbox, p.outbox_kinds = deque(), deque()
-    p.discarded, p.discarded_told, p.discard_logged_s = {}, 0, 0.0
-    return p
+def sender(conn: socket.socket, tmp: Path) -> CommandLink:
+    """The link, with `conn` as the command daemon's connection."""
+    link = CommandLink(str(tmp / "orccadd.sock.rt"))
+    link.conn = conn
+    return link
 
 
 def received(s: socket.socket) -> list[dict[str, Any]]:
@@ -32,13 +30,15 @@ def received(s: socket.socket) -> list[dict[str, Any]]:
             return out
 
 
-def test_a_full_link_keeps_messages_in_order_then_counts_what_it_discards(monkeypatch: Any) -> None:
-    monkeypatch.setattr(rtproc, "OUTBOX_MAX", 50)
+def test_a_full_link_keeps_messages_in_order_then_counts_what_it_discards(
+    monkeypatch: Any, tmp_path: Path
+) -> None:
+    monkeypatch.setattr(cmdlink, "OUTBOX_MAX", 50)
     a, b = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
     a.setblocking(False)
     b.setblocking(False)
     a.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
-    p = sender(a)
+    p = sender(a, tmp_path)
     sent = 0
     while not p.outbox:  # until the link is full
         sent += 1
@@ -58,7 +58,7 @@ def test_a_full_link_keeps_messages_in_order_then_counts_what_it_discards(monkey
     assert [m for m in got if m.get("id") == 7]  # the reply kept
     told = [m for m in got if m.get("push") == "link_discarded"]
     assert told and told[-1]["counts"] == {"cell_output": sent - len(pushes)} == p.discarded
-    a.close()
+    p.close()  # the connection `a` and the listener
     b.close()
 
 

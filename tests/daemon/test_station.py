@@ -18,7 +18,7 @@ import pytest
 from mcap.reader import make_reader
 
 from orccadd.offline.plot import read_log
-from tests.daemon.conftest import ROOT, Daemon, cell_copy, start_daemon_with
+from tests.daemon.conftest import ROOT, Daemon, start_daemon_with, station_copy
 
 DUAL = ROOT / "configs/robots/dual-arm-sim.toml"
 MISSION = str(ROOT / "configs/missions/dual_reach.mission")
@@ -38,14 +38,14 @@ def dual(tmp_path: Path) -> Iterator[Daemon]:
 def slow(tmp_path: Path) -> Iterator[tuple[Daemon, str]]:
     """The dual arm with missions from `tmp_path` too, and dual_reach there with a slow MeetL
     (seconds: a fault injected while it runs lands in it)."""
-    cell = cell_copy(
+    station = station_copy(
         DUAL, tmp_path, f'mission_dirs = ["{tmp_path}"]\ntask_dirs = ["{ROOT / "configs/tasks"}"]'
     )
     text = Path(MISSION).read_text().replace('"../tasks/', f'"{ROOT}/configs/tasks/')
     head, meet, tail = text.partition("task MeetL")
     meet = meet.replace("  post\n", "  set traj.speed_scale = 0.05\n  post\n", 1)
     (tmp_path / "slow.mission").write_text(head + meet + tail)
-    d = start_daemon_with(tmp_path, cell)
+    d = start_daemon_with(tmp_path, station)
     try:
         yield d, str(tmp_path / "slow.mission")
     finally:
@@ -163,10 +163,10 @@ def test_a_mission_on_a_resource_the_cell_lacks_is_refused_at_its_line(dual: Dae
 def test_a_resource_that_fails_at_startup_stops_the_daemon_naming_it(tmp_path: Path) -> None:
     # the two arms start (their plants), then the left hand's chain is not there: exit 2 naming
     # it, no socket served
-    cell = cell_copy(ROOT / "configs/robots/dual-arm-grippers-sim.toml", tmp_path)
-    cell.write_text(cell.read_text().replace("/tmp/orccadd-left-hand", str(tmp_path / "no-such-chain")))
+    station = station_copy(ROOT / "configs/robots/dual-arm-grippers-sim.toml", tmp_path)
+    station.write_text(station.read_text().replace("/tmp/orccadd-left-hand", str(tmp_path / "no-such-chain")))
     cmd = [
-        sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(cell),
+        sys.executable, "-m", "orccadd.daemon.rtproc", "--config", str(station),
         "--socket", str(tmp_path / "run/orccadd.sock"),
     ]  # fmt: skip
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
@@ -259,10 +259,10 @@ def test_a_mission_compiled_as_a_network_runs_each_branch_on_its_arm(tmp_path: P
     daemon steps it with the network runner: both branches at once, each arm through its
     thirty tasks in order, the run a success."""
     missions = ROOT / "tests/daemon/missions"
-    cell = cell_copy(
+    station = station_copy(
         DUAL, tmp_path, f'mission_dirs = ["{missions}"]\ntask_dirs = ["{ROOT / "configs/tasks"}"]'
     )
-    d = start_daemon_with(tmp_path, cell)
+    d = start_daemon_with(tmp_path, station)
     try:
         d.call("load", path=str(missions / "relay_network.mission"))
         mission = cast(dict[str, Any], d.call("describe"))["mission"]

@@ -1,8 +1,11 @@
-"""A cell: several Physical Resources in one daemon (an arm and its gripper, two arms).
+"""A station: several Physical Resources in one daemon (an arm and its gripper, two arms).
 
-A robot config with one `[resource]` is a cell of one resource, read as before. A cell config
-lists its resources instead, each by the robot config that describes it on its own (its model,
-joints, limits, backend, period, safe stop), with what differs here:
+The word "cell" is kept for robot PCs over Zenoh (`[cell]`, `orccadd.config.cellnet`): a
+station is what one daemon drives; a cell is several stations' daemons working together.
+
+A robot config with one `[resource]` is a station of one resource, read as before. A station
+config lists its resources instead, each by the robot config that describes it on its own (its
+model, joints, limits, backend, period, safe stop), with what differs here:
 
     name = "ur5e-gripper"
 
@@ -17,14 +20,15 @@ joints, limits, backend, period, safe stop), with what differs here:
     settings = { port = "/tmp/ttyG" }  # optional: keys that replace its [resource.settings] ones
     loop = { overrun_limit = 10 }      # optional: its loop's [daemon] keys here (`PER_RESOURCE`)
 
-    [daemon]                           # the cell's: one socket, one automaton, one mission
+    [daemon]                           # the station's: one socket, one automaton, one mission
 
 The `[daemon]` keys of a resource's control loop come from its own config (`PER_RESOURCE`: its
 Hold task, overrun limit, switch blend, watchdog, task timeout, tick); every other `[daemon]` key
-(socket, roles, priorities, loads, logs, clients) is the cell's, and a cell's `[daemon]` that sets
-a per-resource key is refused, naming the config where it belongs. A resource's `loop` table
-replaces some of those keys for this cell only: limits counted in periods (overruns in a row, a
-stale heartbeat) are shorter in time when the cell runs the resource at a shorter period.
+(socket, roles, priorities, loads, logs, clients) is the station's, and a station's `[daemon]`
+that sets a per-resource key is refused, naming the config where it belongs. A resource's `loop`
+table replaces some of those keys for this station only: limits counted in periods (overruns in
+a row, a stale heartbeat) are shorter in time when the station runs the resource at a shorter
+period.
 """
 
 from __future__ import annotations
@@ -62,7 +66,7 @@ class ResourceEntry:
 
 
 @dataclass(frozen=True)
-class CellFile:
+class StationFile:
     name: str = field()
     resources: tuple[ResourceEntry, ...] = field(min_len=1)
     daemon: DaemonConfig = field(default=DaemonConfig())
@@ -70,22 +74,22 @@ class CellFile:
 
 
 @dataclass(frozen=True)
-class CellConfig:
+class StationConfig:
     """The resources one daemon drives, each a whole `RobotConfig` (its `resource.name` the
-    cell's name for it, its `daemon` the cell's but for its own Hold task)."""
+    station's name for it, its `daemon` the station's but for its own Hold task)."""
 
     name: str
     source: str
     daemon: DaemonConfig
     resources: tuple[RobotConfig, ...]
-    listed: bool = False  # written as a cell ([[resources]]), not a one-resource robot config
-    overridden: tuple[frozenset[str], ...] = ()  # per resource: the settings keys the cell sets
-    net: CellNetConfig | None = None  # `[cell]`: a peer of a cell of PCs over Zenoh
+    listed: bool = False  # written as a station ([[resources]]), not a one-resource robot config
+    overridden: tuple[frozenset[str], ...] = ()  # per resource: the settings keys the station sets
+    cell: CellNetConfig | None = None  # `[cell]`: the station's daemon a peer of a cell of PCs
 
     @classmethod
-    def of(cls, cfg: RobotConfig) -> CellConfig:
-        """The cell of one resource that a robot config is."""
-        return cls(cfg.name, cfg.source, cfg.daemon, (cfg,), net=cfg.cell)
+    def of(cls, cfg: RobotConfig) -> StationConfig:
+        """The station of one resource that a robot config is."""
+        return cls(cfg.name, cfg.source, cfg.daemon, (cfg,), cell=cfg.cell)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -98,30 +102,30 @@ class CellConfig:
         raise KeyError(name)
 
     def resolve(self, path: str) -> Path:
-        """A path from the cell's file, relative to its folder."""
+        """A path from the station's file, relative to its folder."""
         return (Path(self.source).parent / path).resolve()
 
-    def with_resources(self, resources: tuple[RobotConfig, ...]) -> CellConfig:
+    def with_resources(self, resources: tuple[RobotConfig, ...]) -> StationConfig:
         return replace(self, resources=resources)
 
 
-def is_cell_file(raw: dict[str, Any]) -> bool:
+def is_station_file(raw: dict[str, Any]) -> bool:
     return "resources" in raw
 
 
-def read_cell_config(path: str | Path) -> CellConfig:
-    """Read a cell config or a one-resource robot config (its form only: keys, types, bounds,
-    joints, names; no backend, no URDF: `orccadd.robot.load_cell_config` adds those)."""
+def read_station_config(path: str | Path) -> StationConfig:
+    """Read a station config or a one-resource robot config (its form only: keys, types, bounds,
+    joints, names; no backend, no URDF: `orccadd.robot.load_station_config` adds those)."""
     file = str(path)
     raw = read_toml(Path(path))
-    if not is_cell_file(raw):
-        return CellConfig.of(read_robot_config(path))
+    if not is_station_file(raw):
+        return StationConfig.of(read_robot_config(path))
     for key in ("resource", "model", "joints", "control_period_s", "safe_stop", "limits"):
         if key in raw:
             raise ConfigError(
                 file,
                 key,
-                "belongs to a resource's own config: a cell lists [[resources]], each with its `config`",
+                "belongs to a resource's own config: a station lists [[resources]], each with its `config`",
             )
     for key in PER_RESOURCE:
         if key in (raw.get("daemon") or {}):
@@ -131,12 +135,12 @@ def read_cell_config(path: str | Path) -> CellConfig:
                 "belongs to each resource's loop: set it in that resource's own config "
                 "(or in its `loop` table here)",
             )
-    cell = load_dataclass(CellFile, raw, file)
+    station = load_dataclass(StationFile, raw, file)
     here = Path(file).parent
-    daemon = _absolute(cell.daemon, here)
+    daemon = _absolute(station.daemon, here)
     seen: dict[str, int] = {}
     out: list[RobotConfig] = []
-    for i, entry in enumerate(cell.resources):
+    for i, entry in enumerate(station.resources):
         key = f"resources[{i}]"
         if not NAME.match(entry.name):
             raise ConfigError(
@@ -154,9 +158,9 @@ def read_cell_config(path: str | Path) -> CellConfig:
                 f"(={entry.control_period_s!r}) must be 0 (the config's) or in [0.0001, 0.1]",
             )
         sub_path = (here / entry.config).resolve()
-        if sub_path.is_file() and is_cell_file(read_toml(sub_path)):
+        if sub_path.is_file() and is_station_file(read_toml(sub_path)):
             raise ConfigError(
-                file, f"{key}.config", f"(={entry.config!r}) is a cell itself: name a resource's config"
+                file, f"{key}.config", f"(={entry.config!r}) is a station itself: name a resource's config"
             )
         if not sub_path.is_file():
             raise ConfigError(
@@ -167,7 +171,7 @@ def read_cell_config(path: str | Path) -> CellConfig:
             raise ConfigError(
                 file,
                 f"{key}.config",
-                f"(={entry.config!r}) has a [cell] table: a cell's [cell] is in this file",
+                f"(={entry.config!r}) has a [cell] table: a station's [cell] is in this file",
             )
         loop = _loop_keys(entry.loop or {}, file, f"{key}.loop")
         settings = {**(sub.resource.settings or {}), **(entry.settings or {})}
@@ -183,9 +187,11 @@ def read_cell_config(path: str | Path) -> CellConfig:
                 ),
             )
         )
-    overridden = tuple(frozenset(e.settings or {}) for e in cell.resources)
-    net = load_cellnet(cell.cell, file, cell.name) if cell.cell is not None else None
-    return CellConfig(cell.name, file, daemon, tuple(out), listed=True, overridden=overridden, net=net)
+    overridden = tuple(frozenset(e.settings or {}) for e in station.resources)
+    cell = load_cellnet(station.cell, file, station.name) if station.cell is not None else None
+    return StationConfig(
+        station.name, file, daemon, tuple(out), listed=True, overridden=overridden, cell=cell
+    )
 
 
 def _loop_keys(table: dict[str, Any], file: str, key: str) -> dict[str, Any]:
@@ -202,7 +208,7 @@ def _loop_keys(table: dict[str, Any], file: str, key: str) -> dict[str, Any]:
 
 
 def _absolute(d: DaemonConfig, here: Path) -> DaemonConfig:
-    """The cell's daemon paths made absolute: each resource's config resolves them alike."""
+    """The station's daemon paths made absolute: each resource's config resolves them alike."""
 
     def absolute(p: str) -> str:
         return str((here / p).resolve())
@@ -216,39 +222,39 @@ def _absolute(d: DaemonConfig, here: Path) -> DaemonConfig:
     )
 
 
-def override_key(cell: CellConfig, index: int, err: ConfigError) -> ConfigError:
-    """A backend's error about a setting the cell overrides, named at the cell's key."""
+def override_key(station: StationConfig, index: int, err: ConfigError) -> ConfigError:
+    """A backend's error about a setting the station overrides, named at the station's key."""
     prefix = "resource.settings."
-    if not cell.listed or not err.key.startswith(prefix):
+    if not station.listed or not err.key.startswith(prefix):
         return err
     rest = err.key.removeprefix(prefix)
-    if re.split(r"[.\[]", rest, maxsplit=1)[0] in cell.overridden[index]:
-        return ConfigError(cell.source, f"resources[{index}].settings.{rest}", err.detail)
+    if re.split(r"[.\[]", rest, maxsplit=1)[0] in station.overridden[index]:
+        return ConfigError(station.source, f"resources[{index}].settings.{rest}", err.detail)
     return err
 
 
-def pick_resource(cell: CellConfig, backends: tuple[str, ...], name: str = "") -> RobotConfig:
-    """The resource a device simulator serves from `cell`: the one named `name`, or the cell's
+def pick_resource(station: StationConfig, backends: tuple[str, ...], name: str = "") -> RobotConfig:
+    """The resource a device simulator serves from `station`: the one named `name`, or the station's
     only resource on one of `backends` (a one-resource robot config: its resource, whatever its
     backend, as before). `ConfigError` naming the file if there is none, or several to choose from."""
-    if not cell.listed and not name:
-        return cell.resources[0]
+    if not station.listed and not name:
+        return station.resources[0]
     if name:
         try:
-            return cell.resource(name)
+            return station.resource(name)
         except KeyError:
             raise ConfigError(
-                cell.source, "resources", f"has no resource {name!r} (it has: {', '.join(cell.names)})"
+                station.source, "resources", f"has no resource {name!r} (it has: {', '.join(station.names)})"
             ) from None
-    mine = [r for r in cell.resources if r.resource.backend in backends]
+    mine = [r for r in station.resources if r.resource.backend in backends]
     if len(mine) == 1:
         return mine[0]
     kinds = " or ".join(backends)
     if not mine:
         raise ConfigError(
-            cell.source, "resources", f"has no {kinds} resource (it has: {', '.join(cell.names)})"
+            station.source, "resources", f"has no {kinds} resource (it has: {', '.join(station.names)})"
         )
     names = ", ".join(r.resource.name for r in mine)
     raise ConfigError(
-        cell.source, "resources", f"has several {kinds} resources ({names}): name one with --resource"
+        station.source, "resources", f"has several {kinds} resources ({names}): name one with --resource"
     )

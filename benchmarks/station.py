@@ -5,12 +5,12 @@ Runs orccadd (as a separate process, with its command daemon) on:
 
 - **dual**: configs/robots/dual-arm-sim.toml (two simulated UR5e, `left` at 1 kHz and `right` at
   500 Hz, each plant in its own process), first holding (no switches), then with
-  benchmarks/missions/cell_switching.mission: each arm alternates a tracking law and a dwell,
+  benchmarks/missions/station_switching.mission: each arm alternates a tracking law and a dwell,
   each par's end starting a law on both arms;
 - **gripper**: configs/robots/ur5e-gripper-sim.toml (the UR controller simulator at 500 Hz, the
   arm device-paced, and the servo simulator's gripper at 200 Hz), holding, then pick_place.mission
   run again and again;
-- **scale**: cells of 1, 2 and 4 simulated UR5e at 500 Hz, holding: how the figures grow.
+- **scale**: stations of 1, 2 and 4 simulated UR5e at 500 Hz, holding: how the figures grow.
 
 Every tick of every resource is read here from the daemon's own telemetry rings (shared memory,
 polled faster than they wrap), the automaton's instants from its trace ring. Printed per
@@ -21,7 +21,7 @@ on B), the time from A's event tick to B's first tick of the new law, in B's per
 each resource's wake-up p99 to cyclictest's (1 kHz, the control threads' priority, half of its
 run before ours and half after).
 
-Usage: `python benchmarks/cell.py [--duration-s 60] [--runs dual,gripper,scale]` (root, for
+Usage: `python benchmarks/station.py [--duration-s 60] [--runs dual,gripper,scale]` (root, for
 SCHED_FIFO; `make bench`).
 """
 
@@ -44,13 +44,13 @@ from orccadd.dxlsim.process import DxlSimProcess
 from orccadd.ursim.process import UrSimProcess
 from orccadd.wire.schema import TRACE_IDX, H, R, T, Trace
 from orccadd.wire.telemetry import RingReader, TelemetryBlock
-from tests.daemon.conftest import cell_copy
+from tests.daemon.conftest import station_copy
 
 ROBOTS = ROOT / "configs/robots"
 DUAL = ROBOTS / "dual-arm-sim.toml"
 GRIPPER = ROBOTS / "ur5e-gripper-sim.toml"
 UR5E = ROBOTS / "sim-ur5e.toml"
-SWITCHING = ROOT / "benchmarks/missions/cell_switching.mission"
+SWITCHING = ROOT / "benchmarks/missions/station_switching.mission"
 PICK_PLACE = ROOT / "configs/missions/pick_place.mission"
 POLL_S = 0.5  # the rings hold 16 s of ticks
 
@@ -193,9 +193,9 @@ def hold_then_run(
 
 def run_dual(duration_s: float, base_p99: float | None) -> list[str]:
     out = ["dual-arm-sim (left 1 kHz, right 500 Hz; simulated arms in their own processes)"]
-    with tempfile.TemporaryDirectory(prefix="orccadd-cell-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="orccadd-station-") as tmp:
         missions = f'mission_dirs = ["{ROOT}/configs/missions", "{ROOT}/benchmarks/missions"]'
-        cfg = cell_copy(DUAL, Path(tmp), f'{missions}\ntask_dirs = ["{ROOT}/configs/tasks"]')
+        cfg = station_copy(DUAL, Path(tmp), f'{missions}\ntask_dirs = ["{ROOT}/configs/tasks"]')
         with running_daemon(cfg) as d, Client(d.socket, timeout_s=120) as c:
             out += hold_then_run(c, duration_s, base_p99, SWITCHING, "switching")
     return out
@@ -225,9 +225,9 @@ def run_gripper(duration_s: float, base_p99: float | None) -> list[str]:
 
 
 def run_scale(duration_s: float, base_p99: float | None, sizes: tuple[int, ...] = (1, 2, 4)) -> list[str]:
-    out = ["cells of N simulated UR5e at 500 Hz, holding: the worst resource's figures"]
+    out = ["stations of N simulated UR5e at 500 Hz, holding: the worst resource's figures"]
     for n in sizes:
-        with tempfile.TemporaryDirectory(prefix="orccadd-cell-") as tmp:
+        with tempfile.TemporaryDirectory(prefix="orccadd-station-") as tmp:
             cfg = Path(tmp) / f"arms{n}.toml"
             cfg.write_text(
                 f'name = "arms{n}"\n'
