@@ -42,6 +42,18 @@ def outside(a: list[float], lo: list[float], hi: list[float]) -> bool:
     return any(map(lt, a, lo)) or any(map(gt, a, hi))
 
 
+def within(a: list[float], lo: list[float], hi: list[float]) -> bool:
+    """Every lo_i <= a_i <= hi_i: False for a NaN, and for an infinity within finite bounds.
+
+    A loop, not `all()` on a generator (0.92 µs) nor `outside` and a finiteness test (1.08 µs):
+    0.56 µs for 12 values.
+    """
+    for a_i, l_i, h_i in zip(a, lo, hi):  # noqa: B905, SIM110 (see `clamped`)
+        if not l_i <= a_i <= h_i:
+            return False
+    return True
+
+
 def clamped(a: list[float], lo: list[float], hi: list[float]) -> list[float]:
     """[min(max(a_i, lo_i), hi_i)] (a NaN stays NaN: check finiteness separately).
 
@@ -61,3 +73,9 @@ def clamp(
     """`np.clip(x, lo, hi, out=out)` without np.clip's 4 µs wrapper."""
     np.minimum(x, hi, out=out)
     np.maximum(out, lo, out=out)
+
+
+def float_view(a: npt.NDArray[np.float64]) -> memoryview[float]:
+    """`a`'s memory as a memoryview (made once, outside the tick): a copy between two of them,
+    `view_a[:] = view_b`, costs ~0.07 µs against numpy's ~0.18 µs for `a[:] = b` (6 joints)."""
+    return memoryview(a)  # type: ignore[arg-type]

@@ -30,8 +30,11 @@ from orccadd.physres.description import ResourceDescription
 from orccadd.physres.guard import VelocityGuard
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CMD_CLAMPED, LIMIT_VIOLATION, CommandMode, Lifecycle, Status
-from orccadd.vec import clamped, outside
+from orccadd.vec import clamped, outside, within
 from orccadd.wire.schema import status_names
+
+# the modes a tick compares with, as module globals (an IntEnum member's lookup costs ~0.1 µs)
+TORQUE, VELOCITY, POSITION = CommandMode.TORQUE, CommandMode.VELOCITY, CommandMode.POSITION
 
 # Lifecycle transitions allowed: (from, method) -> to.
 TRANSITIONS: dict[tuple[Lifecycle, str], Lifecycle] = {
@@ -87,6 +90,8 @@ class PhysicalResource(ABC):
         dq_max = model.v_max_rad_s * config.limits.velocity_tolerance
         self._limit_lo: list[float] = [*(model.q_min_rad - tol_q).tolist(), *(-dq_max).tolist()]  # on q_dq
         self._limit_hi: list[float] = [*(model.q_max_rad + tol_q).tolist(), *dq_max.tolist()]
+        # finite limits (the usual): `within` them says finite too, no finiteness test needed
+        self._limits_finite = all(map(isfinite, self._limit_lo + self._limit_hi))
         self._tau_lo, self._tau_hi = (-model.tau_max_nm).tolist(), model.tau_max_nm.tolist()
         self._v_lo, self._v_hi = (-model.v_max_rad_s).tolist(), model.v_max_rad_s.tolist()
         self._q_lo, self._q_hi = model.q_min_rad.tolist(), model.q_max_rad.tolist()
@@ -283,9 +288,14 @@ class PhysicalResource(ABC):
             st.status |= Status.FAULT
             self._set_fault(FaultKind.DEVICE, self._output_fault)
         q_dq = st.q_dq.tolist()
-        if outside(q_dq, self._limit_lo, self._limit_hi) or not all(map(isfinite, q_dq)):
+        lo, hi = self._limit_lo, self._limit_hi
+        if self._limits_finite:
+            beyond = not within(q_dq, lo, hi)  # a NaN or an infinity too
+        else:
+            beyond = outside(q_dq, lo, hi) or not all(map(isfinite, q_dq))
+        if beyond:
             st.status |= LIMIT_VIOLATION
-            self.fault = self._beyond(FaultKind.LIMIT, "measured", q_dq, self._limit_lo, self._limit_hi)
+            self.fault = self._beyond(FaultKind.LIMIT, "measured", q_dq, lo, hi)
         ws = self._workspace
         if ws is not None:
             excess = ws.excess_m(st.q_rad)
@@ -354,11 +364,23 @@ class PhysicalResource(ABC):
             )
             return LIMIT_VIOLATION
         mode = self.mode
-        if mode is CommandMode.TORQUE:
-            sent = clamped(wanted, self._tau_lo, self._tau_hi)
-            if self._velocity_guard is not None:
-                sent = self._velocity_guard.limit(self.state.q_rad, self.state.dq_rad_s, sent)
-        elif mode is CommandMode.VELOCITY:
+        cmd = self._cmd
+        if mode is TORQUE:  # saturated, then cut where it would outrun a joint: never a violation
+            lo, hi = self._tau_lo, self._tau_hi
+            changed = not within(wanted, lo, hi)  # (cheaper than clamping: the usual case)
+            cmd[:] = clamped(wanted, lo, hi) if changed else command  # (an array copies faster)
+            guard = self._velocity_guard
+            if guard is not None:
+                st = self.state
+                cut = guard.limit(st.q_rad, st.dq_rad_s, cmd)  # the saturated torques' dynamics
+                if cut is not None:
+                    cmd[:] = cut
+                    changed = cut != wanted
+            if changed:
+                self.clamp_count += 1
+                return CMD_CLAMPED | self._write_command(t_s, mode, cmd)
+            return self._write_command(t_s, mode, cmd)
+        if mode is VELOCITY:
             sent = clamped(wanted, self._v_lo, self._v_hi)
         else:  # position: within the joint range, and no faster than max_velocity from the last one
             sent = clamped(wanted, self._q_lo, self._q_hi)
@@ -366,15 +388,14 @@ class PhysicalResource(ABC):
             step = self._step_max
             sent = clamped(sent, list(map(sub, last, step)), list(map(add, last, step)))
         flags = 0
-        if sent != wanted:
-            flags = CMD_CLAMPED if mode is CommandMode.TORQUE else CMD_CLAMPED | LIMIT_VIOLATION
+        if sent != wanted:  # a position or a velocity beyond the limits: a violation
+            flags = CMD_CLAMPED | LIMIT_VIOLATION
             self.clamp_count += 1
-            if flags & LIMIT_VIOLATION:
-                self.fault = self._beyond(
-                    FaultKind.LIMIT, "command clamped: commanded", wanted, *self._command_bounds(mode)
-                )
+            self.fault = self._beyond(
+                FaultKind.LIMIT, "command clamped: commanded", wanted, *self._command_bounds(mode)
+            )
         ws = self._workspace
-        if ws is not None and mode is CommandMode.POSITION:
+        if ws is not None and mode is POSITION:
             excess = ws.excess_m(sent)
             if excess > 0.0 and excess > self._last_cmd_excess_m + 1e-9:  # out, or further out
                 flags |= LIMIT_VIOLATION
@@ -382,9 +403,8 @@ class PhysicalResource(ABC):
                 sent = self._last_pos_cmd.tolist()  # held: the tool goes no further out
             else:
                 self._last_cmd_excess_m = excess
-        cmd = self._cmd
         cmd[:] = sent
-        if mode is CommandMode.POSITION:
+        if mode is POSITION:
             self._last_pos_cmd[:] = cmd
         return flags | self._write_command(t_s, mode, cmd)
 

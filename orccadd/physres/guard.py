@@ -37,24 +37,33 @@ class VelocityGuard:
         self.v_max = model.v_max_rad_s.copy()
         self.tau_max = model.tau_max_nm.copy()
         self.horizon_s = horizon_periods * period_s
-        self._tau = np.zeros(model.dof)
+        # the box's bounds, as lists: the tick tests them with Python floats (see orccadd.vec),
+        # the same IEEE operations as the arrays' of the rare path, so the same verdict
+        self._v_lo: list[float] = (-self.v_max).tolist()
+        self._v_hi: list[float] = self.v_max.tolist()
         self._lo = np.zeros(model.dof)
         self._hi = np.zeros(model.dof)
         self.cut_count = 0  # commands cut since start
 
-    def limit(self, q_rad: FloatArray, dq_rad_s: FloatArray, tau_nm: list[float]) -> list[float]:
-        """`tau_nm` itself if it keeps every joint within its velocity limit, else the torques
-        that reach the limit no faster than the horizon allows (within ±max_torque_nm)."""
-        tau = self._tau
-        tau[:] = tau_nm
-        ddq = pin.aba(self.model, self.data, q_rad, dq_rad_s, tau)
+    def limit(self, q_rad: FloatArray, dq_rad_s: FloatArray, tau_nm: FloatArray) -> list[float] | None:
+        """None if `tau_nm` keeps every joint within its velocity limit (the command goes through
+        untouched), else the torques that reach the limit no faster than the horizon allows
+        (within ±max_torque_nm)."""
+        ddq = pin.aba(self.model, self.data, q_rad, dq_rad_s, tau_nm)
+        h = self.horizon_s
+        # ddq within [(-v_max - dq) / h, (v_max - dq) / h] for every joint (a NaN is not)
+        for a, d, lo_v, hi_v in zip(ddq.tolist(), dq_rad_s.tolist(), self._v_lo, self._v_hi):  # noqa: B905
+            if not (lo_v - d) / h <= a <= (hi_v - d) / h:
+                return self._cut(q_rad, dq_rad_s, ddq)
+        return None
+
+    def _cut(self, q_rad: FloatArray, dq_rad_s: FloatArray, ddq: FloatArray) -> list[float]:
+        """The torques that bring `ddq` into the box (the rare path: allocates)."""
         lo, hi = self._lo, self._hi
         np.subtract(-self.v_max, dq_rad_s, out=lo)
         np.subtract(self.v_max, dq_rad_s, out=hi)
         lo /= self.horizon_s
         hi /= self.horizon_s
-        if bool(np.all((ddq >= lo) & (ddq <= hi))):
-            return tau_nm
         self.cut_count += 1
         safe = pin.rnea(self.model, self.data, q_rad, dq_rad_s, np.clip(ddq, lo, hi))
         cut: list[float] = np.clip(safe, -self.tau_max, self.tau_max).tolist()

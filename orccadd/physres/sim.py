@@ -41,9 +41,10 @@ from orccadd.physres.sim_camera import CameraSettings, SimCamera, camera_signals
 from orccadd.physres.sim_contact import WRENCH, HoleSettings, PlaneSettings, ToolContact, shapes_from_settings
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Status
-from orccadd.vec import clamp
+from orccadd.vec import clamp, float_view
 
 INF = math.inf
+POSITION = CommandMode.POSITION  # as a module global: a tick compares with it (see physres.base)
 REST_SPEED_RAD_S = 0.005
 INJECTED_FAULT_CODE = 0x1000  # "generic error" in CiA 301's EMCY table
 
@@ -201,7 +202,14 @@ class SimulatedArm(PhysicalResource):
         self._zero = np.zeros(n)
         # Measurement delay line (latency in periods) and noise buffers.
         depth = s.latency_periods + 1
-        self._ring = np.zeros((depth, 3, n))
+        self._ring = np.zeros((depth, 3 * n))
+        # per slot: views on its q, dq and tau, and on the whole (`JointState.vector`'s order)
+        self._slots = tuple((r[:n], r[n : 2 * n], r[2 * n :], r) for r in self._ring)
+        # without latency, `read` copies the plant's q, dq and torques into the measured state
+        # directly, through memoryviews (a copy between two costs a third of numpy's)
+        st = self.state
+        pairs = ((st.q_rad, self.q), (st.dq_rad_s, self.dq), (st.tau_nm, self.tau_applied))
+        self._now = tuple((float_view(measured), float_view(now)) for measured, now in pairs)
         self._ring_i = 0
         self._ring_filled = False
         self._noise = np.zeros(n)
@@ -273,18 +281,19 @@ class SimulatedArm(PhysicalResource):
         if self.t_sim_s is None:
             self.t_sim_s = t_s
         self._advance_to(t_s)
-        n_ring = self._ring.shape[0]
-        slot = self._ring[self._ring_i]
-        slot[0] = self.q
-        slot[1] = self.dq
-        slot[2] = self.tau_applied
-        self._ring_i = (self._ring_i + 1) % n_ring
-        if self._ring_i == 0:
-            self._ring_filled = True
-        oldest = self._ring[self._ring_i] if self._ring_filled else self._ring[0]
-        state.q_rad[:] = oldest[0]
-        state.dq_rad_s[:] = oldest[1]
-        state.tau_nm[:] = oldest[2]
+        slots = self._slots
+        if len(slots) == 1 and state is self.state:  # no latency: what the plant is now
+            for measured, now in self._now:
+                measured[:] = now
+        else:  # what it was `latency_periods` reads ago (the first one, until then)
+            q, dq, tau, _ = slots[self._ring_i]
+            q[:] = self.q
+            dq[:] = self.dq
+            tau[:] = self.tau_applied
+            i = self._ring_i = (self._ring_i + 1) % len(slots)
+            if i == 0:
+                self._ring_filled = True
+            state.vector[:] = slots[i if self._ring_filled else 0][3]
         s = self.settings
         if s.noise_q_rad:
             self._rng.standard_normal(out=self._noise)
@@ -304,7 +313,7 @@ class SimulatedArm(PhysicalResource):
         return flags
 
     def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
-        if mode is CommandMode.POSITION:
+        if mode is POSITION:
             period = self.config.control_period_s
             np.subtract(command, self._prev_pos_cmd, out=self._vel_ff)
             self._vel_ff /= period

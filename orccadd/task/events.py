@@ -97,23 +97,20 @@ class EventQueue:
         self._t = np.zeros(capacity)
         self._id = np.zeros(capacity, dtype=np.int64)
         self._cap = capacity
-        self._head = 0  # next write
+        # how many events were ever pushed (the producer's counter, the next write's index): an
+        # attribute, not a property, read three times a tick by the control loop
+        self.pushed = 0
         self._tail = 0  # next read
         self.dropped = 0
 
     def push(self, t_s: float, event_id: int) -> None:
-        i = self._head % self._cap
+        i = self.pushed % self._cap
         self._t[i] = t_s
         self._id[i] = event_id
-        self._head += 1
-        if self._head - self._tail > self._cap:
+        self.pushed += 1
+        if self.pushed - self._tail > self._cap:
             self._tail += 1
             self.dropped += 1
-
-    @property
-    def pushed(self) -> int:
-        """How many events were ever pushed (the producer's counter)."""
-        return self._head
 
     @property
     def tail(self) -> int:
@@ -126,11 +123,11 @@ class EventQueue:
 
     def drain(self) -> list[tuple[float, int]]:
         out = []
-        while self._tail < self._head:
+        while self._tail < self.pushed:
             i = self._tail % self._cap
             out.append((float(self._t[i]), int(self._id[i])))
             self._tail += 1
         return out
 
     def __len__(self) -> int:
-        return self._head - self._tail
+        return self.pushed - self._tail

@@ -27,7 +27,7 @@ from orccadd.task.compiled import CompiledTick, compile_schedule
 from orccadd.task.events import EventKind, EventQueue
 from orccadd.task.motion import CommandHistory, extrapolate
 from orccadd.types import T3_MASK, TASK_TIMEOUT, CommandMode, Phase, Status
-from orccadd.vec import max_of, min_of
+from orccadd.vec import float_view, max_of, min_of
 
 # the kind of each built-in type 3 exception; those a resource raises take the resource's own
 # fault (its words, joint and code) when it is of a matching kind
@@ -48,6 +48,8 @@ RESOURCE_T3 = {
 log = logging.getLogger("orccadd.task")
 
 RUNNING = (Phase.RUN, Phase.DONE, Phase.ABORTED)
+# the phases each tick compares with, as module globals (an IntEnum member's lookup costs ~0.1 µs)
+PRE, FAULT = Phase.PRE, Phase.FAULT
 
 
 class ParameterChange(NamedTuple):
@@ -180,6 +182,9 @@ class RobotTask:
         self._tunable = {f"{m.name}.{p.name}": (m, p) for m in modules for p in m.parameters.values()}
         # bumpless transfer: the first command continues the previous task's last one
         self.sent = np.zeros_like(command)  # the last command sent (after blending)
+        # the law's command and `sent` as memoryviews: each tick copies one into the other, in a
+        # third of numpy's time
+        self._command_view, self._sent_view = float_view(command), float_view(self.sent)
         self.wrote = False  # a command was sent in the last tick
         self.wrote_before = False  # the same, of the tick before (while `compute` runs)
         self._offset = np.zeros_like(command)
@@ -404,7 +409,7 @@ class RobotTask:
                 self._resource_t3(t_s, st.status)
             return  # (already stopped for it: a task before this one raised it)
         phase = self.phase
-        if phase is Phase.PRE:
+        if phase is PRE:
             if not self._pre_started:
                 self._pre_started = True
                 self.t_started_s = t_s
@@ -437,7 +442,7 @@ class RobotTask:
                 self._out = self.sent
             return
         self.run_law(t_s)
-        if self.phase is Phase.FAULT:
+        if self.phase is FAULT:
             return
         cmd = self.command
         if self._holding_previous:
@@ -468,7 +473,9 @@ class RobotTask:
 
     def _send(self, t_s: float, cmd: npt.NDArray[np.float64]) -> None:
         flags = self.resource.write(t_s, cmd)
-        if cmd is not self.sent:
+        if cmd is self.command:
+            self._sent_view[:] = self._command_view
+        elif cmd is not self.sent:  # blended
             self.sent[:] = cmd
         if self._history is not None:
             self._history.record(cmd)

@@ -13,7 +13,7 @@ import numpy as np
 from orccadd.daemon.machine import Machine
 from orccadd.daemon.replies import Pending
 from orccadd.types import Status
-from orccadd.wire.schema import H
+from orccadd.wire.schema import H, T
 
 
 def test_slack_fd_becomes_readable_only_after_a_tick_ends(machine: Machine) -> None:
@@ -71,3 +71,33 @@ def test_reset_is_a_pending_reply_and_never_sleeps(machine: Machine) -> None:
         loop.executor.run(max_ticks=1)
         time.sleep(0.001)
     assert not machine.default.supervisor.fault
+
+
+def test_each_tick_record_holds_its_tick_field_by_field(machine: Machine) -> None:
+    """The record is written through the block's memoryview, field by field at plain offsets:
+    each field where `T` and the layout say, the header's counters where `H` says."""
+    loop, res = machine.default.loop, machine.default.resource
+    loop.set_task_ids({id(loop.hold): 7})  # (not 0: a field mistaken for another shows)
+    loop.executor.run(max_ticks=30)
+    task, stats, at = loop.active, loop.stats, loop.layout
+    assert task is not None
+    head = int(machine.default.tel.header[H.TICK_HEAD])
+    rec = machine.default.tel.ticks[(head - 1) % machine.default.tel.tick_len]
+    assert rec[T.SEQ] == head
+    assert rec[T.T_S] == loop.executor._last_release_ns * 1e-9
+    assert rec[T.WAKE_US] == stats.last_latency_ns * 1e-3
+    assert rec[T.COMPUTE_US] == stats.last_compute_ns * 1e-3
+    assert rec[T.TASK] == 7
+    assert rec[T.PHASE] == task.phase
+    assert rec[T.WROTE] == task.wrote
+    assert rec[T.STATUS] == res.state.status
+    assert rec[T.MODE] == res.mode
+    assert rec[at.q].tolist() == res.state.q_rad.tolist()
+    assert rec[at.dq].tolist() == res.state.dq_rad_s.tolist()
+    assert rec[at.tau].tolist() == res.state.tau_nm.tolist()
+    assert rec[at.cmd].tolist() == res.last_command.tolist()
+    for name, where in at.signals.items():
+        assert rec[where].tolist() == res.signals[name].tolist()
+    hdr = machine.default.tel.header
+    assert (hdr[H.TICKS], hdr[H.SWITCHES]) == (stats.ticks, loop.switches) == (30, 1)
+    assert (hdr[H.OVERRUNS], hdr[H.CONSECUTIVE_OVERRUNS]) == (stats.overruns, stats.consecutive_overruns)

@@ -64,14 +64,39 @@ def test_the_guard_passes_what_keeps_within_and_cuts_the_rest_to_the_horizon() -
         q = rng.uniform(model.q_min_rad, model.q_max_rad)
         dq = rng.uniform(-1.05, 1.05) * model.v_max_rad_s * rng.uniform(0, 1, model.dof)
         tau = rng.uniform(-1, 1, model.dof) * model.tau_max_nm
-        out = guard.limit(q, dq, tau.tolist())
+        cut = guard.limit(q, dq, tau)
+        out = tau.tolist() if cut is None else cut
         ddq = pin.aba(model.model, data, q, dq, np.array(out))
         lo = (-model.v_max_rad_s - dq) / (2 * period_s)
         hi = (model.v_max_rad_s - dq) / (2 * period_s)
-        if out == tau.tolist():  # untouched: it kept within
+        if cut is None:  # untouched: it kept within
             assert np.all((ddq >= lo - 1e-6) & (ddq <= hi + 1e-6))
         else:  # cut: within the box unless the torque limit forbids it, and never beyond max torque
             assert np.all(np.abs(out) <= model.tau_max_nm + 1e-9)
             saturated = np.abs(np.abs(out) - model.tau_max_nm) < 1e-9
             if not saturated.any():
                 assert np.all((ddq >= lo - 1e-6) & (ddq <= hi + 1e-6)), (ddq, lo, hi)
+
+
+def test_the_guard_passes_exactly_what_the_box_test_on_arrays_passes() -> None:
+    """The tick tests the box on Python floats: the same verdict as on numpy arrays, joints on
+    its edges and NaN included (the cut path aside, which keeps the arrays)."""
+    model = RobotModel.from_config(load_robot_config(UR5E))
+    period_s = 0.001
+    guard = VelocityGuard(model, period_s)
+    data = model.new_data()
+    h = guard.horizon_s
+    rng = np.random.default_rng(11)
+    for k in range(300):
+        q = rng.uniform(model.q_min_rad, model.q_max_rad)
+        dq = rng.uniform(-1.0, 1.0, model.dof) * model.v_max_rad_s
+        tau = rng.uniform(-1, 1, model.dof) * model.tau_max_nm * rng.uniform(0, 0.3)
+        if k % 3 == 0:  # a joint near an edge of the box
+            j = k % model.dof
+            dq[j] = model.v_max_rad_s[j] - pin.aba(model.model, data, q, dq, tau)[j] * h
+        if k % 50 == 1:
+            tau[k % model.dof] = np.nan
+        ddq = pin.aba(model.model, data, q, dq, tau)
+        lo, hi = (-model.v_max_rad_s - dq) / h, (model.v_max_rad_s - dq) / h
+        passes = bool(np.all((ddq >= lo) & (ddq <= hi)))
+        assert (guard.limit(q, dq, tau) is None) == passes
