@@ -101,12 +101,15 @@ def handled_at(tel: TelemetryBlock, trace: RingReader, cmd: str) -> float:
     return float("nan")
 
 
-def one_round(c: Client, tel: TelemetryBlock, cmd: str, sender: Client) -> tuple[float, float]:
-    """(written -> handled by the real-time process, written -> first tick acted on), seconds."""
+def one_round(
+    c: Client, tel: TelemetryBlock, block: TelemetryBlock, cmd: str, sender: Client
+) -> tuple[float, float]:
+    """(written -> handled by the real-time process, written -> first tick acted on), seconds;
+    `tel` the arm's block (its ticks), `block` the daemon's (its trace)."""
     c.call("start")
     time.sleep(0.6 + np.random.default_rng().uniform(0, 0.4))  # moving, at a random phase
     reader = RingReader(tel.ticks, tel.header, H.TICK_HEAD, from_now=True)
-    trace = RingReader(tel.trace, tel.header, H.TRACE_HEAD, from_now=True)
+    trace = RingReader(block.trace, block.header, H.TRACE_HEAD, from_now=True)
     task0 = int(tel.ticks[(int(tel.header[H.TICK_HEAD]) - 1) % len(tel.ticks), T.TASK])
     sent = time.monotonic()
     sender.call(cmd)
@@ -141,7 +144,9 @@ def main() -> int:
     latencies: dict[str, list[tuple[float, float]]] = {"urgent": [], "main": []}
     with running_daemon() as d, Client(d.socket, timeout_s=120) as c:
         c.call("load", path=str(MISSION))
-        tel = TelemetryBlock.attach(str(c.call("describe")["telemetry"]))
+        desc = c.call("describe")
+        tel = TelemetryBlock.attach(str(desc["telemetry"]))
+        block = TelemetryBlock.attach(str(desc["daemon_telemetry"]))
         period_s = float(tel.header[H.PERIOD_S])
         env = {**os.environ, "ORCCADD_SOCKET": d.socket}
         mon = [sys.executable, "-m", "orccadd.cli", "monitor", "q", "dq", "--rate", "100", "--json"]
@@ -158,7 +163,8 @@ def main() -> int:
             with Client(urgent_socket_path(d.socket)) as urgent:
                 for k in range(args.rounds):  # both paths in turn, under the same load
                     path = "urgent" if k % 2 == 0 else "main"
-                    latencies[path].append(one_round(c, tel, args.command, urgent if path == "urgent" else c))
+                    sender = urgent if path == "urgent" else c
+                    latencies[path].append(one_round(c, tel, block, args.command, sender))
             ticks = int(tel.header[H.TICKS])
             overruns = int(tel.header[H.OVERRUNS])
         finally:

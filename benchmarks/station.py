@@ -82,7 +82,8 @@ def recording(c: Client) -> Iterator[tuple[Recording, Callable[[], None]]]:
     rec = Recording([u["name"] for u in units], [float(u["period_s"]) for u in units])
     rec.ticks = [[] for _ in units]
     readers = [RingReader(b.ticks, b.header, H.TICK_HEAD) for b in blocks]
-    trace = RingReader(blocks[0].trace, blocks[0].header, H.TRACE_HEAD)
+    daemon = TelemetryBlock.attach(desc["daemon_telemetry"])  # the status and the trace
+    trace = RingReader(daemon.trace, daemon.header, H.TRACE_HEAD)
 
     def poll() -> None:
         for i, r in enumerate(readers):

@@ -27,6 +27,7 @@ from orccadd.wire.commands import handles
 from orccadd.wire.schema import PROTOCOL_VERSION, MachineState, OperatorAction, Trace, TuneRecord
 
 MAX_INJECTED_MS = 5000.0  # longest injected tick: a stall, not a hang
+MAX_HANG_MS = 60_000.0  # longest injected hang of a device call
 TUNE_WAIT_S = 1.0  # a tune not applied within this (or 100 periods) is reported as such
 
 
@@ -303,6 +304,10 @@ class RtCommands:
                 raise CommandError(str(e)) from None
         elif fault == "control_thread":
             on.loop.inject_failure()
+        elif fault == "hang":
+            if not 0.0 <= extra_ms <= MAX_HANG_MS:
+                raise CommandError(f"inject hang: extra_ms (={extra_ms:g}) must be in [0, {MAX_HANG_MS:g}]")
+            on.loop.inject_hang((extra_ms or 1000.0) * 1e-3)
         else:
             if not 0.0 <= extra_ms <= MAX_INJECTED_MS:
                 raise CommandError(f"inject: extra_ms (={extra_ms:g}) must be in [0, {MAX_INJECTED_MS:g}]")

@@ -104,6 +104,7 @@ class SwitchingLoop(ControlLoop):
         self._busy_ns = 0  # fault injection: extra compute per tick (real overruns)
         self._busy_ticks = 0
         self._fail_wanted = False  # fault injection: the next tick raises (the thread ends)
+        self._hang_s = 0.0  # fault injection: the next tick waits this long (a device call hangs)
         self._stop_wanted = False
         self._slack_r, self._slack_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self._slack_wanted = False
@@ -148,6 +149,11 @@ class SwitchingLoop(ControlLoop):
         """Fault injection: the next tick raises, ending the control thread (a bug's effect)."""
         self._fail_wanted = True
 
+    def inject_hang(self, seconds: float) -> None:
+        """Fault injection: the next tick waits `seconds` before it reads, as a device call that
+        does not return would (releasing the interpreter, as a blocked read does)."""
+        self._hang_s = seconds
+
     @property
     def slack_fd(self) -> int:
         """Readable once a tick has ended after the last `want_slack()`."""
@@ -173,6 +179,9 @@ class SwitchingLoop(ControlLoop):
         if self._fail_wanted:
             self._fail_wanted = False
             raise RuntimeError("injected failure of the control thread")
+        if self._hang_s:
+            hang, self._hang_s = self._hang_s, 0.0
+            time.sleep(hang)
         if self._stop_wanted:
             self._stop_wanted = False
             self.resource.safe_stop()

@@ -173,6 +173,7 @@ class Machine:
             "joint_limits": joint_limits(d.cfg),
             "period_s": d.cfg.control_period_s,
             "telemetry": d.tel.name,
+            "daemon_telemetry": self.pub.tel.name,  # the daemon's own block: its status and trace
             "resource": describe_resource(d.resource),
             "resources": [self._describe_unit(u) for u in self.units],
             "generation": mc.generation,
@@ -256,6 +257,32 @@ class Machine:
         if held_fault and mc.running:
             self._end_on_held_fault(held_fault)
         self.publish()
+
+    def watch(self, now_ns: int) -> None:
+        """Each wake-up of the automaton thread: a unit whose control thread has stopped ticking
+        without ending (`ResourceUnit.check_stall`: a device call that hangs) is that resource's
+        fault, `comm_lost`; the mission gets its active task's `CommLost` (or `R.fault`), here,
+        since that thread, the queue's producer, may yet come back."""
+        for u in self.units:
+            why = u.check_stall(now_ns)
+            if not why:
+                continue
+            self.note(f"{u.name}: {why}: safe-stopped, the others go on", logging.ERROR)
+            task = u.loop.active
+            event = f"{task.name}.T3.CommLost" if task is not None else ""
+            if u.supervisor.fault is None:
+                u.supervisor.on_t3(event, Fault(FaultKind.COMM_LOST, u.name, why))
+            mc = self.mission
+            if not mc.running or mc.mission is None:
+                continue
+            # the task's own type 3 if the mission runs it there, else the resource's fault input
+            eid = task.builtin_ids.get("CommLost", -1) if task is not None else -1
+            bit = mc.mission.event_bits.get(eid, 0) or self._fault_bit(u.name)
+            if bit:
+                mc.react(self.now_s(), bit)
+            else:
+                self._end_on_held_fault(f"{u.name} stalled ({why})")
+            self.publish()
 
     def _control_failed(self, u: ResourceUnit, why: str) -> None:
         """`u`'s control thread ended on `why` (it safe-stopped the resource first): its active

@@ -36,6 +36,7 @@ from orccadd.daemon.cmdlink import CommandLink, rt_socket_path
 from orccadd.daemon.machine import Machine
 from orccadd.daemon.notify import Notifier
 from orccadd.daemon.replies import CommandError, Pending
+from orccadd.daemon.unit import ResourceUnit
 from orccadd.daemon.urgent import UrgentSocket
 from orccadd.errors import OrccaddError, ResourceError
 from orccadd.logsetup import LogSetupError, setup_logging
@@ -193,6 +194,7 @@ class RealtimeProcess:
                 ready = poller.poll(max(1, int(period_ms)) if link.busy else 100)
                 with self.machine.reactor.held():  # the control thread reacts to nothing meanwhile
                     self._work(ready, sig_r, link)
+                    self.machine.watch(time.monotonic_ns())  # a control thread that hangs
                 if self.cmdd is not None:
                     self.cmdd.respawn_due()
                 now = time.monotonic()
@@ -231,13 +233,15 @@ class RealtimeProcess:
         self.stop_requested = signal.Signals(signum).name
 
     def _healthy(self) -> bool:
-        """Each unit's control loop ticking (its heartbeat fresh, in its own periods), or ended
-        and recorded as that resource's fault (safe-stopped, waiting for a reset)."""
+        """Each unit's control loop ticking (its heartbeat fresh, in its own periods), or ended or
+        hung and recorded as that resource's fault (safe-stopped, waiting for a reset)."""
         now = time.monotonic_ns()
-        return self.started and all(
-            u.heartbeat_fresh(now) if u.control_running() else u.supervisor.fault is not None
-            for u in self.machine.units
-        )
+
+        def fine(u: ResourceUnit) -> bool:
+            recorded = (not u.control_running() or bool(u.stalled)) and u.supervisor.fault is not None
+            return u.heartbeat_fresh(now) or recorded
+
+        return self.started and all(fine(u) for u in self.machine.units)
 
     def _ping(self) -> float:
         """WATCHDOG=1 only while the control loop is healthy; returns when to ping next."""

@@ -14,13 +14,10 @@ with the step it is in and the line it waits at, in the reply and in every later
 from __future__ import annotations
 
 import logging
-import sys
-import sysconfig
 import time
 from collections import deque
 from collections.abc import Callable
 from logging import WARNING
-from pathlib import Path
 from typing import Protocol
 
 from orccadd.config.robot import RobotConfig
@@ -30,12 +27,11 @@ from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.errors import OrccaddError
 from orccadd.fault import Fault, FaultKind, StopCause
 from orccadd.physres.base import PhysicalResource
-from orccadd.runtime.threads import ThreadGroup
+from orccadd.runtime.threads import ThreadGroup, line_of
 from orccadd.types import Status
 from orccadd.wire.commands import RESET_REPLY_S
 
 log = logging.getLogger("orccadd.machine")
-STDLIB = sysconfig.get_paths()["stdlib"]  # `_DeviceReset.where` names the first frame outside it
 
 FAULTS_KEPT = 32  # the last stop causes `describe` lists, for the logs' fault records
 RESET_WAIT_S = 2.0  # longest wait for a device to leave its fault after a reset (bus round trips)
@@ -67,9 +63,11 @@ class ControlThread(Protocol):
     (a reset's device work runs in them) and its control thread, started again if it failed."""
 
     threads: ThreadGroup
+    stalled: str  # why its control thread counts as hung ("": it does not)
 
     def control_ended(self) -> bool: ...
     def restart_control(self) -> None: ...
+    def still_stalled(self) -> str: ...
 
 
 class Supervisor:
@@ -134,6 +132,8 @@ class Supervisor:
             if not device.done():
                 return None
             self.fault = None
+            if unit is not None:
+                unit.stalled = ""  # it ticks again: a new hang is a new fault
             self.note(f"reset: {res.name}: stop cleared, holding")
             on_done()
             return {"reset": True}
@@ -152,6 +152,12 @@ class Supervisor:
         """`CommandError` if a reset cannot begin now (a run or the stop still under way)."""
         if self.mission.running:
             raise CommandError(self._still_running())
+        hung = self.unit.still_stalled() if self.unit is not None else ""
+        if hung:
+            raise CommandError(
+                f"{self.resource.name}: {hung}: a reset waits until the call returns "
+                "(if it never does: restart orccadd)"
+            )
         ended = self.unit is not None and self.unit.control_ended()
         if not ended and not self.resource.state.status & Status.STOPPED:
             raise CommandError(
@@ -241,14 +247,8 @@ class _DeviceReset:
     def where(self) -> str:
         """For how long it runs, its step, and the line it is at outside the standard library
         (the words for a reset that hangs: `for 41 s, in ..., at orccadd/x.py:123 (read_cycle)`)."""
-        frame = sys._current_frames().get(self._thread.ident or -1)
-        while frame is not None and frame.f_code.co_filename.startswith(STDLIB) and frame.f_back:
-            frame = frame.f_back
-        at = ""
-        if frame is not None:
-            parts = Path(frame.f_code.co_filename).parts
-            path = Path(*parts[parts.index("orccadd") :]) if "orccadd" in parts else Path(*parts[-2:])
-            at = f", at {path}:{frame.f_lineno} ({frame.f_code.co_name})"
+        line = line_of(self._thread)
+        at = f", at {line}" if line else ""
         return f"for {time.monotonic() - self._started:.0f} s, in {self.step}{at}"
 
     def done(self) -> bool:

@@ -11,6 +11,14 @@ safe-stops the resource (`safe_stop()`: the device's own stop, without a tick), 
 (`internal`) and hands it to the mission as that resource's fault (`Machine.on_events`); the
 other resources tick on. `reset` starts the control thread again (`restart_control`) before
 the device's reset; a thread that fails again at once is the reset's refusal.
+
+A control thread that stops ticking without ending (a device call that never returns: a read
+waiting on a silent bus) is found by the automaton thread (`stalled`: no tick for the loop's
+watchdog, `watchdog_stale_periods` periods and at least `STALL_MIN_S`): the resource is
+safe-stopped from a thread of the unit (the call may hang on that device too), the fault is
+that resource's (`comm_lost`, naming the line the thread waits at), and the others tick on. The
+device's own watchdog stops the arm meanwhile (a drive's heartbeat consumer, a UR's RTDE
+watchdog, a servo's bus watchdog); this is what lets the daemon say so and go on with the rest.
 """
 
 from __future__ import annotations
@@ -31,7 +39,7 @@ from orccadd.errors import OrccaddError
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
 from orccadd.runtime.rt import RealtimeReport, leave_realtime
-from orccadd.runtime.threads import ThreadGroup
+from orccadd.runtime.threads import ThreadGroup, line_of
 from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
 from orccadd.wire.schema import H
 from orccadd.wire.telemetry import TelemetryBlock
@@ -40,6 +48,8 @@ log = logging.getLogger("orccadd")
 
 QUEUE_LEN = 4096  # the loop's events waiting for the automaton thread
 HOLDING_WAIT_S = 5.0  # longest `start_control` waits for the loop's first tick
+STALL_MIN_S = 0.25  # a control thread is stalled after no tick for this long at least (a
+# loaded machine's real-time throttling holds a FIFO thread up to 50 ms: not a hung device)
 
 EnterRealtime = Callable[[int], RealtimeReport]  # SCHED_FIFO for the calling thread
 
@@ -94,6 +104,8 @@ class ResourceUnit:
         self.failure = ""  # why the control thread ended, in words ("" while it runs or never ran)
         self.failures = 0  # how many times it ended so
         self._failures_taken = 0
+        self.stalled = ""  # why the control thread counts as hung, in words ("": it is not)
+        self._started_ns = 0  # when the control thread last started
         self._control: threading.Thread | None = None
         self._enter_rt: EnterRealtime | None = None
         self._priority = 0
@@ -126,6 +138,8 @@ class ResourceUnit:
         ticks = int(self.tel.header[H.TICKS])
         failures = self.failures
         self.failure = ""
+        self.stalled = ""
+        self._started_ns = time.monotonic_ns()
         self._control = self.threads.start(self._control_main, name="control")
         end = time.monotonic() + HOLDING_WAIT_S
         while int(self.tel.header[H.TICKS]) == ticks:
@@ -143,6 +157,16 @@ class ResourceUnit:
     def control_ended(self) -> bool:
         """Its control thread was started and has ended (it failed, or the unit was stopped)."""
         return self._control is not None and not self._control.is_alive()
+
+    def still_stalled(self) -> str:
+        """Why a reset must wait: the control thread hung and not ticking again yet ("" if not)."""
+        control = self._control
+        if not self.stalled or control is None or not control.is_alive():
+            return ""
+        if self.heartbeat_fresh(time.monotonic_ns()):
+            return ""  # it came back (the call returned): the loop ticks, safe-stopped
+        line = line_of(control)
+        return "its control loop still does not tick" + (f" (waiting at {line})" if line else "")
 
     def _control_main(self) -> None:
         assert self._enter_rt is not None
@@ -181,6 +205,33 @@ class ResourceUnit:
         """The control loop ticked within its watchdog's periods."""
         stale_s = self.cfg.daemon.watchdog_stale_periods * self.cfg.control_period_s
         return now_ns - int(self.tel.header[H.HEARTBEAT_NS]) < stale_s * 1e9
+
+    @property
+    def stall_after_s(self) -> float:
+        return max(STALL_MIN_S, self.cfg.daemon.watchdog_stale_periods * self.cfg.control_period_s)
+
+    def check_stall(self, now_ns: int) -> str:
+        """The automaton thread's, at each wake-up: why the control thread is hung, the first time
+        it is found so ("" otherwise): running, no tick for `stall_after_s` since its last tick or
+        its start. Its resource's safe stop then starts on a thread of the unit."""
+        control = self._control
+        if self.stalled or control is None or not control.is_alive():
+            return ""
+        last_ns = max(int(self.tel.header[H.HEARTBEAT_NS]), self._started_ns)
+        if now_ns - last_ns < self.stall_after_s * 1e9:
+            return ""
+        line = line_of(control)
+        self.stalled = f"its control loop has not ticked for {(now_ns - last_ns) * 1e-9:.2f} s" + (
+            f" (waiting at {line})" if line else ""
+        )
+        self.threads.start(self._stop_stalled, name="stall-safe-stop")
+        return self.stalled
+
+    def _stop_stalled(self) -> None:
+        try:
+            self.resource.safe_stop()
+        except Exception:
+            log.exception("%s: safe stop of a stalled resource", self.name)
 
     def stop(self) -> None:
         """The control loop returns after its current tick."""

@@ -13,12 +13,16 @@ what its owners gave up on). The simulators' groups keep `daemon=True` (a blocke
 from __future__ import annotations
 
 import logging
+import sys
+import sysconfig
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 log = logging.getLogger("orccadd.threads")
+STDLIB = sysconfig.get_paths()["stdlib"]  # `line_of` names the first frame outside it
 
 ErrorHandler = Callable[[str, BaseException], None]
 
@@ -80,3 +84,16 @@ def threads_left() -> list[str]:
     interpreter from exiting."""
     me = threading.current_thread()
     return [t.name for t in threading.enumerate() if t is not me and not t.daemon and t.is_alive()]
+
+
+def line_of(thread: threading.Thread) -> str:
+    """Where `thread` is now: the innermost line outside the standard library, as
+    `orccadd/x.py:123 (read_cycle)` ("" if it is not running). The words for a thread that hangs."""
+    frame = sys._current_frames().get(thread.ident or -1)
+    while frame is not None and frame.f_code.co_filename.startswith(STDLIB) and frame.f_back:
+        frame = frame.f_back
+    if frame is None:
+        return ""
+    parts = Path(frame.f_code.co_filename).parts
+    path = Path(*parts[parts.index("orccadd") :]) if "orccadd" in parts else Path(*parts[-2:])
+    return f"{path}:{frame.f_lineno} ({frame.f_code.co_name})"

@@ -345,12 +345,18 @@ COMMANDS: dict[str, CommandSpec] = {
                 Arg(
                     "fault",
                     (str,),
-                    "resource (the device's fault), overrun, or control_thread (its next tick raises)",
+                    "resource (the device's fault), overrun, control_thread (its next tick raises) "
+                    "or hang (its next tick waits extra_ms, as a device call that does not return)",
                     required=True,
-                    choices=("resource", "overrun", "control_thread"),
+                    choices=("resource", "overrun", "control_thread", "hang"),
                 ),
                 Arg("ticks", (int,), "overrun: how many ticks", default=20),
-                Arg("extra_ms", NUMBER, "overrun: extra compute per tick (0: 1.5 periods)", default=0.0),
+                Arg(
+                    "extra_ms",
+                    NUMBER,
+                    "overrun: extra compute per tick (0: 1.5 periods); hang: how long (0: 1 s)",
+                    default=0.0,
+                ),
                 Arg("resource", (str,), "the resource (default: the first listed)", default=""),
             ),
         ),

@@ -52,9 +52,9 @@ class TelemetryBlock:
         self.trace = buf[o : o + self.trace_len * TRACE_WIDTH].reshape(self.trace_len, TRACE_WIDTH)
         # the same words for the tick's writer: a memoryview stores a float, or copies a vector
         # from another memoryview, in a third of numpy's time (`begin_tick_at`)
-        raw = shm.buf
-        assert raw is not None
-        self.words: memoryview[float] = raw[: buf.size * 8].cast("d")
+        # (a view of the numpy array, not of `shm.buf`: the block's mmap must have no export of
+        # its own left when the interpreter closes it at exit)
+        self.words: memoryview[float] = memoryview(buf)  # type: ignore[arg-type]
 
     @staticmethod
     def create(layout: Layout, period_s: float, name: str | None = None) -> TelemetryBlock:

@@ -328,3 +328,38 @@ def test_a_control_thread_that_fails_faults_its_resource_alone_and_a_reset_start
     dual.call("send", input="Stop")
     s = dual.wait(lambda s: s["state"] != "running", timeout_s=30)
     assert not s["faulted"], s
+
+
+def test_a_control_thread_that_hangs_in_a_device_call_faults_its_resource_alone(
+    slow: tuple[Daemon, str],
+) -> None:
+    # left's next tick waits 5 s (injected: a read that does not return) while left reaches:
+    # within its watchdog (50 periods, at least 0.25 s) left is faulted comm_lost naming where
+    # its thread waits, the mission's safe procedure entered on MeetL's CommLost, right ticking
+    # all along; once the call returns left's loop ticks again, safe-stopped, and a reset clears it
+    dual, mission = slow
+    dual.call("load", path=mission)
+    dual.call("start")
+    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
+
+    def ticks(name: str) -> int:
+        return next(int(u["ticks"]) for u in dual.status()["resources"] if u["name"] == name)
+
+    dual.call("inject", fault="hang", extra_ms=5000.0, resource="left")
+    dual.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(dual)), timeout_s=10)
+    entry = next(e for e in instants(dual) if "safe" in e["actions"])
+    assert entry["inputs"] == ["MeetL.T3.CommLost"], entry
+    fault = resources(dual)["left"]["fault"]
+    assert fault["kind"] == "comm_lost" and fault["resource"] == "left", fault
+    assert "has not ticked for" in fault["text"] and "loop.py" in fault["text"], fault  # where it waits
+    left, right = ticks("left"), ticks("right")
+    dual.call("send", input="Stop")  # the safe procedure's acknowledgement: the run ends
+    dual.wait(lambda s: s["state"] != "running", timeout_s=10)
+    refused = dual.reply("reset", resource="left")
+    assert not refused["ok"] and "still does not tick" in refused["error"], refused  # the call hangs
+    dual.wait(lambda s: ticks("right") > right + 100, timeout_s=10)  # right ticks on meanwhile
+    assert resources(dual)["right"]["fault"] is None
+    dual.wait(lambda s: ticks("left") > left + 100 and at_rest(s, "left"), timeout_s=20)  # it returned
+    assert cast(dict[str, Any], dual.call("reset", resource="left"))["reset"]
+    r = resources(dual)
+    assert r["left"]["fault"] is None and r["left"]["task"] == "Hold_left", r["left"]

@@ -74,3 +74,23 @@ def test_the_status_and_the_trace_are_the_daemons_own_block_not_a_resources(mach
     assert int(machine.pub.tel.header[H.TRACE_HEAD]) > before
     assert int(u.tel.header[H.TRACE_HEAD]) == 0  # the resource's block: its ticks only
     assert machine.pub.tel.status[1:].any()  # the status area written (machine state, ...)
+    desc = machine.describe()
+    assert desc["daemon_telemetry"] == machine.pub.tel.name and desc["telemetry"] == u.tel.name
+
+
+def test_a_hung_control_thread_is_found_once_safe_stopped_and_seen_to_tick_again(machine: Machine) -> None:
+    u = machine.default
+    u.start_control(no_realtime, 0)
+    try:
+        assert u.check_stall(time.monotonic_ns()) == ""  # it ticks
+        u.loop.inject_hang(1.5)
+        wait_for(lambda: u.check_stall(time.monotonic_ns()) or u.stalled, timeout_s=5.0)
+        assert "has not ticked for" in u.stalled and "loop.py" in u.stalled, u.stalled  # where it waits
+        assert u.check_stall(time.monotonic_ns()) == ""  # found once
+        assert "still does not tick" in u.still_stalled()
+        wait_for(lambda: u.resource.stopping_or_stopped)  # the unit's own thread stopped it
+        wait_for(lambda: u.still_stalled() == "", timeout_s=5.0)  # the call returned: it ticks
+        assert u.control_running()
+    finally:
+        u.stop()
+        assert u.join(5.0) == []
