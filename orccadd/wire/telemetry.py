@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import weakref
 from multiprocessing import resource_tracker, shared_memory
 
 import numpy as np
@@ -52,9 +53,14 @@ class TelemetryBlock:
         self.trace = buf[o : o + self.trace_len * TRACE_WIDTH].reshape(self.trace_len, TRACE_WIDTH)
         # the same words for the tick's writer: a memoryview stores a float, or copies a vector
         # from another memoryview, in a third of numpy's time (`begin_tick_at`)
-        # (a view of the numpy array, not of `shm.buf`: the block's mmap must have no export of
-        # its own left when the interpreter closes it at exit)
-        self.words: memoryview[float] = memoryview(buf)  # type: ignore[arg-type]
+        # (a view of `shm.buf` itself: one of the numpy array measured slower in the daemon,
+        # `benchmarks/station.py`, a 1 kHz arm's wake-up p99 ×3 beside a second arm switching
+        # laws; released before the interpreter closes the block's mmap at exit, which refuses
+        # to close while a view of it is left)
+        raw = shm.buf
+        assert raw is not None
+        self.words: memoryview[float] = raw[: buf.size * 8].cast("d")
+        weakref.finalize(self, self.words.release)
 
     @staticmethod
     def create(layout: Layout, period_s: float, name: str | None = None) -> TelemetryBlock:
