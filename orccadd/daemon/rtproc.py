@@ -233,13 +233,15 @@ class RealtimeProcess:
         self.stop_requested = signal.Signals(signum).name
 
     def _healthy(self) -> bool:
-        """Each unit's control loop ticking (its heartbeat fresh, in its own periods), or ended or
-        hung and recorded as that resource's fault (safe-stopped, waiting for a reset)."""
+        """Each unit's control loop ticking (its heartbeat fresh, in its own periods), or ended and
+        recorded as that resource's fault (safe-stopped; `reset` starts it again). One that hangs
+        in a device call is not fine even once faulted: nothing in the daemon can end that call,
+        so the pings stop and the service manager restarts the daemon if it never returns."""
         now = time.monotonic_ns()
 
         def fine(u: ResourceUnit) -> bool:
-            recorded = (not u.control_running() or bool(u.stalled)) and u.supervisor.fault is not None
-            return u.heartbeat_fresh(now) or recorded
+            ended = not u.control_running() and u.supervisor.fault is not None
+            return u.heartbeat_fresh(now) or ended
 
         return self.started and all(fine(u) for u in self.machine.units)
 

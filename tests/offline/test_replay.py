@@ -146,7 +146,7 @@ def test_the_run_record_has_the_mission_its_parameters_every_tune_and_the_result
 
 def _rewritten(src: Path, out: Path, drop: str = "", prefix: str = "") -> Path:
     """`src` copied with the metadata records named `drop` left out, and every signal's name
-    given the resource prefix `prefix` (as a cell's log names them: `left/q`)."""
+    given the resource prefix `prefix` (as a station's log names them: `left/q`)."""
     from mcap.reader import make_reader
     from mcap.writer import Writer
 
@@ -172,7 +172,7 @@ def _rewritten(src: Path, out: Path, drop: str = "", prefix: str = "") -> Path:
     return out
 
 
-def test_a_log_without_its_mission_or_of_a_cell_is_refused_in_words(
+def test_a_log_without_its_mission_or_of_a_station_is_refused_in_words(
     runs: Runs, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     # the copy itself replays: what the two others lack is all that differs
@@ -181,6 +181,6 @@ def test_a_log_without_its_mission_or_of_a_cell_is_refused_in_words(
     bare = _rewritten(runs.plain, tmp_path / "bare.mcap", drop="orccadd.mission")
     code, _, err = replay(capsys, str(bare))
     assert code == 2 and "the log carries no mission" in err, err
-    cell = _rewritten(runs.plain, tmp_path / "cell.mcap", prefix="left/")
-    code, _, err = replay(capsys, str(cell))
-    assert code == 2 and "a cell's log (signal left/" in err and "one-resource robot's run" in err, err
+    station = _rewritten(runs.plain, tmp_path / "station.mcap", prefix="left/")
+    code, _, err = replay(capsys, str(station))
+    assert code == 2 and "a station's log (signal left/" in err and "one-resource robot's run" in err, err
