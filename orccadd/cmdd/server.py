@@ -50,7 +50,7 @@ from orccadd.wire.commands import (
 )
 from orccadd.wire.roles import Roles, peer_credentials
 from orccadd.wire.schema import PROTOCOL_VERSION, H, MissionResult, S
-from orccadd.wire.socketdir import SocketPathError, prepare_socket_dir
+from orccadd.wire.socketdir import SocketPathError, bind_with_mode, prepare_socket_dir
 from orccadd.wire.telemetry import RingReader, TelemetryBlock, read_status
 
 log = logging.getLogger("orccadd.cmdd")
@@ -185,11 +185,7 @@ class CommandDaemon:
             if stat.S_ISSOCK(os.lstat(path).st_mode):
                 os.unlink(path)
         s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
-        old = os.umask(0o117)
-        try:
-            s.bind(str(path))
-        finally:
-            os.umask(old)
+        bind_with_mode(s, path, 0o117)
         if gid >= 0:
             os.chown(path, -1, gid)
         self.sock_ino = os.stat(path).st_ino

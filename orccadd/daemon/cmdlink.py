@@ -24,6 +24,7 @@ from typing import Any
 from orccadd.daemon.machine import Machine
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.wire.commands import COMMANDS, URGENT_COMMANDS, ProtocolError, parse_request
+from orccadd.wire.socketdir import bind_with_mode
 
 log = logging.getLogger("orccadd")
 
@@ -74,11 +75,7 @@ class CommandLink:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(path)
         s = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET | socket.SOCK_CLOEXEC | socket.SOCK_NONBLOCK)
-        old = os.umask(0o177)
-        try:
-            s.bind(path)
-        finally:
-            os.umask(old)
+        bind_with_mode(s, path, 0o177)  # only this user: the command daemon runs as it
         s.listen(2)
         self.listener = s
         self.conn: socket.socket | None = None

@@ -103,8 +103,9 @@ class SwitchingLoop(ControlLoop):
         self.switches = 0
         self._busy_ns = 0  # fault injection: extra compute per tick (real overruns)
         self._busy_ticks = 0
-        self._fail_wanted = False  # fault injection: the next tick raises (the thread ends)
-        self._hang_s = 0.0  # fault injection: the next tick waits this long (a device call hangs)
+        # fault injection at the next tick's start (one test a tick): ("fail", 0) raises (the
+        # thread ends), ("hang", s) waits s seconds (a device call that does not return)
+        self._injection: tuple[str, float] | None = None
         self._stop_wanted = False
         self._slack_r, self._slack_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self._slack_wanted = False
@@ -147,12 +148,12 @@ class SwitchingLoop(ControlLoop):
 
     def inject_failure(self) -> None:
         """Fault injection: the next tick raises, ending the control thread (a bug's effect)."""
-        self._fail_wanted = True
+        self._injection = ("fail", 0.0)
 
     def inject_hang(self, seconds: float) -> None:
         """Fault injection: the next tick waits `seconds` before it reads, as a device call that
         does not return would (releasing the interpreter, as a blocked read does)."""
-        self._hang_s = seconds
+        self._injection = ("hang", seconds)
 
     @property
     def slack_fd(self) -> int:
@@ -176,12 +177,8 @@ class SwitchingLoop(ControlLoop):
     # ---- the control thread ---------------------------------------------------------------
     def step(self, t_s: float) -> None:
         self._t_s = t_s
-        if self._fail_wanted:
-            self._fail_wanted = False
-            raise RuntimeError("injected failure of the control thread")
-        if self._hang_s:
-            hang, self._hang_s = self._hang_s, 0.0
-            time.sleep(hang)
+        if self._injection is not None:
+            self._inject()
         if self._stop_wanted:
             self._stop_wanted = False
             self.resource.safe_stop()
@@ -216,6 +213,14 @@ class SwitchingLoop(ControlLoop):
             self._notified = pushed
             with contextlib.suppress(BlockingIOError):  # wake-ups already pending
                 os.write(self.wake_fd, b"e")
+
+    def _inject(self) -> None:
+        """The injected fault of this tick (the rare path)."""
+        kind, seconds = self._injection or ("", 0.0)
+        self._injection = None
+        if kind == "fail":
+            raise RuntimeError("injected failure of the control thread")
+        time.sleep(seconds)  # releases the interpreter, as a blocked read does
 
     def requests_applied(self) -> bool:
         """Every switch request applied (read by any thread)."""

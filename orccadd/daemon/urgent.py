@@ -30,6 +30,7 @@ from typing import Any
 
 from orccadd.wire.commands import URGENT_COMMANDS, ProtocolError, Role, parse_request
 from orccadd.wire.roles import RoleConfig, Roles, peer_credentials
+from orccadd.wire.socketdir import bind_with_mode
 
 log = logging.getLogger("orccadd")
 
@@ -69,11 +70,7 @@ class UrgentSocket:
             if stat.S_ISSOCK(os.lstat(path).st_mode):
                 os.unlink(path)
         s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC | socket.SOCK_NONBLOCK)
-        old = os.umask(0o117)
-        try:
-            s.bind(path)
-        finally:
-            os.umask(old)
+        bind_with_mode(s, path, 0o117)
         if gid >= 0:
             os.chown(path, -1, gid)
         s.listen(CLIENTS_MAX)

@@ -27,7 +27,6 @@ request is handled between two bus transactions, never during one.
 from __future__ import annotations
 
 import json
-import os
 import socket
 from pathlib import Path
 from typing import Any
@@ -35,6 +34,7 @@ from typing import Any
 from orccadd.dxlsim import table as T
 from orccadd.dxlsim.chain import Chain
 from orccadd.runtime import sim_control
+from orccadd.wire.socketdir import bind_with_mode
 
 MAX_LINE = 4096
 
@@ -86,11 +86,7 @@ class ControlServer:
             raise FileExistsError(f"{self.path} exists and is not a socket: not replaced")
         self.path.unlink(missing_ok=True)
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        old = os.umask(0o177)
-        try:
-            self.sock.bind(str(self.path))
-        finally:
-            os.umask(old)
+        bind_with_mode(self.sock, self.path, 0o177)
         self.sock.listen(8)
         self.sock.setblocking(False)
         self.clients: dict[int, tuple[socket.socket, bytearray]] = {}

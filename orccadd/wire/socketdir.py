@@ -89,3 +89,13 @@ def check_socket_path(path: Path) -> None:
 def urgent_socket_path(public: str) -> str:
     """Where the real-time process takes `abort` and `stop` itself (`orccadd.daemon.urgent`)."""
     return public + ".urgent"
+
+
+def bind_with_mode(sock: socket.socket, path: str | Path, umask: int) -> None:
+    """Bind `sock` to `path` with the socket file's permissions masked by `umask` from the start
+    (0o177: the owner only; 0o117: owner and group), no moment of a wider mode."""
+    old = os.umask(umask)
+    try:
+        sock.bind(str(path))
+    finally:
+        os.umask(old)

@@ -63,6 +63,18 @@ def at_rest(status: dict[str, Any], resource: str) -> bool:
     return "stopped" in (unit.get("resource_status") or [])
 
 
+def reaching_left(d: Daemon, mission: str) -> None:
+    """`mission` loaded and started, until left runs MeetL (the slow reach: a fault lands in it)."""
+    d.call("load", path=mission)
+    d.call("start")
+    d.wait(lambda s: "MeetL" in str(resources(d)["left"]["task"]), timeout_s=60)
+
+
+def ticks(d: Daemon, name: str) -> int:
+    """The ticks resource `name`'s control loop has run so far."""
+    return next(int(u["ticks"]) for u in d.status()["resources"] if u["name"] == name)
+
+
 def resources(d: Daemon) -> dict[str, dict[str, Any]]:
     described = cast(dict[str, Any], d.call("describe"))
     return {r["name"]: r for r in described["resources"]}
@@ -95,9 +107,7 @@ def test_a_fault_on_a_moving_resource_enters_the_safe_procedure_and_holds_the_ot
     slow: tuple[Daemon, str],
 ) -> None:
     dual, mission = slow
-    dual.call("load", path=mission)
-    dual.call("start")
-    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
+    reaching_left(dual, mission)
     dual.call("inject", fault="resource", resource="left")  # left reaches, right holds
     dual.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(dual)), timeout_s=30)
     r = resources(dual)
@@ -115,9 +125,7 @@ def test_a_fault_on_a_held_resource_enters_the_safe_procedure_and_a_reset_names_
     slow: tuple[Daemon, str],
 ) -> None:
     dual, mission = slow
-    dual.call("load", path=mission)
-    dual.call("start")
-    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
+    reaching_left(dual, mission)
     dual.call("inject", fault="resource", resource="right")  # right holds while left reaches
     dual.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(dual)), timeout_s=30)
     entry = next(e for e in instants(dual) if "safe" in e["actions"])
@@ -139,9 +147,7 @@ def test_a_fault_on_a_held_resource_enters_the_safe_procedure_and_a_reset_names_
 
 def test_one_arms_plant_killed_while_it_moves_stops_it_alone(slow: tuple[Daemon, str]) -> None:
     dual, mission = slow
-    dual.call("load", path=mission)
-    dual.call("start")
-    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
+    reaching_left(dual, mission)
     os.kill(resources(dual)["left"]["helper_pid"], signal.SIGKILL)  # its "controller" gone
     dual.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(dual)), timeout_s=30)
     r = resources(dual)
@@ -296,9 +302,7 @@ def test_a_control_thread_that_fails_faults_its_resource_alone_and_a_reset_start
     # safe-stopped with an `internal` fault, the mission's safe procedure entered on left.fault,
     # right holding and ticking all along; the daemon runs on, and `reset` restarts the thread
     dual, mission = slow
-    dual.call("load", path=mission)
-    dual.call("start")
-    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
+    reaching_left(dual, mission)
     dual.call("inject", fault="control_thread", resource="left")
     dual.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(dual)), timeout_s=30)
     entry = next(e for e in instants(dual) if "safe" in e["actions"])
@@ -311,18 +315,15 @@ def test_a_control_thread_that_fails_faults_its_resource_alone_and_a_reset_start
     assert "injected failure of the control thread" in fault["text"], fault
     assert r["right"]["fault"] is None and r["right"]["task"] == "Hold_right", r["right"]
 
-    def ticks(name: str) -> int:
-        return next(int(u["ticks"]) for u in dual.status()["resources"] if u["name"] == name)
-
-    left, right = ticks("left"), ticks("right")
-    dual.wait(lambda s: ticks("right") > right + 100, timeout_s=10)  # right ticks on (500 Hz)
-    assert ticks("left") == left  # left's thread has ended
+    left, right = ticks(dual, "left"), ticks(dual, "right")
+    dual.wait(lambda s: ticks(dual, "right") > right + 100, timeout_s=10)  # right ticks on (500 Hz)
+    assert ticks(dual, "left") == left  # left's thread has ended
     dual.call("send", input="Stop")
     dual.wait(lambda s: s["state"] != "running", timeout_s=30)
     assert cast(dict[str, Any], dual.call("reset", resource="left"))["reset"]
     r = resources(dual)
     assert r["left"]["fault"] is None and r["left"]["task"] == "Hold_left", r["left"]
-    dual.wait(lambda s: ticks("left") > left + 100, timeout_s=10)  # its control thread again
+    dual.wait(lambda s: ticks(dual, "left") > left + 100, timeout_s=10)  # its control thread again
     dual.call("start")  # and left moves again: the mission's tasks on it
     dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
     dual.call("send", input="Stop")
@@ -338,12 +339,7 @@ def test_a_control_thread_that_hangs_in_a_device_call_faults_its_resource_alone(
     # its thread waits, the mission's safe procedure entered on MeetL's CommLost, right ticking
     # all along; once the call returns left's loop ticks again, safe-stopped, and a reset clears it
     dual, mission = slow
-    dual.call("load", path=mission)
-    dual.call("start")
-    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
-
-    def ticks(name: str) -> int:
-        return next(int(u["ticks"]) for u in dual.status()["resources"] if u["name"] == name)
+    reaching_left(dual, mission)
 
     dual.call("inject", fault="hang", extra_ms=5000.0, resource="left")
     dual.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(dual)), timeout_s=10)
@@ -352,14 +348,14 @@ def test_a_control_thread_that_hangs_in_a_device_call_faults_its_resource_alone(
     fault = resources(dual)["left"]["fault"]
     assert fault["kind"] == "comm_lost" and fault["resource"] == "left", fault
     assert "has not ticked for" in fault["text"] and "loop.py" in fault["text"], fault  # where it waits
-    left, right = ticks("left"), ticks("right")
+    left, right = ticks(dual, "left"), ticks(dual, "right")
     dual.call("send", input="Stop")  # the safe procedure's acknowledgement: the run ends
     dual.wait(lambda s: s["state"] != "running", timeout_s=10)
     refused = dual.reply("reset", resource="left")
     assert not refused["ok"] and "still does not tick" in refused["error"], refused  # the call hangs
-    dual.wait(lambda s: ticks("right") > right + 100, timeout_s=10)  # right ticks on meanwhile
+    dual.wait(lambda s: ticks(dual, "right") > right + 100, timeout_s=10)  # right ticks on meanwhile
     assert resources(dual)["right"]["fault"] is None
-    dual.wait(lambda s: ticks("left") > left + 100 and at_rest(s, "left"), timeout_s=20)  # it returned
+    dual.wait(lambda s: ticks(dual, "left") > left + 100 and at_rest(s, "left"), timeout_s=20)  # it returned
     assert cast(dict[str, Any], dual.call("reset", resource="left"))["reset"]
     r = resources(dual)
     assert r["left"]["fault"] is None and r["left"]["task"] == "Hold_left", r["left"]
