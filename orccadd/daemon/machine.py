@@ -95,9 +95,10 @@ class Machine:
         self.commands = Dispatcher(self.rt_commands, "rt")
         self.publish()
 
-    def close_outputs(self, timeout_s: float) -> list[str]:
-        """Every unit's threads but the control threads' ended (their output actions done, a
-        reset's device work), waited for `timeout_s` in all; the names of those still running."""
+    def join_units(self, timeout_s: float) -> list[str]:
+        """Every unit's threads ended (its control thread once stopped: `ResourceUnit.stop`; its
+        output actions done; a reset's device work), waited for `timeout_s` in all; the names of
+        those still running (a device call that hangs)."""
         end = time.monotonic() + timeout_s
         return [name for u in self.units for name in u.join(max(0.0, end - time.monotonic()))]
 

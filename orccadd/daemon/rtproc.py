@@ -260,7 +260,7 @@ class RealtimeProcess:
         if hasattr(self, "machine"):
             for u in self.machine.units:
                 u.stop()
-            self.machine.close_outputs(JOIN_S)  # every unit's threads, its control thread too
+            self.machine.join_units(JOIN_S)  # every unit's threads, its control thread too
         if self.cmdd is not None:
             self.cmdd.end(wait_s=None)
         if self.link is not None:
@@ -296,7 +296,7 @@ class RealtimeProcess:
         for u in m.units:
             u.stop()
         m.rt_commands.close()
-        m.close_outputs(JOIN_S)  # every unit's threads: control, outputs, a reset's device work
+        m.join_units(JOIN_S)  # every unit's threads: control, outputs, a reset's device work
         m.mission.state = MachineState.IDLE
         m.publish()
         for u in m.units:

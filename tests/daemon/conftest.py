@@ -105,7 +105,7 @@ def machine_on(cfg: RobotConfig, mode: CommandMode, clock: Clock) -> Iterator[Ma
     try:
         yield m
     finally:
-        m.close_outputs(5.0)
+        m.join_units(5.0)
         tel.close()
         block.close()
         res.shutdown()
