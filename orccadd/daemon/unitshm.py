@@ -1,0 +1,179 @@
+"""What a resource's unit process and the automaton process share (issue 44, item 2: a process
+per clock domain; work in progress on this branch, not wired into the daemon yet).
+
+One shared-memory block per unit, laid out as float64 words (`UnitChannel`), with one writer per
+field and counters published last (x86 keeps stores in order, and CPython runs a thread's
+stores in program order):
+
+- the switch mailbox: the automaton writes (task index, fresh) then bumps `request`; the unit's
+  control thread applies it at its next tick and copies `request` into `applied`;
+- the event ring: the control thread writes (t_s, event id) then bumps `pushed`; the automaton
+  reads from its own `tail` (a reader that fell a ring behind counts what it lost);
+- `TryLock`: the process-shared try-lock of the in-tick reaction, on `flock` (one system call a
+  try; a process that dies holding it releases it).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+from dataclasses import dataclass
+from enum import IntEnum
+from multiprocessing import resource_tracker, shared_memory
+
+import numpy as np
+import numpy.typing as npt
+
+MAGIC = 0x0E44_0001
+
+
+class W(IntEnum):
+    """The block's header words."""
+
+    MAGIC = 0
+    RING_LEN = 1
+    REQUEST = 2  # switch requests made (the automaton's)
+    TASK = 3  # the last request's task index (-1: the unit's Hold task)
+    FRESH = 4  # the last request starts from the measured state (1) or continues the command (0)
+    APPLIED = 5  # switch requests applied (the control thread's)
+    PUSHED = 6  # events ever pushed (the control thread's)
+
+
+HEADER = len(W)
+
+
+@dataclass
+class Event:
+    t_s: float
+    event_id: int
+
+
+class UnitChannel:
+    """The shared block of one unit. `create` in the automaton process, `attach` in the unit's."""
+
+    def __init__(self, shm: shared_memory.SharedMemory, owner: bool) -> None:
+        self.shm = shm
+        self.owner = owner
+        words: npt.NDArray[np.float64] = np.ndarray((shm.size // 8,), dtype=np.float64, buffer=shm.buf)
+        if int(words[W.MAGIC]) != MAGIC:
+            raise ValueError(f"shared memory {shm.name!r} is not a unit's channel")
+        self.words = words
+        n = int(words[W.RING_LEN])
+        self.ring_len = n
+        self.ring = words[HEADER : HEADER + 2 * n].reshape(n, 2)  # (t_s, event id)
+        self.tail = 0  # the consumer's: the next event to read (not shared)
+        self.lost = 0  # events the consumer came too late for
+
+    @staticmethod
+    def create(ring_len: int = 4096) -> UnitChannel:
+        shm = shared_memory.SharedMemory(create=True, size=8 * (HEADER + 2 * ring_len))
+        words = np.ndarray((HEADER + 2 * ring_len,), dtype=np.float64, buffer=shm.buf)
+        words[:] = 0.0
+        words[W.RING_LEN] = ring_len
+        words[W.TASK] = -1
+        words[W.MAGIC] = MAGIC
+        return UnitChannel(shm, owner=True)
+
+    @staticmethod
+    def attach(name: str) -> UnitChannel:
+        shm = shared_memory.SharedMemory(name=name, create=False)
+        # Python < 3.13 registers attached blocks too and would unlink the owner's block at exit
+        resource_tracker.unregister(shm._name, "shared_memory")  # type: ignore[attr-defined]
+        return UnitChannel(shm, owner=False)
+
+    @property
+    def name(self) -> str:
+        return self.shm.name
+
+    def close(self) -> None:
+        del self.words, self.ring
+        self.shm.close()
+        if self.owner:
+            with contextlib.suppress(FileNotFoundError):
+                self.shm.unlink()
+
+    # ---- the switch mailbox ---------------------------------------------------------------
+    def request_switch(self, task: int, fresh: bool) -> int:
+        """The automaton's: make task `task` (-1: Hold) active at the unit's next tick."""
+        w = self.words
+        w[W.TASK] = task
+        w[W.FRESH] = 1.0 if fresh else 0.0
+        request = int(w[W.REQUEST]) + 1
+        w[W.REQUEST] = request  # published last
+        return request
+
+    def switched(self, request: int) -> bool:
+        return int(self.words[W.APPLIED]) >= request
+
+    def take_switch(self) -> tuple[int, bool] | None:
+        """The control thread's, at the start of a tick: the request not applied yet, if any
+        (task index, fresh), marked applied."""
+        w = self.words
+        request = int(w[W.REQUEST])
+        if request == int(w[W.APPLIED]):
+            return None
+        task, fresh = int(w[W.TASK]), bool(w[W.FRESH])
+        if int(w[W.REQUEST]) != request:  # a newer one came meanwhile: take that at the next tick
+            return None
+        w[W.APPLIED] = request
+        return task, fresh
+
+    # ---- the event ring -------------------------------------------------------------------
+    def push(self, t_s: float, event_id: int) -> None:
+        """The control thread's (tick-safe): one event, published by `pushed`."""
+        w = self.words
+        pushed = int(w[W.PUSHED])
+        slot = self.ring[pushed % self.ring_len]
+        slot[0] = t_s
+        slot[1] = event_id
+        w[W.PUSHED] = pushed + 1
+
+    @property
+    def pushed(self) -> int:
+        return int(self.words[W.PUSHED])
+
+    def drain(self) -> list[Event]:
+        """The automaton's: the events pushed since the last drain, in order; those overwritten
+        before it came are counted in `lost`."""
+        pushed = int(self.words[W.PUSHED])
+        if pushed - self.tail > self.ring_len:
+            self.lost += pushed - self.ring_len - self.tail
+            self.tail = pushed - self.ring_len
+        out = []
+        for i in range(self.tail, pushed):
+            t_s, eid = self.ring[i % self.ring_len]
+            out.append(Event(float(t_s), int(eid)))
+        if int(self.words[W.PUSHED]) - self.tail > self.ring_len:  # overwritten while read
+            lapped = int(self.words[W.PUSHED]) - self.ring_len - self.tail
+            self.lost += lapped
+            out = out[lapped:]
+        self.tail = pushed
+        return out
+
+
+class TryLock:
+    """A lock shared by processes, never waited for: `try_acquire` takes it or returns False at
+    once. On `flock` of the file `path` (each process opens it itself); the kernel releases it
+    when its holder's descriptor closes, its process dying included."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
+
+    def try_acquire(self) -> bool:
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return False
+        return True
+
+    def acquire(self) -> None:
+        """Wait for it (the automaton thread's, never a tick's)."""
+        fcntl.flock(self.fd, fcntl.LOCK_EX)
+
+    def release(self) -> None:
+        fcntl.flock(self.fd, fcntl.LOCK_UN)
+
+    def close(self) -> None:
+        os.close(self.fd)
