@@ -29,7 +29,7 @@ from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.supervision import FaultHistory, Supervisor
-from orccadd.daemon.unit import ResourceUnit
+from orccadd.daemon.unit import ResourceUnit, hold_name
 from orccadd.fault import Fault, FaultKind, StopCause
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
@@ -75,7 +75,7 @@ class Machine:
                 tel,
                 self.registry,
                 wake_fd,
-                hold_name=f"Hold_{res.name}" if station.listed else "Hold",  # events and tunes name it
+                hold_name=hold_name(station.listed, res.name),
             )
             for cfg, res, clock, tel in zip(station.resources, resources, clocks, telemetry, strict=True)
         )

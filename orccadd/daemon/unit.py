@@ -58,6 +58,12 @@ class ControlThreadError(OrccaddError):
     """A unit's control thread ended on an exception (or did not tick in time)."""
 
 
+def hold_name(station_listed: bool, resource: str) -> str:
+    """The name of `resource`'s Hold task: events and tunes name it (`Hold` alone in a daemon of
+    one unlisted resource)."""
+    return f"Hold_{resource}" if station_listed else "Hold"
+
+
 def hold_task(
     cfg: RobotConfig, resource: PhysicalResource, registry: EventRegistry, queue: EventQueue, name: str
 ) -> RobotTask:
@@ -81,14 +87,19 @@ class ResourceUnit:
         wake_fd: int,
         *,
         hold_name: str,
+        queue: EventQueue | None = None,
+        loop_type: type[SwitchingLoop] = SwitchingLoop,
     ) -> None:
+        """`queue`: where the loop's events go (default: a queue of `QUEUE_LEN` in this process);
+        `loop_type`: the control loop's class (a unit process's takes its switches from shared
+        memory)."""
         self.cfg = cfg
         self.resource = resource
         self.clock = clock
         self.tel = tel
         self.wake_fd = wake_fd
-        self.queue = EventQueue(QUEUE_LEN)
-        self.loop = SwitchingLoop(
+        self.queue = queue if queue is not None else EventQueue(QUEUE_LEN)
+        self.loop = loop_type(
             resource,
             clock,
             hold_task(cfg, resource, registry, self.queue, hold_name),
@@ -109,6 +120,7 @@ class ResourceUnit:
         self._control: threading.Thread | None = None
         self._enter_rt: EnterRealtime | None = None
         self._priority = 0
+        self.on_failure: Callable[[str], None] = lambda why: None  # told, from the dying thread
 
     @property
     def name(self) -> str:
@@ -190,6 +202,10 @@ class ResourceUnit:
             log.exception("%s: safe stop after its control thread failed", self.name)
         self.failure = why
         self.failures += 1
+        try:
+            self.on_failure(why)
+        except Exception:
+            log.exception("%s: telling that its control thread failed", self.name)
         with contextlib.suppress(OSError):
             os.write(self.wake_fd, b"x")
 

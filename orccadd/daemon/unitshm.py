@@ -25,6 +25,8 @@ from multiprocessing import resource_tracker, shared_memory
 import numpy as np
 import numpy.typing as npt
 
+from orccadd.task.events import EventQueue
+
 MAGIC = 0x0E44_0001
 
 
@@ -38,6 +40,7 @@ class W(IntEnum):
     FRESH = 4  # the last request starts from the measured state (1) or continues the command (0)
     APPLIED = 5  # switch requests applied (the control thread's)
     PUSHED = 6  # events ever pushed (the control thread's)
+    TAIL = 7  # events consumed (the automaton's, as it drains)
 
 
 HEADER = len(W)
@@ -149,6 +152,7 @@ class UnitChannel:
             self.lost += lapped
             out = out[lapped:]
         self.tail = pushed
+        self.words[W.TAIL] = pushed
         return out
 
 
@@ -177,3 +181,32 @@ class TryLock:
 
     def close(self) -> None:
         os.close(self.fd)
+
+
+class ChannelQueue(EventQueue):
+    """The unit process's event queue: what its tasks and loop push goes into the channel's ring,
+    for the automaton's process to drain (`UnitChannel.drain`). The counter goes on from the
+    channel's (a unit started again continues the ring)."""
+
+    def __init__(self, channel: UnitChannel) -> None:
+        super().__init__(1)
+        self.channel = channel
+        self.pushed = channel.pushed
+
+    def push(self, t_s: float, event_id: int) -> None:
+        self.channel.push(t_s, event_id)
+        self.pushed += 1
+
+    @property
+    def tail(self) -> int:
+        """The events the automaton's process has consumed."""
+        return int(self.channel.words[W.TAIL])
+
+    def event_at(self, index: int) -> int:
+        return int(self.channel.ring[index % self.channel.ring_len][1])
+
+    def __len__(self) -> int:
+        return self.pushed - self.tail
+
+    def drain(self) -> list[tuple[float, int]]:
+        raise TypeError("a unit's events are drained by the automaton's process (UnitChannel.drain)")

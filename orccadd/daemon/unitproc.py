@@ -1,0 +1,333 @@
+"""A resource's unit in a process of its own: one clock domain, one interpreter (issue 44, item
+2; work in progress on branch unit-process, not wired into the daemon yet).
+
+`python -m orccadd.daemon.unitproc --station FILE --resource NAME --channel SHM --telemetry SHM
+--link-fd N --wake-fd N` is started by the automaton's process (`unitlink.UnitLink`). It builds
+the resource, configures it, holds it with its Hold task (`ResourceUnit`, as in one process) and
+runs its control thread at the station's control priority. Then:
+
+- each tick takes the switch request the automaton's process posted in the channel (a task by
+  its index: the Hold tasks of the station's resources in order, then the mission's tasks) and
+  pushes its events into the channel's ring, waking the automaton's process through the
+  inherited `--wake-fd`;
+- the link's requests are served on a thread of their own: `load` builds the mission's tasks,
+  `safe_stop`, `inject`, `end`;
+- every event id is the automaton process's own by construction: this process builds every task
+  both build — the Hold task of each resource of the station, then each mission's tasks — in the
+  same order, those of the other resources on their resource built and never configured (no bus
+  opened). A `load` compares the two registries' names and is refused on any difference;
+- the end of the link (the automaton's process gone) is a safe stop: the unit stops its
+  resource, releases it and exits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import signal
+import socket
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from orccadd.config.robot import RobotConfig
+from orccadd.config.station import StationConfig
+from orccadd.daemon.loop import SwitchingLoop
+from orccadd.daemon.mission import prepare_mission
+from orccadd.daemon.unit import ResourceUnit, hold_name, hold_task
+from orccadd.daemon.unitlink import recv_frame, send_frame
+from orccadd.daemon.unitshm import ChannelQueue, UnitChannel
+from orccadd.errors import OrccaddError
+from orccadd.logsetup import LogSetupError, setup_logging
+from orccadd.physres.base import PhysicalResource
+from orccadd.robot import create_resource, load_station_config, simulated, with_backend
+from orccadd.runtime.clock import Clock
+from orccadd.runtime.rt import RealtimeReport, enter_realtime, lock_memory_early
+from orccadd.task import EventQueue, EventRegistry, RobotTask, load_task_file
+from orccadd.task.loop import resource_clock
+from orccadd.types import CommandMode, Status
+from orccadd.wire.telemetry import TelemetryBlock
+
+log = logging.getLogger("orccadd.unit")
+REST_WAIT_S = 5.0  # how long the end waits for the resource at rest before releasing it
+
+
+def station_as_run(station: StationConfig, simulate: bool, in_process_sim: bool) -> StationConfig:
+    """The station as the daemon runs it: every resource simulated (`--simulate`), a simulated
+    arm in a process of its own unless `--in-process-sim`."""
+    if simulate:
+        station = station.with_resources(tuple(simulated(c) for c in station.resources))
+    if not in_process_sim:
+        station = station.with_resources(
+            tuple(
+                with_backend(c, "sim_process") if c.resource.backend == "sim" else c
+                for c in station.resources
+            )
+        )
+    return station
+
+
+class ChannelLoop(SwitchingLoop):
+    """The control loop of a unit process: at each tick's start, the switch request the
+    automaton's process posted in the channel (a task index into `tasks`) becomes this loop's."""
+
+    channel: UnitChannel
+    tasks: list[RobotTask]  # by index: the station's Hold tasks in order, then the mission's
+
+    def step(self, t_s: float) -> None:
+        taken = self.channel.take_switch()
+        if taken is not None:
+            index, fresh = taken
+            tasks = self.tasks
+            if 0 <= index < len(tasks) and tasks[index].resource is self.resource:
+                self.request_switch(tasks[index], fresh)
+            else:  # not this resource's: the automaton's process asked for what it cannot be
+                self.request_switch(self.hold, fresh=False)
+        super().step(t_s)
+
+
+class UnitProcess:
+    """One resource's unit, the tasks built for it, and the link's server."""
+
+    def __init__(
+        self,
+        station: StationConfig,
+        resource: str,
+        channel: UnitChannel,
+        tel: TelemetryBlock,
+        link: socket.socket,
+        wake_fd: int,
+        spin_us: float = 0.0,
+    ) -> None:
+        if resource not in station.names:
+            raise OrccaddError(
+                f"{station.source}: no resource {resource!r} (resources: {', '.join(station.names)})"
+            )
+        self.station = station
+        self.channel = channel
+        self.link = link
+        self.registry = EventRegistry()
+        self.queue = ChannelQueue(channel)
+        self.send_lock = threading.Lock()
+        self.resource: PhysicalResource
+        self.unit: ResourceUnit
+        # every resource of the station, this one's real, the others built and never configured;
+        # each one's Hold task, in the station's order (the automaton process's event ids)
+        self.bindings: dict[str, tuple[PhysicalResource, EventQueue]] = {}
+        self.holds: list[RobotTask] = []
+        for cfg in station.resources:
+            name = cfg.resource.name
+            if name == resource:
+                self.resource = create_resource(cfg)
+                self.cfg = cfg
+                clock = resource_clock(self.resource, spin_margin_s=spin_us * 1e-6)
+                self.unit = self._unit(cfg, clock, tel, wake_fd, hold_name(station.listed, name))
+                self.bindings[name] = (self.resource, self.queue)
+                self.holds.append(self.unit.loop.hold)
+            else:
+                other = create_resource(cfg)
+                queue = EventQueue(1)  # never ticked here: its events go nowhere
+                self.bindings[name] = (other, queue)
+                self.holds.append(
+                    hold_task(cfg, other, self.registry, queue, hold_name(station.listed, name))
+                )
+        self.loop.tasks = list(self.holds)
+        self.loop.set_task_ids({id(t): i for i, t in enumerate(self.holds)})
+        self.unit.on_failure = lambda why: self.tell({"op": "failed", "why": why})
+        self.ended = threading.Event()
+
+    def _unit(
+        self, cfg: RobotConfig, clock: Clock, tel: TelemetryBlock, wake_fd: int, name: str
+    ) -> ResourceUnit:
+        unit = ResourceUnit(
+            cfg,
+            self.resource,
+            clock,
+            tel,
+            self.registry,
+            wake_fd,
+            hold_name=name,
+            queue=self.queue,
+            loop_type=ChannelLoop,
+        )
+        loop = unit.loop
+        assert isinstance(loop, ChannelLoop)
+        loop.channel = self.channel
+        return unit
+
+    @property
+    def loop(self) -> ChannelLoop:
+        loop = self.unit.loop
+        assert isinstance(loop, ChannelLoop)
+        return loop
+
+    # ---- startup and the end ----------------------------------------------------------------
+    def start(self) -> None:
+        """Configure the resource, hold it; `holding` told once the loop has ticked."""
+        hold = load_task_file(self.cfg.resolve(self.cfg.daemon.hold_task))
+        for w in lock_memory_early():
+            log.warning("%s", w)
+        self.resource.configure()
+        self.resource.activate(CommandMode[hold.task.command.upper()])
+        self.unit.start_control(self._enter_realtime, self.station.daemon.control_priority)
+        self.tell(
+            {
+                "op": "holding",
+                "pid": os.getpid(),
+                "helper_pid": self.resource.helper_pid(),
+                "tasks": [t.name for t in self.loop.tasks],
+                "events": self.registry.names(),
+            }
+        )
+
+    def _enter_realtime(self, priority: int) -> RealtimeReport:
+        return enter_realtime(priority, lock_memory=False, collect_gc=False)
+
+    def end(self) -> int:
+        """Safe stop, the resource at rest (or `REST_WAIT_S`), the loop stopped, the resource
+        released. 0 if it came to rest and was released."""
+        res = self.resource
+        res.safe_stop()
+        end = time.monotonic() + REST_WAIT_S
+        at_rest = False
+        while time.monotonic() < end and self.unit.control_running():
+            if res.state.status & Status.STOPPED:
+                at_rest = True
+                break
+            time.sleep(0.01)
+        at_rest = at_rest or not self.unit.control_running()
+        self.unit.stop()
+        left = self.unit.join(2.0)
+        if left:
+            log.error("%s: thread(s) still running at the end: %s", res.name, ", ".join(left))
+        self.loop.close()
+        try:
+            res.shutdown()
+        except OrccaddError as e:
+            log.error("%s: releasing it failed: %s", res.name, e)
+            return 1
+        return 0 if at_rest and not self.unit.failures else 1
+
+    # ---- the link ---------------------------------------------------------------------------
+    def tell(self, msg: dict[str, Any]) -> None:
+        """A message to the automaton's process (from any thread of this one)."""
+        with self.send_lock, contextlib.suppress(OSError):
+            send_frame(self.link, msg)
+
+    def serve(self) -> None:
+        """The link's requests, until `end` or the link's end."""
+        while True:
+            try:
+                msg = recv_frame(self.link)
+            except (OSError, OrccaddError) as e:
+                log.error("%s: the link to the automaton's process broke: %s", self.resource.name, e)
+                msg = None
+            if msg is None:
+                log.warning("%s: the automaton's process is gone: safe stop", self.resource.name)
+                return
+            op, rid = msg.get("op"), msg.get("id")
+            if op == "end":
+                return
+            try:
+                answer = self.handle(str(op), msg)
+            except (OrccaddError, ValueError, KeyError, TypeError) as e:
+                self.tell({"id": rid, "error": str(e)})
+            else:
+                self.tell({"id": rid, "ok": True, **answer})
+
+    def handle(self, op: str, msg: dict[str, Any]) -> dict[str, Any]:
+        if op == "load":
+            return self._load(msg)
+        if op == "safe_stop":
+            self.loop.request_safe_stop()
+            return {}
+        if op == "inject":
+            return self._inject(str(msg["kind"]), float(msg.get("seconds", 0.0)))
+        raise ValueError(f"no request {op!r} for a unit")
+
+    def _load(self, msg: dict[str, Any]) -> dict[str, Any]:
+        """The mission's tasks built on every resource (this one's for real), in the automaton
+        process's order; its registry's names must be this one's."""
+        loaded = prepare_mission(
+            msg["path"],
+            msg["automaton"],
+            msg["report"],
+            self.bindings,
+            self.registry,
+            msg["specs"],
+            msg.get("data"),
+        )
+        names = self.registry.names()
+        if names != msg["events"]:
+            differ = next(
+                (i for i, (a, b) in enumerate(zip(names, msg["events"], strict=False)) if a != b), None
+            )
+            where = (
+                f"from id {differ}" if differ is not None else f"{len(names)} against {len(msg['events'])}"
+            )
+            raise OrccaddError(f"the unit's event ids are not the automaton's ({where}): mission refused")
+        tasks = [*self.holds, *loaded.tasks]
+        self.loop.set_task_ids({id(t): i for i, t in enumerate(tasks)})
+        self.loop.set_input_events(tuple(int(e) for e in msg.get("input_events", ())))
+        self.loop.tasks = tasks  # one store: a tick sees the old list or the new
+        return {"tasks": [t.name for t in tasks]}
+
+    def _inject(self, kind: str, seconds: float) -> dict[str, Any]:
+        if kind == "control_thread":
+            self.loop.inject_failure()
+        elif kind == "hang":
+            self.loop.inject_hang(seconds)
+        elif kind == "crash":
+            os._exit(70)  # the unit process dies at once, as a segfault in a driver would
+        else:
+            raise ValueError(f"no fault {kind!r} to inject in a unit (control_thread, hang, crash)")
+        return {}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="orccadd-unit", description="one resource of orccadd, in its own process"
+    )
+    ap.add_argument("--station", required=True)
+    ap.add_argument("--resource", required=True)
+    ap.add_argument("--channel", required=True, help="the unit's shared channel (its name)")
+    ap.add_argument("--telemetry", required=True, help="the resource's telemetry block (its name)")
+    ap.add_argument("--link-fd", type=int, required=True)
+    ap.add_argument("--wake-fd", type=int, required=True)
+    ap.add_argument("--spin-us", type=float, default=0.0)
+    ap.add_argument("--simulate", action="store_true")
+    ap.add_argument("--in-process-sim", action="store_true")
+    args = ap.parse_args(argv)
+    try:
+        setup_logging("orccadd.unit")
+    except LogSetupError as e:
+        ap.exit(2, f"{ap.prog}: error: {e}\n")
+    link = socket.socket(fileno=args.link_fd)
+    os.set_inheritable(args.wake_fd, False)
+    channel = UnitChannel.attach(args.channel)
+    tel = TelemetryBlock.attach(args.telemetry)
+    try:
+        station = station_as_run(load_station_config(Path(args.station)), args.simulate, args.in_process_sim)
+        unit = UnitProcess(station, args.resource, channel, tel, link, args.wake_fd, args.spin_us)
+        unit.start()
+    except OrccaddError as e:
+        log.error("%s", e)
+        with contextlib.suppress(OSError):
+            send_frame(link, {"op": "refused", "error": str(e)})
+        return 2
+    # the service manager's SIGTERM reaches every process of the service: here it ends the link
+    # (the blocked read returns), and the unit ends as when the automaton's process is gone
+    signal.signal(signal.SIGTERM, lambda signum, frame: link.shutdown(socket.SHUT_RD))
+    unit.serve()
+    code = unit.end()
+    tel.close()
+    channel.close()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
