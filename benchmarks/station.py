@@ -10,7 +10,10 @@ Runs orccadd (as a separate process, with its command daemon) on:
 - **gripper**: configs/robots/ur5e-gripper-sim.toml (the UR controller simulator at 500 Hz, the
   arm device-paced, and the servo simulator's gripper at 200 Hz), holding, then pick_place.mission
   run again and again;
-- **scale**: stations of 1, 2 and 4 simulated UR5e at 500 Hz, holding: how the figures grow.
+- **scale**: stations of 1, 2 and 4 simulated UR5e at 500 Hz, holding: how the figures grow;
+- **separate**: dual's two arms each in a daemon of its own (two processes, two interpreters),
+  `left` holding while `right` holds, then while `right` alternates the same two laws: the
+  isolation a process per clock domain can reach on this machine, beside dual's one process.
 
 Every tick of every resource is read here from the daemon's own telemetry rings (shared memory,
 polled faster than they wrap), the automaton's instants from its trace ring. Printed per
@@ -21,7 +24,7 @@ on B), the time from A's event tick to B's first tick of the new law, in B's per
 each resource's wake-up p99 to cyclictest's (1 kHz, the control threads' priority, half of its
 run before ours and half after).
 
-Usage: `python benchmarks/station.py [--duration-s 60] [--runs dual,gripper,scale]` (root, for
+Usage: `python benchmarks/station.py [--duration-s 60] [--runs dual,gripper,scale,separate]` (root, for
 SCHED_FIFO; `make bench`).
 """
 
@@ -252,6 +255,72 @@ def run_scale(duration_s: float, base_p99: float | None, sizes: tuple[int, ...] 
     return out
 
 
+SEPARATE_MISSION = """\
+mission RightSwitch
+resource right
+input Stop
+task TrackR on right from "{tasks}/move_joints.toml"
+  set traj.target_rad = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+  set reached.ticks = 3
+  post
+end
+task DwellR on right from "{tasks}/dwell.toml"
+  set elapsed.timeout_s = 0.013
+  post
+end
+main procedure Interleave
+  do
+    loop
+      TrackR;
+      DwellR
+    end loop
+  until Stop
+on fatal do
+  safe
+end
+safe procedure Acknowledge
+  await Stop
+end
+"""
+
+
+def run_separate(duration_s: float, base_p99: float | None) -> list[str]:
+    """dual's arms in two daemons: left (1 kHz) holds throughout; right (500 Hz) holds, then
+    alternates dual's tracking law and dwell (its own events only: two daemons share no mission)."""
+    out = ["dual's arms in two daemons (left 1 kHz holding; right 500 Hz holding, then switching)"]
+    with tempfile.TemporaryDirectory(prefix="orccadd-station-") as tmp:
+        configs = []
+        arms = (("left", 0.001, "loop = { overrun_limit = 50 }\n"), ("right", 0.002, ""))
+        for name, period_s, extra in arms:
+            cfg = Path(tmp) / f"{name}.toml"
+            cfg.write_text(
+                f'name = "{name}"\n[[resources]]\nname = "{name}"\nconfig = "{UR5E}"\n'
+                f"control_period_s = {period_s}\n{extra}"
+                f'[daemon]\ntask_dirs = ["{ROOT}/configs/tasks"]\nmission_dirs = ["{tmp}"]\n'
+            )
+            configs.append(cfg)
+        mission = Path(tmp) / "right_switch.mission"
+        mission.write_text(SEPARATE_MISSION.format(tasks=ROOT / "configs/tasks"))
+        with (
+            running_daemon(configs[0]) as dl,
+            running_daemon(configs[1]) as dr,
+            Client(dl.socket, timeout_s=120) as left,
+            Client(dr.socket, timeout_s=120) as right,
+        ):
+            with recording(left) as (rec, poll):
+                run_for(duration_s, poll)
+            out += timing_lines(rec, "right holding  ", base_p99)
+            right.call("load", path=str(mission))
+            with recording(left) as (rec, poll), recording(right) as (rec_r, poll_r):
+                right.call("start")
+                run_for(duration_s, lambda: (poll(), poll_r()))
+                right.call("stop")
+            out += timing_lines(rec, "right switching", base_p99)
+            switches = rec_r.resource_ticks(0)[:, T.TASK]
+            out.append(f"  right's law switches meanwhile: {int((switches[1:] != switches[:-1]).sum())}")
+    return out
+
+
 def _switch_lines(rec: Recording, desc: dict[str, Any]) -> list[str]:
     own, cross, sent = switch_figures(rec, desc)
     in_tick = 100.0 * sum(1 for x in own if x == 0) / len(own) if own else float("nan")
@@ -271,11 +340,11 @@ def _switch_lines(rec: Recording, desc: dict[str, Any]) -> list[str]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--duration-s", type=float, default=60.0, help="each phase of each run")
-    ap.add_argument("--runs", default="dual,gripper,scale", help="which: dual, gripper, scale")
+    ap.add_argument("--runs", default="dual,gripper,scale", help="which: dual, gripper, scale, separate")
     ap.add_argument("--priority", type=int, default=80, help="cyclictest's: the control threads'")
     args = ap.parse_args()
     runs = [r.strip() for r in args.runs.split(",") if r.strip()]
-    table = {"dual": run_dual, "gripper": run_gripper, "scale": run_scale}
+    table = {"dual": run_dual, "gripper": run_gripper, "scale": run_scale, "separate": run_separate}
     unknown = [r for r in runs if r not in table]
     if unknown:
         ap.error(f"--runs: unknown {', '.join(unknown)} (known: {', '.join(table)})")
