@@ -32,8 +32,7 @@ from orccadd.daemon.mission import compile_and_verify, prepare_mission
 from orccadd.daemon.rtproc import TICK_RING_S
 from orccadd.daemon.unit import hold_name, hold_task
 from orccadd.daemon.unitlink import UnitLink
-from orccadd.daemon.unitproc import station_as_run
-from orccadd.robot import backend_class, create_resource, load_station_config
+from orccadd.robot import backend_class, create_resource, load_station_config, station_as_run
 from orccadd.task import EventQueue, EventRegistry, RobotTask
 from orccadd.wire.schema import H, T
 from orccadd.wire.telemetry import Layout, RingReader, TelemetryBlock

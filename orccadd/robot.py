@@ -109,3 +109,20 @@ def load_robot(path: str | Path) -> Robot:
     cfg = load_robot_config(path, check_model=False)
     model = RobotModel.from_config(cfg)
     return Robot(cfg, model, create_resource(cfg, model))
+
+
+def station_as_run(station: StationConfig, simulate: bool, in_process_sim: bool) -> StationConfig:
+    """The station as the daemon runs it: every resource simulated (`--simulate`: its model,
+    limits and period; no bus opened), a simulated arm in a process of its own unless
+    `in_process_sim`, like a real arm outside the controller. The real-time process and each
+    unit process apply it alike."""
+    if simulate:
+        station = station.with_resources(tuple(simulated(c) for c in station.resources))
+    if not in_process_sim:
+        station = station.with_resources(
+            tuple(
+                with_backend(c, "sim_process") if c.resource.backend == "sim" else c
+                for c in station.resources
+            )
+        )
+    return station

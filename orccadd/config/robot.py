@@ -189,6 +189,10 @@ class DaemonConfig:
     # module's update on its ports: for stepping through a module in a debugger); the commands
     # are the same, bit for bit
     tick: Literal["compiled", "interpreted"] = field(default="compiled")
+    # where each resource's control loop runs: "threads" (a thread each in the real-time
+    # process) or "processes" (a process each, `orccadd.daemon.unitproc`: one interpreter per
+    # clock domain, so that no resource's Python stalls another's tick; docs/architecture.md)
+    units: Literal["threads", "processes"] = field(default="threads")
 
 
 @dataclass(frozen=True)

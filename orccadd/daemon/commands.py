@@ -262,14 +262,14 @@ class RtCommands:
         on = self.m.unit_of(task)
         loop = on.loop
         try:
-            seq = loop.tunes.post(change)
+            seq = on.post_tune(task, rest, value, change)
         except MailboxFullError as e:
             raise CommandError(f"tune {path}: not accepted: {e}") from None
         self.m.note(f"tune {path} = {value}")
         t_posted = self.m.now_s()
 
         def poll() -> Result | None:
-            tick = loop.tunes.acked(seq)
+            tick = on.tune_acked(seq)
             if tick is None:
                 return None
             self._trace_tune(t_posted, task, split_index(rest)[0], change, old, tick)

@@ -249,8 +249,20 @@ class Loader:
         mc = self.m.mission
         mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
         try:
-            bindings = {u.name: (u.resource, u.queue) for u in self.m.units}
+            bindings = {u.name: (u.task_resource, u.queue) for u in self.m.units}
             loaded = prepare_mission(path, automaton, report, bindings, self.m.registry, specs, data)
+            for u in self.m.units:  # a unit process builds the same tasks (the same ids)
+                u.load_mission(
+                    {
+                        "path": path,
+                        "automaton": automaton,
+                        "report": report,
+                        "specs": specs,
+                        "data": data,
+                        "events": self.m.registry.names(),
+                        "input_events": mc.input_events_of(u.task_resource, loaded),
+                    }
+                )
         except OrccaddError as e:
             raise CommandError(str(e)) from None
         if deployment:

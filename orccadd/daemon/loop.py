@@ -18,7 +18,7 @@ import contextlib
 import os
 import struct
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from orccadd.modules.base import CommandMotion
@@ -135,6 +135,10 @@ class SwitchingLoop(ControlLoop):
         """Per named input of the resource (`description.inputs`), the event its rising edge
         pushes (-1: the mission does not declare it). One store: the old or the new tuple."""
         self._input_events = ids
+
+    def set_tasks(self, tasks: Sequence[RobotTask]) -> None:
+        """The tasks by telemetry id (their position: `MissionControl.tasks`)."""
+        self.set_task_ids({id(t): i for i, t in enumerate(tasks)})
 
     def set_task_ids(self, ids: dict[int, int]) -> None:
         """Telemetry task ids by id(task) (`MissionControl.tasks`: the Hold tasks, then the

@@ -30,12 +30,13 @@ from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.supervision import FaultHistory, Supervisor
 from orccadd.daemon.unit import ResourceUnit, hold_name
+from orccadd.daemon.unitlink import UnitLink
+from orccadd.daemon.unitproxy import UnitProxy
 from orccadd.fault import Fault, FaultKind, StopCause
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
 from orccadd.task import EventRegistry, RobotTask
 from orccadd.task.events import EventKind
-from orccadd.types import Phase
 from orccadd.wire.commands import COMMANDS, Dispatcher, with_defaults
 from orccadd.wire.schema import MissionResult, S, Trace, status_names
 from orccadd.wire.telemetry import TelemetryBlock
@@ -59,25 +60,27 @@ class Machine:
         wake_fd: int,
         *,
         allow_fault_injection: bool = False,
+        links: Sequence[UnitLink | None] | None = None,
     ) -> None:
         """`telemetry`: each resource's block (its ticks); `block`: the daemon's own (the status
-        area and the trace, of every resource)."""
+        area and the trace, of every resource). `links`: per resource, its unit process (its
+        resource in `resources` is then the shadow the tasks are built on: never configured),
+        or None: its unit runs here, on threads of this process."""
         self.station = station
         self.pub = Publisher(block)
         self.registry = EventRegistry()
         self.faults = FaultHistory()
         self.faults.on_cause = lambda n: self.pub.trace(Trace.FAULT, self.now_s(), code=n)
-        self.units = tuple(
+        links = list(links) if links is not None else [None] * len(resources)
+        self.units: tuple[ResourceUnit | UnitProxy, ...] = tuple(
             ResourceUnit(
-                cfg,
-                res,
-                clock,
-                tel,
-                self.registry,
-                wake_fd,
-                hold_name=hold_name(station.listed, res.name),
+                cfg, res, clock, tel, self.registry, wake_fd, hold_name=hold_name(station.listed, res.name)
             )
-            for cfg, res, clock, tel in zip(station.resources, resources, clocks, telemetry, strict=True)
+            if link is None
+            else UnitProxy(cfg, res, tel, self.registry, link, hold_name=hold_name(station.listed, res.name))
+            for cfg, res, clock, tel, link in zip(
+                station.resources, resources, clocks, telemetry, links, strict=True
+            )
         )
         self.allow_fault_injection = allow_fault_injection
         self.notes: list[str] = []  # recent notable happenings (bounded), for `describe`
@@ -102,18 +105,24 @@ class Machine:
         end = time.monotonic() + timeout_s
         return [name for u in self.units for name in u.join(max(0.0, end - time.monotonic()))]
 
-    def unit(self, name: str) -> ResourceUnit:
+    def refresh(self) -> None:
+        """Each unit's state as its control loop last published it (a unit process's, from its
+        telemetry block and its link); at each wake-up of the automaton thread."""
+        for u in self.units:
+            u.refresh()
+
+    def unit(self, name: str) -> ResourceUnit | UnitProxy:
         """The resource `name`'s unit; `CommandError` naming those there are."""
         for u in self.units:
             if u.name == name:
                 return u
         raise CommandError(f"no resource {name!r} (resources: {', '.join(u.name for u in self.units)})")
 
-    def unit_of(self, task: RobotTask) -> ResourceUnit:
+    def unit_of(self, task: RobotTask) -> ResourceUnit | UnitProxy:
         return self.unit(task.resource.name)
 
     @property
-    def default(self) -> ResourceUnit:
+    def default(self) -> ResourceUnit | UnitProxy:
         """The resource a client addresses when it names none: the first listed. The wire's
         top-level `joints`, `telemetry`, `resource`, `helper_pid` are its, so that a client of a
         one-resource daemon needs no name; nothing in the daemon itself treats it apart."""
@@ -189,7 +198,7 @@ class Machine:
             "faults": self.faults.recent(),
         }
 
-    def _describe_unit(self, u: ResourceUnit) -> dict[str, Any]:
+    def _describe_unit(self, u: ResourceUnit | UnitProxy) -> dict[str, Any]:
         """One resource as an operator sees it: backend, clock, joints, state, fault, telemetry."""
         st = u.resource.state
         return {
@@ -285,16 +294,13 @@ class Machine:
                 self._end_on_held_fault(f"{u.name} stalled ({why})")
             self.publish()
 
-    def _control_failed(self, u: ResourceUnit, why: str) -> None:
+    def _control_failed(self, u: ResourceUnit | UnitProxy, why: str) -> None:
         """`u`'s control thread ended on `why` (it safe-stopped the resource first): its active
         task's type 3 `LawError` (the controller failed), queued here as its tick would have
         (the thread is gone: this one is the queue's only producer now), so the mission takes
         it as it takes any type 3: the task's own event, or `R.fault` when it holds."""
         self.note(f"{u.name}: {why}: safe-stopped (a reset starts it again)", logging.ERROR)
-        task = u.loop.active
-        if task is not None and task.phase is not Phase.FAULT:
-            task.raise_t3(u.clock.now_ns() * 1e-9, "LawError", why)
-        else:
+        if not u.raise_failure(u.clock.now_ns() * 1e-9, why):
             u.supervisor.stop(why, FaultKind.INTERNAL)
 
     def _runs_task(self, task: str) -> bool:

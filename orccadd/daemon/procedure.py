@@ -98,14 +98,17 @@ class MissionControl:
         return self.loops[self._by_resource[task.resource.name]]
 
     def publish_task_ids(self) -> None:
-        ids = {id(t): i for i, t in enumerate(self.tasks())}
+        tasks = self.tasks()
         for lp in self.loops:
-            lp.set_task_ids(ids)
+            lp.set_tasks(tasks)
             lp.set_input_events(self._input_events(lp.resource))
 
     def _input_events(self, resource: PhysicalResource) -> tuple[int, ...]:
-        """The event of each of `resource`'s named inputs the mission declares (`R.X`), -1 else."""
-        mission = self.mission
+        return self.input_events_of(resource, self.mission)
+
+    @staticmethod
+    def input_events_of(resource: PhysicalResource, mission: LoadedMission | None) -> tuple[int, ...]:
+        """The event of each of `resource`'s named inputs `mission` declares (`R.X`), -1 else."""
         if mission is None:
             return ()
         p = mission.automaton.program

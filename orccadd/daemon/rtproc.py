@@ -37,12 +37,14 @@ from orccadd.daemon.machine import Machine
 from orccadd.daemon.notify import Notifier
 from orccadd.daemon.replies import CommandError, Pending
 from orccadd.daemon.unit import ResourceUnit
+from orccadd.daemon.unitlink import UnitLink
+from orccadd.daemon.unitproc import EXIT_CONTROL_FAILED
 from orccadd.daemon.urgent import UrgentSocket
 from orccadd.errors import OrccaddError, ResourceError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.physres import backend_class
 from orccadd.physres.base import PhysicalResource
-from orccadd.robot import create_resource, load_station_config, simulated, with_backend
+from orccadd.robot import create_resource, load_station_config, station_as_run
 from orccadd.runtime import enter_realtime, leave_realtime
 from orccadd.runtime.rt import RealtimeReport, lock_memory_early
 from orccadd.runtime.threads import ThreadGroup, threads_left
@@ -80,6 +82,8 @@ class RealtimeProcess:
         self.started = False  # every unit's control thread ticks
         self.memory_locked = False  # by `lock_memory_early` at startup
         self.urgent: UrgentSocket | None = None
+        self.in_processes = station.daemon.units == "processes"
+        self.links: list[UnitLink] = []  # each resource's unit process (units = "processes")
 
     # ---- startup --------------------------------------------------------------------------
     def start(self) -> None:
@@ -111,7 +115,25 @@ class RealtimeProcess:
         for w in refused:
             log.warning("%s", w)
         self.memory_locked = not refused
+        self.wake_r, self.wake_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+        if self.in_processes:
+            # each unit process builds, configures and holds its resource (`unitproc`); here,
+            # each resource is a shadow the tasks are built on, never configured
+            for c, tel in zip(self.station.resources, self.tels, strict=True):
+                self.links.append(
+                    UnitLink(
+                        self.station.source,
+                        c.resource.name,
+                        tel.name,
+                        self.wake_w,
+                        simulate=self.args.simulate,
+                        in_process_sim=self.args.in_process_sim,
+                        spin_us=self.args.spin_us,
+                    )
+                )
         for res, hold in zip(self.resources, holds, strict=True):
+            if self.in_processes:
+                break
             try:
                 res.configure()
                 res.activate(CommandMode[hold.task.command.upper()])  # its Hold task's mode
@@ -119,7 +141,6 @@ class RealtimeProcess:
                 if len(self.resources) == 1:
                     raise
                 raise ResourceError(f"resource {res.name}: {e}") from None
-        self.wake_r, self.wake_w = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self.machine = Machine(
             self.station,
             self.resources,
@@ -128,6 +149,7 @@ class RealtimeProcess:
             self.block,
             self.wake_w,
             allow_fault_injection=self.args.allow_fault_injection,
+            links=self.links or None,
         )
         self.link.machine = self.machine
         self.urgent = UrgentSocket(urgent_socket_path(self.socket_path), daemon, self.gid, self.link.urgent)
@@ -179,7 +201,7 @@ class RealtimeProcess:
         assert link is not None
         try:
             while not self.stop_requested:
-                fds = {self.wake_r, sig_r, *link.fds()}
+                fds = {self.wake_r, sig_r, *link.fds(), *self._unit_fds()}
                 if self.cmdd is not None:
                     fds.add(self.cmdd.pidfd)
                 if self.urgent is not None:
@@ -210,6 +232,10 @@ class RealtimeProcess:
     def _work(self, ready: list[tuple[int, int]], sig_r: int, link: CommandLink) -> None:
         """What woke the automaton thread: the control thread's events, signals, the command
         daemon's link and commands, the urgent channel; then the commands' replies."""
+        self.machine.refresh()  # each unit's state, and what its process said
+        unit_fds = self._unit_fds()
+        if any(fd in unit_fds for fd, _ in ready):
+            self.machine.on_events()
         for fd, _ in ready:
             if fd == self.wake_r:
                 with contextlib.suppress(BlockingIOError):
@@ -228,6 +254,15 @@ class RealtimeProcess:
             elif self.urgent is not None:
                 self.urgent.on_readable(fd)
         link.after_work()
+
+    def _unit_fds(self) -> set[int]:
+        """The link and the pidfd of each unit process still running."""
+        return {
+            fd
+            for k in self.links
+            if k.proc.poll() is None and not k.closed
+            for fd in (k.sock.fileno(), k.pidfd)
+        }
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         self.stop_requested = signal.Signals(signum).name
@@ -265,7 +300,9 @@ class RealtimeProcess:
             self.cmdd.end(wait_s=None)
         if self.link is not None:
             self.link.close()
-        for res in self.resources:
+        for link in self.links:
+            link.end()  # its resource released by the unit itself
+        for res in [] if self.in_processes else self.resources:
             with contextlib.suppress(OrccaddError):
                 res.shutdown()
         for tel in [*self.tels, *([self.block] if self.block else [])]:
@@ -279,8 +316,8 @@ class RealtimeProcess:
         if m.mission.running:
             m.mission.result = MissionResult.STOPPED
         m.pub.trace(Trace.COMMAND, m.now_s(), OperatorAction.SHUTDOWN)
-        for res in self.resources:
-            res.safe_stop()
+        for u in m.units:
+            u.resource.safe_stop()
         timeout_s = max(c.safe_stop.timeout_s for c in self.station.resources) + 1.0
         deadline = time.monotonic() + timeout_s
         stopped = False
@@ -288,6 +325,7 @@ class RealtimeProcess:
         # its device's stop is all there is to wait for, and its reads are not there to show it
         ticking = [u for u in m.units if u.control_running()]
         while time.monotonic() < deadline and all(u.control_running() for u in ticking):
+            m.refresh()
             if all(u.resource.state.status & Status.STOPPED for u in ticking):
                 stopped = True
                 break
@@ -338,8 +376,12 @@ class RealtimeProcess:
                 failed.append(res.name)
 
         group = ThreadGroup("release")
-        for res in self.resources:
-            group.start(release, res, name=res.name)
+        for u in self.machine.units:
+            if isinstance(u, ResourceUnit):  # a unit process released its own at its end
+                group.start(release, u.resource, name=u.name)
+            elif u.link.proc.returncode not in (0, EXIT_CONTROL_FAILED):  # that one: logged below
+                log.error("%s: its unit process ended with %s", u.name, u.link.proc.returncode)
+                failed.append(u.name)
         left = group.join(RELEASE_S)  # names those still running
         return not failed and not left
 
@@ -377,16 +419,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         station = load_station_config(robot_config_path(args.config))
         if args.simulate:
-            station = station.with_resources(tuple(simulated(c) for c in station.resources))
             log.info("--simulate: every resource on the simulated arm (%s)", ", ".join(station.names))
-        if not args.in_process_sim:
-            # a simulated arm lives in its own process, like a real arm outside the controller
-            station = station.with_resources(
-                tuple(
-                    with_backend(c, "sim_process") if c.resource.backend == "sim" else c
-                    for c in station.resources
-                )
-            )
+        station = station_as_run(station, args.simulate, args.in_process_sim)
         proc = RealtimeProcess(station, args.socket or station.daemon.socket, args)
     except OrccaddError as e:
         log.error("%s", e)

@@ -66,8 +66,16 @@ class ControlThread(Protocol):
     stalled: str  # why its control thread counts as hung ("": it does not)
 
     def control_ended(self) -> bool: ...
-    def restart_control(self) -> None: ...
     def still_stalled(self) -> str: ...
+    def device_reset(self, wait_s: float) -> DeviceReset: ...
+
+
+class DeviceReset(Protocol):
+    """A reset's device work under way (`_DeviceReset` here, or a unit process's)."""
+
+    def running(self) -> bool: ...
+    def where(self) -> str: ...
+    def done(self) -> bool: ...
 
 
 class Supervisor:
@@ -89,7 +97,7 @@ class Supervisor:
         self.note = note
         self.fault: StopCause | None = None  # why the resource was safe-stopped (None when not)
         self.history = history if history is not None else FaultHistory()
-        self._resetting: _DeviceReset | None = None  # the device's last reset
+        self._resetting: DeviceReset | None = None  # the device's last reset
         self.unit: ControlThread | None = None  # its unit (`ResourceUnit.bind`); None: a test's
         self.threads = ThreadGroup("supervisor")  # a reset's device work when there is no unit
 
@@ -124,9 +132,10 @@ class Supervisor:
         self.check_reset()
         wait_s = max(100 * self.cfg.control_period_s, RESET_WAIT_S)
         unit = self.unit
-        threads = unit.threads if unit is not None else self.threads
-        restart = unit.restart_control if unit is not None and unit.control_ended() else None
-        device = self._resetting = _DeviceReset(threads, res, self.loop, wait_s, restart)
+        if unit is not None:
+            device = self._resetting = unit.device_reset(wait_s)
+        else:
+            device = self._resetting = _DeviceReset(self.threads, res, self.loop, wait_s)
 
         def poll() -> Result | None:
             if not device.done():

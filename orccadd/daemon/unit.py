@@ -30,17 +30,20 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.outputs import OutputWorker
-from orccadd.daemon.supervision import Supervisor
+from orccadd.daemon.supervision import Supervisor, _DeviceReset
 from orccadd.errors import OrccaddError
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
 from orccadd.runtime.rt import RealtimeReport, leave_realtime
 from orccadd.runtime.threads import ThreadGroup, line_of
 from orccadd.task import EventQueue, EventRegistry, RobotTask, build_task, load_task_file
+from orccadd.task.task import ParameterChange
+from orccadd.types import Phase
 from orccadd.wire.schema import H
 from orccadd.wire.telemetry import TelemetryBlock
 
@@ -126,6 +129,28 @@ class ResourceUnit:
     def name(self) -> str:
         return self.resource.name
 
+    @property
+    def task_resource(self) -> PhysicalResource:
+        """What the mission's tasks are built on: the resource itself."""
+        return self.resource
+
+    def refresh(self) -> None:
+        """Nothing: the automaton thread reads this unit's state where the control thread writes
+        it (a unit process's proxy reads it from the telemetry block here)."""
+
+    def load_mission(self, message: dict[str, Any]) -> None:
+        """Nothing: the mission's tasks were built on this unit's resource (a unit process's
+        proxy sends them to the process here)."""
+
+    def post_tune(self, task: RobotTask, path: str, value: Any, change: ParameterChange) -> int:
+        """`change` (of `task`'s `path` to `value`, checked) to the loop's tune mailbox; its
+        sequence number. `MailboxFullError` if the loop does not take them."""
+        return self.loop.tunes.post(change)
+
+    def tune_acked(self, seq: int) -> int | None:
+        """The tick that applied tune `seq` (None: not yet)."""
+        return self.loop.tunes.acked(seq)
+
     def bind(self, supervisor: Supervisor) -> None:
         self.supervisor = supervisor
         supervisor.unit = self
@@ -209,6 +234,22 @@ class ResourceUnit:
         with contextlib.suppress(OSError):
             os.write(self.wake_fd, b"x")
 
+    def device_reset(self, wait_s: float) -> _DeviceReset:
+        """A reset's device work, on a thread of the unit (the control thread started again
+        first if it had ended)."""
+        restart = self.restart_control if self.control_ended() else None
+        return _DeviceReset(self.threads, self.resource, self.loop, wait_s, restart)
+
+    def raise_failure(self, t_s: float, why: str) -> bool:
+        """The automaton thread's, once the control thread has ended on `why`: its active task's
+        type 3 `LawError`, queued as its tick would have (this thread is the queue's only
+        producer now). False if there is no task to raise it (none active, or already faulted)."""
+        task = self.loop.active
+        if task is None or task.phase is Phase.FAULT:
+            return False
+        task.raise_t3(t_s, "LawError", why)
+        return True
+
     def take_failure(self) -> str:
         """The automaton thread's: why the control thread ended, once per failure ("" if not)."""
         if self.failures == self._failures_taken:
@@ -240,10 +281,15 @@ class ResourceUnit:
         self.stalled = f"its control loop has not ticked for {(now_ns - last_ns) * 1e-9:.2f} s" + (
             f" (waiting at {line})" if line else ""
         )
-        self.threads.start(self._stop_stalled, name="stall-safe-stop")
+        self.threads.start(self.stop_stalled, name="stall-safe-stop")
         return self.stalled
 
-    def _stop_stalled(self) -> None:
+    def control_line(self) -> str:
+        """The line the control thread is at outside the standard library ("": not running)."""
+        control = self._control
+        return line_of(control) if control is not None and control.is_alive() else ""
+
+    def stop_stalled(self) -> None:
         try:
             self.resource.safe_stop()
         except Exception:

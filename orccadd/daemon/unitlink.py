@@ -124,7 +124,8 @@ class UnitLink:
         finally:
             theirs.close()
         self.pidfd = os.pidfd_open(self.proc.pid)
-        self.told: list[dict[str, Any]] = []
+        self.told: list[dict[str, Any]] = []  # come, not taken by `call` nor `receive` yet
+        self.seen: list[dict[str, Any]] = []  # taken by `receive` (tests read them)
         self.holding: dict[str, Any] = {}
         self._next_id = 0
 
@@ -139,14 +140,20 @@ class UnitLink:
             self._told(msg)
         return self.holding
 
-    def call(self, op: str, timeout_s: float = 10.0, **args: Any) -> dict[str, Any]:
-        """Request `op`, wait for its answer; `UnitLinkError` with the unit's words if refused."""
+    def send(self, op: str, **args: Any) -> int:
+        """Request `op` without waiting; its id (its answer carries it)."""
         self._next_id += 1
         rid = self._next_id
         try:
             send_frame(self.sock, {"op": op, "id": rid, **args})
         except OSError as e:
             raise UnitLinkError(f"unit {self.resource}: its link is gone ({e})") from None
+        return rid
+
+    def call(self, op: str, timeout_s: float = 10.0, **args: Any) -> dict[str, Any]:
+        """Request `op`, wait for its answer; `UnitLinkError` with the unit's words if refused.
+        What else arrives meanwhile goes to `told`."""
+        rid = self.send(op, **args)
         end = time.monotonic() + timeout_s
         while True:
             msg = self._recv(end - time.monotonic())
@@ -159,12 +166,16 @@ class UnitLink:
             self._told(msg)
 
     def receive(self, timeout_s: float = 0.0) -> list[dict[str, Any]]:
-        """What the unit said unasked within `timeout_s` (added to `told`, returned too)."""
-        got = []
+        """Every message not taken yet by a `call` — those that came while one waited, then
+        what arrives within `timeout_s` — in order, once each. `UnitLinkError` once the unit's
+        process has ended (what it said before comes first)."""
         end = time.monotonic() + timeout_s
-        while (msg := self._recv(end - time.monotonic())) is not None:
-            self._told(msg)
-            got.append(msg)
+        try:
+            while (msg := self._recv(end - time.monotonic())) is not None:
+                self._told(msg)
+        finally:
+            got, self.told = self.told, []
+            self.seen.extend(got)
         return got
 
     def _recv(self, timeout_s: float) -> dict[str, Any] | None:

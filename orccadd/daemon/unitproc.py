@@ -44,31 +44,21 @@ from orccadd.daemon.unitshm import ChannelQueue, UnitChannel
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.physres.base import PhysicalResource
-from orccadd.robot import create_resource, load_station_config, simulated, with_backend
+from orccadd.robot import create_resource, load_station_config, station_as_run
 from orccadd.runtime.clock import Clock
 from orccadd.runtime.rt import RealtimeReport, enter_realtime, lock_memory_early
 from orccadd.task import EventQueue, EventRegistry, RobotTask, load_task_file
+from orccadd.task.events import EventKind
 from orccadd.task.loop import resource_clock
 from orccadd.types import CommandMode, Status
 from orccadd.wire.telemetry import TelemetryBlock
 
 log = logging.getLogger("orccadd.unit")
 REST_WAIT_S = 5.0  # how long the end waits for the resource at rest before releasing it
-
-
-def station_as_run(station: StationConfig, simulate: bool, in_process_sim: bool) -> StationConfig:
-    """The station as the daemon runs it: every resource simulated (`--simulate`), a simulated
-    arm in a process of its own unless `--in-process-sim`."""
-    if simulate:
-        station = station.with_resources(tuple(simulated(c) for c in station.resources))
-    if not in_process_sim:
-        station = station.with_resources(
-            tuple(
-                with_backend(c, "sim_process") if c.resource.backend == "sim" else c
-                for c in station.resources
-            )
-        )
-    return station
+# the unit's exit codes past 0 (released, at rest): what went wrong, for the real-time process
+EXIT_CONTROL_FAILED = 1  # its control thread failed while it ran (released, at rest)
+EXIT_NOT_RELEASED = 3  # releasing the resource failed
+EXIT_NOT_AT_REST = 4  # not at rest within REST_WAIT_S
 
 
 class ChannelLoop(SwitchingLoop):
@@ -79,6 +69,8 @@ class ChannelLoop(SwitchingLoop):
     tasks: list[RobotTask]  # by index: the station's Hold tasks in order, then the mission's
 
     def step(self, t_s: float) -> None:
+        if self.channel.take_stop():
+            self.request_safe_stop()
         taken = self.channel.take_switch()
         if taken is not None:
             index, fresh = taken
@@ -138,6 +130,8 @@ class UnitProcess:
         self.loop.tasks = list(self.holds)
         self.loop.set_task_ids({id(t): i for i, t in enumerate(self.holds)})
         self.unit.on_failure = lambda why: self.tell({"op": "failed", "why": why})
+        self.queue.before_push = self._before_push
+        self.kinds = self.registry.kinds()
         self.ended = threading.Event()
 
     def _unit(
@@ -209,8 +203,11 @@ class UnitProcess:
             res.shutdown()
         except OrccaddError as e:
             log.error("%s: releasing it failed: %s", res.name, e)
-            return 1
-        return 0 if at_rest and not self.unit.failures else 1
+            return EXIT_NOT_RELEASED
+        if not at_rest:
+            log.error("%s: not at rest within %g s of its safe stop", res.name, REST_WAIT_S)
+            return EXIT_NOT_AT_REST
+        return EXIT_CONTROL_FAILED if self.unit.failures else 0
 
     # ---- the link ---------------------------------------------------------------------------
     def tell(self, msg: dict[str, Any]) -> None:
@@ -237,21 +234,75 @@ class UnitProcess:
             except (OrccaddError, ValueError, KeyError, TypeError) as e:
                 self.tell({"id": rid, "error": str(e)})
             else:
-                self.tell({"id": rid, "ok": True, **answer})
+                if answer is not None:
+                    self.tell({"id": rid, "ok": True, **answer})
 
-    def handle(self, op: str, msg: dict[str, Any]) -> dict[str, Any]:
+    def _before_push(self, event_id: int) -> None:
+        """A type 3's fault goes to the automaton's process before its event (the control
+        thread's, the rare path): `Machine.on_events` reads it as it drains the event."""
+        kinds = self.kinds
+        if event_id < len(kinds) and kinds[event_id] is EventKind.T3:
+            info = self.registry.info(event_id)
+            task = next((t for t in self.loop.tasks if t.name == info.task), None)
+            if task is not None and task.fault is not None:
+                self.tell({"op": "t3", "task": task.name, "fault": task.fault})
+
+    def handle(self, op: str, msg: dict[str, Any]) -> dict[str, Any] | None:
+        """A request's answer (None: answered later, by a thread of the unit)."""
         if op == "load":
             return self._load(msg)
-        if op == "safe_stop":
-            self.loop.request_safe_stop()
+        if op == "tune":
+            return self._tune(int(msg["task"]), str(msg["path"]), msg["value"])
+        if op == "output":
+            self.unit.outputs.request(str(msg["name"]))
             return {}
+        if op == "reset":
+            self._reset(msg["id"], float(msg["wait_s"]))
+            return None
+        if op == "stalled":  # found so by the automaton's process (no tick for its watchdog)
+            self.unit.threads.start(self.unit.stop_stalled, name="stall-safe-stop")
+            return {"line": self.unit.control_line()}
+        if op == "diagnostics":
+            return {"diagnostics": self.resource.diagnostics(), "fault": self.resource.fault_message}
         if op == "inject":
-            return self._inject(str(msg["kind"]), float(msg.get("seconds", 0.0)))
+            return self._inject(msg)
         raise ValueError(f"no request {op!r} for a unit")
+
+    def _tune(self, task: int, path: str, value: Any) -> dict[str, Any]:
+        """The change checked again here, posted to the loop; answered with the tick that
+        applied it (within 100 periods, at least 2 s)."""
+        tasks = self.loop.tasks
+        if not 0 <= task < len(tasks) or tasks[task].resource is not self.resource:
+            raise ValueError(f"task {task}: not a task of {self.resource.name}")
+        seq = self.loop.tunes.post(tasks[task].prepare_tune(path, value))
+        end = time.monotonic() + max(100 * self.cfg.control_period_s, 2.0)
+        while (tick := self.loop.tunes.acked(seq)) is None:
+            if time.monotonic() > end or not self.unit.control_running():
+                raise OrccaddError("the control loop has not applied it (not running?)")
+            time.sleep(0.0005)
+        return {"tick": tick}
+
+    def _reset(self, rid: int, wait_s: float) -> None:
+        """The device's reset on a thread of the unit; answered when it ends."""
+        device = self.unit.device_reset(wait_s)
+
+        def watch() -> None:
+            try:
+                while not device.done():
+                    time.sleep(0.005)
+            except OrccaddError as e:
+                self.tell({"id": rid, "error": str(e)})
+            else:
+                self.unit.stalled = ""
+                self.tell({"id": rid, "ok": True})
+
+        self.unit.threads.start(watch, name="reset-answer")
 
     def _load(self, msg: dict[str, Any]) -> dict[str, Any]:
         """The mission's tasks built on every resource (this one's for real), in the automaton
-        process's order; its registry's names must be this one's."""
+        process's order, the registry seeded with the automaton's; its names must then be this
+        one's."""
+        self.registry.seed(msg.get("registry", []))
         loaded = prepare_mission(
             msg["path"],
             msg["automaton"],
@@ -274,17 +325,23 @@ class UnitProcess:
         self.loop.set_task_ids({id(t): i for i, t in enumerate(tasks)})
         self.loop.set_input_events(tuple(int(e) for e in msg.get("input_events", ())))
         self.loop.tasks = tasks  # one store: a tick sees the old list or the new
+        self.kinds = self.registry.kinds()
         return {"tasks": [t.name for t in tasks]}
 
-    def _inject(self, kind: str, seconds: float) -> dict[str, Any]:
+    def _inject(self, msg: dict[str, Any]) -> dict[str, Any]:
+        kind = str(msg["kind"])
         if kind == "control_thread":
             self.loop.inject_failure()
         elif kind == "hang":
-            self.loop.inject_hang(seconds)
+            self.loop.inject_hang(float(msg["seconds"]))
+        elif kind == "overrun":
+            self.loop.inject_overrun(int(msg["ticks"]), int(msg["extra_ns"]))
+        elif kind == "resource":
+            self.resource.inject_fault(str(msg["fault"]), str(msg["message"]))
         elif kind == "crash":
             os._exit(70)  # the unit process dies at once, as a segfault in a driver would
         else:
-            raise ValueError(f"no fault {kind!r} to inject in a unit (control_thread, hang, crash)")
+            raise ValueError(f"no fault {kind!r} to inject in a unit")
         return {}
 
 

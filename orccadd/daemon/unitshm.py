@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 from multiprocessing import resource_tracker, shared_memory
@@ -41,6 +42,8 @@ class W(IntEnum):
     APPLIED = 5  # switch requests applied (the control thread's)
     PUSHED = 6  # events ever pushed (the control thread's)
     TAIL = 7  # events consumed (the automaton's, as it drains)
+    STOP = 8  # safe stops requested (the automaton's)
+    STOPS_TAKEN = 9  # safe stops taken (the control thread's)
 
 
 HEADER = len(W)
@@ -108,6 +111,23 @@ class UnitChannel:
 
     def switched(self, request: int) -> bool:
         return int(self.words[W.APPLIED]) >= request
+
+    def requests_applied(self) -> bool:
+        return int(self.words[W.APPLIED]) == int(self.words[W.REQUEST])
+
+    # ---- the safe stop ----------------------------------------------------------------------
+    def request_stop(self) -> None:
+        """The automaton's: safe-stop the resource at the unit's next tick."""
+        self.words[W.STOP] = int(self.words[W.STOP]) + 1
+
+    def take_stop(self) -> bool:
+        """The control thread's, at a tick's start: a safe stop was requested since the last."""
+        w = self.words
+        wanted = w[W.STOP]
+        if wanted == w[W.STOPS_TAKEN]:
+            return False
+        w[W.STOPS_TAKEN] = wanted
+        return True
 
     def take_switch(self) -> tuple[int, bool] | None:
         """The control thread's, at the start of a tick: the request not applied yet, if any
@@ -192,8 +212,12 @@ class ChannelQueue(EventQueue):
         super().__init__(1)
         self.channel = channel
         self.pushed = channel.pushed
+        # told each event before it is pushed (the unit sends a type 3's fault first)
+        self.before_push: Callable[[int], None] | None = None
 
     def push(self, t_s: float, event_id: int) -> None:
+        if self.before_push is not None:
+            self.before_push(event_id)
         self.channel.push(t_s, event_id)
         self.pushed += 1
 

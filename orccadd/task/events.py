@@ -72,6 +72,22 @@ class EventRegistry:
     def id(self, name: str) -> int:
         return self._by_name[name].id
 
+    def seed(self, infos: list[EventInfo]) -> None:
+        """Register `infos` (another registry's, in id order) first: the tasks built after get
+        that registry's ids (a unit process's, from the automaton's). `ValueError` if this
+        registry already gave one of those ids to another event."""
+        for info in infos:
+            have = self._by_name.get(info.name)
+            if have is None and info.id == len(self._by_id):
+                self._by_name[info.name] = info
+                self._by_id.append(info)
+            elif have is None or have.id != info.id:
+                raise ValueError(f"event {info.name!r}: id {info.id} here is another event's")
+
+    def infos(self) -> list[EventInfo]:
+        """Every event, in id order (what `seed` takes)."""
+        return list(self._by_id)
+
     def info(self, event_id: int) -> EventInfo:
         return self._by_id[event_id]
 

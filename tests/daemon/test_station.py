@@ -25,9 +25,16 @@ MISSION = str(ROOT / "configs/missions/dual_reach.mission")
 pytestmark = pytest.mark.timeout(240, method="thread")
 
 
+@pytest.fixture(params=["threads", "processes"])
+def units(request: pytest.FixtureRequest) -> str:
+    """Where each resource's control loop runs (`[daemon] units`): the station's tests hold for both."""
+    return str(request.param)
+
+
 @pytest.fixture
-def dual(tmp_path: Path) -> Iterator[Daemon]:
-    d = start_daemon_with(tmp_path, DUAL)
+def dual(tmp_path: Path, units: str) -> Iterator[Daemon]:
+    dirs = f'mission_dirs = ["{ROOT / "configs/missions"}"]\ntask_dirs = ["{ROOT / "configs/tasks"}"]'
+    d = start_daemon_with(tmp_path, station_copy(DUAL, tmp_path, f'units = "{units}"\n{dirs}'))
     try:
         yield d
     finally:
@@ -35,11 +42,13 @@ def dual(tmp_path: Path) -> Iterator[Daemon]:
 
 
 @pytest.fixture
-def slow(tmp_path: Path) -> Iterator[tuple[Daemon, str]]:
+def slow(tmp_path: Path, units: str) -> Iterator[tuple[Daemon, str]]:
     """The dual arm with missions from `tmp_path` too, and dual_reach there with a slow MeetL
     (seconds: a fault injected while it runs lands in it)."""
     station = station_copy(
-        DUAL, tmp_path, f'mission_dirs = ["{tmp_path}"]\ntask_dirs = ["{ROOT / "configs/tasks"}"]'
+        DUAL,
+        tmp_path,
+        f'units = "{units}"\nmission_dirs = ["{tmp_path}"]\ntask_dirs = ["{ROOT / "configs/tasks"}"]',
     )
     text = Path(MISSION).read_text().replace('"../tasks/', f'"{ROOT}/configs/tasks/')
     head, meet, tail = text.partition("task MeetL")

@@ -19,8 +19,7 @@ from orccadd.daemon.mission import compile_and_verify, prepare_mission
 from orccadd.daemon.rtproc import TICK_RING_S
 from orccadd.daemon.unit import hold_name, hold_task
 from orccadd.daemon.unitlink import UnitLink, UnitLinkError
-from orccadd.daemon.unitproc import station_as_run
-from orccadd.robot import backend_class, create_resource, load_station_config
+from orccadd.robot import backend_class, create_resource, load_station_config, station_as_run
 from orccadd.task import EventQueue, EventRegistry, RobotTask
 from orccadd.wire.schema import H, T
 from orccadd.wire.telemetry import Layout, TelemetryBlock
@@ -132,7 +131,7 @@ def test_a_failed_control_thread_is_told_and_the_unit_exits_saying_so(unit: Auto
         5.0,
         what="the unit telling its control thread failed",
     )
-    assert "injected failure" in next(m["why"] for m in unit.link.told if m.get("op") == "failed")
+    assert "injected failure" in next(m["why"] for m in unit.link.seen if m.get("op") == "failed")
     assert unit.link.end() == 1  # safe-stopped by the dying thread, released; the failure in its code
 
 
