@@ -16,10 +16,11 @@ import numpy as np
 
 from orccadd.daemon import adhoc
 from orccadd.daemon.loader import Loader
+from orccadd.daemon.ports import ResourcePort
 from orccadd.daemon.replies import CommandError, Pending, Result
+from orccadd.daemon.unitproxy import RemoteLoop
 from orccadd.daemon.view import Machine, UnitView
 from orccadd.errors import OrccaddError, ParameterError, did_you_mean
-from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.mailbox import MailboxFullError
 from orccadd.task import RobotTask
 from orccadd.task.task import ParameterChange, split_index
@@ -304,6 +305,12 @@ class RtCommands:
                 raise CommandError(str(e)) from None
         elif fault == "control_thread":
             on.loop.inject_failure()
+        elif fault == "unit_process":
+            if not isinstance(on.loop, RemoteLoop):
+                raise CommandError(
+                    f'inject unit_process: {on.name} runs in this process ([daemon] units = "threads")'
+                )
+            on.loop.inject_crash()
         elif fault == "hang":
             if not 0.0 <= extra_ms <= MAX_HANG_MS:
                 raise CommandError(f"inject hang: extra_ms (={extra_ms:g}) must be in [0, {MAX_HANG_MS:g}]")
@@ -320,7 +327,7 @@ class RtCommands:
         return {"injected": fault, "resource": on.name}
 
 
-def describe_resource(res: PhysicalResource) -> dict[str, Any]:
+def describe_resource(res: ResourcePort) -> dict[str, Any]:
     return {
         **res.description.as_dict(),
         "tool": describe_tool(res),
@@ -329,7 +336,7 @@ def describe_resource(res: PhysicalResource) -> dict[str, Any]:
     }
 
 
-def describe_tool(res: PhysicalResource) -> dict[str, Any]:
+def describe_tool(res: ResourcePort) -> dict[str, Any]:
     """The tool the Cartesian tasks move ([tool]), its workspace, and where its wrench comes from:
     the resource's sensor (its `wrench` signal) or, without one, an estimate a task makes from the
     joint torques (`wrench_from_torques`)."""

@@ -249,7 +249,7 @@ class Loader:
         mc = self.m.mission
         mc.need(MachineState.IDLE, MachineState.READY, what="load a mission")
         try:
-            bindings = {u.name: (u.task_resource, u.queue) for u in self.m.units}
+            bindings = {u.name: (u.task_resource, u.task_queue) for u in self.m.units}
             loaded = prepare_mission(path, automaton, report, bindings, self.m.registry, specs, data)
             for u in self.m.units:  # a unit process builds the same tasks (the same ids)
                 u.load_mission(

@@ -105,11 +105,13 @@ class Machine:
         end = time.monotonic() + timeout_s
         return [name for u in self.units for name in u.join(max(0.0, end - time.monotonic()))]
 
-    def refresh(self) -> None:
+    def refresh(self) -> bool:
         """Each unit's state as its control loop last published it (a unit process's, from its
-        telemetry block and its link); at each wake-up of the automaton thread."""
+        telemetry block and its link); at each wake-up of the automaton thread. True if a unit
+        has a failure to take (`on_events`)."""
         for u in self.units:
             u.refresh()
+        return any(u.failure_pending() for u in self.units)
 
     def unit(self, name: str) -> ResourceUnit | UnitProxy:
         """The resource `name`'s unit; `CommandError` naming those there are."""
@@ -215,6 +217,7 @@ class Machine:
             "fault": u.supervisor.fault.to_wire() if u.supervisor.fault else None,
             "telemetry": u.tel.name,
             "helper_pid": u.resource.helper_pid(),  # a simulated arm's plant process (0: none)
+            "unit_pid": u.pid,  # the process its control loop runs in (this one's, or its own)
             "hold_tunables": u.loop.hold.tunable_names,
             "description": describe_resource(u.resource),
         }

@@ -13,12 +13,10 @@ from logging import INFO, WARNING
 from typing import Any, NamedTuple
 
 from orccadd.automaton import Automaton
-from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.mission import LoadedMission, MissionRunner
-from orccadd.daemon.outputs import OutputWorker
+from orccadd.daemon.ports import LoopPort, OutputsPort, ResourcePort
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.replies import CommandError
-from orccadd.physres.base import PhysicalResource
 from orccadd.task import RobotTask
 from orccadd.wire.schema import MachineState, MissionResult, Trace
 
@@ -51,7 +49,7 @@ def _bits(mask: int) -> list[int]:
 class MissionControl:
     def __init__(
         self,
-        loops: Sequence[SwitchingLoop],
+        loops: Sequence[LoopPort],
         publisher: Publisher,
         note: Callable[..., None],
         abort: Callable[[str], None],
@@ -78,7 +76,7 @@ class MissionControl:
         # daemon at once (the real-time process sets it; the trace says it too, later)
         self.cell_output: Callable[[str, str], None] = lambda name, mission: None
         # per resource's name: the thread that performs its output actions (`emit R.Y`)
-        self.outputs: dict[str, OutputWorker] = {}
+        self.outputs: dict[str, OutputsPort] = {}
 
     @property
     def running(self) -> bool:
@@ -93,7 +91,7 @@ class MissionControl:
         """The Hold tasks (one per resource), then the mission's tasks: their telemetry ids."""
         return [*self.holds, *(self.mission.tasks if self.mission else ())]
 
-    def loop_of(self, task: RobotTask) -> SwitchingLoop:
+    def loop_of(self, task: RobotTask) -> LoopPort:
         """The control loop of the resource `task` runs on."""
         return self.loops[self._by_resource[task.resource.name]]
 
@@ -103,11 +101,11 @@ class MissionControl:
             lp.set_tasks(tasks)
             lp.set_input_events(self._input_events(lp.resource))
 
-    def _input_events(self, resource: PhysicalResource) -> tuple[int, ...]:
+    def _input_events(self, resource: ResourcePort) -> tuple[int, ...]:
         return self.input_events_of(resource, self.mission)
 
     @staticmethod
-    def input_events_of(resource: PhysicalResource, mission: LoadedMission | None) -> tuple[int, ...]:
+    def input_events_of(resource: ResourcePort, mission: LoadedMission | None) -> tuple[int, ...]:
         """The event of each of `resource`'s named inputs `mission` declares (`R.X`), -1 else."""
         if mission is None:
             return ()

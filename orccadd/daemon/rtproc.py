@@ -39,6 +39,7 @@ from orccadd.daemon.replies import CommandError, Pending
 from orccadd.daemon.unit import ResourceUnit
 from orccadd.daemon.unitlink import UnitLink
 from orccadd.daemon.unitproc import EXIT_CONTROL_FAILED
+from orccadd.daemon.unitproxy import UnitProxy
 from orccadd.daemon.urgent import UrgentSocket
 from orccadd.errors import OrccaddError, ResourceError
 from orccadd.logsetup import LogSetupError, setup_logging
@@ -232,9 +233,7 @@ class RealtimeProcess:
     def _work(self, ready: list[tuple[int, int]], sig_r: int, link: CommandLink) -> None:
         """What woke the automaton thread: the control thread's events, signals, the command
         daemon's link and commands, the urgent channel; then the commands' replies."""
-        self.machine.refresh()  # each unit's state, and what its process said
-        unit_fds = self._unit_fds()
-        if any(fd in unit_fds for fd, _ in ready):
+        if self.machine.refresh():  # each unit's state; a unit's failure (its process's end)
             self.machine.on_events()
         for fd, _ in ready:
             if fd == self.wake_r:
@@ -257,11 +256,9 @@ class RealtimeProcess:
 
     def _unit_fds(self) -> set[int]:
         """The link and the pidfd of each unit process still running."""
+        links = [u.link for u in self.machine.units if isinstance(u, UnitProxy)]
         return {
-            fd
-            for k in self.links
-            if k.proc.poll() is None and not k.closed
-            for fd in (k.sock.fileno(), k.pidfd)
+            fd for k in links if k.proc.poll() is None and not k.closed for fd in (k.sock.fileno(), k.pidfd)
         }
 
     def _on_signal(self, signum: int, frame: Any) -> None:
@@ -274,7 +271,7 @@ class RealtimeProcess:
         so the pings stop and the service manager restarts the daemon if it never returns."""
         now = time.monotonic_ns()
 
-        def fine(u: ResourceUnit) -> bool:
+        def fine(u: ResourceUnit | UnitProxy) -> bool:
             ended = not u.control_running() and u.supervisor.fault is not None
             return u.heartbeat_fresh(now) or ended
 
@@ -300,7 +297,10 @@ class RealtimeProcess:
             self.cmdd.end(wait_s=None)
         if self.link is not None:
             self.link.close()
-        for link in self.links:
+        started = hasattr(self, "machine")  # the machine's units hold the links now (a reset renews them)
+        for link in (
+            [u.link for u in self.machine.units if isinstance(u, UnitProxy)] if started else self.links
+        ):
             link.end()  # its resource released by the unit itself
         for res in [] if self.in_processes else self.resources:
             with contextlib.suppress(OrccaddError):
@@ -375,13 +375,16 @@ class RealtimeProcess:
                 log.exception("%s: releasing its hardware failed", res.name)
                 failed.append(res.name)
 
+        if self.in_processes:  # each unit process released its own at its end
+            for u in self.machine.units:
+                code = u.link.proc.returncode if isinstance(u, UnitProxy) else None
+                if code not in (0, EXIT_CONTROL_FAILED):  # that one: logged after
+                    log.error("%s: its unit process ended with %s", u.name, code)
+                    failed.append(u.name)
+            return not failed
         group = ThreadGroup("release")
-        for u in self.machine.units:
-            if isinstance(u, ResourceUnit):  # a unit process released its own at its end
-                group.start(release, u.resource, name=u.name)
-            elif u.link.proc.returncode not in (0, EXIT_CONTROL_FAILED):  # that one: logged below
-                log.error("%s: its unit process ended with %s", u.name, u.link.proc.returncode)
-                failed.append(u.name)
+        for res in self.resources:
+            group.start(release, res, name=res.name)
         left = group.join(RELEASE_S)  # names those still running
         return not failed and not left
 

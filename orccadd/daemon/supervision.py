@@ -18,10 +18,11 @@ import time
 from collections import deque
 from collections.abc import Callable
 from logging import WARNING
-from typing import Protocol
+from typing import Protocol, cast
 
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.loop import SwitchingLoop
+from orccadd.daemon.ports import LoopPort, ResourcePort
 from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.errors import OrccaddError
@@ -84,8 +85,8 @@ class Supervisor:
     def __init__(
         self,
         cfg: RobotConfig,
-        resource: PhysicalResource,
-        loop: SwitchingLoop,
+        resource: ResourcePort,
+        loop: LoopPort,
         mission: MissionControl,
         note: Callable[..., None],
         history: FaultHistory | None = None,
@@ -135,7 +136,10 @@ class Supervisor:
         if unit is not None:
             device = self._resetting = unit.device_reset(wait_s)
         else:
-            device = self._resetting = _DeviceReset(self.threads, res, self.loop, wait_s)
+            # a supervisor without a unit: a test's, given the resource and its loop themselves
+            device = self._resetting = _DeviceReset(
+                self.threads, cast(PhysicalResource, res), cast(SwitchingLoop, self.loop), wait_s
+            )
 
         def poll() -> Result | None:
             if not device.done():

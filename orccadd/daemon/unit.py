@@ -130,9 +130,19 @@ class ResourceUnit:
         return self.resource.name
 
     @property
+    def pid(self) -> int:
+        """The process the control loop runs in: this one."""
+        return os.getpid()
+
+    @property
     def task_resource(self) -> PhysicalResource:
         """What the mission's tasks are built on: the resource itself."""
         return self.resource
+
+    @property
+    def task_queue(self) -> EventQueue:
+        """Where the mission's tasks push their events: the loop's queue."""
+        return self.queue
 
     def refresh(self) -> None:
         """Nothing: the automaton thread reads this unit's state where the control thread writes
@@ -249,6 +259,10 @@ class ResourceUnit:
             return False
         task.raise_t3(t_s, "LawError", why)
         return True
+
+    def failure_pending(self) -> bool:
+        """A failure `take_failure` has not taken yet."""
+        return self.failures != self._failures_taken
 
     def take_failure(self) -> str:
         """The automaton thread's: why the control thread ended, once per failure ("" if not)."""

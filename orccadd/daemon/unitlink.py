@@ -89,10 +89,15 @@ class UnitLink:
         simulate: bool = False,
         in_process_sim: bool = False,
         spin_us: float = 0.0,
+        channel: UnitChannel | None = None,
     ) -> None:
+        """`channel`: the unit's shared channel (a unit started again takes its predecessor's:
+        the automaton's side keeps it); None: a new one, closed with this link."""
         self.resource = resource
         self.closed = False
-        self.channel = UnitChannel.create()
+        self.own_channel = channel is None
+        self.channel = channel if channel is not None else UnitChannel.create()
+        self.start_args = (station_path, resource, telemetry, wake_fd, simulate, in_process_sim, spin_us)
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         self.sock = ours
         argv = [
@@ -127,6 +132,7 @@ class UnitLink:
         self.told: list[dict[str, Any]] = []  # come, not taken by `call` nor `receive` yet
         self.seen: list[dict[str, Any]] = []  # taken by `receive` (tests read them)
         self.holding: dict[str, Any] = {}
+        self.refused = ""  # why the unit could not start (its words), "" if it did
         self._next_id = 0
 
     def wait_holding(self, timeout_s: float = START_WAIT_S) -> dict[str, Any]:
@@ -192,6 +198,8 @@ class UnitLink:
     def _told(self, msg: dict[str, Any]) -> None:
         if msg.get("op") == "holding":
             self.holding = msg
+        elif msg.get("op") == "refused":
+            self.refused = str(msg.get("error", "refused"))
         self.told.append(msg)
 
     def end(self, timeout_s: float = 10.0) -> int:
@@ -216,4 +224,17 @@ class UnitLink:
         self.sock.close()
         if hasattr(self, "pidfd"):
             os.close(self.pidfd)
-        self.channel.close()
+        if self.own_channel:
+            self.channel.close()
+
+    def again(self) -> UnitLink:
+        """A new unit process for the same resource, on the same channel (this one ended); this
+        link's channel passes to it."""
+        path, resource, tel, wake_fd, simulate, in_process_sim, spin_us = self.start_args
+        link = UnitLink(
+            path, resource, tel, wake_fd, simulate=simulate, in_process_sim=in_process_sim, spin_us=spin_us,
+            channel=self.channel,
+        )  # fmt: skip
+        link.own_channel, self.own_channel = self.own_channel, False
+        self.close()
+        return link

@@ -51,6 +51,7 @@ from orccadd.task import EventQueue, EventRegistry, RobotTask, load_task_file
 from orccadd.task.events import EventKind
 from orccadd.task.loop import resource_clock
 from orccadd.types import CommandMode, Status
+from orccadd.wire.schema import H
 from orccadd.wire.telemetry import TelemetryBlock
 
 log = logging.getLogger("orccadd.unit")
@@ -128,6 +129,9 @@ class UnitProcess:
                     hold_task(cfg, other, self.registry, queue, hold_name(station.listed, name))
                 )
         self.loop.tasks = list(self.holds)
+        # a unit started again (its process had died) counts on in its telemetry block
+        self.loop.stats.continue_from(int(tel.header[H.TICKS]), int(tel.header[H.OVERRUNS]))
+        self.loop.switches = int(tel.header[H.SWITCHES])
         self.loop.set_task_ids({id(t): i for i, t in enumerate(self.holds)})
         self.unit.on_failure = lambda why: self.tell({"op": "failed", "why": why})
         self.queue.before_push = self._before_push

@@ -34,7 +34,7 @@ from orccadd.physres.base import Diagnostics, PhysicalResource
 from orccadd.runtime.clock import Clock, WallClock
 from orccadd.runtime.threads import ThreadGroup
 from orccadd.state import JointState
-from orccadd.task import EventRegistry, RobotTask
+from orccadd.task import EventQueue, EventRegistry, RobotTask
 from orccadd.task.task import ParameterChange
 from orccadd.types import CommandMode, Phase, Status
 from orccadd.wire.schema import H, T, TickLayout
@@ -175,6 +175,10 @@ class RemoteLoop:
     def inject_hang(self, seconds: float) -> None:
         self.proxy.call("inject", kind="hang", seconds=seconds)
 
+    def inject_crash(self) -> None:
+        """The unit's process dies at once (`os._exit`), as a driver's segfault would end it."""
+        self.proxy.request("inject", kind="crash")
+
     def inject_overrun(self, ticks: int, extra_ns: int) -> None:
         self.proxy.call("inject", kind="overrun", ticks=ticks, extra_ns=extra_ns)
 
@@ -232,31 +236,53 @@ class ResourceView:
 
 
 class RemoteReset:
-    """A reset's device work, done by the unit (as `supervision._DeviceReset`)."""
+    """A reset's device work, done by the unit (as `supervision._DeviceReset`). A unit whose
+    process has ended is started again instead: a new process configures the resource and holds
+    it (a fresh start is a reset), then builds the loaded mission's tasks again."""
 
     def __init__(self, proxy: UnitProxy, wait_s: float) -> None:
         self.proxy = proxy
         self._started = time.monotonic()
-        self._answer: dict[str, Any] | None = None
-        rid = proxy.request("reset", wait_s=wait_s)
-        proxy.on_answer(rid, self._answered)
+        self._error = ""
+        self._ended = False
+        if proxy.link.proc.poll() is None:
+            self.step = "the device's reset, in the unit"
+            proxy.on_answer(proxy.request("reset", wait_s=wait_s), self._answered)
+        else:
+            self.step = "starting its unit process again"
+            proxy.link = proxy.link.again()
 
     def _answered(self, msg: dict[str, Any]) -> None:
-        self._answer = msg
+        self._error = str(msg.get("error", ""))
+        self._ended = True
 
     def running(self) -> bool:
-        self.proxy.pump()
-        return self._answer is None
+        p = self.proxy
+        p.pump()
+        if self._ended:
+            return False
+        if self.step.startswith("starting"):
+            if p.link.refused or p.link.proc.poll() is not None:
+                self._answered(
+                    {"error": f"{p.name}: its unit process did not start: {p.link.refused or 'it ended'}"}
+                )
+            elif p.link.holding:
+                if p.mission_message is None:
+                    self._ended = True
+                else:
+                    self.step = "the mission's tasks built again in the new unit process"
+                    message = {**p.mission_message, "registry": p.registry.infos()}
+                    p.on_answer(p.request("load", **message), self._answered)
+        return not self._ended
 
     def where(self) -> str:
-        return f"for {time.monotonic() - self._started:.0f} s, in the unit process of {self.proxy.name}"
+        return f"for {time.monotonic() - self._started:.0f} s, in {self.step}"
 
     def done(self) -> bool:
         if self.running():
             return False
-        assert self._answer is not None
-        if "error" in self._answer:
-            raise CommandError(str(self._answer["error"]))
+        if self._error:
+            raise CommandError(f"the reset of {self.proxy.name} failed in {self.step}: {self._error}")
         self.proxy.failure = ""
         self.proxy.stalled = ""
         return True
@@ -299,8 +325,9 @@ class UnitProxy:
         self.resource = ResourceView(self, shadow)
         self.shadow = shadow
         self.task_resource: PhysicalResource = shadow  # what the automaton's tasks are built on
+        self.task_queue = EventQueue(1)  # theirs: never ticked here, they push nothing
         self.clock: Clock = WallClock()
-        self.loop = RemoteLoop(self, hold_task(cfg, shadow, registry, self.queue, hold_name))  # type: ignore[arg-type]
+        self.loop = RemoteLoop(self, hold_task(cfg, shadow, registry, self.task_queue, hold_name))
         self.outputs = RemoteOutputs(self)
         self.threads = ThreadGroup(f"unit-{shadow.name}", daemon=False)  # none: the unit's are its own
         self.supervisor: Any = None
@@ -310,12 +337,18 @@ class UnitProxy:
         self.stalled = ""
         self._started_ns = 0
         self._answers: dict[int, Callable[[dict[str, Any]], None]] = {}
+        self.mission_message: dict[str, Any] | None = None  # the last mission the unit built
         layout = TickLayout(tel.dof, ())
         self._q = slice(layout.q.start, layout.tau.stop)
 
     @property
     def name(self) -> str:
         return self.shadow.name
+
+    @property
+    def pid(self) -> int:
+        """The unit's process."""
+        return int(self.link.proc.pid)
 
     @property
     def holding(self) -> dict[str, Any]:
@@ -404,6 +437,9 @@ class UnitProxy:
             return ""
         return "" if self.heartbeat_fresh(time.monotonic_ns()) else "its control loop still does not tick"
 
+    def failure_pending(self) -> bool:
+        return self.failures != self._failures_taken
+
     def take_failure(self) -> str:
         self.pump()
         if self.failures == self._failures_taken:
@@ -459,11 +495,13 @@ class UnitProxy:
 
     def load_mission(self, message: dict[str, Any]) -> None:
         """The mission's tasks built in the unit as here (`message`: what `unitproc` takes);
-        `OrccaddError` with its words if the unit refused."""
+        `OrccaddError` with its words if the unit refused. Kept: a unit started again builds
+        them too."""
         try:
             self.link.call("load", timeout_s=REPLY_WAIT_S, registry=self.registry.infos(), **message)
         except UnitLinkError as e:
             raise OrccaddError(str(e)) from None
+        self.mission_message = message
 
     def device_reset(self, wait_s: float) -> RemoteReset:
         return RemoteReset(self, wait_s)

@@ -8,28 +8,39 @@ from typing import Any, Protocol
 
 from orccadd.config.robot import RobotConfig
 from orccadd.config.station import StationConfig
-from orccadd.daemon.loop import SwitchingLoop
-from orccadd.daemon.outputs import OutputWorker
+from orccadd.daemon.ports import LoopPort, OutputsPort, QueuePort, ResourcePort
 from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.publisher import Publisher
 from orccadd.daemon.supervision import Supervisor
 from orccadd.physres.base import PhysicalResource
 from orccadd.task import RobotTask
 from orccadd.task.events import EventQueue, EventRegistry
+from orccadd.task.task import ParameterChange
 
 
 class UnitView(Protocol):
     """What the handlers use of one resource's unit (`orccadd.daemon.unit.ResourceUnit`)."""
 
     cfg: RobotConfig
-    resource: PhysicalResource
-    queue: EventQueue
-    loop: SwitchingLoop
     supervisor: Supervisor
-    outputs: OutputWorker
 
     @property
     def name(self) -> str: ...
+    @property
+    def resource(self) -> ResourcePort: ...
+    @property
+    def task_resource(self) -> PhysicalResource: ...
+    @property
+    def queue(self) -> QueuePort: ...
+    @property
+    def task_queue(self) -> EventQueue: ...
+    @property
+    def loop(self) -> LoopPort: ...
+    @property
+    def outputs(self) -> OutputsPort: ...
+    def load_mission(self, message: dict[str, Any]) -> None: ...
+    def post_tune(self, task: RobotTask, path: str, value: Any, change: ParameterChange) -> int: ...
+    def tune_acked(self, seq: int) -> int | None: ...
 
 
 class Machine(Protocol):

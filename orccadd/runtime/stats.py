@@ -48,6 +48,7 @@ class TimingStats:
         self._over = np.zeros(capacity, dtype=np.bool_)
         self._cap = capacity
         self.ticks = 0
+        self._first = 0  # `ticks` before the first recorded here (`continue_from`)
         self.overruns = 0
         self.missed_ticks = 0
         self.consecutive_overruns = 0
@@ -75,8 +76,18 @@ class TimingStats:
         else:
             self.consecutive_overruns = 0
 
+    def continue_from(self, ticks: int, overruns: int) -> None:
+        """Count on from another's counts (a resource's unit started again in a new process: its
+        telemetry's counters go on); the figures are this one's ticks only."""
+        self.ticks = self._first = ticks
+        self.overruns = overruns
+
     def _window(self, arr: np.ndarray) -> np.ndarray:
-        return arr[: min(self.ticks, self._cap)]
+        recorded = self.ticks - self._first
+        if recorded >= self._cap:
+            return arr
+        start = self._first % self._cap
+        return np.roll(arr, -start)[:recorded]
 
     @property
     def latency(self) -> Summary:

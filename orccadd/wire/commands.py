@@ -345,10 +345,11 @@ COMMANDS: dict[str, CommandSpec] = {
                 Arg(
                     "fault",
                     (str,),
-                    "resource (the device's fault), overrun, control_thread (its next tick raises) "
-                    "or hang (its next tick waits extra_ms, as a device call that does not return)",
+                    "resource (the device's fault), overrun, control_thread (its next tick raises), "
+                    "hang (its next tick waits extra_ms, as a device call that does not return) or "
+                    'unit_process (its unit\'s process dies at once: [daemon] units = "processes")',
                     required=True,
-                    choices=("resource", "overrun", "control_thread", "hang"),
+                    choices=("resource", "overrun", "control_thread", "hang", "unit_process"),
                 ),
                 Arg("ticks", (int,), "overrun: how many ticks", default=20),
                 Arg(

@@ -29,7 +29,9 @@ class StandIn:
 
 
 def release(*resources: StandIn) -> bool:
-    return RealtimeProcess._release(cast(RealtimeProcess, SimpleNamespace(resources=list(resources))))
+    return RealtimeProcess._release(
+        cast(RealtimeProcess, SimpleNamespace(resources=list(resources), in_processes=False))
+    )
 
 
 def test_every_resource_is_released() -> None:

@@ -368,3 +368,37 @@ def test_a_control_thread_that_hangs_in_a_device_call_faults_its_resource_alone(
     assert cast(dict[str, Any], dual.call("reset", resource="left"))["reset"]
     r = resources(dual)
     assert r["left"]["fault"] is None and r["left"]["task"] == "Hold_left", r["left"]
+
+
+@pytest.mark.parametrize("units", ["processes"])
+def test_a_unit_process_that_dies_faults_its_resource_alone_and_a_reset_starts_a_new_one(
+    slow: tuple[Daemon, str],
+) -> None:
+    # left's unit process dies at once (injected: as a driver's segfault would end it) while left
+    # reaches: left faulted `internal` naming its process's end, the mission's safe procedure
+    # entered on MeetL's LawError, right ticking all along; `reset` starts a new unit process,
+    # which holds left and builds the mission's tasks again: the mission runs on left again
+    dual, mission = slow
+    reaching_left(dual, mission)
+    pid = next(u["unit_pid"] for u in dual.call("describe")["resources"] if u["name"] == "left")
+    dual.call("inject", fault="unit_process", resource="left")
+    dual.wait(lambda s: s["faulted"] and any("safe" in e["actions"] for e in instants(dual)), timeout_s=30)
+    entry = next(e for e in instants(dual) if "safe" in e["actions"])
+    assert entry["inputs"] == ["MeetL.T3.LawError"], entry
+    fault = resources(dual)["left"]["fault"]
+    assert fault["kind"] == "internal" and "process ended" in fault["text"], fault
+    right = ticks(dual, "right")
+    dual.wait(lambda s: ticks(dual, "right") > right + 100, timeout_s=10)  # right ticks on
+    assert resources(dual)["right"]["fault"] is None
+    dual.call("send", input="Stop")
+    dual.wait(lambda s: s["state"] != "running", timeout_s=30)
+    left = ticks(dual, "left")
+    assert cast(dict[str, Any], dual.call("reset", resource="left"))["reset"]
+    r = next(u for u in dual.call("describe")["resources"] if u["name"] == "left")
+    assert r["unit_pid"] != pid and r["fault"] is None and r["task"] == "Hold_left", r
+    dual.wait(lambda s: ticks(dual, "left") > left + 100, timeout_s=10)  # counted on, not from 0
+    dual.call("start")  # the mission's tasks, built again in the new process
+    dual.wait(lambda s: "MeetL" in str(resources(dual)["left"]["task"]), timeout_s=60)
+    dual.call("send", input="Stop")
+    s = dual.wait(lambda s: s["state"] != "running", timeout_s=30)
+    assert not s["faulted"], s
