@@ -195,11 +195,15 @@ def hold_then_run(
     return out + timing_lines(rec, label, base_p99) + _switch_lines(rec, desc)
 
 
+UNITS = "threads"  # `--units`: where each resource's control loop runs ([daemon] units)
+
+
 def run_dual(duration_s: float, base_p99: float | None) -> list[str]:
-    out = ["dual-arm-sim (left 1 kHz, right 500 Hz; simulated arms in their own processes)"]
+    out = [f"dual-arm-sim (left 1 kHz, right 500 Hz; simulated arms in their own processes; units = {UNITS})"]
     with tempfile.TemporaryDirectory(prefix="orccadd-station-") as tmp:
         missions = f'mission_dirs = ["{ROOT}/configs/missions", "{ROOT}/benchmarks/missions"]'
-        cfg = station_copy(DUAL, Path(tmp), f'{missions}\ntask_dirs = ["{ROOT}/configs/tasks"]')
+        lines = f'{missions}\ntask_dirs = ["{ROOT}/configs/tasks"]\nunits = "{UNITS}"'
+        cfg = station_copy(DUAL, Path(tmp), lines)
         with running_daemon(cfg) as d, Client(d.socket, timeout_s=120) as c:
             out += hold_then_run(c, duration_s, base_p99, SWITCHING, "switching")
     return out
@@ -342,7 +346,12 @@ def main() -> int:
     ap.add_argument("--duration-s", type=float, default=60.0, help="each phase of each run")
     ap.add_argument("--runs", default="dual,gripper,scale", help="which: dual, gripper, scale, separate")
     ap.add_argument("--priority", type=int, default=80, help="cyclictest's: the control threads'")
+    ap.add_argument(
+        "--units", choices=("threads", "processes"), default="threads", help="dual: [daemon] units"
+    )
     args = ap.parse_args()
+    global UNITS
+    UNITS = args.units
     runs = [r.strip() for r in args.runs.split(",") if r.strip()]
     table = {"dual": run_dual, "gripper": run_gripper, "scale": run_scale, "separate": run_separate}
     unknown = [r for r in runs if r not in table]

@@ -27,11 +27,13 @@ from orccadd.daemon.commands import RtCommands, describe_resource
 from orccadd.daemon.inline import InlineReactor
 from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.publisher import Publisher
+from orccadd.daemon.reactions import ReactionTables
 from orccadd.daemon.replies import CommandError, Pending, Result
 from orccadd.daemon.supervision import FaultHistory, Supervisor
 from orccadd.daemon.unit import ResourceUnit, hold_name
 from orccadd.daemon.unitlink import UnitLink
 from orccadd.daemon.unitproxy import UnitProxy
+from orccadd.daemon.unitshm import TryLock
 from orccadd.fault import Fault, FaultKind, StopCause
 from orccadd.physres.base import PhysicalResource
 from orccadd.runtime.clock import Clock
@@ -86,7 +88,15 @@ class Machine:
         self.notes: list[str] = []  # recent notable happenings (bounded), for `describe`
         self.mission = MissionControl([u.loop for u in self.units], self.pub, self.note, self.abort)
         self.mission.outputs = {u.name: u.outputs for u in self.units}
-        self.reactor = InlineReactor(self.mission, self.registry)
+        proxies = [u for u in self.units if isinstance(u, UnitProxy)]
+        self.reactor: InlineReactor | ReactionTables
+        if proxies and proxies[0].link.station is not None:
+            lock = TryLock(proxies[0].link.station[2])
+            self.reactor = ReactionTables(
+                self.mission, self.registry, [u.channel for u in proxies], lock, self._task_id
+            )
+        else:
+            self.reactor = InlineReactor(self.mission, self.registry)
         for u in self.units:
             u.bind(Supervisor(u.cfg, u.resource, u.loop, self.mission, self.note, self.faults))
             u.loop.reactor = self.reactor
@@ -104,6 +114,10 @@ class Machine:
         those still running (a device call that hangs)."""
         end = time.monotonic() + timeout_s
         return [name for u in self.units for name in u.join(max(0.0, end - time.monotonic()))]
+
+    def _task_id(self, task: RobotTask) -> int:
+        """`task`'s index among the Hold tasks and the mission's (the units number them so)."""
+        return next((i for i, t in enumerate(self.mission.tasks()) if t is task), -1)
 
     def refresh(self) -> bool:
         """Each unit's state as its control loop last published it (a unit process's, from its

@@ -40,6 +40,7 @@ from orccadd.daemon.unit import ResourceUnit
 from orccadd.daemon.unitlink import UnitLink
 from orccadd.daemon.unitproc import EXIT_CONTROL_FAILED
 from orccadd.daemon.unitproxy import UnitProxy
+from orccadd.daemon.unitshm import UnitChannel
 from orccadd.daemon.urgent import UrgentSocket
 from orccadd.errors import OrccaddError, ResourceError
 from orccadd.logsetup import LogSetupError, setup_logging
@@ -85,6 +86,7 @@ class RealtimeProcess:
         self.urgent: UrgentSocket | None = None
         self.in_processes = station.daemon.units == "processes"
         self.links: list[UnitLink] = []  # each resource's unit process (units = "processes")
+        self.lock_path = ""  # the station's try-lock file: reactions in a tick (units = "processes")
 
     # ---- startup --------------------------------------------------------------------------
     def start(self) -> None:
@@ -120,7 +122,11 @@ class RealtimeProcess:
         if self.in_processes:
             # each unit process builds, configures and holds its resource (`unitproc`); here,
             # each resource is a shadow the tasks are built on, never configured
-            for c, tel in zip(self.station.resources, self.tels, strict=True):
+            n = len(self.station.resources)
+            channels = [UnitChannel.create(units=n, index=k) for k in range(n)]
+            self.lock_path = rt_socket_path(self.socket_path) + ".units.lock"
+            names = [ch.name for ch in channels]
+            for k, (c, tel, ch) in enumerate(zip(self.station.resources, self.tels, channels, strict=True)):
                 self.links.append(
                     UnitLink(
                         self.station.source,
@@ -130,8 +136,11 @@ class RealtimeProcess:
                         simulate=self.args.simulate,
                         in_process_sim=self.args.in_process_sim,
                         spin_us=self.args.spin_us,
+                        channel=ch,
+                        station=(names, k, self.lock_path),
                     )
                 )
+                self.links[-1].own_channel = True  # closed with its link
         for res, hold in zip(self.resources, holds, strict=True):
             if self.in_processes:
                 break
@@ -346,6 +355,9 @@ class RealtimeProcess:
         if self.urgent is not None:
             self.urgent.close()
         released = self._release()
+        if self.lock_path:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(self.lock_path)
         for tel in [*self.tels, *([self.block] if self.block else [])]:
             tel.close()
         what = "hardware released" if released else "hardware not all released"

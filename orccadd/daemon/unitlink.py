@@ -90,13 +90,17 @@ class UnitLink:
         in_process_sim: bool = False,
         spin_us: float = 0.0,
         channel: UnitChannel | None = None,
+        station: tuple[list[str], int, str] | None = None,
     ) -> None:
         """`channel`: the unit's shared channel (a unit started again takes its predecessor's:
-        the automaton's side keeps it); None: a new one, closed with this link."""
+        the automaton's side keeps it); None: a new one, closed with this link. `station`: every
+        unit's channel by name in the station's order, this unit's index among them, and the
+        station's try-lock file (for the reactions it takes in its ticks; None: it takes none)."""
         self.resource = resource
         self.closed = False
         self.own_channel = channel is None
         self.channel = channel if channel is not None else UnitChannel.create()
+        self.station = station
         self.start_args = (station_path, resource, telemetry, wake_fd, simulate, in_process_sim, spin_us)
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         self.sock = ours
@@ -119,6 +123,9 @@ class UnitLink:
             "--spin-us",
             str(spin_us),
         ]
+        if station is not None:
+            names, index, lock = station
+            argv += ["--channels", ",".join(names), "--index", str(index), "--lock", lock]
         argv += ["--simulate"] if simulate else []
         argv += ["--in-process-sim"] if in_process_sim else []
         try:
@@ -233,7 +240,7 @@ class UnitLink:
         path, resource, tel, wake_fd, simulate, in_process_sim, spin_us = self.start_args
         link = UnitLink(
             path, resource, tel, wake_fd, simulate=simulate, in_process_sim=in_process_sim, spin_us=spin_us,
-            channel=self.channel,
+            channel=self.channel, station=self.station,
         )  # fmt: skip
         link.own_channel, self.own_channel = self.own_channel, False
         self.close()

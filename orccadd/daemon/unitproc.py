@@ -38,9 +38,10 @@ from orccadd.config.robot import RobotConfig
 from orccadd.config.station import StationConfig
 from orccadd.daemon.loop import SwitchingLoop
 from orccadd.daemon.mission import prepare_mission
+from orccadd.daemon.reactions import ChannelReactor
 from orccadd.daemon.unit import ResourceUnit, hold_name, hold_task
 from orccadd.daemon.unitlink import recv_frame, send_frame
-from orccadd.daemon.unitshm import ChannelQueue, UnitChannel
+from orccadd.daemon.unitshm import ChannelQueue, TryLock, UnitChannel
 from orccadd.errors import OrccaddError
 from orccadd.logsetup import LogSetupError, setup_logging
 from orccadd.physres.base import PhysicalResource
@@ -137,6 +138,7 @@ class UnitProcess:
         self.queue.before_push = self._before_push
         self.kinds = self.registry.kinds()
         self.ended = threading.Event()
+        self.reactor: ChannelReactor | None = None
 
     def _unit(
         self, cfg: RobotConfig, clock: Clock, tel: TelemetryBlock, wake_fd: int, name: str
@@ -162,6 +164,12 @@ class UnitProcess:
         loop = self.unit.loop
         assert isinstance(loop, ChannelLoop)
         return loop
+
+    def react_in_ticks(self, reactor: ChannelReactor) -> None:
+        """Take the automaton's published reactions in the tick of their event."""
+        self.reactor = reactor
+        reactor.tasks = self.loop.tasks
+        self.loop.reactor = reactor
 
     # ---- startup and the end ----------------------------------------------------------------
     def start(self) -> None:
@@ -329,6 +337,8 @@ class UnitProcess:
         self.loop.set_task_ids({id(t): i for i, t in enumerate(tasks)})
         self.loop.set_input_events(tuple(int(e) for e in msg.get("input_events", ())))
         self.loop.tasks = tasks  # one store: a tick sees the old list or the new
+        if self.reactor is not None:
+            self.reactor.tasks = tasks
         self.kinds = self.registry.kinds()
         return {"tasks": [t.name for t in tasks]}
 
@@ -360,6 +370,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--link-fd", type=int, required=True)
     ap.add_argument("--wake-fd", type=int, required=True)
     ap.add_argument("--spin-us", type=float, default=0.0)
+    ap.add_argument("--channels", default="", help="every unit's channel, in the station's order")
+    ap.add_argument("--index", type=int, default=0, help="this unit's among them")
+    ap.add_argument("--lock", default="", help="the station's try-lock file (reactions in a tick)")
     ap.add_argument("--simulate", action="store_true")
     ap.add_argument("--in-process-sim", action="store_true")
     args = ap.parse_args(argv)
@@ -374,6 +387,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         station = station_as_run(load_station_config(Path(args.station)), args.simulate, args.in_process_sim)
         unit = UnitProcess(station, args.resource, channel, tel, link, args.wake_fd, args.spin_us)
+        if args.lock:
+            others = [
+                channel if i == args.index else UnitChannel.attach(n)
+                for i, n in enumerate(args.channels.split(","))
+            ]
+            unit.react_in_ticks(ChannelReactor(others, args.index, TryLock(args.lock)))
         unit.start()
     except OrccaddError as e:
         log.error("%s", e)

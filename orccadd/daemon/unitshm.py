@@ -44,9 +44,22 @@ class W(IntEnum):
     TAIL = 7  # events consumed (the automaton's, as it drains)
     STOP = 8  # safe stops requested (the automaton's)
     STOPS_TAKEN = 9  # safe stops taken (the control thread's)
+    # the reactions the unit may take in the tick of its event (`daemon.reactions`): written
+    # under the station's try-lock, by the automaton (the table) or a unit (what it took)
+    TABLE_CAP = 10  # rows the table holds
+    TABLE_WIDTH = 11  # words a row: the event id, then per unit the task it switches to
+    TABLE_ROWS = 12  # rows valid now (0: none, react in the automaton's thread)
+    TAKEN = 13  # reactions taken in a tick (the unit's)
+    BOOKED = 14  # of those, booked by the automaton
+    TAKEN_EVENT = 15  # the last one's: its event id, time, and queue indices [first, end)
+    TAKEN_T_S = 16
+    TAKEN_FIRST = 17
+    TAKEN_END = 18
 
 
 HEADER = len(W)
+TABLE_ROWS_MAX = 64  # events of one resource a mission reacts to in their tick, at most
+NO_TASK = -2.0  # a table row's task for a unit whose task does not change
 
 
 @dataclass
@@ -68,16 +81,27 @@ class UnitChannel:
         n = int(words[W.RING_LEN])
         self.ring_len = n
         self.ring = words[HEADER : HEADER + 2 * n].reshape(n, 2)  # (t_s, event id)
+        rows, width = int(words[W.TABLE_CAP]), int(words[W.TABLE_WIDTH])
+        at = HEADER + 2 * n
+        self.table = words[at : at + rows * width].reshape(rows, width)
         self.tail = 0  # the consumer's: the next event to read (not shared)
         self.lost = 0  # events the consumer came too late for
 
     @staticmethod
-    def create(ring_len: int = 4096) -> UnitChannel:
-        shm = shared_memory.SharedMemory(create=True, size=8 * (HEADER + 2 * ring_len))
-        words = np.ndarray((HEADER + 2 * ring_len,), dtype=np.float64, buffer=shm.buf)
+    def create(
+        ring_len: int = 4096, units: int = 1, index: int = 0, table_rows: int = TABLE_ROWS_MAX
+    ) -> UnitChannel:
+        """A new channel for unit `index` of a station of `units` resources (its Hold task's
+        index is `index`: the automaton numbers the Hold tasks first)."""
+        width = 1 + units
+        size = HEADER + 2 * ring_len + table_rows * width
+        shm = shared_memory.SharedMemory(create=True, size=8 * size)
+        words = np.ndarray((size,), dtype=np.float64, buffer=shm.buf)
         words[:] = 0.0
         words[W.RING_LEN] = ring_len
-        words[W.TASK] = -1
+        words[W.TASK] = index
+        words[W.TABLE_CAP] = table_rows
+        words[W.TABLE_WIDTH] = width
         words[W.MAGIC] = MAGIC
         return UnitChannel(shm, owner=True)
 
@@ -93,7 +117,7 @@ class UnitChannel:
         return self.shm.name
 
     def close(self) -> None:
-        del self.words, self.ring
+        del self.words, self.ring, self.table
         self.shm.close()
         if self.owner:
             with contextlib.suppress(FileNotFoundError):
@@ -155,6 +179,71 @@ class UnitChannel:
     @property
     def pushed(self) -> int:
         return int(self.words[W.PUSHED])
+
+    # ---- the reactions taken in the tick of their event (`daemon.reactions`) --------------
+    # all under the station's try-lock: the automaton's work holds it, a tick only tries it
+    @property
+    def wanted_task(self) -> int:
+        """The task the automaton wants on this unit: the last request's, or the last switch a
+        unit took in its tick (-1: the Hold task)."""
+        return int(self.words[W.TASK])
+
+    @property
+    def consumed(self) -> int:
+        """The events the automaton has consumed (as `tail`, read by any process)."""
+        return int(self.words[W.TAIL])
+
+    def has_table(self) -> bool:
+        """Reactions to take in a tick are published (tick-safe)."""
+        return bool(self.words[W.TABLE_ROWS])
+
+    def drained(self) -> bool:
+        """Every event pushed has been consumed by the automaton."""
+        return int(self.words[W.PUSHED]) == int(self.words[W.TAIL])
+
+    def publish(self, rows: list[tuple[int, list[float]]]) -> None:
+        """The automaton's: the reactions this unit may take now, per event id the task of each
+        unit of the station (`NO_TASK`: unchanged). Those past the table's size are left to the
+        automaton's thread."""
+        t = self.table
+        n = min(len(rows), len(t))
+        for i, (event_id, tasks) in enumerate(rows[:n]):
+            t[i, 0] = event_id
+            t[i, 1 : 1 + len(tasks)] = tasks
+        self.words[W.TABLE_ROWS] = n
+
+    def invalidate(self) -> None:
+        """No reaction to take in a tick until the automaton publishes again."""
+        self.words[W.TABLE_ROWS] = 0
+
+    def row_of(self, event_id: int) -> npt.NDArray[np.float64] | None:
+        """The unit's (tick-safe): the table's row for `event_id`, None if it has none."""
+        t = self.table
+        for i in range(int(self.words[W.TABLE_ROWS])):
+            if t[i, 0] == event_id:
+                return t[i]  # type: ignore[no-any-return]
+        return None
+
+    def take(self, event_id: int, t_s: float, first: int, end: int, own_task: float) -> None:
+        """The unit's: it took the reaction to `event_id` (queue indices [first, end)) in its
+        tick, switching itself to `own_task` (`NO_TASK`: no switch)."""
+        w = self.words
+        w[W.TAKEN_EVENT] = event_id
+        w[W.TAKEN_T_S] = t_s
+        w[W.TAKEN_FIRST] = first
+        w[W.TAKEN_END] = end
+        if own_task != NO_TASK:
+            w[W.TASK] = own_task  # what the automaton wants on it now (no request to apply)
+        w[W.TAKEN] = int(w[W.TAKEN]) + 1
+
+    def taken(self) -> tuple[int, float, int, int] | None:
+        """The automaton's: a reaction taken in a tick and not booked yet (event id, time, queue
+        indices [first, end)), marked booked; None if none."""
+        w = self.words
+        if int(w[W.TAKEN]) == int(w[W.BOOKED]):
+            return None
+        w[W.BOOKED] = w[W.TAKEN]
+        return int(w[W.TAKEN_EVENT]), float(w[W.TAKEN_T_S]), int(w[W.TAKEN_FIRST]), int(w[W.TAKEN_END])
 
     def drain(self) -> list[Event]:
         """The automaton's: the events pushed since the last drain, in order; those overwritten
