@@ -195,7 +195,7 @@ def hold_then_run(
     return out + timing_lines(rec, label, base_p99) + _switch_lines(rec, desc)
 
 
-UNITS = "threads"  # `--units`: where each resource's control loop runs ([daemon] units)
+UNITS = "auto"  # `--units`: where each resource's control loop runs ([daemon] units)
 
 
 def run_dual(duration_s: float, base_p99: float | None) -> list[str]:
@@ -204,9 +204,33 @@ def run_dual(duration_s: float, base_p99: float | None) -> list[str]:
         missions = f'mission_dirs = ["{ROOT}/configs/missions", "{ROOT}/benchmarks/missions"]'
         lines = f'{missions}\ntask_dirs = ["{ROOT}/configs/tasks"]\nunits = "{UNITS}"'
         cfg = station_copy(DUAL, Path(tmp), lines)
+        t0 = time.monotonic()
         with running_daemon(cfg) as d, Client(d.socket, timeout_s=120) as c:
+            up_s = time.monotonic() - t0
+            out.append(
+                f"  cost: {cost_line(d.proc.pid, c.call('describe'))}; up and answering in {up_s:.2f} s"
+            )
             out += hold_then_run(c, duration_s, base_p99, SWITCHING, "switching")
     return out
+
+
+def rss_mb(pid: int) -> float:
+    """A process's resident memory (MB), 0 if it is gone."""
+    try:
+        text = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return 0.0
+    return next((int(line.split()[1]) / 1024 for line in text.splitlines() if line.startswith("VmRSS:")), 0.0)
+
+
+def cost_line(daemon_pid: int, desc: dict[str, Any]) -> str:
+    """The resident memory of the real-time process and of each resource's unit process (its
+    own, or the real-time process's: counted once) — plants and the command daemon apart."""
+    units = {int(u["unit_pid"]) for u in desc["resources"]} - {daemon_pid}
+    each = ", ".join(f"{rss_mb(p):.0f}" for p in sorted(units))
+    own = f" + unit processes {each} MB" if units else ""
+    total = rss_mb(daemon_pid) + sum(rss_mb(p) for p in units)
+    return f"resident memory: real-time process {rss_mb(daemon_pid):.0f} MB{own} = {total:.0f} MB"
 
 
 def run_gripper(duration_s: float, base_p99: float | None) -> list[str]:
@@ -347,7 +371,7 @@ def main() -> int:
     ap.add_argument("--runs", default="dual,gripper,scale", help="which: dual, gripper, scale, separate")
     ap.add_argument("--priority", type=int, default=80, help="cyclictest's: the control threads'")
     ap.add_argument(
-        "--units", choices=("threads", "processes"), default="threads", help="dual: [daemon] units"
+        "--units", choices=("auto", "threads", "processes"), default="auto", help="dual: [daemon] units"
     )
     args = ap.parse_args()
     global UNITS

@@ -190,9 +190,10 @@ class DaemonConfig:
     # are the same, bit for bit
     tick: Literal["compiled", "interpreted"] = field(default="compiled")
     # where each resource's control loop runs: "threads" (a thread each in the real-time
-    # process) or "processes" (a process each, `orccadd.daemon.unitproc`: one interpreter per
-    # clock domain, so that no resource's Python stalls another's tick; docs/architecture.md)
-    units: Literal["threads", "processes"] = field(default="threads")
+    # process), "processes" (a process each, `orccadd.daemon.unitproc`: one interpreter per
+    # clock domain, so that no resource's Python stalls another's tick; docs/architecture.md),
+    # or "auto": processes for a station of several resources, a thread for one resource
+    units: Literal["auto", "threads", "processes"] = field(default="auto")
 
 
 @dataclass(frozen=True)

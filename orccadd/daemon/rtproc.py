@@ -84,7 +84,8 @@ class RealtimeProcess:
         self.started = False  # every unit's control thread ticks
         self.memory_locked = False  # by `lock_memory_early` at startup
         self.urgent: UrgentSocket | None = None
-        self.in_processes = station.daemon.units == "processes"
+        units = station.daemon.units
+        self.in_processes = units == "processes" or (units == "auto" and len(station.resources) > 1)
         self.links: list[UnitLink] = []  # each resource's unit process (units = "processes")
         self.lock_path = ""  # the station's try-lock file: reactions in a tick (units = "processes")
 
