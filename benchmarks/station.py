@@ -11,6 +11,9 @@ Runs orccadd (as a separate process, with its command daemon) on:
   arm device-paced, and the servo simulator's gripper at 200 Hz), holding, then pick_place.mission
   run again and again;
 - **scale**: stations of 1, 2 and 4 simulated UR5e at 500 Hz, holding: how the figures grow;
+- **isolation**: dual's station, `left` holding while `right` holds, then while `right` alone
+  alternates the two laws (a mission on `right` only): each domain's figure while the other
+  switches, in one daemon (`--units`: threads or processes);
 - **separate**: dual's two arms each in a daemon of its own (two processes, two interpreters),
   `left` holding while `right` holds, then while `right` alternates the same two laws: the
   isolation a process per clock domain can reach on this machine, beside dual's one process.
@@ -24,7 +27,8 @@ on B), the time from A's event tick to B's first tick of the new law, in B's per
 each resource's wake-up p99 to cyclictest's (1 kHz, the control threads' priority, half of its
 run before ours and half after).
 
-Usage: `python benchmarks/station.py [--duration-s 60] [--runs dual,gripper,scale,separate]` (root, for
+Usage: `python benchmarks/station.py [--duration-s 60] [--runs dual,gripper,scale,isolation,separate]
+[--units auto|threads|processes]` (root, for
 SCHED_FIFO; `make bench`).
 """
 
@@ -349,6 +353,43 @@ def run_separate(duration_s: float, base_p99: float | None) -> list[str]:
     return out
 
 
+def run_isolation(duration_s: float, base_p99: float | None) -> list[str]:
+    """dual's station: left holds throughout; right holds, then alternates its two laws."""
+    out = [f"dual-arm-sim, left holding; right holding, then switching (units = {UNITS})"]
+    with tempfile.TemporaryDirectory(prefix="orccadd-station-") as tmp:
+        lines = f'mission_dirs = ["{tmp}"]\ntask_dirs = ["{ROOT}/configs/tasks"]\nunits = "{UNITS}"'
+        cfg = station_copy(DUAL, Path(tmp), lines)
+        mission = Path(tmp) / "right_switch.mission"
+        mission.write_text(SEPARATE_MISSION.format(tasks=ROOT / "configs/tasks"))
+        with running_daemon(cfg) as d, Client(d.socket, timeout_s=120) as c:
+            with recording(c) as (rec, poll):
+                run_for(duration_s, poll)
+            out += timing_lines(rec, "right holding  ", base_p99)
+            c.call("load", path=str(mission))
+            with recording(c) as (rec, poll):
+                c.call("start")
+                run_for(duration_s, poll)
+                c.call("stop")
+            out += timing_lines(rec, "right switching", base_p99)
+            tasks = rec.resource_ticks(1)[:, T.TASK]
+            out.append(f"  right's law switches meanwhile: {int((tasks[1:] != tasks[:-1]).sum())}")
+            out.append(f"  stalls longer than a period shared by both domains: {shared_stalls(rec)}")
+    return out
+
+
+def shared_stalls(rec: Recording) -> str:
+    """The ticks of each domain released later than its period, overlapping in time with such a
+    tick of the other domain: their count and the longest (a stall both saw)."""
+    late = []
+    for i in range(len(rec.names)):
+        t = rec.resource_ticks(i)
+        period_us = rec.periods_s[i] * 1e6
+        mask = t[:, T.WAKE_US] > period_us
+        late.append([(s, s + w * 1e-6) for s, w in zip(t[mask, T.T_S], t[mask, T.WAKE_US], strict=True)])
+    shared = [min(a1, b1) - max(a0, b0) for a0, a1 in late[0] for b0, b1 in late[1] if a0 < b1 and b0 < a1]
+    return f"{len(shared)}, longest {max(shared) * 1e3:.2f} ms" if shared else "none"
+
+
 def _switch_lines(rec: Recording, desc: dict[str, Any]) -> list[str]:
     own, cross, sent = switch_figures(rec, desc)
     in_tick = 100.0 * sum(1 for x in own if x == 0) / len(own) if own else float("nan")
@@ -368,7 +409,9 @@ def _switch_lines(rec: Recording, desc: dict[str, Any]) -> list[str]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--duration-s", type=float, default=60.0, help="each phase of each run")
-    ap.add_argument("--runs", default="dual,gripper,scale", help="which: dual, gripper, scale, separate")
+    ap.add_argument(
+        "--runs", default="dual,gripper,scale", help="which: dual, gripper, scale, isolation, separate"
+    )
     ap.add_argument("--priority", type=int, default=80, help="cyclictest's: the control threads'")
     ap.add_argument(
         "--units", choices=("auto", "threads", "processes"), default="auto", help="dual: [daemon] units"
@@ -377,7 +420,13 @@ def main() -> int:
     global UNITS
     UNITS = args.units
     runs = [r.strip() for r in args.runs.split(",") if r.strip()]
-    table = {"dual": run_dual, "gripper": run_gripper, "scale": run_scale, "separate": run_separate}
+    table = {
+        "dual": run_dual,
+        "gripper": run_gripper,
+        "scale": run_scale,
+        "isolation": run_isolation,
+        "separate": run_separate,
+    }
     unknown = [r for r in runs if r not in table]
     if unknown:
         ap.error(f"--runs: unknown {', '.join(unknown)} (known: {', '.join(table)})")

@@ -17,11 +17,10 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import subprocess
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
-
-import numpy as np
 
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.replies import CommandError
@@ -36,7 +35,7 @@ from orccadd.runtime.threads import ThreadGroup
 from orccadd.state import JointState
 from orccadd.task import EventQueue, EventRegistry, RobotTask
 from orccadd.task.task import ParameterChange
-from orccadd.types import CommandMode, Phase, Status
+from orccadd.types import CommandMode, Status
 from orccadd.wire.schema import H, T, TickLayout
 from orccadd.wire.telemetry import TelemetryBlock
 
@@ -203,6 +202,7 @@ class ResourceView:
         self.state = JointState(self.dof)
         self.mode = CommandMode.TORQUE
         self.diagnostics_cache: Diagnostics | None = None
+        self.fault_text = ""
 
     @property
     def stopping_or_stopped(self) -> bool:
@@ -210,7 +210,8 @@ class ResourceView:
 
     @property
     def fault_message(self) -> str:
-        return str(self.proxy.holding.get("fault", ""))
+        """The device's last fault in words, as the unit last said it ("" if none)."""
+        return self.fault_text
 
     def helper_pid(self) -> int:
         return int(self.proxy.holding.get("helper_pid", 0))
@@ -225,14 +226,16 @@ class ResourceView:
             raise OrccaddError(str(e)) from None
 
     def diagnostics(self) -> Diagnostics:
+        """The unit's resource's, asked for briefly (a unit that does not answer at once: the
+        last it gave, or the shadow's)."""
         try:
-            d = self.proxy.call("diagnostics")["diagnostics"]
+            answer = self.proxy.link.call("diagnostics", timeout_s=STALL_ANSWER_S)
+            d = answer["diagnostics"]
             assert isinstance(d, Diagnostics)
-            self.diagnostics_cache = d
+            self.diagnostics_cache, self.fault_text = d, str(answer.get("fault", ""))
         except UnitLinkError:
-            if self.diagnostics_cache is None:
-                return self.shadow.diagnostics()
-        return self.diagnostics_cache
+            pass
+        return self.diagnostics_cache if self.diagnostics_cache is not None else self.shadow.diagnostics()
 
 
 class RemoteReset:
@@ -423,9 +426,6 @@ class UnitProxy:
             raise OrccaddError(str(e)) from None
         self.refresh()
 
-    def restart_control(self) -> None:
-        raise OrccaddError(f"{self.name}: its unit process is started again by a reset (not yet)")
-
     def control_running(self) -> bool:
         return self.link.proc.poll() is None and not self.failure
 
@@ -485,9 +485,8 @@ class UnitProxy:
         it (or by the device's watchdog): its active task's type 3 `LawError`, pushed here into
         the unit's ring, which nothing else writes now."""
         task = self.loop.active
-        if task is None or task.phase is Phase.FAULT:
+        if task is None:
             return False
-        task.phase = Phase.FAULT
         task.fault_reason = "LawError"
         task.fault = Fault(FaultKind.INTERNAL, self.name, why)
         self.queue.push(t_s, task.builtin_ids["LawError"])
@@ -512,20 +511,9 @@ class UnitProxy:
             self.link.send("end")
 
     def join(self, timeout_s: float) -> list[str]:
+        """[] once the unit's process has ended within `timeout_s`, else its name."""
         try:
             self.link.proc.wait(timeout=timeout_s)
-        except Exception:
+        except subprocess.TimeoutExpired:
             return [f"unit process of {self.name} (pid {self.link.proc.pid})"]
         return []
-
-    def close(self) -> None:
-        self.link.end(0.0)
-
-    def at_rest(self) -> bool:
-        self.refresh()
-        return bool(int(self.resource.state.status) & int(Status.STOPPED))
-
-
-def last_record(tel: TelemetryBlock) -> np.ndarray | None:
-    head = int(tel.header[H.TICK_HEAD])
-    return None if not head else tel.ticks[(head - 1) % len(tel.ticks)]
