@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 from harness import ROOT, figures
+from station import SEPARATE_MISSION as MISSION
 
 from orccadd.config.station import StationConfig
 from orccadd.daemon.mission import compile_and_verify, prepare_mission
@@ -39,33 +40,6 @@ from orccadd.wire.telemetry import Layout, RingReader, TelemetryBlock
 from tests.daemon.conftest import station_copy
 
 DUAL = ROOT / "configs/robots/dual-arm-sim.toml"
-MISSION = """\
-mission RightSwitch
-resource right
-input Stop
-task TrackR on right from "{tasks}/move_joints.toml"
-  set traj.target_rad = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
-  set reached.ticks = 3
-  post
-end
-task DwellR on right from "{tasks}/dwell.toml"
-  set elapsed.timeout_s = 0.013
-  post
-end
-main procedure Interleave
-  do
-    loop
-      TrackR;
-      DwellR
-    end loop
-  until Stop
-on fatal do
-  safe
-end
-safe procedure Acknowledge
-  await Stop
-end
-"""
 
 
 def telemetry_for(station: StationConfig, i: int) -> TelemetryBlock:

@@ -23,11 +23,14 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
 
+from orccadd.daemon.mission import LoadedMission
 from orccadd.daemon.procedure import MissionControl
 from orccadd.daemon.unitshm import NO_TASK, TryLock, UnitChannel
 from orccadd.task import RobotTask
 from orccadd.task.events import EventKind, EventRegistry
 from orccadd.wire.schema import MachineState
+
+MEMO_MAX = 4096  # automaton states whose tables are kept
 
 
 class ReactionTables:
@@ -49,6 +52,8 @@ class ReactionTables:
         self.upto = [0] * len(self.channels)  # per unit: events before this index were reacted to
         self.inline = 0  # reactions taken in the tick of their event
         self._published: Any = None  # what the tables were computed from
+        self._memo: dict[Any, list[list[tuple[int, list[float]]]]] = {}  # by that, this mission's
+        self._memo_generation = -1
 
     @contextmanager
     def held(self) -> Iterator[None]:
@@ -96,6 +101,17 @@ class ReactionTables:
         if key == self._published:
             return
         self._published = key
+        if key[0] != self._memo_generation or len(self._memo) >= MEMO_MAX:  # another mission; or full
+            self._memo, self._memo_generation = {}, key[0]
+        rows = self._memo.get(key)
+        if rows is None:  # a state seen before (a mission's loop) costs a lookup, not the plans
+            rows = self._memo[key] = self._rows(mission)
+        for ch, unit_rows in zip(self.channels, rows, strict=True):
+            ch.publish(unit_rows)
+
+    def _rows(self, mission: LoadedMission) -> list[list[tuple[int, list[float]]]]:
+        """Per unit, its events' reactions from the automaton's present state."""
+        mc = self.mission
         rows: list[list[tuple[int, list[float]]]] = [[] for _ in self.channels]
         by_resource = {lp.resource.name: k for k, lp in enumerate(mc.loops)}
         inputs = {eid: k for k, lp in enumerate(mc.loops) for eid in mc.input_events_of(lp.resource, mission)}
@@ -112,8 +128,7 @@ class ReactionTables:
             tasks = self._decide(bit)
             if tasks is not None:
                 rows[k].append((event_id, tasks))
-        for ch, unit_rows in zip(self.channels, rows, strict=True):
-            ch.publish(unit_rows)
+        return rows
 
     def _decide(self, inputs: int) -> list[float] | None:
         """Per unit, the task the reaction to `inputs` switches it to (`NO_TASK`: none), as

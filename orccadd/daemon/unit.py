@@ -57,6 +57,25 @@ STALL_MIN_S = 0.25  # a control thread is stalled after no tick for this long at
 EnterRealtime = Callable[[int], RealtimeReport]  # SCHED_FIFO for the calling thread
 
 
+def heartbeat_fresh(cfg: RobotConfig, tel: TelemetryBlock, now_ns: int) -> bool:
+    """The resource's control loop ticked within its watchdog's periods (its telemetry says)."""
+    stale_s = cfg.daemon.watchdog_stale_periods * cfg.control_period_s
+    return now_ns - int(tel.header[H.HEARTBEAT_NS]) < stale_s * 1e9
+
+
+def stall_after_s(cfg: RobotConfig) -> float:
+    """No tick for this long: the resource's control thread is hung."""
+    return max(STALL_MIN_S, cfg.daemon.watchdog_stale_periods * cfg.control_period_s)
+
+
+def stalled_for_s(cfg: RobotConfig, tel: TelemetryBlock, started_ns: int, now_ns: int) -> float:
+    """How long the control loop has not ticked (since its last tick or its start), if it is
+    hung by `stall_after_s`; 0.0 if it is not."""
+    last_ns = max(int(tel.header[H.HEARTBEAT_NS]), started_ns)
+    quiet_s = (now_ns - last_ns) * 1e-9
+    return quiet_s if quiet_s >= stall_after_s(cfg) else 0.0
+
+
 class ControlThreadError(OrccaddError):
     """A unit's control thread ended on an exception (or did not tick in time)."""
 
@@ -274,12 +293,7 @@ class ResourceUnit:
     # ---- health and the end ---------------------------------------------------------------
     def heartbeat_fresh(self, now_ns: int) -> bool:
         """The control loop ticked within its watchdog's periods."""
-        stale_s = self.cfg.daemon.watchdog_stale_periods * self.cfg.control_period_s
-        return now_ns - int(self.tel.header[H.HEARTBEAT_NS]) < stale_s * 1e9
-
-    @property
-    def stall_after_s(self) -> float:
-        return max(STALL_MIN_S, self.cfg.daemon.watchdog_stale_periods * self.cfg.control_period_s)
+        return heartbeat_fresh(self.cfg, self.tel, now_ns)
 
     def check_stall(self, now_ns: int) -> str:
         """The automaton thread's, at each wake-up: why the control thread is hung, the first time
@@ -288,11 +302,11 @@ class ResourceUnit:
         control = self._control
         if self.stalled or control is None or not control.is_alive():
             return ""
-        last_ns = max(int(self.tel.header[H.HEARTBEAT_NS]), self._started_ns)
-        if now_ns - last_ns < self.stall_after_s * 1e9:
+        quiet_s = stalled_for_s(self.cfg, self.tel, self._started_ns, now_ns)
+        if not quiet_s:
             return ""
         line = line_of(control)
-        self.stalled = f"its control loop has not ticked for {(now_ns - last_ns) * 1e-9:.2f} s" + (
+        self.stalled = f"its control loop has not ticked for {quiet_s:.2f} s" + (
             f" (waiting at {line})" if line else ""
         )
         self.threads.start(self.stop_stalled, name="stall-safe-stop")

@@ -24,7 +24,7 @@ from typing import Any
 
 from orccadd.config.robot import RobotConfig
 from orccadd.daemon.replies import CommandError
-from orccadd.daemon.unit import hold_task
+from orccadd.daemon.unit import heartbeat_fresh, hold_task, stalled_for_s
 from orccadd.daemon.unitlink import UnitLink, UnitLinkError
 from orccadd.daemon.unitshm import UnitChannel
 from orccadd.errors import OrccaddError
@@ -40,7 +40,6 @@ from orccadd.wire.schema import H, T, TickLayout
 from orccadd.wire.telemetry import TelemetryBlock
 
 log = logging.getLogger("orccadd")
-STALL_MIN_S = 0.25  # as `unit.STALL_MIN_S`
 REPLY_WAIT_S = 5.0  # the longest a unit's answer to a short request may take
 STALL_ANSWER_S = 0.2  # how long a stalled unit's answer (where it waits) is waited for
 
@@ -448,18 +447,14 @@ class UnitProxy:
         return self.failure
 
     def heartbeat_fresh(self, now_ns: int) -> bool:
-        stale_s = self.cfg.daemon.watchdog_stale_periods * self.cfg.control_period_s
-        return now_ns - int(self.tel.header[H.HEARTBEAT_NS]) < stale_s * 1e9
-
-    @property
-    def stall_after_s(self) -> float:
-        return max(STALL_MIN_S, self.cfg.daemon.watchdog_stale_periods * self.cfg.control_period_s)
+        return heartbeat_fresh(self.cfg, self.tel, now_ns)
 
     def check_stall(self, now_ns: int) -> str:
+        """As `ResourceUnit.check_stall`, the unit's safe stop asked of it."""
         if self.stalled or not self.control_running():
             return ""
-        last_ns = max(int(self.tel.header[H.HEARTBEAT_NS]), self._started_ns)
-        if now_ns - last_ns < self.stall_after_s * 1e9:
+        quiet_s = stalled_for_s(self.cfg, self.tel, self._started_ns, now_ns)
+        if not quiet_s:
             return ""
         # the unit safe-stops its resource from a thread of its own and says where its control
         # thread waits (not waited for long: a unit hung whole answers nothing)
@@ -467,7 +462,7 @@ class UnitProxy:
             line = str(self.link.call("stalled", timeout_s=STALL_ANSWER_S).get("line", ""))
         except UnitLinkError:
             line = ""
-        self.stalled = f"its control loop has not ticked for {(now_ns - last_ns) * 1e-9:.2f} s" + (
+        self.stalled = f"its control loop has not ticked for {quiet_s:.2f} s" + (
             f" (waiting at {line})" if line else ""
         )
         return self.stalled

@@ -21,12 +21,13 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
-from multiprocessing import resource_tracker, shared_memory
+from multiprocessing import shared_memory
 
 import numpy as np
 import numpy.typing as npt
 
 from orccadd.task.events import EventQueue
+from orccadd.wire.telemetry import attach_shared
 
 MAGIC = 0x0E44_0001
 
@@ -107,10 +108,7 @@ class UnitChannel:
 
     @staticmethod
     def attach(name: str) -> UnitChannel:
-        shm = shared_memory.SharedMemory(name=name, create=False)
-        # Python < 3.13 registers attached blocks too and would unlink the owner's block at exit
-        resource_tracker.unregister(shm._name, "shared_memory")  # type: ignore[attr-defined]
-        return UnitChannel(shm, owner=False)
+        return UnitChannel(attach_shared(name), owner=False)
 
     @property
     def name(self) -> str:

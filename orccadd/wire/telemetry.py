@@ -29,6 +29,15 @@ _TICK_HEAD = int(H.TICK_HEAD)
 _HEARTBEAT_NS = int(H.HEARTBEAT_NS)
 
 
+def attach_shared(name: str) -> shared_memory.SharedMemory:
+    """Another process's shared-memory block `name`, attached (not owned: closing it here does
+    not unlink it)."""
+    shm = shared_memory.SharedMemory(name=name, create=False)
+    # Python < 3.13 registers attached blocks too and would unlink the owner's block at exit
+    resource_tracker.unregister(shm._name, "shared_memory")  # type: ignore[attr-defined]
+    return shm
+
+
 class TelemetryBlock:
     """Views on the block. The real-time process creates it; the command daemon attaches."""
 
@@ -80,10 +89,7 @@ class TelemetryBlock:
 
     @staticmethod
     def attach(name: str) -> TelemetryBlock:
-        shm = shared_memory.SharedMemory(name=name, create=False)
-        # Python < 3.13 registers attached blocks too and would unlink the owner's block at exit
-        resource_tracker.unregister(shm._name, "shared_memory")  # type: ignore[attr-defined]
-        return TelemetryBlock(shm, owner=False)
+        return TelemetryBlock(attach_shared(name), owner=False)
 
     @property
     def name(self) -> str:
