@@ -344,7 +344,9 @@ class RealtimeProcess:
         for u in m.units:
             u.stop()
         m.rt_commands.close()
-        m.join_units(JOIN_S)  # every unit's threads: control, outputs, a reset's device work
+        # every unit's threads: control, outputs, a reset's device work; a unit process's end
+        # releases its hardware too: it has as long as a release has
+        m.join_units(RELEASE_S if self.in_processes else JOIN_S)
         m.mission.state = MachineState.IDLE
         m.publish()
         for u in m.units:

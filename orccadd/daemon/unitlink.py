@@ -147,7 +147,12 @@ class UnitLink:
         ticked; `UnitLinkError` with what it said if it ended or did not hold in time."""
         end = time.monotonic() + timeout_s
         while not self.holding:
-            msg = self._recv(end - time.monotonic())
+            try:
+                msg = self._recv(end - time.monotonic())
+            except UnitLinkError:
+                if self.refused:  # its own words: what it could not do
+                    raise UnitLinkError(self.refused) from None
+                raise
             if msg is None:
                 raise UnitLinkError(f"unit {self.resource}: did not hold its resource within {timeout_s:g} s")
             self._told(msg)
