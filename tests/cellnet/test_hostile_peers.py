@@ -67,8 +67,9 @@ def test_malformed_payloads_are_dropped_with_a_log_line(arm_a: Member, certs: Pa
     s = peer_session(certs, "console", arm_a.endpoint)
     try:
         until_matched(s, "orccadd/test/console/signal/PartPlaced")
+        block = zenoh.CongestionControl.BLOCK  # each delivered: a put is dropped under congestion by default
         for raw in GARBAGE:
-            s.put("orccadd/test/console/signal/PartPlaced", raw)
+            s.put("orccadd/test/console/signal/PartPlaced", raw, congestion_control=block)
         replies = []
         for key in ("orccadd/test/arm-a/read", "orccadd/test/arm-a/control"):
             for raw in GARBAGE:
