@@ -6,11 +6,12 @@ from __future__ import annotations
 import canopen
 
 from orccadd.drivers.canopen.capabilities import consumer_entry
-from tools.make_cia402_eds import OUT, eds
+from tools.make_cia402_eds import OUT, OUT_ECAT, eds
 
 
 def test_the_shipped_file_is_the_generators_output() -> None:
     assert OUT.read_text() == eds(), "run: python tools/make_cia402_eds.py"
+    assert OUT_ECAT.read_text() == eds(ethercat=True), "run: python tools/make_cia402_eds.py"
 
 
 def test_canopen_reads_it_as_a_cia_402_drive() -> None:
