@@ -26,6 +26,10 @@ through the `send` callable given at construction. What it does:
   the EMCY (0x1014) is aborted with 0x06090030, as CiA 301 lets the identifier change only while
   bit 31 says "not valid".
 
+The objects, their values and their typed SDO access are `objects.ObjectStore`'s (the EtherCAT
+simulator's CoE server serves the same store); this class adds CAN's side and the PDO rules
+(`_before_store`, `_after_store`).
+
 Write hooks (`on_write`) let the drive behind the node react to controlword and friends,
 whether they arrive by PDO or SDO; checks (`checks`) let it refuse a value before it is stored
 (an SDO download is aborted with the check's code, an RPDO's entry left as it was).
@@ -33,7 +37,6 @@ whether they arrive by PDO or SDO; checks (`checks`) let it refuse a value befor
 
 from __future__ import annotations
 
-import logging
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -41,50 +44,58 @@ from enum import IntEnum
 from typing import Any
 
 import can
-import canopen
-from canopen.objectdictionary import ODArray, ODRecord, ODVariable
+from canopen.objectdictionary import ODVariable
 
-from orccadd.drivers.canopen.capabilities import object_dictionary
+from orccadd.drivesim.objects import (
+    ABORT_COMMAND,
+    ABORT_DEVICE_STATE,
+    ABORT_GENERAL,
+    ABORT_LENGTH,
+    ABORT_NO_OBJECT,
+    ABORT_NO_SUBINDEX,
+    ABORT_NOT_MAPPABLE,
+    ABORT_PDO_LENGTH,
+    ABORT_READ_ONLY,
+    ABORT_TOGGLE,
+    ABORT_TOO_LONG,
+    ABORT_UNSUPPORTED_ACCESS,
+    ABORT_VALUE_HIGH,
+    ABORT_VALUE_LOW,
+    ABORT_VALUE_RANGE,
+    ABORT_WRITE_ONLY,
+    ObjectStore,
+    SdoAbortError,
+)
 
-log = logging.getLogger("orccadd.drivesim")
+__all__ = [
+    "ABORT_COMMAND",
+    "ABORT_DEVICE_STATE",
+    "ABORT_GENERAL",
+    "ABORT_LENGTH",
+    "ABORT_MAPPING_ORDER",
+    "ABORT_NOT_MAPPABLE",
+    "ABORT_NO_OBJECT",
+    "ABORT_NO_SUBINDEX",
+    "ABORT_PDO_LENGTH",
+    "ABORT_READ_ONLY",
+    "ABORT_TOGGLE",
+    "ABORT_TOO_LONG",
+    "ABORT_UNSUPPORTED_ACCESS",
+    "ABORT_VALUE_HIGH",
+    "ABORT_VALUE_LOW",
+    "ABORT_VALUE_RANGE",
+    "ABORT_WRITE_ONLY",
+    "Nmt",
+    "Pdo",
+    "SdoAbortError",
+    "SlaveNode",
+]
 
-# SDO abort codes (CiA 301, 7.2.4.3.17)
-ABORT_TOGGLE = 0x05030000
-ABORT_COMMAND = 0x05040001
-ABORT_UNSUPPORTED_ACCESS = 0x06010000
-ABORT_WRITE_ONLY = 0x06010001
-ABORT_READ_ONLY = 0x06010002
-ABORT_NO_OBJECT = 0x06020000
-ABORT_NOT_MAPPABLE = 0x06040041
-ABORT_PDO_LENGTH = 0x06040042
-ABORT_LENGTH = 0x06070010
-ABORT_TOO_LONG = 0x06070012  # data type does not match, length of service parameter too high
-ABORT_NO_SUBINDEX = 0x06090011
-ABORT_VALUE_RANGE = 0x06090030
-ABORT_VALUE_HIGH = 0x06090031
-ABORT_VALUE_LOW = 0x06090032
-ABORT_DEVICE_STATE = 0x08000022
-
-ABORT_GENERAL = 0x08000000
 # a mapping written out of CiA 301's order (the PDO still valid, or an entry while the count is not
 # 0): CiA 301 names no code for it; CANopenNode and Copley's drives answer "unsupported access"
 ABORT_MAPPING_ORDER = ABORT_UNSUPPORTED_ACCESS
-_VARIABLE_SIZE = frozenset(
-    {
-        canopen.objectdictionary.VISIBLE_STRING,
-        canopen.objectdictionary.OCTET_STRING,
-        canopen.objectdictionary.UNICODE_STRING,
-        canopen.objectdictionary.DOMAIN,
-    }
-)
 
 COB_NMT, COB_SYNC = 0x000, 0x080
-_EMPTY: dict[int, Any] = {
-    canopen.objectdictionary.VISIBLE_STRING: "",
-    canopen.objectdictionary.UNICODE_STRING: "",
-    canopen.objectdictionary.OCTET_STRING: b"",
-    canopen.objectdictionary.DOMAIN: b"",
-}
 COB_INVALID = 1 << 31  # bit 31 of a COB-ID (PDO, EMCY): 1 = not valid
 COB_IDENTIFIER = 0x3FFFFFFF  # bits 0-29: what may change only while not valid
 
@@ -96,12 +107,6 @@ class Nmt(IntEnum):
     STOPPED = 0x04
     OPERATIONAL = 0x05
     PRE_OPERATIONAL = 0x7F
-
-
-class SdoAbortError(Exception):
-    def __init__(self, code: int) -> None:
-        super().__init__(f"SDO abort 0x{code:08X}")
-        self.code = code
 
 
 @dataclass
@@ -132,28 +137,18 @@ class _Segmented:
     size: int | None = None
 
 
-class SlaveNode:
+class SlaveNode(ObjectStore):
+    """A CANopen slave over an `ObjectStore`: its values, `checks` and `on_write` hooks are the
+    store's; frames in through `on_frame`, out through `send`."""
+
     def __init__(
         self, node_id: int, eds: str, send: Callable[[can.Message], None], strict_cob_ids: bool = True
     ) -> None:
-        self.node_id = node_id
+        super().__init__(eds, node_id)
         self.strict_cob_ids = strict_cob_ids
         self.now_s = 0.0  # the time of the frame or poll being handled
         self.eds = eds
-        self.od = object_dictionary(eds, node_id)
         self.send = send
-        self.vars: dict[tuple[int, int], ODVariable] = {}
-        for obj in self.od.values():
-            if isinstance(obj, ODVariable):
-                self.vars[(obj.index, 0)] = obj
-            elif isinstance(obj, ODRecord | ODArray):
-                for sub in obj.values():
-                    self.vars[(sub.index, sub.subindex)] = sub
-        self.values: dict[tuple[int, int], Any] = {}
-        self.on_write: dict[tuple[int, int], Callable[[Any], None]] = {}
-        # raise SdoAbortError to refuse a value before it is stored (SDO: aborted; RPDO: ignored)
-        self.checks: dict[tuple[int, int], Callable[[Any], None]] = {}
-        self.unsized_logged: set[tuple[int, int]] = set()  # objects an unsized download was logged for
         self.on_heartbeat_lost: Callable[[int], None] = lambda producer: None
         self.on_reset_node: Callable[[], None] = lambda: None  # the application resets too
         self.nmt = Nmt.INITIALISING
@@ -168,24 +163,9 @@ class SlaveNode:
         self._lost: set[int] = set()
 
     # ---- object values -------------------------------------------------------------------
-    def get(self, index: int, sub: int = 0) -> Any:
-        return self.values[(index, sub)]
-
-    def set(self, index: int, sub: int, value: Any) -> None:
-        """Set a value from the drive's side (no hooks, no access check)."""
-        self.values[(index, sub)] = value
-
-    def has(self, index: int, sub: int = 0) -> bool:
-        return (index, sub) in self.values
-
-    def _defaults(self, comm_only: bool) -> None:
-        for key, var in self.vars.items():
-            if comm_only and not 0x1000 <= key[0] <= 0x1FFF:
-                continue
-            default = var.value if var.value is not None else var.default
-            if default is None:
-                default = _EMPTY.get(var.data_type or 0, 0)
-            self.values[key] = default
+    def defaults(self, comm_only: bool) -> None:
+        """Values back to the description's defaults, and the PDOs rebuilt from them."""
+        super().defaults(comm_only)
         self._build_pdos()
 
     # ---- NMT -------------------------------------------------------------------------------
@@ -194,7 +174,7 @@ class SlaveNode:
         self._reset(now_s, comm_only=False)
 
     def _reset(self, now_s: float, comm_only: bool) -> None:
-        self._defaults(comm_only)
+        self.defaults(comm_only)
         if not comm_only:  # the application restarts too: its own values, before the boot-up
             self.on_reset_node()
         self._seg = None
@@ -468,19 +448,8 @@ class SlaveNode:
         idx, sb = struct.unpack_from("<HB", req, 1) if ccs not in (0, 3) else (0, 0)
         self._sdo_reply(struct.pack("<BHBI", 0x80, idx, sb, code))
 
-    def _var(self, index: int, sub: int) -> ODVariable:
-        var = self.vars.get((index, sub))
-        if var is None:
-            raise SdoAbortError(
-                ABORT_NO_SUBINDEX if any(k[0] == index for k in self.vars) else ABORT_NO_OBJECT
-            )
-        return var
-
     def _upload_initiate(self, index: int, sub: int) -> None:
-        var = self._var(index, sub)
-        if not var.readable:
-            raise SdoAbortError(ABORT_WRITE_ONLY)
-        data = var.encode_raw(self.values[(index, sub)])
+        data = self.read(index, sub)
         if len(data) <= 4:
             n = 4 - len(data)
             self._sdo_reply(struct.pack("<BHB", 0x43 | n << 2, index, sub) + data.ljust(4, b"\x00"))
@@ -489,43 +458,18 @@ class SlaveNode:
             self._sdo_reply(struct.pack("<BHBI", 0x41, index, sub, len(data)))
 
     def _download_initiate(self, cmd: int, index: int, sub: int, req: bytes) -> None:
-        var = self._var(index, sub)
+        var = self.var(index, sub)
         if not var.writable:
             raise SdoAbortError(ABORT_READ_ONLY)
         expedited, sized = bool(cmd & 0x02), bool(cmd & 0x01)
         if expedited:
-            data = bytes(req[4 : 8 - (cmd >> 2 & 0x3)]) if sized else self._unsized(var, bytes(req[4:8]))
+            data = bytes(req[4 : 8 - (cmd >> 2 & 0x3)]) if sized else self.unsized(var, bytes(req[4:8]))
             self._store(var, data)
             self._sdo_reply(struct.pack("<BHB", 0x60, index, sub) + b"\x00" * 4)
         else:
             total: int | None = struct.unpack_from("<I", req, 4)[0] if sized else None
             self._seg = _Segmented(index, sub, upload=False, data=bytearray(), size=total)
             self._sdo_reply(struct.pack("<BHB", 0x60, index, sub) + b"\x00" * 4)
-
-    def _unsized(self, var: ODVariable, data: bytes) -> bytes:
-        """An expedited download without a size indication (e = 1, s = 0, allowed by CiA 301): the
-        object's own size taken from the 4 bytes, logged once per object. Bytes beyond it other than
-        padding (zeros, or the sign extension of a negative value) would be lost: aborted."""
-        size = 4 if var.data_type in _VARIABLE_SIZE else len(var) // 8
-        if size > 4:  # more than an expedited transfer carries
-            raise SdoAbortError(ABORT_LENGTH)
-        value, rest = data[:size], data[size:]
-        negative = var.data_type in canopen.objectdictionary.SIGNED_TYPES and bool(value[-1] & 0x80)
-        if rest.strip(b"\x00") and not (negative and not rest.strip(b"\xff")):
-            raise SdoAbortError(ABORT_TOO_LONG)
-        key = (var.index, var.subindex)
-        if key not in self.unsized_logged:
-            self.unsized_logged.add(key)
-            log.warning(
-                "node %d: expedited SDO download to 0x%04X:%02X without a size indication (e=1, s=0): "
-                "taken as the object's %d bytes (%s); logged once per object",
-                self.node_id,
-                var.index,
-                var.subindex,
-                size,
-                value.hex(" "),
-            )
-        return value
 
     def _segment(self, req: bytes) -> None:
         seg = self._seg
@@ -550,34 +494,21 @@ class SlaveNode:
             self._seg = None
             if seg.size is not None and seg.size != len(seg.data):
                 raise SdoAbortError(ABORT_LENGTH)
-            self._store(self._var(seg.index, seg.sub), bytes(seg.data))
+            self.write(seg.index, seg.sub, bytes(seg.data))
         self._sdo_reply(bytes([0x20 | toggle << 4]) + b"\x00" * 7)
 
-    def _store(self, var: ODVariable, data: bytes) -> None:
-        if var.data_type not in _VARIABLE_SIZE and len(data) != len(var) // 8:
-            raise SdoAbortError(ABORT_LENGTH)
-        value = var.decode_raw(data)
-        key = (var.index, var.subindex)
-        if isinstance(value, int):  # the PDO rules first: CiA 301 names their codes
+    def _before_store(self, var: ODVariable, value: Any) -> None:
+        """The PDO rules, before the description's limits: CiA 301 names their codes."""
+        if isinstance(value, int):
             self._check_mapping_write(var.index, var.subindex, value)
-            self._check_cob_id_write(key, value)
-        if isinstance(value, int | float):
-            if var.max is not None and value > var.max:
-                raise SdoAbortError(ABORT_VALUE_HIGH)
-            if var.min is not None and value < var.min:
-                raise SdoAbortError(ABORT_VALUE_LOW)
-        check = self.checks.get(key)
-        if check is not None:
-            check(value)
-        self.values[key] = value
+            self._check_cob_id_write((var.index, var.subindex), value)
+
+    def _after_store(self, var: ODVariable, value: Any) -> None:
         pdo = self._pdo_by_comm(var.index) or self._pdo_by_mapping(var.index)
         if pdo is not None:  # a PDO's parameters changed: it follows at once
             self._load_pdo(pdo)
         if var.index == 0x1016:
             self._configure_consumers(0.0)
-        hook = self.on_write.get(key)
-        if hook is not None:
-            hook(value)
 
     def _sdo_reply(self, payload: bytes) -> None:
         self._emit(0x580 + self.node_id, payload)

@@ -1,2 +1,3 @@
-"""An EtherCAT slave simulator (issue 45, under way): a chain of ESCs answering a master's
-frames on one end of a virtual Ethernet link. So far: the frames and their datagrams."""
+"""An EtherCAT slave simulator (`python -m orccadd.ecatsim`): a line of ESCs answering a master's
+frames on one end of a virtual Ethernet link, each with a CoE mailbox over a CiA 402 drive's
+dictionary and the drive simulator's axis on the shared arm (docs/simulators.md)."""

@@ -204,6 +204,7 @@ class Esc:
             start, length = self._sm_area(sm)
             if offset <= start + length - 1 < offset + n:  # its last byte read: empty
                 self.sm[sm].full = False
+                self._set_sm_status(sm)
                 self._deliver_outbox()
         return True
 

@@ -21,6 +21,7 @@ BACKENDS: dict[str, tuple[str, str]] = {
     "canopen402": ("orccadd.physres.canopen402", "Canopen402Arm"),
     "ur_rtde": ("orccadd.physres.ur_rtde", "UrRtdeArm"),
     "dynamixel": ("orccadd.physres.dynamixel", "DynamixelArm"),
+    "ethercat402": ("orccadd.physres.ethercat402", "Ethercat402Arm"),
 }
 
 # the bus packages a built-in backend needs, and the extra that installs them
@@ -28,6 +29,7 @@ EXTRAS: dict[str, tuple[str, tuple[str, ...]]] = {
     "canopen402": ("canopen", ("can", "canopen")),
     "dynamixel": ("dynamixel", ("serial", "dynamixel_sdk")),
     "ur_rtde": ("ur", ("rtde_control", "rtde_receive", "dashboard_client")),
+    "ethercat402": ("ethercat", ("pysoem",)),
 }
 
 

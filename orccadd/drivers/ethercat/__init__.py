@@ -1,0 +1,1 @@
+"""The EtherCAT master side: SOEM (pysoem) driving CiA 402 drives over CoE."""
