@@ -23,12 +23,16 @@ state and statusword out, transitions numbered as in the standard's figure:
 
 `decode_state` and `command_towards` are the controller's side: what state a statusword
 reports, and which controlword moves a drive one step towards OPERATION ENABLED (or towards
-SWITCHED ON, where the startup parks the drives until the cyclic exchange runs).
+SWITCHED ON, where the startup parks the drives until the cyclic exchange runs); `step_towards`,
+`step_quick_stop` and `step_fault_reset` take a whole arm's drives one cycle on, whatever bus
+carries their controlwords (CANopen's RPDOs, EtherCAT's process data).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from enum import IntEnum
+from typing import Protocol
 
 
 class State(IntEnum):
@@ -244,3 +248,69 @@ _POWERED = (
     State.QUICK_STOP_ACTIVE,
     State.FAULT_REACTION_ACTIVE,
 )
+
+
+# the power stage on: the drive holds or moves the joint
+POWERED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
+
+
+class DriveWords(Protocol):
+    """A drive as the controller sees it: the state its last statusword showed, the controlword
+    the next cycle sends."""
+
+    state: State
+    controlword: int
+
+
+def step_towards(drives: Iterable[DriveWords], target: State) -> bool:
+    """One cycle towards `target` (SWITCHED ON or OPERATION ENABLED) on every drive (transitions
+    2, 3, 4 or 5, and 15 out of a fault). True once every drive is there."""
+    there = True
+    for d in drives:
+        cw = command_towards(d.state, target)
+        if cw == CW_FAULT_RESET and d.controlword == CW_FAULT_RESET:
+            cw = CW_DISABLE_VOLTAGE  # for a rising edge next time
+        if cw is not None:
+            d.controlword = cw
+        there = there and d.state is target
+    return there
+
+
+def step_quick_stop(drives: Iterable[DriveWords]) -> bool:
+    """One cycle of quick stop (transition 11) on every enabled drive. True once every drive has
+    its power stage off."""
+    off = True
+    for d in drives:
+        # a drive asked to enable may be enabled already, its statusword saying so not yet here
+        if d.state is State.OPERATION_ENABLED or d.controlword == CW_ENABLE_OPERATION:
+            d.controlword = CW_QUICK_STOP
+        off = off and d.state not in POWERED
+    return off
+
+
+def step_fault_reset(drives: Iterable[DriveWords]) -> bool:
+    """One cycle of fault reset: a rising edge of bit 7 on every faulted drive (reset, then
+    disable voltage, then reset again). True once no drive is in FAULT."""
+    done = True
+    for d in drives:
+        if d.state is State.FAULT:
+            d.controlword = CW_FAULT_RESET if d.controlword != CW_FAULT_RESET else CW_DISABLE_VOLTAGE
+            done = False
+    return done
+
+
+# error codes of EMCY messages and of 0x603F (CiA 301 / CiA 402) in words
+ERROR_CODE_TEXTS = {
+    0x2310: "over-current",
+    0x3210: "DC link over-voltage",
+    0x4310: "drive over-temperature",
+    0x8110: "CAN overrun",
+    0x8130: "heartbeat / life guard error",
+    0x8611: "following error",
+    0x7300: "sensor (encoder) error",
+}
+
+
+def error_code_text(code: int) -> str:
+    """An error code in words ("" if unknown): exact, else its class (the high byte)."""
+    return ERROR_CODE_TEXTS.get(code, ERROR_CODE_TEXTS.get(code & 0xFF00, ""))

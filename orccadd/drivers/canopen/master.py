@@ -49,7 +49,7 @@ from orccadd.drivers.canopen.settings import CanopenSettings
 from orccadd.drivers.canopen.startup import CONTROLLER_NODE_ID, configure_drive
 from orccadd.errors import ResourceError
 
-POWERED = (cia402.State.OPERATION_ENABLED, cia402.State.QUICK_STOP_ACTIVE, cia402.State.FAULT_REACTION_ACTIVE)
+POWERED = cia402.POWERED
 _TARGET_OF = {cia402.MODE_CSP: 0x607A, cia402.MODE_CSV: 0x60FF, cia402.MODE_CST: 0x6071}
 _TARGET_FMT = {0x607A: "i", 0x60FF: "i", 0x6071: "h"}
 
@@ -387,7 +387,7 @@ class CanopenMaster:
                 a.rebooted = True
         elif kind == 0x080 and len(data) >= 3:
             a.emcy_code = struct.unpack_from("<H", data, 0)[0]
-            a.emcy_text = _emcy_text(a.emcy_code)
+            a.emcy_text = cia402.error_code_text(a.emcy_code)
         elif kind == 0x580 and a.sdo_pending is not None and len(data) >= 8:
             self._sdo_answer(a, bytes(data))
 
@@ -452,42 +452,16 @@ class CanopenMaster:
             a.emcy_text = ""
 
     def step_fault_reset(self) -> bool:
-        """One cycle of fault reset: a rising edge of bit 7 on every faulted axis (reset, then
-        disable voltage, then reset again). True once no axis is in FAULT."""
-        done = True
-        for a in self.axes:
-            if a.state is cia402.State.FAULT:
-                a.controlword = (
-                    cia402.CW_FAULT_RESET
-                    if a.controlword != cia402.CW_FAULT_RESET
-                    else cia402.CW_DISABLE_VOLTAGE
-                )
-                done = False
-        return done
+        """One cycle of fault reset on every faulted axis (`cia402.step_fault_reset`)."""
+        return cia402.step_fault_reset(self.axes)
 
     def step_towards(self, target: cia402.State) -> bool:
-        """One cycle towards `target` (SWITCHED ON or OPERATION ENABLED) on every axis (CiA 402
-        transitions 2, 3, 4 or 5, and 15 out of a fault). True once every axis is there."""
-        there = True
-        for a in self.axes:
-            cw = cia402.command_towards(a.state, target)
-            if cw == cia402.CW_FAULT_RESET and a.controlword == cia402.CW_FAULT_RESET:
-                cw = cia402.CW_DISABLE_VOLTAGE  # for a rising edge next time
-            if cw is not None:
-                a.controlword = cw
-            there = there and a.state is target
-        return there
+        """One cycle towards `target` on every axis (`cia402.step_towards`)."""
+        return cia402.step_towards(self.axes, target)
 
     def step_quick_stop(self) -> bool:
-        """One cycle of quick stop (transition 11) on every enabled axis. True once every axis has
-        its power stage off."""
-        off = True
-        for a in self.axes:
-            # an axis asked to enable may be enabled already, its TPDO saying so not yet here
-            if a.state is cia402.State.OPERATION_ENABLED or a.controlword == cia402.CW_ENABLE_OPERATION:
-                a.controlword = cia402.CW_QUICK_STOP
-            off = off and a.state not in POWERED
-        return off
+        """One cycle of quick stop on every enabled axis (`cia402.step_quick_stop`)."""
+        return cia402.step_quick_stop(self.axes)
 
     def write_mode(self, code: int) -> None:
         """Ask every drive for mode `code` (0x6060) by a non-blocking SDO write; answers are
@@ -536,18 +510,3 @@ class CanopenMaster:
 
 def _per_mille(tau_nm: float, a: AxisLink) -> int:
     return max(-32768, min(32767, round(tau_nm / a.nm_per_mille)))
-
-
-EMCY_TEXTS = {
-    0x2310: "over-current",
-    0x3210: "DC link over-voltage",
-    0x4310: "drive over-temperature",
-    0x8110: "CAN overrun",
-    0x8130: "heartbeat / life guard error",
-    0x8611: "following error",
-    0x7300: "sensor (encoder) error",
-}
-
-
-def _emcy_text(code: int) -> str:
-    return EMCY_TEXTS.get(code, EMCY_TEXTS.get(code & 0xFF00, ""))
