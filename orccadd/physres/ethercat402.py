@@ -36,7 +36,9 @@ import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
 from orccadd.drivers.canopen import cia402
-from orccadd.drivers.ethercat.settings import EthercatSettings, load_ethercat_settings
+from orccadd.drivers.canopen.capabilities import object_dictionary
+from orccadd.drivers.ethercat.pdo import layout_for
+from orccadd.drivers.ethercat.settings import TARGET_OF_MODE, EthercatSettings, load_ethercat_settings
 from orccadd.errors import ResourceError
 from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
@@ -56,6 +58,15 @@ COMMAND_OF = {v: k for k, v in MODE_OF.items()}
 COMMAND_OF_MODE = {"csp": CommandMode.POSITION, "csv": CommandMode.VELOCITY, "cst": CommandMode.TORQUE}
 
 
+def mapped_modes(s: EthercatSettings) -> frozenset[CommandMode]:
+    layouts = [layout_for(object_dictionary(eds, 1)) for eds in s.eds_paths]
+    return frozenset(
+        COMMAND_OF_MODE[name]
+        for name, index in TARGET_OF_MODE.items()
+        if all(index in lay.rx for lay in layouts)
+    )
+
+
 class Ethercat402Arm(PhysicalResource):
     Settings = EthercatSettings
 
@@ -66,14 +77,13 @@ class Ethercat402Arm(PhysicalResource):
 
     @classmethod
     def describe(cls, config: RobotConfig) -> ResourceDescription:
-        """The configured mode and torque (CST) beside it: the RxPDO carries every mode's target
-        and the mode of operation, so the drives switch while enabled, within one cycle."""
+        """Every mode whose target every drive's RxPDO carries (from their descriptions): with the
+        mode of operation in the RxPDO too, the drives switch while enabled, within one cycle."""
         s: EthercatSettings = config.backend_settings
-        first = COMMAND_OF_MODE[s.mode]
         return ResourceDescription(
             backend="ethercat402",
             joints=config.joint_names,
-            modes=frozenset({first, CommandMode.TORQUE}),
+            modes=mapped_modes(s),
             mode_switch_needs_disable=False,
             position=MEASURED,
             velocity=MEASURED,  # the drive's velocity actual value (0x606C)
@@ -95,7 +105,9 @@ class Ethercat402Arm(PhysicalResource):
 
         s: EthercatSettings = config.backend_settings
         self.settings = s
-        self.master = EcatMaster(s, list(config.joint_names), config.control_period_s)
+        self.master = EcatMaster(
+            s, list(config.joint_names), config.control_period_s, config.safe_stop.deceleration_rad_s2
+        )
         n = self.dof
         self._pos = np.zeros(n)
         self._vel = np.zeros(n)

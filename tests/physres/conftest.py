@@ -45,6 +45,7 @@ DESCRIBED_BY = {  # the config each backend's description is read from at collec
     "canopen402": "configs/robots/canopen-6axis.toml",
     "dynamixel": "configs/robots/dxl-6axis-sim.toml",
     "ur_rtde": "configs/robots/ur5e-rtde-sim.toml",
+    "ethercat402": "configs/robots/ethercat-6axis-sim.toml",
 }
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -10,6 +11,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from orccadd.ecatsim.process import EcatSimProcess
 from orccadd.errors import ResourceError
 from orccadd.fault import FaultKind
 from orccadd.physres import PhysicalResource
@@ -22,10 +24,11 @@ from tests.canopen_rig import Rig, canopen_rig
 from tests.conftest import ROOT, UR5E, variant_text
 from tests.physres.test_dynamixel import DxlRig, dxl_rig
 
-BACKENDS = ["sim", "sim_process", "canopen402", "dynamixel", "ur_rtde"]
+BACKENDS = ["sim", "sim_process", "canopen402", "dynamixel", "ur_rtde", "ethercat402"]
 # the shipped config each backend's description is read from at collection (`describe` needs no
 # device): a test in a mode the backend does not declare is not generated for it at all
 UR_SIM = ROOT / "configs/robots/ur5e-rtde-sim.toml"
+ECAT_SIM = ROOT / "configs/robots/ethercat-6axis-sim.toml"
 UNLOCK_DELAY_S = 1  # the simulated UR controller's: a protective stop can be unlocked 1 s after it
 
 # ur_rtde blocks in C++ holding the interpreter: only a thread can time such a test out
@@ -69,6 +72,15 @@ def ur_sim(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, UrS
         yield config, sim
 
 
+@pytest.fixture(scope="module")
+def ecat_sim() -> Iterator[EcatSimProcess]:
+    """Six simulated EtherCAT drives on a veth link (a separate process, root: its namespace)."""
+    if os.geteuid() != 0:
+        pytest.skip("the EtherCAT simulator's link needs root")
+    with EcatSimProcess(ECAT_SIM, "--priority", "70") as sim:
+        yield sim
+
+
 @pytest.fixture(params=BACKENDS)
 def resource(request: pytest.FixtureRequest) -> Iterator[PhysicalResource]:
     if request.param == "canopen402":
@@ -77,6 +89,9 @@ def resource(request: pytest.FixtureRequest) -> Iterator[PhysicalResource]:
         cfg = load_robot_config(request.getfixturevalue("dxl").config)
     elif request.param == "ur_rtde":
         cfg = load_robot_config(request.getfixturevalue("ur_sim")[0])
+    elif request.param == "ethercat402":
+        request.getfixturevalue("ecat_sim")
+        cfg = load_robot_config(ECAT_SIM)
     else:
         cfg = with_backend(load_robot_config(UR5E), request.param)
     res = create_resource(cfg)
@@ -102,6 +117,9 @@ def inject_device_fault(
     if resource.description.backend == "ur_rtde":
         sim: UrSimProcess = request.getfixturevalue("ur_sim")[1]
         return (lambda: sim.inject("protective_stop")), ""  # the controller stops the whole arm
+    if resource.description.backend == "ethercat402":
+        ecat: EcatSimProcess = request.getfixturevalue("ecat_sim")
+        return (lambda: ecat.inject("overcurrent", device=3)), third  # the third slave on the line
     rig: Rig = request.getfixturevalue("can_rig")
     return (lambda: rig.drives.inject("overcurrent", device=3)), third  # node 3: the third joint
 

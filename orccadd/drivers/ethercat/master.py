@@ -4,8 +4,9 @@ Startup (`EcatMaster.start`, before the control loop runs; blocking): the interf
 exists and is up), the line scanned (`config_init`: as many slaves as joints, each one's identity
 as the config says: vendor id, product code, revision), PRE-OP, each drive configured over CoE
 SDO (the PDO mapping of `pdo.layout_for` in `rx_pdo`/`tx_pdo` and their assignment to SM2/SM3,
-the mode of operation, the interpolation period, the following error window, the sync managers'
-synchronisation: DC SYNC0 or SM-synchronous), the distributed clocks (`config_dc`, SYNC0 at the
+the mode of operation, the interpolation period, the following error window, the quick stop
+deceleration (the config's safe stop's), the sync managers' synchronisation: DC SYNC0 or
+SM-synchronous), the distributed clocks (`config_dc`, SYNC0 at the
 control period on every slave), the process data image (`config_map`), SAFE-OP. Every state
 change waits `state_timeout_s` and a refusal names the slave, its joint and its AL status code.
 OP comes from the resource, once the cyclic exchange runs (a slave takes OP only with outputs,
@@ -35,6 +36,7 @@ import pysoem
 
 from orccadd.drivers.canopen import cia402
 from orccadd.drivers.canopen.capabilities import MODE_CODES, object_dictionary
+from orccadd.drivers.canopen.startup import interpolation_time_period
 from orccadd.drivers.ethercat.pdo import PdoLayout, layout_for
 from orccadd.drivers.ethercat.settings import TARGET_OF_MODE, EthercatSettings
 from orccadd.errors import ResourceError
@@ -108,8 +110,15 @@ class CycleReport:
 
 
 class EcatMaster:
-    def __init__(self, settings: EthercatSettings, joint_names: list[str], period_s: float) -> None:
+    def __init__(
+        self,
+        settings: EthercatSettings,
+        joint_names: list[str],
+        period_s: float,
+        stop_deceleration_rad_s2: float,
+    ) -> None:
         self.s = settings
+        self.stop_deceleration_rad_s2 = stop_deceleration_rad_s2
         self.names = joint_names
         self.period_s = period_s
         self.period_ns = int(round(period_s * 1e9))
@@ -221,12 +230,13 @@ class EcatMaster:
             self._sdo_write(d, assign, 0, u8.pack(1))
         d.mode = self._mode
         self._sdo_write(d, 0x6060, 0, struct.pack("<b", self._mode))
-        if 0x60C2 in od:  # the interpolation period: the control period as value × 10^index s
-            value, exponent = self.period_s * 1e3, -3
-            while value < 100 and exponent > -6 and abs(value - round(value)) > 1e-9:
-                value, exponent = value * 10, exponent - 1
-            self._sdo_write(d, 0x60C2, 1, u8.pack(round(value)))
+        if 0x60C2 in od:  # the drive interpolates (its CSP velocity feed-forward) over the period
+            value, exponent = interpolation_time_period(self.period_s)
+            self._sdo_write(d, 0x60C2, 1, u8.pack(value))
             self._sdo_write(d, 0x60C2, 2, struct.pack("<b", exponent))
+        if 0x6085 in od:  # quick stop: the config's safe stop deceleration
+            decel = round(self.stop_deceleration_rad_s2 * d.counts_per_rad)
+            self._sdo_write(d, 0x6085, 0, u32.pack(min(decel, 0xFFFFFFFF)))
         if 0x6065 in od:
             window = round(self.s.following_error_rad * d.counts_per_rad)
             self._sdo_write(d, 0x6065, 0, u32.pack(min(window, 0xFFFFFFFE)))
