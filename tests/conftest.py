@@ -73,6 +73,7 @@ ONE_AT_A_TIME_MODULES = (
     "tests/ursim/test_stock_force_io.py",
     "tests/ursim/test_stock_cb3.py",
     "tests/daemon/test_dynamixel.py",  # Dynamixel chains on pseudo-terminals
+    "tests/daemon/test_ethercat.py",  # a 1 kHz EtherCAT line: SOEM, the slave simulator, the loop
     "tests/physres/test_dynamixel.py",
     "tests/dxlsim/test_sdk.py",
     "tests/physres/test_sim_process.py",  # this process's loop against the plant's watchdog
@@ -91,8 +92,8 @@ ONE_AT_A_TIME_MODULES = (
 )
 # in these modules, the tests on these backends
 ONE_AT_A_TIME_BACKENDS = {
-    "tests/physres/test_contract.py": ("ur_rtde", "dynamixel", "sim_process"),
-    "tests/daemon/test_same_mission.py": ("ur_rtde", "dynamixel"),
+    "tests/physres/test_contract.py": ("ur_rtde", "dynamixel", "sim_process", "ethercat402"),
+    "tests/daemon/test_same_mission.py": ("ur_rtde", "dynamixel", "ethercat402"),
     "tests/daemon/test_line_demo.py": ("ur_rtde",),
 }
 ONE_AT_A_TIME_TESTS = ("tests/daemon/test_peg_in_hole.py::test_the_same_mission_on_the_ur_simulator",)

@@ -1,8 +1,8 @@
 """The same position-mode mission (configs/missions/demo_position.mission) on every backend
 (sim-ur5e, canopen-6axis in CSP, ur5e-rtde-sim by servoJ, dxl-6axis-sim: a smaller arm with
-other joint limits), through orccadd and orccadctl, each in its own processes: it runs to
-completion and its reactive trace (the instants: states, inputs, actions) is the same whatever
-the arm."""
+other joint limits, ethercat-6axis-sim in CSP at 1 kHz), through orccadd and orccadctl, each in
+its own processes: it runs to completion and its reactive trace (the instants: states, inputs,
+actions) is the same whatever the arm."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from orccadd.ecatsim.process import EcatSimProcess
 from orccadd.ursim.process import UrSimProcess
 from tests.canopen_rig import canopen_rig
 from tests.daemon.conftest import ROOT, Daemon, robot_config, start_daemon_with
@@ -19,6 +20,7 @@ from tests.daemon.test_dynamixel import dxl_daemon_rig
 
 MISSION = str(ROOT / "configs/missions/demo_position.mission")
 UR = ROOT / "configs/robots/ur5e-rtde-sim.toml"
+ECAT = ROOT / "configs/robots/ethercat-6axis-sim.toml"
 
 
 def local_config(tmp: Path, source: Path) -> Path:
@@ -57,12 +59,15 @@ def arm_config(backend: str, tmp: Path) -> Iterator[Path]:
     elif backend == "ur_rtde":
         with UrSimProcess(UR, "--boot", "running", "--priority", "70"):
             yield local_config(tmp, UR)
+    elif backend == "ethercat402":
+        with EcatSimProcess(ECAT, "--priority", "70"):
+            yield local_config(tmp, ECAT)
     else:  # dxl-6axis-sim: the servo simulator on a pseudo-terminal under tmp
         with dxl_daemon_rig(tmp) as rig:
             yield rig.config
 
 
-@pytest.fixture(params=["sim", "canopen402", "ur_rtde", "dynamixel"])
+@pytest.fixture(params=["sim", "canopen402", "ur_rtde", "dynamixel", "ethercat402"])
 def backend_daemon(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Daemon]:
     with arm_config(request.param, tmp_path) as config:
         d = start_daemon_with(tmp_path, config)
