@@ -10,6 +10,9 @@ The resource maps the Physical Resource contract onto the drives (`drivers.ether
   over for good, so a stalled loop is one the drives notice;
 - activate(mode): the mode (0x6060 is in the RxPDO), then Enable Operation from the next ticks,
   holding where the arm is (reads say TORQUE_OFF until every drive is enabled);
+- the clock: with distributed clocks the ticks are released at the reference clock's period
+  starts (`wait_for_cycle`: each frame brings the reference time back, which maps it onto
+  CLOCK_MONOTONIC), SYNC0 coming `sync0_shift_us` later; without, by the loop's own deadlines;
 - read: the frame sent at the end of the last tick, back (no waiting: it has had a period):
   positions and velocities as the drives measure them, torques per mille through the gear; a
   drive's FAULT with its error code (0x603F, in the same frame) is FAULT; `lost_frames` frames in
@@ -43,7 +46,8 @@ from orccadd.errors import ResourceError
 from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
 from orccadd.physres.base import PhysicalResource
-from orccadd.physres.description import MEASURED, Quantity, ResourceDescription, Source
+from orccadd.physres.description import MEASURED, ClockSource, Quantity, ResourceDescription, Source
+from orccadd.runtime.clock import WallClock
 from orccadd.state import FloatArray, JointState
 from orccadd.types import CommandMode, Status
 
@@ -92,6 +96,9 @@ class Ethercat402Arm(PhysicalResource):
             stop_categories=frozenset({0, 1, 2}),
             read_time_s=0.0,  # the frame sent at the end of the last tick is back: no waiting
             write_time_s=0.0,
+            # with distributed clocks the reference clock's periods release the ticks
+            clock=ClockSource.DEVICE if s.distributed_clocks else ClockSource.LOOP,
+            device_period_s=config.control_period_s if s.distributed_clocks else 0.0,
             fault_reset=True,
         )
 
@@ -123,6 +130,7 @@ class Ethercat402Arm(PhysicalResource):
         self._loop_took_over = False
         self._keeper: threading.Thread | None = None
         self._closing = threading.Event()
+        self._sleeper = WallClock()
 
     # ---- lifecycle ------------------------------------------------------------------------
     def _on_configure(self) -> None:
@@ -250,6 +258,17 @@ class Ethercat402Arm(PhysicalResource):
         self._pos[:] = q
         self._vel[:] = 0.0
         self._tau[:] = pin.computeGeneralizedGravity(self.model.model, self._data, q)
+
+    def wait_for_cycle(self, timeout_s: float) -> int:
+        """With distributed clocks: the next period's start on the reference clock (mapped to
+        ours by each frame's reference time), or -1 after `timeout_s`."""
+        now = time.monotonic_ns()
+        due = self.master.next_cycle_ns(now)
+        if due - now > timeout_s * 1e9:
+            self._sleeper.sleep_until_ns(now + int(timeout_s * 1e9))
+            return -1
+        self._sleeper.sleep_until_ns(due)
+        return due
 
     # ---- tick hooks ---------------------------------------------------------------------------
     def _read_into(self, t_s: float, state: JointState, loop: bool = True) -> int:

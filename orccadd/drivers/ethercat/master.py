@@ -161,6 +161,8 @@ class EcatMaster:
         self.bad_in_row = 0
         self.last_wkc = 0
         self.dc_time_ns = 0
+        self.sent_at_ns = 0  # CLOCK_MONOTONIC when the last frame left
+        self.dc_offset_ns: int | None = None  # the reference clock's system time minus ours
         self._timeout_us = settings.receive_timeout_us or max(100, int(period_s * 1e6 / 3))
         for i, (sl, eds) in enumerate(zip(settings.slaves, settings.eds_paths, strict=True)):
             counts_per_rad = sl.counts_per_rev * sl.gear_ratio / (2 * np.pi)
@@ -211,7 +213,7 @@ class EcatMaster:
                 raise ResourceError(
                     f"no slave on {s.interface} has distributed clocks (distributed_clocks = false)"
                 )
-            shift_ns = s.sync0_shift_us * 1000 or self.period_ns // 2
+            shift_ns = s.sync0_shift_us * 1000 or self.period_ns * 3 // 4
             for slave in m.slaves:
                 slave.dc_sync(True, self.period_ns, shift_ns)
         size = m.config_map()
@@ -337,6 +339,10 @@ class EcatMaster:
         if wkc == self.expected_wkc:
             self.bad_in_row = 0
             self.dc_time_ns = int(self.m.dc_time)
+            if self.dc_time_ns and self.sent_at_ns:  # the frame passed the reference clock just after it left
+                measured = self.dc_time_ns - self.sent_at_ns
+                offset = self.dc_offset_ns
+                self.dc_offset_ns = measured if offset is None else offset + (measured - offset) // 16
             for d, slave in zip(self.drives, self.m.slaves, strict=True):
                 self._decode(d, slave.input)
         else:
@@ -407,9 +413,19 @@ class EcatMaster:
                 else:  # 0x6060
                     values.append(d.mode)
             slave.output = d.rx.pack(*values)
+        self.sent_at_ns = time.monotonic_ns()
         self.m.send_processdata()
         self.sent = True
         self.frames += 1
+
+    def next_cycle_ns(self, now_ns: int) -> int:
+        """When the next cycle starts on our clock: the next multiple of the period on the
+        reference clock's time (SYNC0 comes `sync0_shift` after it), before the first frame with
+        the reference time back, a period from now."""
+        offset = self.dc_offset_ns
+        if offset is None:
+            return now_ns + self.period_ns
+        return ((now_ns + offset) // self.period_ns + 1) * self.period_ns - offset
 
     # ---- CiA 402 --------------------------------------------------------------------------------
     def set_controlword(self, cw: int) -> None:

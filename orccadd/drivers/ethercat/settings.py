@@ -79,8 +79,9 @@ class EthercatSettings:
     interface: str = field(default="eth1")
     mode: Literal["csp", "csv", "cst"] = field(default="csp")
     distributed_clocks: bool = field(default=True)
-    # SYNC0 this long after the cycle's start (the frame leaves at the start): the drives take
-    # the outputs once the frame has passed them all, and latch the inputs the next frame reads
+    # SYNC0 this long after the cycle's start on the reference clock, where the tick is released
+    # (0: three quarters of the period): the drives take the outputs at SYNC0, so the tick's frame
+    # must have passed them by then, and latch the inputs the next tick's frame reads
     sync0_shift_us: int = field(default=0, bounds=(0, 100_000))
     lost_frames: int = field(default=3, bounds=(1, 1000))
     # how long a tick waits for its frame to come back (0: a third of the period)
