@@ -43,6 +43,7 @@ def test_the_readme_has_a_tour_per_bus() -> None:
         "A UR arm over RTDE",
         "A Dynamixel chain",
         "CANopen CiA 402 drives",
+        "EtherCAT CiA 402 drives",
         "From simulation to the robot and back",
         "Two arms in one daemon",
         "An arm with its gripper",

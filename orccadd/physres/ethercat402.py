@@ -59,6 +59,7 @@ MODE_OF = {
     CommandMode.TORQUE: cia402.MODE_CST,
 }
 COMMAND_OF = {v: k for k, v in MODE_OF.items()}
+MAILBOX_POLL_S = 0.05
 COMMAND_OF_MODE = {"csp": CommandMode.POSITION, "csv": CommandMode.VELOCITY, "cst": CommandMode.TORQUE}
 
 
@@ -129,6 +130,7 @@ class Ethercat402Arm(PhysicalResource):
         self._exchange = threading.RLock()  # one cycle at a time: the keeper's or a tick's
         self._loop_took_over = False
         self._keeper: threading.Thread | None = None
+        self._mailbox: threading.Thread | None = None
         self._closing = threading.Event()
         self._sleeper = WallClock()
 
@@ -142,6 +144,10 @@ class Ethercat402Arm(PhysicalResource):
         self._wait(lambda: self._walk_to is None, "SWITCHED ON on every drive")
         self._keeper = threading.Thread(target=self._keep, name=f"{self.name}-ecat-keeper", daemon=True)
         self._keeper.start()
+        self._mailbox = threading.Thread(
+            target=self._watch_mailboxes, name=f"{self.name}-ecat-mailbox", daemon=True
+        )
+        self._mailbox.start()
 
     def _on_activate(self, mode: CommandMode) -> None:
         self.master.set_mode(MODE_OF[mode])
@@ -158,8 +164,9 @@ class Ethercat402Arm(PhysicalResource):
 
     def _on_shutdown(self) -> None:
         self._closing.set()
-        if self._keeper is not None:
-            self._keeper.join(1.0)
+        for thread in (self._keeper, self._mailbox):
+            if thread is not None:
+                thread.join(1.0)
         with self._exchange:
             self.master.close()
 
@@ -169,6 +176,7 @@ class Ethercat402Arm(PhysicalResource):
     def _on_reset_fault(self) -> None:
         """Slaves back to OP where they left it, then fault reset (the next cycles' rising edges)."""
         self._wait(self.master.step_operational, "OP on every slave", every=10)
+        self.master.forget_emergencies()
         self._fault_reset = True
         self._walk_failed = ""
         self.fault = None
@@ -182,6 +190,13 @@ class Ethercat402Arm(PhysicalResource):
                 self._cycle_without_loop()
             else:
                 time.sleep(period)
+
+    def _watch_mailboxes(self) -> None:
+        """A drive's CoE emergency, read from its mailbox once its statusword shows the fault
+        (the fault is reported from the process data in that tick; the emergency adds its error
+        register to the words)."""
+        while not self._closing.wait(MAILBOX_POLL_S):  # SOEM takes frames from two threads
+            self.master.read_emergencies()
 
     def _cycle_without_loop(self) -> None:
         with self._exchange:
@@ -354,4 +369,6 @@ class Ethercat402Arm(PhysicalResource):
             "expected_wkc": m.expected_wkc,
             "last_wkc": m.last_wkc,
             "dc_time_ns": m.dc_time_ns,
+            **{f"slave_{d.position}": d.identity for d in m.drives},
+            **{f"emergency_{d.position}": d.emergency for d in m.drives if d.emergency},
         }

@@ -23,13 +23,13 @@ for a frame with the interpreter released (`always_release_gil`).
 
 from __future__ import annotations
 
+import fcntl
 import logging
 import os
 import socket
 import struct
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -47,6 +47,8 @@ log = logging.getLogger("orccadd.ethercat")
 AL_NAMES = {1: "INIT", 2: "PRE-OP", 3: "BOOT", 4: "SAFE-OP", 8: "OP"}
 AL_ERROR = 0x10
 AL_NO_SYNC = 0x002D  # SYNC0 not seen yet: OP asked too early, asked again
+SIOCGIFFLAGS = 0x8913
+IFF_UP, IFF_RUNNING = 0x1, 0x40
 
 
 def al_state_name(state: int) -> str:
@@ -55,19 +57,20 @@ def al_state_name(state: int) -> str:
 
 
 def check_interface(name: str) -> None:
-    """ResourceError unless `name` is a network interface that is up."""
-    base = Path("/sys/class/net")
-    if not (base / name).exists():
-        have = ", ".join(sorted(p.name for p in base.iterdir())) if base.exists() else "none"
-        raise ResourceError(f"network interface {name!r} does not exist (interfaces here: {have})")
-    flags = int((base / name / "flags").read_text().strip(), 16)
-    operstate = (base / name / "operstate").read_text().strip()
-    if not flags & 0x1:  # IFF_UP
-        raise ResourceError(f"network interface {name!r} is down: ip link set {name} up")
-    if operstate not in ("up", "unknown"):
+    """ResourceError unless `name` is a network interface of this network namespace that is up
+    and has its link (asked of the kernel: /sys/class/net shows the namespace sysfs was mounted in)."""
+    names = sorted(n for _, n in socket.if_nameindex())
+    if name not in names:
         raise ResourceError(
-            f"network interface {name!r} has no link (operstate {operstate}): its cable, the line's power"
+            f"network interface {name!r} does not exist (interfaces here: {', '.join(names)})"
         )
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        ifreq = fcntl.ioctl(s, SIOCGIFFLAGS, struct.pack("16sH14x", name.encode()[:15], 0))
+    (flags,) = struct.unpack_from("H", ifreq, 16)
+    if not flags & IFF_UP:
+        raise ResourceError(f"network interface {name!r} is down: ip link set {name} up")
+    if not flags & IFF_RUNNING:
+        raise ResourceError(f"network interface {name!r} has no link: its cable, the line's power")
 
 
 def _socket_fds() -> set[int]:
@@ -119,6 +122,8 @@ class DriveLink:
     torque_per_mille: int = 0
     error_code: int = 0
     fresh: int = 0  # inputs decoded since startup
+    emergency: str = ""  # the last CoE emergency read from its mailbox, in words ("" once reset)
+    identity: str = ""  # as the scan found it
 
     def __post_init__(self) -> None:
         self.rx = struct.Struct(self.layout.rx_format)
@@ -204,6 +209,10 @@ class EcatMaster:
                 f"({', '.join(self.names)})"
             )
         self._check_identities()
+        for d, slave in zip(self.drives, m.slaves, strict=True):
+            ident = f"vendor 0x{slave.man:08X}, product 0x{slave.id:08X}, revision 0x{slave.rev:08X}"
+            d.identity = f"{slave.name}: {ident}"
+            slave.add_emergency_callback(lambda e, d=d: self._emergency(d, e))
         self._walk_al(pysoem.PREOP_STATE)
         for d in self.drives:
             self._configure_drive(d)
@@ -281,6 +290,32 @@ class EcatMaster:
             if index in od:
                 self._sdo_write(d, index, 1, u16.pack(sync))
                 self._sdo_write(d, index, 2, u32.pack(self.period_ns))
+
+    # ---- CoE emergencies --------------------------------------------------------------------------
+    def _emergency(self, d: DriveLink, e: Any) -> None:
+        text = cia402.error_code_text(e.error_code)
+        d.emergency = (
+            f"EMCY 0x{e.error_code:04X}"
+            + (f" {text}" if text else "")
+            + f", error register 0x{e.error_reg:02X}"
+        )
+
+    def read_emergencies(self) -> None:
+        """Read the mailbox of every drive in FAULT whose emergency is not known yet (mailbox
+        frames beside the cyclic exchange: lifecycle threads only, and only while the line
+        answers)."""
+        if self.bad_in_row or self.m is None:
+            return
+        for d, slave in zip(self.drives, self.m.slaves, strict=True):
+            if d.state is cia402.State.FAULT and not d.emergency:
+                try:
+                    slave.mbx_receive()  # an emergency there reaches `_emergency`
+                except (pysoem.MailboxError, pysoem.PacketError, pysoem.WkcError, pysoem.SdoError) as e:
+                    log.debug("%s: mailbox: %s", d.where, e)
+
+    def forget_emergencies(self) -> None:
+        for d in self.drives:
+            d.emergency = ""
 
     # ---- the application layer's states --------------------------------------------------------
     def _walk_al(self, target: int) -> None:
@@ -361,6 +396,8 @@ class EcatMaster:
                     if d.error_code
                     else ""
                 )
+                if d.emergency:
+                    rep.fault += f" ({d.emergency})"
                 rep.fault_code, rep.fault_joint = d.error_code, d.name
         return rep
 
@@ -461,12 +498,13 @@ class EcatMaster:
         if m is None:
             return
         try:
-            if self.sent:
+            if self.expected_wkc:  # the process image is mapped: one last frame, power stages off
+                if self.sent:
+                    self.receive()
+                self.set_controlword(cia402.CW_DISABLE_VOLTAGE)
+                zeros = np.zeros(len(self.drives))
+                self.transmit(zeros, zeros, zeros)
                 self.receive()
-            self.set_controlword(cia402.CW_DISABLE_VOLTAGE)
-            zeros = np.zeros(len(self.drives))
-            self.transmit(zeros, zeros, zeros)
-            self.receive()
             m.state = pysoem.INIT_STATE
             m.write_state()
         except Exception as e:  # closing whatever state the line is in
