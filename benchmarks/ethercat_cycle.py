@@ -61,17 +61,19 @@ def run_rate(rate_hz: float, duration_s: float) -> None:
         config = config_at(period_s, Path(tmp))
         with EcatSimProcess(config, "--priority", str(SIM_PRIORITY)) as sim:
             before = cyclictest(period_s, duration_s / 2, PRIORITY)
+            # real time first (mlockall takes a while): the keeper thread cycles the line until
+            # the loop's first tick, and nothing may stall between them for the SM watchdog's time
+            rt = enter_realtime(PRIORITY, cpus=None)
             arm = create_resource(load_robot_config(config))
             assert isinstance(arm, Ethercat402Arm)
             arm.configure()
             arm.activate(CommandMode.POSITION)
-            hold = arm.read(time.monotonic()).q_rad.copy()
             m = arm.master
             n = int(duration_s * rate_hz)
             rec = np.zeros((n, 4), dtype=np.int64)  # release, woke, read done, write done (ns)
             frames0, lost0, wkc0 = m.frames, m.frames_lost, m.wkc_errors
             sim0 = sim.status()
-            rt = enter_realtime(PRIORITY, cpus=None)
+            hold: np.ndarray | None = None
             comm_lost = k = 0
             try:
                 while k < n:
@@ -81,6 +83,8 @@ def run_rate(rate_hz: float, duration_s: float) -> None:
                         release = woke
                     st = arm.read(release * 1e-9)
                     t_read = time.monotonic_ns()
+                    if hold is None:
+                        hold = st.q_rad.copy()  # where the first tick finds the arm
                     arm.write(release * 1e-9, hold)
                     rec[k] = (release, woke, t_read, time.monotonic_ns())
                     comm_lost += bool(st.status & 0x08)

@@ -74,6 +74,8 @@ ONE_AT_A_TIME_MODULES = (
     "tests/ursim/test_stock_cb3.py",
     "tests/daemon/test_dynamixel.py",  # Dynamixel chains on pseudo-terminals
     "tests/daemon/test_ethercat.py",  # a 1 kHz EtherCAT line: SOEM, the slave simulator, the loop
+    "tests/physres/test_ethercat402.py",
+    "tests/ecatsim/test_stock_pysoem.py",
     "tests/physres/test_dynamixel.py",
     "tests/dxlsim/test_sdk.py",
     "tests/physres/test_sim_process.py",  # this process's loop against the plant's watchdog

@@ -10,6 +10,9 @@ slave's place on the line (1 = next to the master):
 
     {"inject": "overcurrent", "device": 2}     the drive faults (EMCY 0x2310, fault reaction)
     {"inject": "following_error" | "sto" | "clear" | "power_cycle", "device": 2}
+    {"inject": "al_error", "device": 2, "code": 26}
+                                                slave 2 leaves OP: SAFE-OP + ERROR, AL status code
+                                                26 (0x001A, synchronisation error; the default)
     {"inject": "unplug", "device": 3}           the cable before slave 3 pulled: 3.. unreachable
     {"inject": "replug"}
     {"inject": "lose_frames", "frames": 5}     the next 5 frames get no answer

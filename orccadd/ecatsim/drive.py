@@ -335,6 +335,14 @@ class DriveSlave:
                 self.node.set(0x1018, sub, value)
 
     # ---- faults ------------------------------------------------------------------------------
+    def leave_op(self, code: int) -> None:
+        """The firmware's own error: SAFE-OP + ERROR with AL status `code` (the drive's power stage
+        off with a fault if it was on, as for a lost cycle)."""
+        if self.esc.al_state is AlState.OP:
+            self._lost_cycle()
+            self.esc.al_error(AlState.SAFE_OP, code)
+            self.node.al_state = AlState.SAFE_OP
+
     def power_cycle(self) -> None:
         """Power off and on: the ESC at its power-on state, the dictionary at its defaults."""
         self.esc.power_on()

@@ -3,12 +3,13 @@
 `VethLink` makes the namespace and the pair (`ip netns add`, `ip link add … type veth`), moves
 the slaves' end into the namespace and brings both ends up; the master's end stays where the
 controller runs, named as its config's `interface`. A raw packet socket on the slaves' end,
-bound to EtherCAT's EtherType 0x88A4, receives the master's frames and sends the answers (frames
-a socket sends are not looped back to it). `close` deletes the namespace, and with it the pair.
+bound to EtherCAT's EtherType 0x88A4, receives the master's frames, each with the kernel's time
+stamp of its arrival, and sends the answers (frames a socket sends are not looped back to it).
+`close` deletes the namespace, and with it the pair.
 
-Leftovers of a simulator that was killed (the namespace, a veth of the master's name) are removed
-before the new pair is made; an interface of that name that is not a veth is never touched: the
-link is refused, naming it.
+Leftovers of a simulator that was killed (the namespace, a veth of the master's name) are
+removed before the new pair is made; an interface of that name that is not a veth is never
+touched: the link is refused, naming it.
 """
 
 from __future__ import annotations
@@ -17,11 +18,15 @@ import ctypes
 import ctypes.util
 import os
 import socket
+import struct
 import subprocess
 import threading
+import time
 from pathlib import Path
 
 ETH_P_ECAT = 0x88A4
+SO_TIMESTAMPNS = 35  # the kernel's receive time of each frame (CLOCK_REALTIME, ns)
+_TIMESPEC = struct.Struct("@qq")
 CLONE_NEWNET = 0x40000000
 NETNS_DIR = Path("/var/run/netns")
 
@@ -93,9 +98,26 @@ class VethLink:
             )
             self.sock.bind((slave_interface, ETH_P_ECAT))
             self.sock.setblocking(False)
+            self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+            self._wait_until_up()
         except BaseException:
             self._delete()
             raise
+
+    def _wait_until_up(self, timeout_s: float = 5.0) -> None:
+        """Both ends operational: a link just brought up drops what is sent on it until the
+        kernel's link watch has attached its queue (up to a second later), and a master that
+        scanned then would find no slave."""
+        end = time.monotonic() + timeout_s
+        while True:
+            here = _ip("-o", "link", "show", "dev", self.master_interface).stdout
+            there = _ip("-n", self.netns, "-o", "link", "show", "dev", self.slave_interface).stdout
+            if "state UP" in here and "state UP" in there:
+                return
+            if time.monotonic() > end:
+                link = f"{self.master_interface} <-> {self.slave_interface}"
+                raise LinkError(f"the link {link} not up within {timeout_s:g} s")
+            time.sleep(0.02)
 
     def _remove_leftovers(self) -> None:
         kind = interface_kind(self.master_interface)
@@ -112,12 +134,18 @@ class VethLink:
     def fileno(self) -> int:
         return self.sock.fileno()
 
-    def receive(self) -> bytes | None:
-        """A frame if one waits, else None."""
+    def receive(self) -> tuple[bytes, int] | None:
+        """A frame if one waits, with the time it reached the link (CLOCK_MONOTONIC ns, from
+        the kernel's receive time stamp); None if none waits."""
         try:
-            return self.sock.recv(2048)
+            data, ancillary, _flags, _addr = self.sock.recvmsg(2048, 64)
         except BlockingIOError:
             return None
+        for level, kind, value in ancillary:
+            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(value) >= _TIMESPEC.size:
+                sec, nsec = _TIMESPEC.unpack_from(value)
+                return data, sec * 1_000_000_000 + nsec - (time.time_ns() - time.monotonic_ns())
+        return data, time.monotonic_ns()
 
     def send(self, frame: bytes) -> None:
         self.sock.send(frame)

@@ -2,9 +2,11 @@
 
 `EcatSimulator.run(link, stop)` is the slaves' side of the wire in one loop: between frames the
 arm integrates on the clock and every drive runs its time (SYNC0 pulses, free-run cycles, the SM
-watchdog); a frame is answered as the chain of ESCs would (`chain.Chain`), after whatever was due
-before it arrived. Faults are injected with `inject`: a drive's (overcurrent, following_error,
-sto, clear, power_cycle) or the wire's (unplug, replug, lose_frames, short_wkc).
+watchdog); a frame is answered as the chain of ESCs would (`chain.Chain`) at the time it reached
+the link (the kernel's time stamp: its distributed-clock latches and the system time it carries
+are the wire's, not this loop's), after whatever was due before then. Faults are injected with
+`inject`: a drive's (overcurrent, following_error, sto, clear, power_cycle) or the wire's
+(unplug, replug, lose_frames, short_wkc).
 """
 
 from __future__ import annotations
@@ -22,19 +24,20 @@ from orccadd.drivesim.plant import DriveTrainArm
 from orccadd.ecatsim.chain import Chain
 from orccadd.ecatsim.drive import DriveSlave, DriveSpec
 from orccadd.ecatsim.frame import EthernetFrame, FrameError
+from orccadd.ecatsim.registers import AlStatusCode
 from orccadd.model import RobotModel
 from orccadd.runtime import sim_control
 
 log = logging.getLogger("orccadd.ecatsim")
 
-DRIVE_FAULTS = ("overcurrent", "following_error", "sto", "clear", "power_cycle")
+DRIVE_FAULTS = ("overcurrent", "following_error", "sto", "clear", "power_cycle", "al_error")
 WIRE_FAULTS = ("unplug", "replug", "lose_frames", "short_wkc")
 IDLE_WAKE_S = 0.0005  # the drives' own time runs at least this often
 
 
 class Wire(Protocol):
     def fileno(self) -> int: ...
-    def receive(self) -> bytes | None: ...
+    def receive(self) -> tuple[bytes, int] | None: ...  # a frame and when it arrived (monotonic ns)
     def send(self, frame: bytes) -> None: ...
 
 
@@ -48,6 +51,7 @@ class EcatSimulator:
         self.lock = threading.Lock()  # held while frames, the drives' time or injections run
         self.bad_frames = 0
         self.longest_gap_s = 0.0
+        self._advanced_ns = 0
 
     # ---- the wire ---------------------------------------------------------------------------
     def answer(self, raw: bytes, clock_ns: int) -> bytes | None:
@@ -68,6 +72,7 @@ class EcatSimulator:
 
     def advance(self, clock_ns: int) -> None:
         """The world up to `clock_ns`: the arm integrated, each drive's time run."""
+        self._advanced_ns = clock_ns
         self.arm.step_to(clock_ns * 1e-9)
         for slave in self.slaves:
             slave.tick(clock_ns)
@@ -80,13 +85,17 @@ class EcatSimulator:
             self.longest_gap_s = max(self.longest_gap_s, now - last)
             last = now
             with self.lock:
-                self.advance(time.monotonic_ns())
-                raw = wire.receive()
-                while raw is not None:
-                    reply = self.answer(raw, time.monotonic_ns())
+                got = wire.receive()
+                while got is not None:
+                    raw, arrived_ns = got
+                    # the world as it was when the frame reached the line (a SYNC0 before it ran
+                    # before it, one after it after), then the frame, as ESCs serve it on the wire
+                    self.advance(max(arrived_ns, self._advanced_ns))
+                    reply = self.answer(raw, arrived_ns)
                     if reply is not None:
                         wire.send(reply)
-                    raw = wire.receive()
+                    got = wire.receive()
+                self.advance(time.monotonic_ns())
 
     # ---- faults and status ------------------------------------------------------------------
     def inject(self, req: sim_control.Injection) -> None:
@@ -118,6 +127,8 @@ class EcatSimulator:
             axis.sto = True
         elif fault == "clear":
             axis.sto = False
+        elif fault == "al_error":  # the slave's own error: SAFE-OP + ERROR with this AL status code
+            slave.leave_op(int(params.get("code", AlStatusCode.SYNCHRONIZATION_ERROR)))
         else:
             slave.power_cycle()
 

@@ -27,11 +27,8 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
-
-import numpy as np
-import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
 from orccadd.drivers.canopen import cia402
@@ -40,24 +37,17 @@ from orccadd.drivers.canopen.master import POWERED, CanopenMaster
 from orccadd.drivers.canopen.settings import CanopenSettings, load_canopen_settings
 from orccadd.drivers.canopen.startup import mode_not_shown
 from orccadd.errors import ResourceError
-from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
-from orccadd.physres.base import PhysicalResource
+from orccadd.physres.cia402_arm import COMMAND_OF, MODE_OF, Cia402Arm, Drive
 from orccadd.physres.description import MEASURED, Quantity, ResourceDescription, Source
 from orccadd.runtime.rt import ThreadsStartedHere
-from orccadd.state import FloatArray, JointState
-from orccadd.types import CommandMode, Status
+from orccadd.state import JointState
+from orccadd.types import CommandMode
 
-MODE_OF = {
-    CommandMode.POSITION: cia402.MODE_CSP,
-    CommandMode.VELOCITY: cia402.MODE_CSV,
-    CommandMode.TORQUE: cia402.MODE_CST,
-}
-COMMAND_OF = {v: k for k, v in MODE_OF.items()}
 VELOCITY_FILTER = 0.5  # first-order filter weight of the newest position difference
 
 
-class Canopen402Arm(PhysicalResource):
+class Canopen402Arm(Cia402Arm):
     Settings = CanopenSettings
 
     @classmethod
@@ -105,19 +95,18 @@ class Canopen402Arm(PhysicalResource):
         s: CanopenSettings = config.backend_settings
         self.settings = s
         self.master = CanopenMaster(s, list(config.joint_names), config.control_period_s)
-        n = self.dof
-        self._pos = np.zeros(n)
-        self._vel = np.zeros(n)
-        self._tau = np.zeros(n)
-        self._walk_to: cia402.State | None = None  # where the ticks take the drives (None: nowhere)
         self._walk_after: list[int] = []  # each drive's TPDO count when the walk began
         self._pumping = False  # a cycle run by this resource, not by the control loop
-        self._fault_reset = False
-        self._stop_t0 = 0.0
-        self._comm_lost = False
-        self._walk_t0 = 0.0  # when the walk under way began (monotonic s)
-        self._walk_failed = ""  # why a walk ended without its state (a fault until `reset`)
-        self._data = model.new_data()
+
+    @property
+    def drives(self) -> Sequence[Drive]:
+        return self.master.axes
+
+    @property
+    def _walk_timeout_s(self) -> float:
+        return self.settings.startup_timeout_s
+
+    _walk_timeout_key = "startup_timeout_s"
 
     # ---- lifecycle ------------------------------------------------------------------------
     def _on_configure(self) -> None:
@@ -147,9 +136,6 @@ class Canopen402Arm(PhysicalResource):
     def _on_shutdown(self) -> None:
         self.master.close()
 
-    def _on_clear_stop(self) -> None:
-        self._enable_blocking()
-
     def _on_reset_fault(self) -> None:
         """Fault reset on every faulted drive: the next cycles send the rising edges."""
         self.master.clear_faults()
@@ -158,35 +144,12 @@ class Canopen402Arm(PhysicalResource):
         self.fault = None
 
     # ---- helpers for the blocking phases (the loop may or may not be ticking) -------------
-    def _pump(self, seconds: float) -> None:
-        """Run read cycles ourselves for `seconds` when no control loop does."""
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self._cycle_without_loop()
-
     def _cycle_without_loop(self) -> None:
-        now = time.monotonic()
-        self._pumping = True
+        self._pumping = True  # not the loop's: our heartbeat stays the startup producer's
         try:
-            self._read_into(now, self.state)
-            self._on_keep_alive(now)
+            super()._cycle_without_loop()
         finally:
             self._pumping = False
-        time.sleep(self.config.control_period_s)
-
-    def _wait(self, done: Any, what: str) -> None:
-        end = time.monotonic() + self.settings.startup_timeout_s
-        while not done():
-            if time.monotonic() > end:
-                states = ", ".join(
-                    f"{a.node_id}: {a.state.name}, statusword 0x{a.statusword:04X}" for a in self.master.axes
-                )
-                limit = self.settings.startup_timeout_s
-                raise ResourceError(f"resource {self.name!r}: no {what} within {limit:g} s (drives {states})")
-            if self.loop_ticking:  # asked at every step: a loop that stops is taken over
-                time.sleep(self.config.control_period_s)
-            else:
-                self._cycle_without_loop()
 
     def _set_mode_blocking(self, mode: CommandMode) -> None:
         """0x6060 on every drive, then 0x6061 read until every drive shows the mode."""
@@ -219,46 +182,10 @@ class Canopen402Arm(PhysicalResource):
         """From the next tick on, take every drive to `target`, once each answered a SYNC since
         now (a fresh TPDO: its state is current and the cyclic exchange runs)."""
         self._walk_after = [a.tpdo_count for a in self.master.axes]
-        self._walk_t0 = time.monotonic()
-        self._walk_to = target
+        super()._walk(target)
 
-    def _step_walk(self, target: cia402.State) -> None:
-        m = self.master
-        if any(a.tpdo_count <= n for a, n in zip(m.axes, self._walk_after, strict=True)):
-            return  # controlwords as they are until every drive answered a SYNC
-        if target is cia402.State.OPERATION_ENABLED:
-            q = self.state.q_rad
-            for j, a in enumerate(m.axes):  # enabled holding where it is, as measured now
-                if a.state is not cia402.State.OPERATION_ENABLED:
-                    self._pos[j] = q[j]
-                    self._vel[j] = 0.0
-        if m.step_towards(target):
-            self._walk_to = None
-        elif time.monotonic() - self._walk_t0 > self.settings.startup_timeout_s:
-            late = next(a for a in m.axes if a.state is not target)
-            self._walk_failed = (
-                f"node {late.node_id} ({late.name}) did not reach {target.name} within "
-                f"{self.settings.startup_timeout_s:g} s (startup_timeout_s): statusword "
-                f"0x{late.statusword:04X} ({late.state.name}), controlword 0x{late.controlword:04X}"
-            )
-            self._walk_to = None  # commands stay unsent: the fault stops the arm
-
-    def _enable_blocking(self) -> None:
-        self._hold_here()
-        self._walk(cia402.State.OPERATION_ENABLED)
-        try:
-            self._wait(lambda: self._walk_to is None, "OPERATION ENABLED on every drive")
-        finally:
-            self._walk_to = None
-        self.master.set_controlword(cia402.CW_ENABLE_OPERATION)
-        self._hold_here()
-
-    def _hold_here(self) -> None:
-        """Targets that keep the arm where it is: its position, no speed, gravity torque."""
-        q = self.state.q_rad
-        self._pos[:] = q
-        self._vel[:] = 0.0
-        self._tau[:] = pin.computeGeneralizedGravity(self.model.model, self._data, q)
+    def _walk_ready(self) -> bool:
+        return all(a.tpdo_count > n for a, n in zip(self.master.axes, self._walk_after, strict=True))
 
     # ---- tick hooks -------------------------------------------------------------------------
     def _read_into(self, t_s: float, state: JointState) -> int:
@@ -266,7 +193,6 @@ class Canopen402Arm(PhysicalResource):
         if not self._pumping:
             m.loop_started()  # our heartbeat from the loop's ticks on
         rep = m.receive(t_s)
-        flags = 0
         powered = True
         for j, a in enumerate(m.axes):
             state.q_rad[j] = a.position_counts / a.counts_per_rad
@@ -280,62 +206,7 @@ class Canopen402Arm(PhysicalResource):
                     state.dq_rad_s[j] += VELOCITY_FILTER * (dq - state.dq_rad_s[j])
             state.tau_nm[j] = a.torque_per_mille * a.nm_per_mille if a.has_torque_actual else self._tau[j]
             powered = powered and a.state in POWERED
-        if rep.comm_lost:
-            flags |= Status.COMM_LOST
-            self._set_fault(FaultKind.COMM_LOST, rep.comm_lost, rep.comm_lost_joint)
-        elif rep.fault:
-            flags |= Status.FAULT
-            self._set_fault(FaultKind.DEVICE, rep.fault, rep.fault_joint, rep.fault_code)
-            state.fault_code = rep.fault_code
-        elif self._walk_failed:
-            flags |= Status.FAULT
-            self._set_fault(FaultKind.DEVICE, self._walk_failed)
-        if not powered:
-            flags |= Status.TORQUE_OFF
-        self._comm_lost = bool(rep.comm_lost)
-        return flags
+        return self._flags(rep, powered)
 
-    def _on_keep_alive(self, t_s: float) -> None:
-        """No command this tick: the controlwords of the sequence under way (quick stop, fault
-        reset, enabling) and targets that hold, so every drive still gets its RPDO."""
-        m = self.master
-        walk_to = self._walk_to
-        if self._fault_reset:
-            self._fault_reset = not m.step_fault_reset()
-        elif walk_to is not None:
-            self._step_walk(walk_to)
-        elif self._stop_flags & Status.STOPPING:
-            off = m.step_quick_stop()
-            timed_out = t_s - self._stop_t0 > self.config.safe_stop.timeout_s
-            if off or (self._comm_lost and timed_out):  # unreachable drives stop on their own watchdogs
-                self._mark_stopped(torque_off=True)
-        m.transmit(t_s, self._pos, self._vel, self._tau)
-
-    def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
-        if self._walk_to is not None:  # not enabled yet: hold, the command is not sent
-            self._on_keep_alive(t_s)
-            return 0
-        st = self.state
-        if mode is CommandMode.POSITION:
-            self._pos[:] = command
-            self._vel[:] = 0.0
-            self._tau[:] = st.tau_nm
-        elif mode is CommandMode.VELOCITY:
-            self._vel[:] = command
-            self._pos[:] = st.q_rad
-            self._tau[:] = st.tau_nm
-        else:
-            self._tau[:] = command
-            self._pos[:] = st.q_rad
-            self._vel[:] = 0.0
-        self.master.transmit(t_s, self._pos, self._vel, self._tau)
-        return 0
-
-    def _begin_safe_stop(self) -> None:
-        self._walk_to = None
-        t_s = self.state.t_s  # the tick's time (safe_stop runs inside a tick, after read)
-        self._stop_t0 = t_s
-        self._pos[:] = self.state.q_rad
-        self._vel[:] = 0.0
-        self.master.step_quick_stop()
+    def _send(self, t_s: float) -> None:
         self.master.transmit(t_s, self._pos, self._vel, self._tau)

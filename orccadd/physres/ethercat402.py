@@ -22,8 +22,12 @@ The resource maps the Physical Resource contract onto the drives (`drivers.ether
 - mode switch: the mode byte of the next frame, within one cycle (CSP and CST both mapped);
 - safe_stop: quick stop on every drive (each ramps down at its quick-stop deceleration and
   switches off); STOPPED once every drive is off;
-- reset_fault: slaves that left OP (the SM watchdog, a cable pulled and put back) taken back to
-  OP, acknowledging their error; then fault reset (rising edge of bit 7) and Enable Operation.
+- a slave that leaves OP (its SM watchdog, a cable pulled and put back, its own error) still
+  counts in the working counter (SAFE-OP reads and writes the process data) but no longer takes
+  its outputs: a thread beside the ticks reads the AL states every 50 ms, and such a slave is
+  COMM_LOST naming it and its AL status code;
+- reset_fault: slaves that left OP taken back to OP, acknowledging their error; then fault reset
+  (rising edge of bit 7) and Enable Operation.
 """
 
 from __future__ import annotations
@@ -31,34 +35,24 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
-
-import numpy as np
-import pinocchio as pin
 
 from orccadd.config.robot import RobotConfig
 from orccadd.drivers.canopen import cia402
 from orccadd.drivers.canopen.capabilities import object_dictionary
 from orccadd.drivers.ethercat.pdo import layout_for
 from orccadd.drivers.ethercat.settings import TARGET_OF_MODE, EthercatSettings, load_ethercat_settings
-from orccadd.errors import ResourceError
-from orccadd.fault import FaultKind
 from orccadd.model import RobotModel
-from orccadd.physres.base import PhysicalResource
+from orccadd.physres.cia402_arm import COMMAND_OF, MODE_OF, Cia402Arm, Drive
 from orccadd.physres.description import MEASURED, ClockSource, Quantity, ResourceDescription, Source
 from orccadd.runtime.clock import WallClock
-from orccadd.state import FloatArray, JointState
-from orccadd.types import CommandMode, Status
+from orccadd.runtime.rt import ThreadsStartedHere
+from orccadd.state import JointState
+from orccadd.types import CommandMode
 
 log = logging.getLogger("orccadd.ethercat")
 
-MODE_OF = {
-    CommandMode.POSITION: cia402.MODE_CSP,
-    CommandMode.VELOCITY: cia402.MODE_CSV,
-    CommandMode.TORQUE: cia402.MODE_CST,
-}
-COMMAND_OF = {v: k for k, v in MODE_OF.items()}
 MAILBOX_POLL_S = 0.05
 COMMAND_OF_MODE = {"csp": CommandMode.POSITION, "csv": CommandMode.VELOCITY, "cst": CommandMode.TORQUE}
 
@@ -72,7 +66,7 @@ def mapped_modes(s: EthercatSettings) -> frozenset[CommandMode]:
     )
 
 
-class Ethercat402Arm(PhysicalResource):
+class Ethercat402Arm(Cia402Arm):
     Settings = EthercatSettings
 
     @classmethod
@@ -116,23 +110,22 @@ class Ethercat402Arm(PhysicalResource):
         self.master = EcatMaster(
             s, list(config.joint_names), config.control_period_s, config.safe_stop.deceleration_rad_s2
         )
-        n = self.dof
-        self._pos = np.zeros(n)
-        self._vel = np.zeros(n)
-        self._tau = np.zeros(n)
-        self._walk_to: cia402.State | None = None
-        self._walk_t0 = 0.0
-        self._walk_failed = ""
-        self._fault_reset = False
-        self._stop_t0 = 0.0
-        self._comm_lost = False
-        self._data = model.new_data()
         self._exchange = threading.RLock()  # one cycle at a time: the keeper's or a tick's
         self._loop_took_over = False
         self._keeper: threading.Thread | None = None
         self._mailbox: threading.Thread | None = None
         self._closing = threading.Event()
         self._sleeper = WallClock()
+
+    @property
+    def drives(self) -> Sequence[Drive]:
+        return self.master.drives
+
+    @property
+    def _walk_timeout_s(self) -> float:
+        return self.settings.state_timeout_s
+
+    _walk_timeout_key = "state_timeout_s"
 
     # ---- lifecycle ------------------------------------------------------------------------
     def _on_configure(self) -> None:
@@ -143,11 +136,14 @@ class Ethercat402Arm(PhysicalResource):
         self._walk(cia402.State.SWITCHED_ON)
         self._wait(lambda: self._walk_to is None, "SWITCHED ON on every drive")
         self._keeper = threading.Thread(target=self._keep, name=f"{self.name}-ecat-keeper", daemon=True)
-        self._keeper.start()
         self._mailbox = threading.Thread(
             target=self._watch_mailboxes, name=f"{self.name}-ecat-mailbox", daemon=True
         )
-        self._mailbox.start()
+        with ThreadsStartedHere(self.settings.io_priority) as started:
+            self._keeper.start()
+            self._mailbox.start()
+        for w in started.warnings:
+            log.warning("%s: %s", self.name, w)
 
     def _on_activate(self, mode: CommandMode) -> None:
         self.master.set_mode(MODE_OF[mode])
@@ -170,9 +166,6 @@ class Ethercat402Arm(PhysicalResource):
         with self._exchange:
             self.master.close()
 
-    def _on_clear_stop(self) -> None:
-        self._enable_blocking()
-
     def _on_reset_fault(self) -> None:
         """Slaves back to OP where they left it, then fault reset (the next cycles' rising edges)."""
         self._wait(self.master.step_operational, "OP on every slave", every=10)
@@ -194,9 +187,10 @@ class Ethercat402Arm(PhysicalResource):
     def _watch_mailboxes(self) -> None:
         """A drive's CoE emergency, read from its mailbox once its statusword shows the fault
         (the fault is reported from the process data in that tick; the emergency adds its error
-        register to the words)."""
+        register to the words), and every slave's AL state (one that left OP is a lost slave)."""
         while not self._closing.wait(MAILBOX_POLL_S):  # SOEM takes frames from two threads
             self.master.read_emergencies()
+            self.master.watch_states()
 
     def _cycle_without_loop(self) -> None:
         with self._exchange:
@@ -205,74 +199,6 @@ class Ethercat402Arm(PhysicalResource):
                 self._read_into(now, self.state, loop=False)
                 self._on_keep_alive(now)
         time.sleep(self.config.control_period_s)
-
-    def _pump(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            if self.loop_ticking:
-                time.sleep(self.config.control_period_s)
-            else:
-                self._cycle_without_loop()
-
-    def _wait(self, done: Callable[[], bool], what: str, every: int = 1) -> None:
-        """Cycle (or let the ticks cycle) until `done()`, asked every `every` cycles."""
-        end = time.monotonic() + self.settings.state_timeout_s
-        n = 0
-        while True:
-            if n % every == 0 and done():
-                return
-            n += 1
-            if time.monotonic() > end:
-                states = ", ".join(
-                    f"{d.where}: {d.state.name}, statusword 0x{d.statusword:04X}" for d in self.master.drives
-                )
-                raise ResourceError(
-                    f"resource {self.name!r}: no {what} within {self.settings.state_timeout_s:g} s "
-                    f"(state_timeout_s; drives {states})"
-                )
-            if self.loop_ticking:
-                time.sleep(self.config.control_period_s)
-            else:
-                self._cycle_without_loop()
-
-    def _walk(self, target: cia402.State) -> None:
-        self._walk_t0 = time.monotonic()
-        self._walk_to = target
-
-    def _step_walk(self, target: cia402.State) -> None:
-        m = self.master
-        if target is cia402.State.OPERATION_ENABLED:
-            q = self.state.q_rad
-            for j, d in enumerate(m.drives):  # enabled holding where it is, as measured now
-                if d.state is not cia402.State.OPERATION_ENABLED:
-                    self._pos[j] = q[j]
-                    self._vel[j] = 0.0
-        if m.step_towards(target):
-            self._walk_to = None
-        elif time.monotonic() - self._walk_t0 > self.settings.state_timeout_s:
-            late = next(d for d in m.drives if d.state is not target)
-            self._walk_failed = (
-                f"{late.where} did not reach {target.name} within {self.settings.state_timeout_s:g} s "
-                f"(state_timeout_s): statusword 0x{late.statusword:04X} ({late.state.name}), controlword "
-                f"0x{late.controlword:04X}"
-            )
-            self._walk_to = None
-
-    def _enable_blocking(self) -> None:
-        self._hold_here()
-        self._walk(cia402.State.OPERATION_ENABLED)
-        try:
-            self._wait(lambda: self._walk_to is None, "OPERATION ENABLED on every drive")
-        finally:
-            self._walk_to = None
-        self.master.set_controlword(cia402.CW_ENABLE_OPERATION)
-        self._hold_here()
-
-    def _hold_here(self) -> None:
-        q = self.state.q_rad
-        self._pos[:] = q
-        self._vel[:] = 0.0
-        self._tau[:] = pin.computeGeneralizedGravity(self.model.model, self._data, q)
 
     def wait_for_cycle(self, timeout_s: float) -> int:
         """With distributed clocks: the next period's start on the reference clock (mapped to
@@ -291,73 +217,17 @@ class Ethercat402Arm(PhysicalResource):
             self._loop_took_over = True  # the keeper stops: from now on a stalled loop shows
         with self._exchange:
             rep = self.master.receive()
-        flags = 0
         powered = True
         for j, d in enumerate(self.master.drives):
             state.q_rad[j] = d.position_counts / d.counts_per_rad
             state.dq_rad_s[j] = d.velocity_counts / d.counts_per_rad
             state.tau_nm[j] = d.torque_per_mille * d.nm_per_mille
             powered = powered and d.state in cia402.POWERED
-        if rep.comm_lost:
-            flags |= Status.COMM_LOST
-            self._set_fault(FaultKind.COMM_LOST, rep.comm_lost, rep.comm_lost_joint)
-        elif rep.fault:
-            flags |= Status.FAULT
-            self._set_fault(FaultKind.DEVICE, rep.fault, rep.fault_joint, rep.fault_code)
-            state.fault_code = rep.fault_code
-        elif self._walk_failed:
-            flags |= Status.FAULT
-            self._set_fault(FaultKind.DEVICE, self._walk_failed)
-        if not powered:
-            flags |= Status.TORQUE_OFF
-        self._comm_lost = bool(rep.comm_lost)
-        return flags
+        return self._flags(rep, powered)
 
-    def _send(self) -> None:
+    def _send(self, t_s: float) -> None:
         with self._exchange:
             self.master.transmit(self._pos, self._vel, self._tau)
-
-    def _on_keep_alive(self, t_s: float) -> None:
-        m = self.master
-        walk_to = self._walk_to
-        if self._fault_reset:
-            self._fault_reset = not m.step_fault_reset()
-        elif walk_to is not None:
-            self._step_walk(walk_to)
-        elif self._stop_flags & Status.STOPPING:
-            off = m.step_quick_stop()
-            timed_out = t_s - self._stop_t0 > self.config.safe_stop.timeout_s
-            if off or (self._comm_lost and timed_out):  # unreachable drives stop on their own watchdogs
-                self._mark_stopped(torque_off=True)
-        self._send()
-
-    def _write_command(self, t_s: float, mode: CommandMode, command: FloatArray) -> int:
-        if self._walk_to is not None:
-            self._on_keep_alive(t_s)
-            return 0
-        st = self.state
-        if mode is CommandMode.POSITION:
-            self._pos[:] = command
-            self._vel[:] = 0.0
-            self._tau[:] = st.tau_nm
-        elif mode is CommandMode.VELOCITY:
-            self._vel[:] = command
-            self._pos[:] = st.q_rad
-            self._tau[:] = st.tau_nm
-        else:
-            self._tau[:] = command
-            self._pos[:] = st.q_rad
-            self._vel[:] = 0.0
-        self._send()
-        return 0
-
-    def _begin_safe_stop(self) -> None:
-        self._walk_to = None
-        self._stop_t0 = self.state.t_s
-        self._pos[:] = self.state.q_rad
-        self._vel[:] = 0.0
-        self.master.step_quick_stop()
-        self._send()
 
     def _details(self) -> dict[str, Any]:
         m = self.master

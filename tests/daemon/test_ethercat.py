@@ -36,6 +36,28 @@ def local_config(tmp: Path) -> Path:
     return path
 
 
+def moving(d: Daemon) -> None:
+    """demo_position.mission started, its second motion under way."""
+    d.call("load", path=DEMO)
+    d.call("start")
+    d.wait(lambda s: s["active_task"] == "Reach")
+
+
+def stopped_then_reset(d: Daemon) -> None:
+    """The operator's Stop for the safe procedure, then `orccadctl reset`, the fault gone."""
+    d.call("stop")
+    d.wait(lambda s: s["state"] == "ready")
+    r = d.ctl("reset")
+    assert r.returncode == 0, r.stdout + r.stderr
+    d.wait(lambda s: not s["faulted"], timeout_s=30)
+
+
+def runs_to_success(d: Daemon) -> None:
+    d.call("start")
+    s = d.wait(lambda s: s["state"] != "running", timeout_s=90)
+    assert s["result"] == "success" and not s["faulted"], s
+
+
 @pytest.fixture
 def line(tmp_path: Path) -> Iterator[tuple[EcatSimProcess, Daemon]]:
     with EcatSimProcess(CONFIG, "--priority", "70") as sim:
@@ -70,60 +92,41 @@ def test_a_mission_with_csp_and_cst_motions_completes(line: tuple[EcatSimProcess
 
 def test_a_drive_fault_quick_stops_then_reset_and_a_new_run(line: tuple[EcatSimProcess, Daemon]) -> None:
     sim, d = line
-    d.call("load", path=DEMO)
-    d.call("start")
-    d.wait(lambda s: s["active_task"] == "Reach")
+    moving(d)
     sim.inject("overcurrent", device=2)
     s = d.wait(lambda s: s["faulted"] and "stopped" in s.get("resource_status", []), timeout_s=30)
     assert "slave 2 (shoulder_lift_joint)" in str(s["fault"]) and "0x2310" in str(s["fault"]), s["fault"]
     states = [dev["state"] for dev in sim.status()["devices"]]
     assert states[1] == "FAULT" and all(st in ("SWITCH_ON_DISABLED", "FAULT") for st in states), states
-    d.call("stop")  # the safe procedure awaits the operator's Stop
-    d.wait(lambda s: s["state"] == "ready")
-    r = d.ctl("reset")
-    assert r.returncode == 0, r.stdout + r.stderr
-    d.wait(lambda s: not s["faulted"])
+    stopped_then_reset(d)
     assert [dev["state"] for dev in sim.status()["devices"]] == ["OPERATION_ENABLED"] * 6
-    d.call("start")
-    s = d.wait(lambda s: s["state"] != "running", timeout_s=90)
-    assert s["result"] == "success" and not s["faulted"], s
+    runs_to_success(d)
 
 
 def test_an_unplugged_slave_is_a_lost_line_and_reset_walks_it_back(
     line: tuple[EcatSimProcess, Daemon],
 ) -> None:
     sim, d = line
-    d.call("load", path=DEMO)
-    d.call("start")
-    d.wait(lambda s: s["active_task"] == "Reach")
+    moving(d)
     sim.inject("unplug", device=4)
     s = d.wait(lambda s: s["faulted"] and "stopped" in s.get("resource_status", []), timeout_s=30)
     assert "slave 4 (wrist_1_joint)" in str(s["fault"]), s["fault"]
     st = sim.status()  # the slaves beyond the cut lost their outputs: SM watchdog, drives off
     assert st["al_status_codes"][3:] == [0x001B] * 3, st
     assert all(dev["state"] != "OPERATION_ENABLED" for dev in st["devices"][3:]), st["devices"]
-    d.call("stop")
-    d.wait(lambda s: s["state"] == "ready")
     sim.inject("replug")
-    r = d.ctl("reset")
-    assert r.returncode == 0, r.stdout + r.stderr
-    d.wait(lambda s: not s["faulted"], timeout_s=30)
+    stopped_then_reset(d)
     st = sim.status()
-    assert (
-        st["al_states"] == ["OP"] * 6 and [dev["state"] for dev in st["devices"]] == ["OPERATION_ENABLED"] * 6
-    )
-    d.call("start")
-    s = d.wait(lambda s: s["state"] != "running", timeout_s=90)
-    assert s["result"] == "success" and not s["faulted"], s
+    assert st["al_states"] == ["OP"] * 6
+    assert [dev["state"] for dev in st["devices"]] == ["OPERATION_ENABLED"] * 6
+    runs_to_success(d)
 
 
 def test_the_simulator_killed_stops_the_arm_and_the_daemon_carries_on(
     line: tuple[EcatSimProcess, Daemon],
 ) -> None:
     sim, d = line
-    d.call("load", path=DEMO)
-    d.call("start")
-    d.wait(lambda s: s["active_task"] == "Reach")
+    moving(d)
     sim.kill()
     s = d.wait(lambda s: s["faulted"], timeout_s=30)
     assert "EtherCAT line on ecm0" in str(s["fault"]), s["fault"]

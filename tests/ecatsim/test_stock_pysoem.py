@@ -31,7 +31,7 @@ pytestmark = pytest.mark.skipif(
 
 @pytest.fixture
 def sim() -> Iterator[EcatSimProcess]:
-    with EcatSimProcess(CONFIG) as process:
+    with EcatSimProcess(CONFIG, "--priority", "70") as process:
         yield process
 
 

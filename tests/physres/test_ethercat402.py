@@ -17,6 +17,7 @@ from orccadd.errors import ResourceError
 from orccadd.robot import create_resource, load_robot_config
 from orccadd.types import CommandMode, Status
 from tests.conftest import ROOT
+from tests.drivers.ethercat.test_settings import variant
 
 pytest.importorskip("pysoem")
 pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason="raw sockets and the simulator's link need root")
@@ -24,19 +25,9 @@ pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason="raw sockets and the s
 SIM = ROOT / "configs/robots/ethercat-6axis-sim.toml"
 
 
-def variant(tmp_path: Path, *edits: tuple[str, str]) -> Path:
-    text = SIM.read_text().replace('"../', f'"{ROOT / "configs"}/')
-    for old, new in edits:
-        assert old in text, old
-        text = text.replace(old, new, 1)
-    path = tmp_path / "ecat.toml"
-    path.write_text(text)
-    return path
-
-
 @pytest.fixture
 def sim() -> Iterator[EcatSimProcess]:
-    with EcatSimProcess(SIM) as process:
+    with EcatSimProcess(SIM, "--priority", "70") as process:
         yield process
 
 
@@ -116,5 +107,42 @@ def test_a_started_line_names_its_slaves_and_a_drives_emergency(sim: EcatSimProc
             "slave 2 (shoulder_lift_joint): drive fault, error code 0x2310 over-current "
             "(EMCY 0x2310 over-current, error register 0x03)"
         ), res.fault_message
+    finally:
+        res.shutdown()
+
+
+def test_a_slave_that_leaves_op_is_comm_lost_naming_it_and_reset_brings_it_back(sim: EcatSimProcess) -> None:
+    res = create_resource(load_robot_config(SIM))
+    res.configure()
+    try:
+        res.activate(CommandMode.POSITION)
+        end = time.monotonic() + 5.0
+        while res.read(time.monotonic()).status & Status.TORQUE_OFF and time.monotonic() < end:
+            res.keep_alive(time.monotonic())
+            time.sleep(0.001)
+        sim.inject("al_error", device=3)  # its working counter stays: only its AL state tells
+        end = time.monotonic() + 5.0
+        while not res.state.status & Status.COMM_LOST and time.monotonic() < end:
+            res.read(time.monotonic())
+            res.keep_alive(time.monotonic())
+            time.sleep(0.001)
+        assert res.state.status & Status.COMM_LOST
+        assert res.fault is not None and res.fault.joint == "elbow_joint"
+        assert (
+            "slave 3 (elbow_joint) left OP, now SAFE-OP + ERROR, AL status code 0x001A" in res.fault_message
+        )
+        res.safe_stop()
+        end = time.monotonic() + 5.0
+        while not res.state.status & Status.STOPPED and time.monotonic() < end:
+            res.read(time.monotonic())
+            res.keep_alive(time.monotonic())
+            time.sleep(0.001)
+        assert res.state.status & Status.STOPPED
+        res.reset_fault()  # the slave back to OP, its drive's fault reset
+        assert sim.status()["al_states"] == ["OP"] * 6
+        for _ in range(50):
+            assert not res.read(time.monotonic()).status & Status.COMM_LOST
+            res.keep_alive(time.monotonic())
+            time.sleep(0.001)
     finally:
         res.shutdown()

@@ -31,6 +31,7 @@ carries their controlwords (CANopen's RPDOs, EtherCAT's process data).
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import dataclass
 from enum import IntEnum
 from typing import Protocol
 
@@ -314,3 +315,14 @@ ERROR_CODE_TEXTS = {
 def error_code_text(code: int) -> str:
     """An error code in words ("" if unknown): exact, else its class (the high byte)."""
     return ERROR_CODE_TEXTS.get(code, ERROR_CODE_TEXTS.get(code & 0xFF00, ""))
+
+
+@dataclass
+class CycleReport:
+    """What a master's cycle found wrong (its `receive`), for the resource's flags and words."""
+
+    comm_lost: str = ""
+    comm_lost_joint: str = ""  # the drive it is about ("" for the bus or line)
+    fault: str = ""
+    fault_joint: str = ""
+    fault_code: int = 0

@@ -35,7 +35,7 @@ import logging
 import select
 import struct
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import can
 import canopen
@@ -43,6 +43,7 @@ import numpy as np
 
 from orccadd.drivers.canopen import cia402
 from orccadd.drivers.canopen.capabilities import MODE_CODES, object_dictionary
+from orccadd.drivers.canopen.cia402 import CycleReport
 from orccadd.drivers.canopen.pdo_mapping import abort_text
 from orccadd.drivers.canopen.port import BusPort
 from orccadd.drivers.canopen.settings import CanopenSettings
@@ -97,17 +98,9 @@ class AxisLink:
 
     state: cia402.State = cia402.State.NOT_READY_TO_SWITCH_ON  # decoded from each statusword
 
-
-@dataclass
-class CycleReport:
-    """What `receive` found wrong, for the resource's status flags and messages."""
-
-    comm_lost: str = ""
-    comm_lost_joint: str = ""  # the axis it is about ("" for the bus)
-    fault: str = ""
-    fault_joint: str = ""
-    fault_code: int = 0
-    notes: list[str] = field(default_factory=list)
+    @property
+    def where(self) -> str:
+        return f"node {self.node_id} ({self.name})"
 
 
 class CanopenMaster:
@@ -450,18 +443,6 @@ class CanopenMaster:
             a.sdo_error = ""
             a.emcy_code = 0
             a.emcy_text = ""
-
-    def step_fault_reset(self) -> bool:
-        """One cycle of fault reset on every faulted axis (`cia402.step_fault_reset`)."""
-        return cia402.step_fault_reset(self.axes)
-
-    def step_towards(self, target: cia402.State) -> bool:
-        """One cycle towards `target` on every axis (`cia402.step_towards`)."""
-        return cia402.step_towards(self.axes, target)
-
-    def step_quick_stop(self) -> bool:
-        """One cycle of quick stop on every enabled axis (`cia402.step_quick_stop`)."""
-        return cia402.step_quick_stop(self.axes)
 
     def write_mode(self, code: int) -> None:
         """Ask every drive for mode `code` (0x6060) by a non-blocking SDO write; answers are

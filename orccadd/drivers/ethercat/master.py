@@ -37,6 +37,7 @@ import pysoem
 
 from orccadd.drivers.canopen import cia402
 from orccadd.drivers.canopen.capabilities import MODE_CODES, object_dictionary
+from orccadd.drivers.canopen.cia402 import CycleReport
 from orccadd.drivers.canopen.startup import interpolation_time_period
 from orccadd.drivers.ethercat.pdo import PdoLayout, layout_for
 from orccadd.drivers.ethercat.settings import TARGET_OF_MODE, EthercatSettings
@@ -48,6 +49,7 @@ AL_NAMES = {1: "INIT", 2: "PRE-OP", 3: "BOOT", 4: "SAFE-OP", 8: "OP"}
 AL_ERROR = 0x10
 AL_NO_SYNC = 0x002D  # SYNC0 not seen yet: OP asked too early, asked again
 SIOCGIFFLAGS = 0x8913
+SCAN_RETRIES = 3
 IFF_UP, IFF_RUNNING = 0x1, 0x40
 
 
@@ -134,15 +136,6 @@ class DriveLink:
         return f"slave {self.position} ({self.name})"
 
 
-@dataclass
-class CycleReport:
-    comm_lost: str = ""
-    comm_lost_joint: str = ""
-    fault: str = ""
-    fault_joint: str = ""
-    fault_code: int = 0
-
-
 class EcatMaster:
     def __init__(
         self,
@@ -166,6 +159,9 @@ class EcatMaster:
         self.bad_in_row = 0
         self.last_wkc = 0
         self.dc_time_ns = 0
+        self.al_lost = ""  # a slave found out of OP while the line should be in OP (words), else ""
+        self.al_lost_joint = ""
+        self.in_op = False  # every slave reached OP: from then on, one that leaves it is a fault
         self.sent_at_ns = 0  # CLOCK_MONOTONIC when the last frame left
         self.dc_offset_ns: int | None = None  # the reference clock's system time minus ours
         self._timeout_us = settings.receive_timeout_us or max(100, int(period_s * 1e6 / 3))
@@ -201,6 +197,11 @@ class EcatMaster:
         for fd in _socket_fds() - before:
             _never_block(fd)
         found = m.config_init()
+        for _ in range(SCAN_RETRIES):  # the scan waits 20 ms for its broadcast: a line may be slower
+            if found > 0:
+                break
+            time.sleep(0.1)
+            found = m.config_init()
         if found <= 0:
             raise ResourceError(f"no EtherCAT slave answers on {s.interface}: the line's cable and power")
         if found != len(self.drives):
@@ -291,6 +292,22 @@ class EcatMaster:
                 self._sdo_write(d, index, 1, u16.pack(sync))
                 self._sdo_write(d, index, 2, u32.pack(self.period_ns))
 
+    def watch_states(self) -> None:
+        """Whether every slave is still in OP (AL status frames beside the cyclic exchange: a
+        lifecycle thread, only while the line answers). A slave that left OP (its SM watchdog, a
+        cable pulled and put back, its own error) keeps its place in the working counter in
+        SAFE-OP, but no longer takes its outputs: `receive` reports it as a lost slave."""
+        if not self.in_op or self.bad_in_row or self.m is None or self.al_lost:
+            return
+        for d, (state, code) in zip(self.drives, self.states(), strict=True):
+            if state != pysoem.OP_STATE:
+                why = (
+                    f", AL status code 0x{code:04X} ({pysoem.al_status_code_to_string(code)})" if code else ""
+                )
+                self.al_lost_joint = d.name
+                self.al_lost = f"EtherCAT: {d.where} left OP, now {al_state_name(state)}{why}"
+                return
+
     # ---- CoE emergencies --------------------------------------------------------------------------
     def _emergency(self, d: DriveLink, e: Any) -> None:
         text = cia402.error_code_text(e.error_code)
@@ -355,6 +372,8 @@ class EcatMaster:
         acknowledged, OP asked; True once every slave is in OP."""
         states = self.states()
         if all(state == pysoem.OP_STATE for state, _ in states):
+            self.in_op = True
+            self.al_lost = self.al_lost_joint = ""
             return True
         for slave, (state, _code) in zip(self.m.slaves, states, strict=True):
             if state & AL_ERROR or state != pysoem.OP_STATE:
@@ -388,6 +407,8 @@ class EcatMaster:
                 self.wkc_errors += 1
             if self.bad_in_row >= self.s.lost_frames:
                 rep.comm_lost, rep.comm_lost_joint = self._lost_words(wkc)
+        if self.al_lost and not rep.comm_lost:
+            rep.comm_lost, rep.comm_lost_joint = self.al_lost, self.al_lost_joint
         for d in self.drives:
             if d.state in (cia402.State.FAULT, cia402.State.FAULT_REACTION_ACTIVE) and not rep.fault:
                 text = cia402.error_code_text(d.error_code)
@@ -473,15 +494,6 @@ class EcatMaster:
         """The mode of operation the next frame carries (0x6060 is in the RxPDO)."""
         for d in self.drives:
             d.mode = code
-
-    def step_towards(self, target: cia402.State) -> bool:
-        return cia402.step_towards(self.drives, target)
-
-    def step_quick_stop(self) -> bool:
-        return cia402.step_quick_stop(self.drives)
-
-    def step_fault_reset(self) -> bool:
-        return cia402.step_fault_reset(self.drives)
 
     def modes(self) -> frozenset[int]:
         """The modes every drive's RxPDO carries a target for."""

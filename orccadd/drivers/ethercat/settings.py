@@ -88,6 +88,10 @@ class EthercatSettings:
     receive_timeout_us: int = field(default=0, bounds=(0, 100_000))
     state_timeout_s: float = field(default=5.0, bounds=(0.1, 120.0))
     sdo_timeout_s: float = field(default=0.5, bounds=(0.01, 10.0))
+    # the keeper (the cyclic exchange until the loop's first tick) and the mailbox/AL-state
+    # watcher at SCHED_FIFO (0: time-shared): below the control thread (80), above the rest; a
+    # time-shared keeper starved on a busy machine would let the slaves' SM watchdog expire
+    io_priority: int = field(default=65, bounds=(0, 98))
     following_error_rad: float = field(default=0.1, bounds=(0.0, 10.0), open_lo=True)  # CSP, 0x6065
     following_error_timeout_ms: int = field(default=100, bounds=(0, 65535))  # 0x6066
     simulator: SimulatorConfig = field(default=SimulatorConfig())
