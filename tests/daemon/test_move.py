@@ -97,15 +97,32 @@ def trajectory_csv(names: Sequence[str], q0: Sequence[float], joint: int, amp: f
     return "\n".join(rows) + "\n"
 
 
-def follow_ticks(d: Daemon) -> tuple[np.ndarray, np.ndarray]:
+class TickCollector:
+    """The telemetry ring's ticks from now on, gathered while the run goes (the ring keeps 16 s:
+    read only after the run, on a machine slow to answer the status, its start was gone)."""
+
+    def __init__(self, d: Daemon) -> None:
+        self.desc = d.call("describe")
+        self.tel = TelemetryBlock.attach(str(self.desc["telemetry"]))
+        self.reader = RingReader(self.tel.ticks, self.tel.header, H.TICK_HEAD, from_now=True)
+        self.parts: list[np.ndarray] = []
+
+    def poll(self) -> None:
+        got = self.reader.poll()
+        if len(got):
+            self.parts.append(got.copy())
+
+    def close(self) -> np.ndarray:
+        self.poll()
+        self.tel.close()
+        return np.concatenate(self.parts) if self.parts else np.zeros((0, 1))
+
+
+def follow_ticks(d: Daemon, rec: np.ndarray, desc: dict[str, object]) -> tuple[np.ndarray, np.ndarray]:
     """The loop time since the follow law started and the measured q, of each of its ticks."""
-    desc = d.call("describe")
-    tel = TelemetryBlock.attach(str(desc["telemetry"]))
-    try:
-        rec = RingReader(tel.ticks, tel.header, H.TICK_HEAD, from_now=False).poll()
-    finally:
-        tel.close()
-    task = desc["tasks"].index("Follow")
+    tasks = desc["tasks"]
+    assert isinstance(tasks, list)
+    task = tasks.index("Follow")
     mine = rec[(rec[:, T.TASK] == task) & (rec[:, T.PHASE] == Phase.RUN)]
     return mine[:, T.T_S] - mine[0, T.T_S], mine[:, TickLayout(6).q]
 
@@ -115,12 +132,14 @@ def test_follow_tracks_the_interpolation_to_the_last_point_and_bad_trajectories_
 ) -> None:
     names, q0 = joints(daemon)
     text = trajectory_csv(names, q0, joint=2, amp=0.3, dur_s=1.0)
+    ticks = TickCollector(daemon)
     r = daemon.call("follow", csv=text, name="out_and_back.csv")
     assert r["points"] == 21 and r["duration_s"] == 1.0 and r["task_file"].endswith("follow_joints.toml")
-    s = ended(daemon)
+    s = daemon.wait(lambda s: ticks.poll() or s["state"] not in ("running", "holding"), timeout_s=WAIT_S)
+    rec = ticks.close()
     assert s["result"] == "success", s
     np.testing.assert_allclose(joints(daemon)[1], q0, atol=0.006)
-    t, q = follow_ticks(daemon)
+    t, q = follow_ticks(daemon, rec, daemon.call("describe"))
     lines = [row.split(",") for row in text.split()[1:]]
     points = np.array(lines, dtype=float)
     spline = Spline(JointTrajectory(points[:, 0], points[:, 1:]))
