@@ -162,6 +162,7 @@ class EcatMaster:
         self.al_lost = ""  # a slave found out of OP while the line should be in OP (words), else ""
         self.al_lost_joint = ""
         self.in_op = False  # every slave reached OP: from then on, one that leaves it is a fault
+        self._al_suspect: tuple[int, int] | None = None  # (slave, state) read once out of OP
         self.sent_at_ns = 0  # CLOCK_MONOTONIC when the last frame left
         self.dc_offset_ns: int | None = None  # the reference clock's system time minus ours
         self._timeout_us = settings.receive_timeout_us or max(100, int(period_s * 1e6 / 3))
@@ -296,17 +297,30 @@ class EcatMaster:
         """Whether every slave is still in OP (AL status frames beside the cyclic exchange: a
         lifecycle thread, only while the line answers). A slave that left OP (its SM watchdog, a
         cable pulled and put back, its own error) keeps its place in the working counter in
-        SAFE-OP, but no longer takes its outputs: `receive` reports it as a lost slave."""
+        SAFE-OP, but no longer takes its outputs: `receive` reports it as a lost slave. Only a
+        state that is one (1, 2, 3, 4 or 8, with or without the error bit) read twice in a row
+        with the line answering counts: a frame answered very late can be taken by SOEM as the
+        answer to a later request (0x0F, every state's bit, was read once after a 1.4 s stall)."""
         if not self.in_op or self.bad_in_row or self.m is None or self.al_lost:
             return
-        for d, (state, code) in zip(self.drives, self.states(), strict=True):
-            if state != pysoem.OP_STATE:
-                why = (
-                    f", AL status code 0x{code:04X} ({pysoem.al_status_code_to_string(code)})" if code else ""
-                )
-                self.al_lost_joint = d.name
-                self.al_lost = f"EtherCAT: {d.where} left OP, now {al_state_name(state)}{why}"
-                return
+        states = self.states()
+        if self.bad_in_row:
+            return
+        out = [
+            (d, state, code)
+            for d, (state, code) in zip(self.drives, states, strict=True)
+            if state != pysoem.OP_STATE
+        ]
+        if not out or any(state & 0x0F not in AL_NAMES for _, state, _ in out):
+            self._al_suspect = None
+            return
+        d, state, code = out[0]
+        if self._al_suspect != (d.position, state):
+            self._al_suspect = (d.position, state)  # seen once: confirmed by the next read
+            return
+        why = f", AL status code 0x{code:04X} ({pysoem.al_status_code_to_string(code)})" if code else ""
+        self.al_lost_joint = d.name
+        self.al_lost = f"EtherCAT: {d.where} left OP, now {al_state_name(state)}{why}"
 
     # ---- CoE emergencies --------------------------------------------------------------------------
     def _emergency(self, d: DriveLink, e: Any) -> None:
@@ -374,6 +388,7 @@ class EcatMaster:
         if all(state == pysoem.OP_STATE for state, _ in states):
             self.in_op = True
             self.al_lost = self.al_lost_joint = ""
+            self._al_suspect = None
             return True
         for slave, (state, _code) in zip(self.m.slaves, states, strict=True):
             if state & AL_ERROR or state != pysoem.OP_STATE:
