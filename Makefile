@@ -72,6 +72,7 @@ bench: setup
 	$(PY) benchmarks/canopen_cycle.py
 	$(PY) benchmarks/canopen_cycle.py --buses 2 --rates 1000
 	$(PY) benchmarks/ur_rtde_cycle.py
+	$(PY) benchmarks/ethercat_cycle.py --duration-s 60
 	$(PY) benchmarks/station.py
 	$(PY) benchmarks/cell_zenoh.py
 
